@@ -1,0 +1,109 @@
+"""FMI 2.0 co-simulation slave of the plant (DESIGN.md contract): FMI variables <-> vibromodel.Plant.
+
+No physics here. No Python exception may leave a callback (pythonfmu turns it into fmi2Fatal and
+destroys the instance): errors are logged with the parameter and value, `fmi_status` is set to 3 and
+the status shim (fmu_src/fmi2_status_shim.c) returns fmi2Error to the host.
+"""
+import math
+
+from pythonfmu import Boolean, DefaultExperiment, Fmi2Causality, Fmi2Slave, Fmi2Variability, Integer, Real
+from pythonfmu.enums import Fmi2Initial, Fmi2Status
+
+from vibromodel.integrate import IntegrationError
+from vibromodel.parameters import ParameterError, Scene, scene_names
+from vibromodel.plant import Plant, Settings
+
+STATUS_OK, STATUS_ERROR = 0, 3
+OUTPUTS = ("x", "v", "a", "F_contact", "F_electrostatic")
+
+
+class HertzEAOscillator(Fmi2Slave):
+    author = "vibrofmu"
+    description = "Hertzian-contact oscillator with two-sided electrostatic actuation (PAPER Eq. 3, ERRATA §3.1)"
+    default_experiment = DefaultExperiment(start_time=0.0, stop_time=200.0, step_size=0.1)
+
+    def __init__(self, **kwargs):
+        super().__init__(**kwargs)
+        scene, settings = Scene(), Settings()
+        for name in scene_names():
+            setattr(self, name, getattr(scene, name))
+            self.register_variable(Real(name, causality=Fmi2Causality.parameter,
+                                        variability=Fmi2Variability.fixed))
+        self.fidelity, self.solver = int(settings.fidelity), int(settings.solver)
+        self.rtol, self.max_step = settings.rtol, settings.max_step
+        self.register_variable(Integer("fidelity", causality=Fmi2Causality.parameter,
+                                       variability=Fmi2Variability.fixed,
+                                       description="0 exact Eq. 3, 1 polynomial Eq. 7, 2 Eq. 7 printed coefficients"))
+        self.register_variable(Integer("solver", causality=Fmi2Causality.parameter,
+                                       variability=Fmi2Variability.fixed,
+                                       description="0 adaptive DOP853, 1 fixed-step RK4"))
+        self.register_variable(Real("rtol", causality=Fmi2Causality.parameter, variability=Fmi2Variability.fixed,
+                                    description="relative tolerance (setupExperiment's tolerance wins)"))
+        self.register_variable(Real("max_step", causality=Fmi2Causality.parameter,
+                                    variability=Fmi2Variability.fixed,
+                                    description="RK4 step / adaptive step ceiling; 0 = automatic"))
+        self.U = 0.0
+        self.register_variable(Real("U", causality=Fmi2Causality.input, description="control force"))
+        self._set_outputs(scene.x_start, scene.v_start, 0.0, 0.0, 0.0, True)
+        for name in OUTPUTS:
+            self.register_variable(Real(name, causality=Fmi2Causality.output, initial=Fmi2Initial.exact))
+        self.register_variable(Boolean("in_contact", causality=Fmi2Causality.output,
+                                       variability=Fmi2Variability.discrete, initial=Fmi2Initial.exact))
+        self.fmi_status = STATUS_OK
+        self.register_variable(Integer("fmi_status", causality=Fmi2Causality.local,
+                                       variability=Fmi2Variability.discrete,
+                                       description="0 ok, 3 error (read by the status shim)"))
+        self.plant = None
+        self.halted = "the FMU has not been initialised"  # why doStep refuses, or None
+        self.experiment_tolerance = None
+
+    def _set_outputs(self, x, v, a, F_contact, F_electrostatic, in_contact):
+        self.x, self.v, self.a = x, v, a
+        self.F_contact, self.F_electrostatic, self.in_contact = F_contact, F_electrostatic, in_contact
+
+    def _error(self, message):
+        self.fmi_status = STATUS_ERROR
+        self.log(message, Fmi2Status.error)
+
+    def _halt(self, message):
+        self.halted = message
+        self._error(message)
+
+    def setup_experiment(self, start_time, stop_time=None, tolerance=None):
+        self.start_time = start_time
+        self.experiment_tolerance = tolerance
+
+    def exit_initialization_mode(self):
+        try:
+            scene = Scene(**{name: float(getattr(self, name)) for name in scene_names()})
+            rtol = self.rtol if self.experiment_tolerance is None else self.experiment_tolerance
+            settings = Settings(fidelity=int(self.fidelity), solver=int(self.solver),
+                                rtol=float(rtol), max_step=float(self.max_step))
+            self.plant = Plant(scene, settings, t0=float(getattr(self, "start_time", 0.0)))
+            self._publish(self.plant.outputs())
+            self.halted = None
+        except ParameterError as error:
+            self._halt(f"{error}")
+        except Exception as error:  # never let an exception reach pythonfmu (fmi2Fatal)
+            self._halt(f"initialisation failed: {error!r}")
+
+    def do_step(self, current_time, step_size):
+        if self.halted is not None:
+            self._error(f"doStep refused: {self.halted}")
+            return False
+        try:
+            self._publish(self.plant.do_step(current_time, step_size, float(self.U)))
+            return True
+        except ParameterError as error:
+            self._error(f"doStep refused: {error}")
+        except IntegrationError as error:
+            self._publish(self.plant.outputs_at(error.t, error.x, error.v))
+            self._halt(f"simulation stopped: {error}")
+        except Exception as error:
+            self._halt(f"doStep failed at tau = {current_time!r}: {error!r}")
+        return False
+
+    def _publish(self, out):
+        values = (out.x, out.v, out.a, out.F_contact, out.F_electrostatic)
+        if all(math.isfinite(value) for value in values):
+            self._set_outputs(*values, out.in_contact)

@@ -1,0 +1,75 @@
+"""Forces of Eq. 3 and their series (5), coefficients a0..a5 of Eq. 8 (ERRATA §3.2).
+
+Scalar functions on Python floats: they sit on the integrators' hot path.
+"""
+from __future__ import annotations
+
+import math
+
+
+def hertz(x: float) -> float:
+    """Hertz contact force (1 + 2x/3)^(3/2) of Eq. 3; zero once contact is lost (no tension)."""
+    s = 1.0 + 2.0 * x / 3.0
+    return s * math.sqrt(s) if s > 0.0 else 0.0
+
+
+def contact_indentation(x: float) -> float:
+    """1 + 2x/3 = z/z_s: positive in contact, <= 0 when the mass has left the contact."""
+    return 1.0 + 2.0 * x / 3.0
+
+
+def electrostatic(t: float, x: float, alpha: float, beta: float, gamma: float, Omega: float, R: float) -> float:
+    """Right-hand electrostatic terms of Eq. 3: alpha*F2(x) + (beta sin Omega t + gamma(1 - cos 2 Omega t)) F3(x)."""
+    u = 2.0 * x / (3.0 * R)
+    f3 = 1.0 / ((1.0 - u) * (1.0 - u))
+    force = alpha * (f3 - 1.0 / ((1.0 + u) * (1.0 + u)))
+    if beta or gamma:
+        force += (beta * math.sin(Omega * t) + gamma * (1.0 - math.cos(2.0 * Omega * t))) * f3
+    return force
+
+
+def horner(coefficients, x: float) -> float:
+    """sum c_k x^k for coefficients (c_0, c_1, ...)."""
+    value = 0.0
+    for c in reversed(coefficients):
+        value = value * x + c
+    return value
+
+
+# Series (5), corrected (ERRATA §3.2): coefficients of x^0 .. x^5.
+def series_g1() -> tuple[float, ...]:
+    """G1 ~ (1 + 2x/3)^(3/2); contains no R."""
+    return (1.0, 1.0, 1.0 / 6.0, -1.0 / 54.0, 1.0 / 216.0, -1.0 / 648.0)
+
+
+def series_g1_printed(R: float) -> tuple[float, ...]:
+    """G1 as printed in Eq. 5 (wrong x^4, x^5 terms and a spurious R)."""
+    return (1.0, 1.0 / R, 1.0 / (6.0 * R**2), -1.0 / (54.0 * R**3), 1.0 / (432.0 * R**4), 1.0 / (1296.0 * R**5))
+
+
+def series_g2(R: float) -> tuple[float, ...]:
+    """G2 ~ (1 - 2x/3R)^-2 - (1 + 2x/3R)^-2."""
+    return (0.0, 8.0 / (3.0 * R), 0.0, 64.0 / (27.0 * R**3), 0.0, 128.0 / (81.0 * R**5))
+
+
+def series_g3(R: float) -> tuple[float, ...]:
+    """G3 ~ (1 - 2x/3R)^-2."""
+    return (1.0, 4.0 / (3.0 * R), 4.0 / (3.0 * R**2), 32.0 / (27.0 * R**3), 80.0 / (81.0 * R**4), 64.0 / (81.0 * R**5))
+
+
+def coefficients(alpha: float, gamma: float, R: float) -> tuple[float, ...]:
+    """a0..a5 of Eq. 7 (corrected Eq. 8): a_k = G1_k - alpha G2_k - gamma G3_k, a0 = -gamma."""
+    g1, g2, g3 = series_g1(), series_g2(R), series_g3(R)
+    return (-gamma,) + tuple(g1[k] - alpha * g2[k] - gamma * g3[k] for k in range(1, 6))
+
+
+def coefficients_printed(alpha: float, gamma: float, R: float) -> tuple[float, ...]:
+    """a0..a5 exactly as printed in Eq. 8 (to reproduce the paper)."""
+    return (
+        -gamma,
+        1.0 - 8.0 * alpha / (3.0 * R) - 4.0 * gamma / (3.0 * R),
+        1.0 / 6.0 - 4.0 * gamma / (3.0 * R**2),
+        -1.0 / 54.0 - 64.0 * alpha / (27.0 * R**3),
+        1.0 / 432.0 - 80.0 * gamma / (81.0 * R**5),
+        1.0 / 1296.0 - 128.0 * alpha / (81.0 * R**5) - 64.0 * gamma / (81.0 * R**5),
+    )

@@ -1,0 +1,309 @@
+"""Integrators of x' = v, v' = accel(t, x, v, U) that live inside the FMU between doSteps.
+
+- Dop853: adaptive embedded Runge-Kutta 8(5,3) of Hairer, Norsett and Wanner (the algorithm and
+  coefficients of scipy's DOP853), with error control, 7th-order dense output and event location.
+  It keeps its step size, its last derivative (FSAL) and its last step's interpolant between
+  communication points: a communication point inside a step is read from the dense output, so a
+  doStep costs no restart. A step that would cross a contact event is cut at the event (the contact
+  force has a kink there); a terminal event (pull-in) stops the run at the event.
+- Rk4: classic fixed-step Runge-Kutta 4; each communication interval is split into equal steps no
+  longer than max_step.
+
+Both work on Python floats (a 2-state system is far faster this way than with numpy arrays).
+"""
+from __future__ import annotations
+
+import math
+
+from scipy.integrate._ivp import dop853_coefficients as _dop
+from scipy.optimize import brentq
+
+
+class IntegrationError(RuntimeError):
+    """The integrator cannot continue; the message says where and why."""
+
+    def __init__(self, message: str, t: float, x: float, v: float):
+        super().__init__(message)
+        self.t, self.x, self.v = t, x, v
+
+
+class TerminalEvent(IntegrationError):
+    """A terminal event (pull-in) was reached at (t, x, v)."""
+
+
+def _rows(matrix, n_rows, start=0):
+    return tuple(tuple(float(a) for a in matrix[s, :s]) for s in range(start, start + n_rows))
+
+
+# Butcher tableau of DOP853 (12 stages + FSAL stage), error weights and dense-output extension.
+N_STAGES = _dop.N_STAGES
+A = _rows(_dop.A, N_STAGES)
+B = tuple(float(b) for b in _dop.B)
+C = tuple(float(c) for c in _dop.C[:N_STAGES])
+E3 = tuple(float(e) for e in _dop.E3)
+E5 = tuple(float(e) for e in _dop.E5)
+A_EXTRA = _rows(_dop.A, 3, start=N_STAGES + 1)
+C_EXTRA = tuple(float(c) for c in _dop.C[N_STAGES + 1:])
+D = tuple(tuple(float(d) for d in row) for row in _dop.D)
+
+SAFETY, MIN_FACTOR, MAX_FACTOR = 0.9, 0.2, 10.0
+ERROR_EXPONENT = -1.0 / 8.0  # error estimator of order 7
+ATOL_PER_RTOL = 1e-2  # atol = 1e-2 rtol: the response is O(1e-2), so rtol alone would be too loose
+
+
+def _dot(coefficients, values):
+    return sum(c * k for c, k in zip(coefficients, values))
+
+
+class Dop853:
+    """Adaptive DOP853 with dense output and event location; restartable between doSteps."""
+
+    def __init__(self, accel, events, t0, x0, v0, U, rtol, max_step=math.inf):
+        self.accel, self.events = accel, events
+        self.rtol, self.atol, self.max_step = rtol, rtol * ATOL_PER_RTOL, max_step
+        self.nfev = 0
+        self.n_steps = 0
+        self.contact_side = {}
+        self._restart(t0, x0, v0, U)
+        self.h = None  # chosen on the first step
+
+    # -- state ---------------------------------------------------------------------------------
+    def _restart(self, t, x, v, U):
+        """Start afresh at (t, x, v) with input U: a new derivative, no interpolant yet."""
+        self.t, self.x, self.v, self.U = t, x, v, U
+        self.a = self._f(t, x, v)
+        self.t_old = None
+        self._dense = None
+        self.stop = None  # (event name, t, x, v) once a terminal event is reached
+        self.contact_side = {e.name: e.g(x) > 0.0 for e in self.events if not e.terminal}
+
+    def _f(self, t, x, v):
+        self.nfev += 1
+        return self.accel(t, x, v, self.U)
+
+    def set_input(self, t, U):
+        """Input U holds from t on. If it changed, restart at t (read from the dense output if the
+        integrator has stepped beyond t)."""
+        if U == self.U:
+            return
+        x, v = self.value_at(t)
+        self.U = U
+        self._restart(t, x, v, U)
+
+    # -- stepping ------------------------------------------------------------------------------
+    def advance(self, t_target):
+        """Step until t_target is covered (self.t >= t_target, maybe beyond it).
+
+        Raises TerminalEvent if a terminal event lies at or before t_target, IntegrationError if the
+        step size collapses or the state stops being finite.
+        """
+        while self.t < t_target:
+            if self.stop is not None:
+                name, t, x, v = self.stop
+                raise TerminalEvent(f"{name} at tau = {t:.10g}, x = {x:.10g}", t, x, v)
+            self._step()
+        if self.stop is not None and self.stop[1] <= t_target:
+            name, t, x, v = self.stop
+            raise TerminalEvent(f"{name} at tau = {t:.10g}, x = {x:.10g}", t, x, v)
+
+    def _step(self):
+        t, x, v = self.t, self.x, self.v
+        if self.h is None:
+            self.h = self._initial_step()
+        min_step = 10.0 * (math.nextafter(t, math.inf) - t)
+        h = min(self.h, self.max_step)
+        rejected = False
+        while True:
+            if not h >= min_step:
+                raise IntegrationError(
+                    f"step size collapsed to {h:.3g} at tau = {t:.10g}, x = {x:.10g} (stiff or singular)", t, x, v)
+            x_new, v_new, kx, kv, error = self._trial(t, x, v, h)
+            if error < 1.0:
+                factor = MAX_FACTOR if error == 0.0 else min(MAX_FACTOR, SAFETY * error**ERROR_EXPONENT)
+                self.h = h * (min(1.0, factor) if rejected else factor)
+                break
+            if not math.isfinite(error):
+                h *= MIN_FACTOR
+            else:
+                h *= max(MIN_FACTOR, SAFETY * error**ERROR_EXPONENT)
+            rejected = True
+        self._accept(t, x, v, h, x_new, v_new, kx, kv)
+        self._handle_events(t, x, v)
+
+    def _trial(self, t, x, v, h):
+        """One DOP853 step of size h: new state, stages, scaled error norm (inf on overflow)."""
+        accel, U = self.accel, self.U
+        kx, kv = [v], [self.a]
+        try:
+            for s in range(1, N_STAGES):
+                row = A[s]
+                xs = x + h * _dot(row, kx)
+                vs = v + h * _dot(row, kv)
+                kx.append(vs)
+                kv.append(accel(t + C[s] * h, xs, vs, U))
+            x_new = x + h * _dot(B, kx)
+            v_new = v + h * _dot(B, kv)
+            kx.append(v_new)
+            kv.append(accel(t + h, x_new, v_new, U))
+        except (ArithmeticError, ValueError):  # a stage beyond a singularity: treat as a failed step
+            self.nfev += len(kv)
+            return x, v, kx, kv, math.inf
+        self.nfev += N_STAGES
+        sx = self.atol + self.rtol * max(abs(x), abs(x_new))
+        sv = self.atol + self.rtol * max(abs(v), abs(v_new))
+        e5 = (_dot(E5, kx) / sx) ** 2 + (_dot(E5, kv) / sv) ** 2
+        e3 = (_dot(E3, kx) / sx) ** 2 + (_dot(E3, kv) / sv) ** 2
+        if not math.isfinite(e5 + e3):
+            return x, v, kx, kv, math.inf
+        if e5 == 0.0 and e3 == 0.0:
+            return x_new, v_new, kx, kv, 0.0
+        return x_new, v_new, kx, kv, abs(h) * e5 / math.sqrt((e5 + 0.01 * e3) * 2.0)
+
+    def _accept(self, t, x, v, h, x_new, v_new, kx, kv):
+        self.t_old, self.x_old, self.v_old, self.a_old = t, x, v, self.a
+        self._stages = (kx, kv)
+        self._dense = None
+        self.t, self.x, self.v, self.a = t + h, x_new, v_new, kv[-1]
+        self.n_steps += 1
+
+    def _initial_step(self):
+        """Hairer's starting step (scipy's select_initial_step)."""
+        t, x, v, a = self.t, self.x, self.v, self.a
+        sx, sv = self.atol + abs(x) * self.rtol, self.atol + abs(v) * self.rtol
+        d0 = math.hypot(x / sx, v / sv) / math.sqrt(2.0)
+        d1 = math.hypot(v / sx, a / sv) / math.sqrt(2.0)
+        h0 = 1e-6 if d0 < 1e-5 or d1 < 1e-5 else 0.01 * d0 / d1
+        h0 = min(h0, self.max_step)
+        a1 = self._f(t + h0, x + h0 * v, v + h0 * a)
+        d2 = math.hypot((h0 * a) / sx, (a1 - a) / sv) / math.sqrt(2.0) / h0
+        h1 = max(1e-6, h0 * 1e-3) if max(d1, d2) <= 1e-15 else (0.01 / max(d1, d2)) ** (1.0 / 9.0)
+        return min(100.0 * h0, h1, self.max_step)
+
+    # -- events --------------------------------------------------------------------------------
+    def _handle_events(self, t0, x0, v0):
+        """Find the earliest event in the last step; cut the step there (redo it with the exact
+        length, so no step straddles the event)."""
+        earliest = None
+        for event in self.events:
+            g_end = event.g(self.x)
+            crossed = g_end <= 0.0 if event.terminal else (g_end > 0.0) != self.contact_side[event.name]
+            if not crossed:
+                continue
+            t_event = self._locate(event)
+            if earliest is None or t_event < earliest[0]:
+                earliest = (t_event, event)
+        if earliest is None:
+            return
+        t_event, event = earliest
+        h = t_event - t0
+        if h > 0.0:
+            self.t, self.x, self.v, self.a = t0, x0, v0, self.a_old
+            x_new, v_new, kx, kv, _ = self._trial(t0, x0, v0, h)
+            self._accept(t0, x0, v0, h, x_new, v_new, kx, kv)
+        if event.terminal:
+            self.stop = (event.name, self.t, self.x, self.v)
+        else:
+            self.contact_side[event.name] = not self.contact_side[event.name]
+
+    def _locate(self, event):
+        """Root of g(x(t)) on the last step's dense output."""
+        g = event.g
+        g_start = g(self.x_old)
+        if g_start == 0.0:
+            return self.t_old
+        return brentq(lambda tt: g(self.value_at(tt)[0]), self.t_old, self.t, xtol=1e-15, rtol=4e-16)
+
+    # -- dense output --------------------------------------------------------------------------
+    def value_at(self, t):
+        """(x, v) at t in [t_old, t] of the last step (7th-order interpolant)."""
+        if t == self.t:
+            return self.x, self.v
+        if self.t_old is None or not (self.t_old <= t <= self.t):
+            raise ValueError(f"tau = {t} is outside the last step [{self.t_old}, {self.t}]")
+        if self._dense is None:
+            self._dense = self._build_dense()
+        fx, fv = self._dense
+        s = (t - self.t_old) / (self.t - self.t_old)
+        x = v = 0.0
+        for i in range(len(fx) - 1, -1, -1):
+            x += fx[i]
+            v += fv[i]
+            w = s if (len(fx) - 1 - i) % 2 == 0 else 1.0 - s
+            x *= w
+            v *= w
+        return x + self.x_old, v + self.v_old
+
+    def _build_dense(self):
+        """Coefficients F of scipy's Dop853DenseOutput, from three extra stages."""
+        kx, kv = list(self._stages[0]), list(self._stages[1])
+        t, x, v, h = self.t_old, self.x_old, self.v_old, self.t - self.t_old
+        for row, c in zip(A_EXTRA, C_EXTRA):
+            xs = x + h * _dot(row, kx)
+            vs = v + h * _dot(row, kv)
+            kx.append(vs)
+            kv.append(self._f(t + c * h, xs, vs))
+        dense = []
+        for y_old, y_new, f_old, f_new, k in (
+            (x, self.x, v, self.v, kx),
+            (v, self.v, self.a_old, self.a, kv),
+        ):
+            dy = y_new - y_old
+            dense.append([dy, h * f_old - dy, 2.0 * dy - h * (f_new + f_old)] + [h * _dot(row, k) for row in D])
+        return dense
+
+
+class Rk4:
+    """Fixed-step classic Runge-Kutta 4; steps end exactly on the communication points."""
+
+    def __init__(self, accel, events, t0, x0, v0, U, max_step):
+        self.accel, self.events, self.max_step = accel, events, max_step
+        self.t, self.x, self.v, self.U = t0, x0, v0, U
+        self.nfev = 0
+        self.n_steps = 0
+
+    def set_input(self, t, U):
+        self.U = U
+
+    def advance(self, t_target):
+        """Integrate to exactly t_target in equal steps <= max_step."""
+        span = t_target - self.t
+        if span <= 0.0:
+            return
+        n = max(1, math.ceil(span / self.max_step * (1.0 - 1e-12)))
+        h = span / n
+        t0 = self.t
+        for i in range(1, n + 1):
+            self._step(h)
+            self.t = t_target if i == n else t0 + i * h
+
+    def _step(self, h):
+        f, U, t, x, v = self.accel, self.U, self.t, self.x, self.v
+        try:
+            a1 = f(t, x, v, U)
+            a2 = f(t + 0.5 * h, x + 0.5 * h * v, v + 0.5 * h * a1, U)
+            v2 = v + 0.5 * h * a1
+            a3 = f(t + 0.5 * h, x + 0.5 * h * v2, v + 0.5 * h * a2, U)
+            v3 = v + 0.5 * h * a2
+            a4 = f(t + h, x + h * v3, v + h * a3, U)
+            v4 = v + h * a3
+        except (ArithmeticError, ValueError):
+            raise IntegrationError(
+                f"RK4 step h = {h:.3g} from tau = {t:.10g} left the model's domain (x = {x:.10g}); "
+                f"reduce max_step", t, x, v) from None
+        self.nfev += 4
+        x_new = x + h / 6.0 * (v + 2.0 * v2 + 2.0 * v3 + v4)
+        v_new = v + h / 6.0 * (a1 + 2.0 * a2 + 2.0 * a3 + a4)
+        if not (math.isfinite(x_new) and math.isfinite(v_new)):
+            raise IntegrationError(
+                f"RK4 unstable: the state became non-finite after tau = {t:.10g} with h = {h:.3g}; "
+                f"reduce max_step", t, x, v)
+        for event in self.events:
+            if event.terminal and event.g(x_new) <= 0.0:
+                raise TerminalEvent(f"{event.name} at tau = {t + h:.10g}, x = {x_new:.10g}", t + h, x_new, v_new)
+        self.x, self.v = x_new, v_new
+        self.n_steps += 1
+
+    def value_at(self, t):
+        if t != self.t:
+            raise ValueError(f"RK4 holds only tau = {self.t}, not {t}")
+        return self.x, self.v

@@ -1,0 +1,132 @@
+"""One class per fidelity level of the plant; each gives x'' = accel(t, x, v, U) and its events.
+
+Fidelity 0: exact Eq. 3 (+ input force U). Fidelity 1: polynomial Eq. 7 with the corrected a0..a5.
+Fidelity 2: Eq. 7 with the paper's printed a0..a5. A scene pays only for the physics it switches on:
+terms whose amplitude is zero are not evaluated.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from enum import IntEnum
+from typing import Callable
+
+from . import forces
+from .parameters import PULL_IN_GAP, Scene
+
+
+class Fidelity(IntEnum):
+    EXACT = 0
+    POLYNOMIAL = 1
+    POLYNOMIAL_PAPER = 2
+
+
+@dataclass(frozen=True)
+class Event:
+    """A zero of g(x) that an integrator must not step across blindly.
+
+    terminal: the run stops there (pull-in); otherwise the step is cut there (contact kink).
+    """
+
+    name: str
+    g: Callable[[float], float]
+    terminal: bool
+
+
+def pull_in_events(R: float) -> tuple[Event, Event]:
+    """Gaps 1 -/+ 2x/(3R) reaching PULL_IN_GAP: the electrostatic force is singular at gap 0."""
+    c = 2.0 / (3.0 * R)
+    return (
+        Event("pull-in (upper electrode)", lambda x: 1.0 - c * x - PULL_IN_GAP, True),
+        Event("pull-in (lower electrode)", lambda x: 1.0 + c * x - PULL_IN_GAP, True),
+    )
+
+
+CONTACT_EVENT = Event("contact", forces.contact_indentation, False)
+
+
+class ExactModel:
+    """Eq. 3 with U added: x'' = 1 + Delta cos(omega t) + F_em(t, x) - H(x) - mu x' + U."""
+
+    fidelity = Fidelity.EXACT
+
+    def __init__(self, scene: Scene):
+        self.scene = scene
+        self.events = (CONTACT_EVENT,) + pull_in_events(scene.R)
+        self.accel = self._make_accel(scene)
+
+    @staticmethod
+    def _make_accel(s: Scene):
+        mu, Delta, omega = s.mu, s.Delta, s.omega
+        alpha, beta, gamma, Omega, R = s.alpha, s.beta, s.gamma, s.Omega, s.R
+        load_forcing = Delta != 0.0
+        electrostatics = alpha != 0.0 or beta != 0.0 or gamma != 0.0
+        sqrt, cos, electrostatic = math.sqrt, math.cos, forces.electrostatic
+
+        def accel(t, x, v, U):
+            s3 = 1.0 + 2.0 * x / 3.0
+            a = 1.0 + U - mu * v
+            if s3 > 0.0:
+                a -= s3 * sqrt(s3)  # Hertz contact, zero without contact
+            if load_forcing:
+                a += Delta * cos(omega * t)
+            if electrostatics:
+                a += electrostatic(t, x, alpha, beta, gamma, Omega, R)
+            return a
+
+        return accel
+
+    def forces(self, t: float, x: float) -> tuple[float, float]:
+        """(F_contact, F_electrostatic) as they enter Eq. 3."""
+        s = self.scene
+        return forces.hertz(x), forces.electrostatic(t, x, s.alpha, s.beta, s.gamma, s.Omega, s.R)
+
+
+class PolynomialModel:
+    """Eq. 7: x'' = -mu x' - sum a_k x^k + Delta cos(omega t) + (beta sin Omega t - gamma cos 2 Omega t) G3(x) + U."""
+
+    events: tuple[Event, ...] = ()
+
+    def __init__(self, scene: Scene, printed: bool = False):
+        self.scene = scene
+        self.fidelity = Fidelity.POLYNOMIAL_PAPER if printed else Fidelity.POLYNOMIAL
+        make = forces.coefficients_printed if printed else forces.coefficients
+        self.a = make(scene.alpha, scene.gamma, scene.R)
+        self.g1 = forces.series_g1_printed(scene.R) if printed else forces.series_g1()
+        self.g2 = forces.series_g2(scene.R)
+        self.g3 = forces.series_g3(scene.R)
+        self.accel = self._make_accel(scene, self.a, self.g3)
+
+    @staticmethod
+    def _make_accel(s: Scene, a, g3):
+        mu, Delta, omega, beta, gamma, Omega = s.mu, s.Delta, s.omega, s.beta, s.gamma, s.Omega
+        a0, a1, a2, a3, a4, a5 = a
+        g30, g31, g32, g33, g34, g35 = g3
+        load_forcing = Delta != 0.0
+        ac = beta != 0.0 or gamma != 0.0
+        sin, cos = math.sin, math.cos
+
+        def accel(t, x, v, U):
+            acc = U - mu * v - (a0 + x * (a1 + x * (a2 + x * (a3 + x * (a4 + x * a5)))))
+            if load_forcing:
+                acc += Delta * cos(omega * t)
+            if ac:
+                G3 = g30 + x * (g31 + x * (g32 + x * (g33 + x * (g34 + x * g35))))
+                acc += (beta * sin(Omega * t) - gamma * cos(2.0 * Omega * t)) * G3
+            return acc
+
+        return accel
+
+    def forces(self, t: float, x: float) -> tuple[float, float]:
+        """(G1(x), alpha G2(x) + (beta sin + gamma(1 - cos 2 Omega t)) G3(x)): the series of Eq. 5."""
+        s = self.scene
+        drive = s.beta * math.sin(s.Omega * t) + s.gamma * (1.0 - math.cos(2.0 * s.Omega * t))
+        return forces.horner(self.g1, x), s.alpha * forces.horner(self.g2, x) + drive * forces.horner(self.g3, x)
+
+
+def make_model(scene: Scene, fidelity: int):
+    """The plant model of a fidelity level (0, 1 or 2)."""
+    fidelity = Fidelity(fidelity)
+    if fidelity is Fidelity.EXACT:
+        return ExactModel(scene)
+    return PolynomialModel(scene, printed=fidelity is Fidelity.POLYNOMIAL_PAPER)

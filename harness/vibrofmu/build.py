@@ -1,0 +1,29 @@
+"""Build the FMUs: pythonfmu packs the slave and the vibromodel package; the status shim goes on top."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import vibromodel
+from fmpy import read_model_description
+from pythonfmu import FmuBuilder
+
+from .shim import install_status_shim
+
+FMU_SRC = Path(vibromodel.__file__).resolve().parents[1]
+REPO_ROOT = FMU_SRC.parent
+BUILD_DIR = REPO_ROOT / "build"
+PLANT_SLAVE = FMU_SRC / "HertzEAOscillator.py"
+PLANT_FMU = BUILD_DIR / "HertzEAOscillator.fmu"
+
+
+def build_fmu(slave: Path, out_dir: Path = BUILD_DIR) -> Path:
+    """Build out_dir/<slave name>.fmu with vibromodel in its resources and the status shim installed."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    fmu = Path(FmuBuilder.build_FMU(slave, dest=out_dir, project_files=[FMU_SRC / "vibromodel"]))
+    status = next(v for v in read_model_description(str(fmu)).modelVariables if v.name == "fmi_status")
+    install_status_shim(fmu, status.valueReference)
+    return fmu
+
+
+def build_plant(out_dir: Path = BUILD_DIR) -> Path:
+    return build_fmu(PLANT_SLAVE, out_dir)

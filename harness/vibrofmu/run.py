@@ -1,0 +1,149 @@
+"""Drive one FMU under FMPy's FMU2Slave: set start values, doStep loop, collect outputs and log.
+
+A run never raises for a failing FMU: it keeps what was computed, records the status and the FMU's
+log messages, and says why it stopped before the stop time.
+"""
+from __future__ import annotations
+
+import math
+import shutil
+import time
+from ctypes import byref
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from fmpy import calloc, extract, free, read_model_description
+from fmpy.fmi1 import FMICallException
+from fmpy.fmi2 import (FMU2Slave, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE,
+                       fmi2CallbackFunctions, fmi2CallbackLoggerTYPE)
+from fmpy.logging import addLoggerProxy
+
+STATUS_NAMES = ["ok", "warning", "discard", "error", "fatal", "pending"]
+
+
+@dataclass
+class RunResult:
+    time: np.ndarray
+    outputs: dict[str, np.ndarray]
+    stop_time: float
+    completed: bool
+    stop_reason: str | None
+    log: list[str] = field(default_factory=list)
+    wall_time: float = 0.0  # doStep loop incl. getters
+    instantiate_time: float = 0.0  # unpack, load, instantiate, initialise
+
+    @property
+    def end_time(self) -> float:
+        return float(self.time[-1]) if len(self.time) else math.nan
+
+
+class FmuLog:
+    """FMI logger callback that keeps the messages (and the ctypes objects alive)."""
+
+    def __init__(self):
+        self.messages: list[str] = []
+
+        def logger(_env, _instance, status, category, message):
+            label = STATUS_NAMES[status] if 0 <= status < len(STATUS_NAMES) else str(status)
+            self.messages.append(f"[{label}] {message.decode(errors='replace')}")
+
+        self.callbacks = fmi2CallbackFunctions()
+        self.callbacks.logger = fmi2CallbackLoggerTYPE(logger)
+        self.callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
+        self.callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
+        addLoggerProxy(byref(self.callbacks))
+
+    def errors(self) -> list[str]:
+        return [m for m in self.messages if m.startswith(("[error]", "[fatal]", "[discard]"))]
+
+
+class FmuInstance:
+    """One instantiated co-simulation FMU with name-based access to its variables."""
+
+    def __init__(self, fmu_path: Path | str, instance_name: str = "instance"):
+        self.model_description = read_model_description(str(fmu_path))
+        self.variables = {v.name: v for v in self.model_description.modelVariables}
+        self.unzip_dir = extract(str(fmu_path))
+        self.log = FmuLog()
+        self.fmu = FMU2Slave(guid=self.model_description.guid, unzipDirectory=self.unzip_dir,
+                             modelIdentifier=self.model_description.coSimulation.modelIdentifier,
+                             instanceName=instance_name)
+        self.fmu.instantiate(callbacks=self.log.callbacks, loggingOn=True)
+
+    def set(self, values: dict):
+        for name, value in values.items():
+            variable = self.variables[name]
+            if variable.type == "Integer":
+                self.fmu.setInteger([variable.valueReference], [int(value)])
+            elif variable.type == "Boolean":
+                self.fmu.setBoolean([variable.valueReference], [bool(value)])
+            else:
+                self.fmu.setReal([variable.valueReference], [float(value)])
+
+    def value_references(self, names):
+        return [self.variables[n].valueReference for n in names]
+
+    def output_names(self):
+        return [v.name for v in self.model_description.modelVariables if v.causality == "output"]
+
+    def close(self):
+        try:
+            self.fmu.terminate()
+        except FMICallException:
+            pass
+        self.fmu.freeInstance()
+        shutil.rmtree(self.unzip_dir, ignore_errors=True)
+
+
+def run_fmu(fmu_path: Path | str, start_values: dict, stop_time: float, output_interval: float,
+            tolerance: float | None = None, progress=None) -> RunResult:
+    """Simulate from 0 to stop_time with communication step output_interval."""
+    t0 = time.perf_counter()
+    instance = FmuInstance(fmu_path)
+    fmu = instance.fmu
+    names = instance.output_names()
+    reals = [n for n in names if instance.variables[n].type == "Real"]
+    booleans = [n for n in names if instance.variables[n].type == "Boolean"]
+    real_refs, bool_refs = instance.value_references(reals), instance.value_references(booleans)
+    n_steps = int(round(stop_time / output_interval))
+    times, rows = [], []
+    stop_reason = None
+    try:
+        fmu.setupExperiment(tolerance=tolerance, startTime=0.0, stopTime=stop_time)
+        fmu.enterInitializationMode()
+        instance.set(start_values)
+        fmu.exitInitializationMode()
+    except FMICallException as error:
+        stop_reason = _reason(error, instance.log)
+    instantiate_time = time.perf_counter() - t0
+
+    t_loop = time.perf_counter()
+    if stop_reason is None:
+        times.append(0.0)
+        rows.append(fmu.getReal(real_refs) + [float(b) for b in fmu.getBoolean(bool_refs)])
+        for i in range(n_steps):
+            t = i * output_interval
+            try:
+                fmu.doStep(currentCommunicationPoint=t, communicationStepSize=output_interval)
+            except FMICallException as error:
+                stop_reason = _reason(error, instance.log)
+                break
+            times.append((i + 1) * output_interval)
+            rows.append(fmu.getReal(real_refs) + [float(b) for b in fmu.getBoolean(bool_refs)])
+            if progress is not None:
+                progress(i + 1, n_steps)
+    wall_time = time.perf_counter() - t_loop
+    instance.close()
+
+    data = np.array(rows, dtype=float).reshape(len(rows), len(reals) + len(booleans))
+    outputs = {name: data[:, j] for j, name in enumerate(reals + booleans)}
+    return RunResult(time=np.array(times), outputs=outputs, stop_time=stop_time,
+                     completed=stop_reason is None, stop_reason=stop_reason, log=instance.log.messages,
+                     wall_time=wall_time, instantiate_time=instantiate_time)
+
+
+def _reason(error: FMICallException, log: FmuLog) -> str:
+    messages = log.errors()
+    detail = messages[-1] if messages else "no log message"
+    return f"{error}: {detail}"

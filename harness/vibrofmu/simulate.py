@@ -1,0 +1,73 @@
+"""Simulate the plant FMU for a scene, optionally compare with the reference, export the results."""
+from __future__ import annotations
+
+import dataclasses
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from vibromodel.parameters import ParameterError, Scene, consistency_warning, validate
+from vibromodel.plant import Settings
+
+from . import export
+from .compare import errors
+from .reference import REFERENCE_ATOL, REFERENCE_RTOL, Reference, reference_solution
+from .run import RunResult, run_fmu
+
+FIDELITIES = {"exact": 0, "polynomial": 1, "polynomial-paper": 2}
+SOLVERS = {"adaptive": 0, "rk4": 1}
+
+
+def start_values(scene: Scene, settings: Settings) -> dict:
+    return {**scene.as_dict(), **dataclasses.asdict(settings)}
+
+
+def check_inputs(scene: Scene, settings: Settings, stop_time: float, output_interval: float) -> list[str]:
+    """Raise ParameterError for bad input (before anything runs); return warnings."""
+    validate(scene)
+    settings.validate()
+    for name, value in (("stop-time", stop_time), ("output-interval", output_interval)):
+        if not (np.isfinite(value) and value > 0):
+            raise ParameterError(name, value, "must be a finite number > 0")
+    warning = consistency_warning(scene)
+    return [warning] if warning else []
+
+
+def simulate(fmu: Path, scene: Scene, settings: Settings, stop_time: float, output_interval: float,
+             out_dir: Path, compare: bool = False, progress=None) -> tuple[RunResult, dict, Reference | None]:
+    """Run the FMU, write out_dir/result.csv, summary.json and x.png; return the run, the summary
+    and the reference (None without compare)."""
+    warnings = check_inputs(scene, settings, stop_time, output_interval)
+    for warning in warnings:
+        print(f"warning: {warning}", file=sys.stderr)
+    run = run_fmu(fmu, start_values(scene, settings), stop_time, output_interval, progress=progress)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    summary = {
+        "fmu": str(fmu),
+        "parameters": scene.as_dict(),
+        "settings": {**dataclasses.asdict(settings), "stop_time": stop_time, "output_interval": output_interval},
+        "warnings": warnings,
+        "completed": run.completed,
+        "end_time": run.end_time,
+        "stop_reason": run.stop_reason,
+        "wall_time_s": run.wall_time,
+        "instantiate_time_s": run.instantiate_time,
+        "fmu_log": run.log[-20:],
+    }
+    reference = reference_x = None
+    if compare and len(run.time):
+        reference = reference_solution(scene, settings.fidelity, run.end_time)
+        reference_x = reference(run.time)[0]
+        summary["reference"] = {"method": "solve_ivp DOP853", "rtol": REFERENCE_RTOL, "atol": REFERENCE_ATOL,
+                                "stop_event": reference.stop_event,
+                                "contact_changes_tau": reference.contact_changes}
+        summary["error"] = errors(run.time, run.outputs["x"], run.outputs["v"], reference)
+    export.write_csv(out_dir / "result.csv", run.time, run.outputs)
+    export.write_json(out_dir / "summary.json", summary)
+    fidelity = {v: k for k, v in FIDELITIES.items()}[settings.fidelity]
+    solver = {v: k for k, v in SOLVERS.items()}[settings.solver]
+    export.plot_x(out_dir / "x.png", run.time, run.outputs["x"],
+                  f"HertzEAOscillator: fidelity {fidelity}, solver {solver}, rtol {settings.rtol:g}",
+                  reference_x=reference_x)
+    return run, summary, reference
