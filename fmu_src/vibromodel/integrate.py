@@ -211,7 +211,7 @@ class Dop853:
         g_start = g(self.x_old)
         if g_start == 0.0:
             return self.t_old
-        return brentq(lambda tt: g(self.value_at(tt)[0]), self.t_old, self.t, xtol=1e-15, rtol=4e-16)
+        return brentq(lambda tt: g(self.value_at(tt)[0]), self.t_old, self.t, xtol=1e-15, rtol=1e-15)
 
     # -- dense output --------------------------------------------------------------------------
     def value_at(self, t):

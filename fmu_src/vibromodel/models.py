@@ -37,8 +37,8 @@ def pull_in_events(R: float) -> tuple[Event, Event]:
     """Gaps 1 -/+ 2x/(3R) reaching PULL_IN_GAP: the electrostatic force is singular at gap 0."""
     c = 2.0 / (3.0 * R)
     return (
-        Event("pull-in (upper electrode)", lambda x: 1.0 - c * x - PULL_IN_GAP, True),
-        Event("pull-in (lower electrode)", lambda x: 1.0 + c * x - PULL_IN_GAP, True),
+        Event(f"pull-in: upper gap 1 - 2x/(3R) below {PULL_IN_GAP:g}", lambda x: 1.0 - c * x - PULL_IN_GAP, True),
+        Event(f"pull-in: lower gap 1 + 2x/(3R) below {PULL_IN_GAP:g}", lambda x: 1.0 + c * x - PULL_IN_GAP, True),
     )
 
 

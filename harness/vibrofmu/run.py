@@ -146,4 +146,4 @@ def run_fmu(fmu_path: Path | str, start_values: dict, stop_time: float, output_i
 def _reason(error: FMICallException, log: FmuLog) -> str:
     messages = log.errors()
     detail = messages[-1] if messages else "no log message"
-    return f"{error}: {detail}"
+    return f"{str(error).rstrip('.')}: {detail}"
