@@ -271,10 +271,36 @@ class Rk4:
             return
         n = max(1, math.ceil(span / self.max_step * (1.0 - 1e-12)))
         h = span / n
+        self._check_stability(h)
         t0 = self.t
         for i in range(1, n + 1):
             self._step(h)
             self.t = t_target if i == n else t0 + i * h
+
+    def _check_stability(self, h):
+        """Refuse a step for which RK4 is unstable on the local linearisation x'' = -k x - c x'.
+
+        Eigenvalues lambda of [[0, 1], [-k, -c]] with Re(lambda) <= 0 (physically stable) must give
+        |R(h lambda)| <= 1, R(z) = 1 + z + z^2/2 + z^3/6 + z^4/24, or RK4 would blow up (a NaN or a
+        spurious pull-in instead of an honest error).
+        """
+        f, U, t, x, v = self.accel, self.U, self.t, self.x, self.v
+        dx, dv = 1e-6 * max(1.0, abs(x)), 1e-6 * max(1.0, abs(v))
+        try:
+            k = -(f(t, x + dx, v, U) - f(t, x - dx, v, U)) / (2.0 * dx)
+            c = -(f(t, x, v + dv, U) - f(t, x, v - dv, U)) / (2.0 * dv)
+        except (ArithmeticError, ValueError):
+            return
+        self.nfev += 4
+        root = complex(c * c / 4.0 - k) ** 0.5
+        for lam in (-c / 2.0 + root, -c / 2.0 - root):
+            z = h * lam
+            growth = abs(1.0 + z + z * z / 2.0 + z**3 / 6.0 + z**4 / 24.0)
+            if lam.real <= 0.0 and growth > 1.0 + 1e-12:
+                raise IntegrationError(
+                    f"RK4 unstable: step h = {h:.3g} at tau = {t:.10g} gives h*lambda = {z:.3g} outside the "
+                    f"stability region (|lambda| = {abs(lam):.3g}); reduce max_step below "
+                    f"{2.5 / abs(lam):.3g}", t, x, v)
 
     def _step(self, h):
         f, U, t, x, v = self.accel, self.U, self.t, self.x, self.v
