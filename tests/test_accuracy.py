@@ -56,3 +56,12 @@ def test_setup_experiment_tolerance_takes_precedence(plant_fmu, reference):
 
     loose = run_fmu(plant_fmu, {"rtol": 1e-4}, 200.0, 0.1, tolerance=1e-10)
     assert max_error(loose, reference) <= 1e-9
+
+
+@pytest.mark.parametrize("stop_time,interval", [(1e-3, 1e-6), (200.0, 100.0), (200.0, 7.3)])
+def test_any_communication_step_size_is_covered(run_plant, reference, stop_time, interval):
+    run = run_plant(stop_time=stop_time, output_interval=interval, rtol=1e-10)
+    assert run.completed, run.stop_reason
+    assert run.time[-1] == pytest.approx(round(stop_time / interval) * interval, rel=1e-12)
+    # same tolerance as on the 0.1 grid: the step sequence does not depend on the communication grid
+    assert max_error(run, reference) <= 1e-9

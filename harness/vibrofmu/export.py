@@ -31,9 +31,11 @@ def plot_x(path: Path, time, x, title: str, reference_x=None) -> None:
         ax.plot(time, reference_x, "--", lw=1.0, label="reference (DOP853, rtol 1e-12)")
         err = np.abs(np.asarray(x) - np.asarray(reference_x))
         ax2 = ax.twinx()
-        ax2.semilogy(time, np.maximum(err, 1e-18), color="tab:red", lw=0.6, alpha=0.7, label="|x - x_ref|")
+        ax2.semilogy(time, np.maximum(err, 1e-18), color="tab:red", lw=0.5, alpha=0.5, label="|x - x_ref|")
         ax2.set_ylabel("|x - x_ref|", color="tab:red")
         ax2.legend(loc="lower right")
+        ax.set_zorder(ax2.get_zorder() + 1)  # the solution in front of the error
+        ax.patch.set_visible(False)
     ax.legend(loc="upper right")
     ax.set_title(title)
     fig.tight_layout()
