@@ -1,0 +1,519 @@
+/*
+ * fmi2_status_shim.c -- FMI 2.0 co-simulation wrapper around a pythonfmu
+ * 0.7.0 library, giving Python slaves a way to return fmi2Error.
+ *
+ * Layout inside the FMU (done by harness/vibrofmu/shim.py):
+ *   binaries/linux64/<id>.so            this shim
+ *   binaries/linux64/<id>_pythonfmu.so  pythonfmu's original library
+ *
+ * The inner library is found next to the shim's own file (dladdr), so it
+ * works wherever the host extracted the FMU.  Its name is derived from the
+ * shim's own file name: "<name>.so" -> "<name>_pythonfmu.so".
+ *
+ * Status mapping.  The Python slave exposes an Integer variable with value
+ * reference STATUS_VR (given at compile time) holding 0 (ok) or 3 (error).
+ * After every state-changing call (setup experiment, enter/exit
+ * initialization, doStep, set*, reset, setFMUstate) that the inner library
+ * answered with OK/Warning/Discard, the shim reads that flag; if it is 3 the
+ * call returns fmi2Error instead.  (fmi2DeSerializeFMUstate is not mapped:
+ * it does not involve the slave instance, see there.)
+ *
+ * Per-instance state:
+ *   OK    everything is forwarded.
+ *   ERROR entered when a state-changing call ends in fmi2Error.  As in the
+ *         FMI 2.0 state machine (and the Modelica Reference-FMUs masks),
+ *         only getters, status/FMU-state inquiries, fmi2SetDebugLogging,
+ *         fmi2Reset, fmi2SetFMUstate and fmi2FreeInstance are forwarded;
+ *         every other call -- including fmi2Terminate, which the standard
+ *         does not allow in the error state -- returns fmi2Error without
+ *         being forwarded and logs "call X not allowed after an error".
+ *         fmi2Reset (or fmi2SetFMUstate) leaves ERROR when the inner call
+ *         succeeds and the flag reads 0 afterwards.
+ *   FATAL entered the first time the inner library returns fmi2Fatal.  For
+ *         pythonfmu this means a Python exception was raised and its C++
+ *         layer has already released the Python slave object (but keeps
+ *         the dangling pointer).  Nothing is forwarded any more; every call
+ *         returns fmi2Fatal without touching output arguments.
+ *         fmi2FreeInstance does NOT forward either: pythonfmu's destructor
+ *         would release the same Python objects a second time (a
+ *         use-after-free).  The inner instance is leaked on purpose.
+ *
+ * Logging.  pythonfmu only passes messages on (even errors) when debug
+ * logging is on, so the inner instance always gets loggingOn=true and a
+ * logger of the shim's own (forward_log), which passes Warning/Discard/
+ * Error/Fatal messages to the host unconditionally and fmi2OK messages only
+ * as enabled by loggingOn / fmi2SetDebugLogging (which the shim handles
+ * itself and does not forward).
+ *
+ * NULL component pointers give fmi2Error (fmi2FreeInstance(NULL) is a no-op).
+ */
+
+#define _GNU_SOURCE
+#include <dlfcn.h>
+#include <pthread.h>
+#include <stddef.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#ifndef STATUS_VR
+#error "compile with -DSTATUS_VR=<value reference of the Integer status flag>"
+#endif
+
+#define FLAG_ERROR 3
+
+/* ---- minimal FMI 2.0 type definitions (see fmi2TypesPlatform.h / fmi2FunctionTypes.h) ---- */
+
+typedef void *fmi2Component;
+typedef void *fmi2ComponentEnvironment;
+typedef void *fmi2FMUstate;
+typedef unsigned int fmi2ValueReference;
+typedef double fmi2Real;
+typedef int fmi2Integer;
+typedef int fmi2Boolean;
+typedef char fmi2Char;
+typedef const fmi2Char *fmi2String;
+typedef char fmi2Byte;
+
+typedef enum { fmi2OK, fmi2Warning, fmi2Discard, fmi2Error, fmi2Fatal, fmi2Pending } fmi2Status;
+typedef enum { fmi2ModelExchange, fmi2CoSimulation } fmi2Type;
+typedef enum { fmi2DoStepStatus, fmi2PendingStatus, fmi2LastSuccessfulTime, fmi2Terminated } fmi2StatusKind;
+
+typedef void (*fmi2CallbackLogger)(fmi2ComponentEnvironment, fmi2String instanceName, fmi2Status,
+                                   fmi2String category, fmi2String message, ...);
+typedef void *(*fmi2CallbackAllocateMemory)(size_t nobj, size_t size);
+typedef void (*fmi2CallbackFreeMemory)(void *obj);
+typedef void (*fmi2StepFinished)(fmi2ComponentEnvironment, fmi2Status);
+
+typedef struct {
+    fmi2CallbackLogger logger;
+    fmi2CallbackAllocateMemory allocateMemory;
+    fmi2CallbackFreeMemory freeMemory;
+    fmi2StepFinished stepFinished;
+    fmi2ComponentEnvironment componentEnvironment;
+} fmi2CallbackFunctions;
+
+#define EXPORT __attribute__((visibility("default")))
+
+/* ---- inner library ---- */
+
+typedef struct {
+    fmi2Component (*Instantiate)(fmi2String, fmi2Type, fmi2String, fmi2String,
+                                 const fmi2CallbackFunctions *, fmi2Boolean, fmi2Boolean);
+    void (*FreeInstance)(fmi2Component);
+    fmi2Status (*SetupExperiment)(fmi2Component, fmi2Boolean, fmi2Real, fmi2Real, fmi2Boolean, fmi2Real);
+    fmi2Status (*EnterInitializationMode)(fmi2Component);
+    fmi2Status (*ExitInitializationMode)(fmi2Component);
+    fmi2Status (*Terminate)(fmi2Component);
+    fmi2Status (*Reset)(fmi2Component);
+    fmi2Status (*GetReal)(fmi2Component, const fmi2ValueReference[], size_t, fmi2Real[]);
+    fmi2Status (*GetInteger)(fmi2Component, const fmi2ValueReference[], size_t, fmi2Integer[]);
+    fmi2Status (*GetBoolean)(fmi2Component, const fmi2ValueReference[], size_t, fmi2Boolean[]);
+    fmi2Status (*GetString)(fmi2Component, const fmi2ValueReference[], size_t, fmi2String[]);
+    fmi2Status (*SetReal)(fmi2Component, const fmi2ValueReference[], size_t, const fmi2Real[]);
+    fmi2Status (*SetInteger)(fmi2Component, const fmi2ValueReference[], size_t, const fmi2Integer[]);
+    fmi2Status (*SetBoolean)(fmi2Component, const fmi2ValueReference[], size_t, const fmi2Boolean[]);
+    fmi2Status (*SetString)(fmi2Component, const fmi2ValueReference[], size_t, const fmi2String[]);
+    fmi2Status (*GetFMUstate)(fmi2Component, fmi2FMUstate *);
+    fmi2Status (*SetFMUstate)(fmi2Component, fmi2FMUstate);
+    fmi2Status (*FreeFMUstate)(fmi2Component, fmi2FMUstate *);
+    fmi2Status (*SerializedFMUstateSize)(fmi2Component, fmi2FMUstate, size_t *);
+    fmi2Status (*SerializeFMUstate)(fmi2Component, fmi2FMUstate, fmi2Byte[], size_t);
+    fmi2Status (*DeSerializeFMUstate)(fmi2Component, const fmi2Byte[], size_t, fmi2FMUstate *);
+    fmi2Status (*GetDirectionalDerivative)(fmi2Component, const fmi2ValueReference[], size_t,
+                                           const fmi2ValueReference[], size_t, const fmi2Real[], fmi2Real[]);
+    fmi2Status (*SetRealInputDerivatives)(fmi2Component, const fmi2ValueReference[], size_t,
+                                          const fmi2Integer[], const fmi2Real[]);
+    fmi2Status (*GetRealOutputDerivatives)(fmi2Component, const fmi2ValueReference[], size_t,
+                                           const fmi2Integer[], fmi2Real[]);
+    fmi2Status (*DoStep)(fmi2Component, fmi2Real, fmi2Real, fmi2Boolean);
+    fmi2Status (*CancelStep)(fmi2Component);
+    fmi2Status (*GetStatus)(fmi2Component, const fmi2StatusKind, fmi2Status *);
+    fmi2Status (*GetRealStatus)(fmi2Component, const fmi2StatusKind, fmi2Real *);
+    fmi2Status (*GetIntegerStatus)(fmi2Component, const fmi2StatusKind, fmi2Integer *);
+    fmi2Status (*GetBooleanStatus)(fmi2Component, const fmi2StatusKind, fmi2Boolean *);
+    fmi2Status (*GetStringStatus)(fmi2Component, const fmi2StatusKind, fmi2String *);
+} InnerApi;
+
+static InnerApi inner;
+static void *inner_handle = NULL;
+static char load_error[8192] = "";
+static pthread_once_t load_once = PTHREAD_ONCE_INIT;
+
+/* A static function: its address cannot be interposed by another library. */
+static void anchor(void) {}
+
+static void load_inner(void)
+{
+    Dl_info info;
+    if (!dladdr((void *)&anchor, &info) || info.dli_fname == NULL) {
+        snprintf(load_error, sizeof load_error, "cannot determine the shim's own path");
+        return;
+    }
+    const char *own = info.dli_fname;
+    size_t n = strlen(own);
+    if (n > 3 && strcmp(own + n - 3, ".so") == 0) n -= 3;
+    char path[4096];
+    if ((size_t)snprintf(path, sizeof path, "%.*s_pythonfmu.so", (int)n, own) >= sizeof path) {
+        snprintf(load_error, sizeof load_error, "path of the inner library is too long");
+        return;
+    }
+    void *h = dlopen(path, RTLD_NOW | RTLD_LOCAL | RTLD_DEEPBIND);
+    if (h == NULL) {
+        snprintf(load_error, sizeof load_error, "cannot load inner library: %s", dlerror());
+        return;
+    }
+#define RESOLVE(name)                                                                    \
+    do {                                                                                 \
+        *(void **)(&inner.name) = dlsym(h, "fmi2" #name);                                \
+        if (inner.name == NULL) {                                                        \
+            snprintf(load_error, sizeof load_error, "symbol fmi2" #name " missing in %s", path); \
+            dlclose(h);                                                                  \
+            memset(&inner, 0, sizeof inner);                                             \
+            return;                                                                      \
+        }                                                                                \
+    } while (0)
+    RESOLVE(Instantiate); RESOLVE(FreeInstance);
+    RESOLVE(SetupExperiment); RESOLVE(EnterInitializationMode); RESOLVE(ExitInitializationMode);
+    RESOLVE(Terminate); RESOLVE(Reset);
+    RESOLVE(GetReal); RESOLVE(GetInteger); RESOLVE(GetBoolean); RESOLVE(GetString);
+    RESOLVE(SetReal); RESOLVE(SetInteger); RESOLVE(SetBoolean); RESOLVE(SetString);
+    RESOLVE(GetFMUstate); RESOLVE(SetFMUstate); RESOLVE(FreeFMUstate);
+    RESOLVE(SerializedFMUstateSize); RESOLVE(SerializeFMUstate); RESOLVE(DeSerializeFMUstate);
+    RESOLVE(GetDirectionalDerivative); RESOLVE(SetRealInputDerivatives); RESOLVE(GetRealOutputDerivatives);
+    RESOLVE(DoStep); RESOLVE(CancelStep);
+    RESOLVE(GetStatus); RESOLVE(GetRealStatus); RESOLVE(GetIntegerStatus);
+    RESOLVE(GetBooleanStatus); RESOLVE(GetStringStatus);
+#undef RESOLVE
+    inner_handle = h; /* never dlclose'd: pythonfmu keeps a Python thread alive */
+}
+
+/* ---- shim component ---- */
+
+typedef enum { SHIM_OK, SHIM_ERROR, SHIM_FATAL } ShimState;
+
+typedef struct {
+    fmi2Component inner;
+    fmi2CallbackFunctions cb;       /* the host's callbacks (copy) */
+    fmi2CallbackFunctions inner_cb; /* given to the inner library: logger = forward_log */
+    char *name;
+    ShimState state;
+    int logging_on;                 /* host's debug logging flag ... */
+    size_t ncat;                    /* ... and categories (0 = all) */
+    char **cat;
+} Shim;
+
+static void noop_logger(fmi2ComponentEnvironment e, fmi2String i, fmi2Status s, fmi2String c, fmi2String m, ...)
+{
+    (void)e; (void)i; (void)s; (void)c; (void)m;
+}
+
+static void free_categories(Shim *s)
+{
+    for (size_t i = 0; i < s->ncat; i++) free(s->cat[i]);
+    free(s->cat);
+    s->cat = NULL;
+    s->ncat = 0;
+}
+
+static void set_logging(Shim *s, fmi2Boolean on, size_t n, const fmi2String cats[])
+{
+    free_categories(s);
+    s->logging_on = on != 0;
+    if (n == 0 || cats == NULL) return;
+    s->cat = calloc(n, sizeof *s->cat);
+    if (s->cat == NULL) return; /* out of memory: all categories */
+    for (size_t i = 0; i < n; i++)
+        if (cats[i] != NULL && (s->cat[s->ncat] = strdup(cats[i])) != NULL) s->ncat++;
+}
+
+static int category_enabled(const Shim *s, fmi2String category)
+{
+    if (!s->logging_on) return 0;
+    if (s->ncat == 0) return 1;
+    for (size_t i = 0; i < s->ncat; i++)
+        if (strcmp(s->cat[i], "logAll") == 0 || (category && strcmp(s->cat[i], category) == 0)) return 1;
+    return 0;
+}
+
+/* Pass a message to a host logger.  The host treats the message as a
+   printf format: '%' is doubled so that the text is printed as is. */
+static void log_to(const fmi2CallbackFunctions *cb, fmi2String instanceName, fmi2Status status,
+                   fmi2String category, fmi2String msg)
+{
+    if (msg == NULL) msg = "";
+    if (instanceName == NULL) instanceName = "";
+    if (strchr(msg, '%') == NULL) {
+        cb->logger(cb->componentEnvironment, instanceName, status, category, msg);
+        return;
+    }
+    char *buf = malloc(2 * strlen(msg) + 1);
+    if (buf == NULL) return;
+    char *o = buf;
+    for (const char *p = msg; *p; p++) {
+        if (*p == '%') *o++ = '%';
+        *o++ = *p;
+    }
+    *o = '\0';
+    cb->logger(cb->componentEnvironment, instanceName, status, category, buf);
+    free(buf);
+}
+
+/* Logger handed to the inner library.  pythonfmu 0.7.0 drops *every* message
+   (even errors and its "Fatal py exception" report) unless debug logging is
+   on, so the inner instance always runs with logging on and the filtering is
+   done here: warnings, discards, errors and fatals always reach the host;
+   fmi2OK messages only when the host enabled logging for their category. */
+static void forward_log(fmi2ComponentEnvironment env, fmi2String instanceName, fmi2Status status,
+                        fmi2String category, fmi2String message, ...)
+{
+    const Shim *s = (const Shim *)env;
+    if (status >= fmi2Warning || category_enabled(s, category))
+        log_to(&s->cb, instanceName, status, category, message);
+}
+
+static void shim_log(const Shim *s, fmi2Status status, const char *msg)
+{
+    log_to(&s->cb, s->name, status, status >= fmi2Error ? "logStatusError" : "logAll", msg);
+}
+
+static fmi2Status refuse(Shim *s, const char *fn)
+{
+    char msg[160];
+    if (s->state == SHIM_FATAL) return fmi2Fatal; /* already reported once */
+    snprintf(msg, sizeof msg, "call %s not allowed after an error", fn);
+    shim_log(s, fmi2Error, msg);
+    return fmi2Error;
+}
+
+/* Record fatal results (never forward again after one). */
+static fmi2Status note(Shim *s, fmi2Status st)
+{
+    if (st == fmi2Fatal) s->state = SHIM_FATAL;
+    return st;
+}
+
+/* After a state-changing call: map the Python status flag onto the result. */
+static fmi2Status settle(Shim *s, fmi2Status st, int may_clear_error)
+{
+    if (st == fmi2OK || st == fmi2Warning || st == fmi2Discard) {
+        const fmi2ValueReference vr = STATUS_VR;
+        fmi2Integer flag = 0;
+        fmi2Status rs = inner.GetInteger(s->inner, &vr, 1, &flag);
+        if (rs > fmi2Warning) st = rs;
+        else if (flag == FLAG_ERROR) st = fmi2Error;
+    }
+    if (st == fmi2Fatal) s->state = SHIM_FATAL;
+    else if (st == fmi2Error) s->state = SHIM_ERROR;
+    else if (may_clear_error) s->state = SHIM_OK;
+    return st;
+}
+
+/* Guards.  S: the shim pointer; NULL components give fmi2Error. */
+#define SHIM(c) Shim *S = (Shim *)(c); if (S == NULL) return fmi2Error
+/* forwarded in OK and ERROR state (getters, inquiries) */
+#define ALLOW_IN_ERROR() if (S->state == SHIM_FATAL) return fmi2Fatal
+/* forwarded only in OK state */
+#define ONLY_IN_OK(fn) if (S->state != SHIM_OK) return refuse(S, fn)
+
+/* ---- exported FMI 2.0 API ---- */
+
+EXPORT const char *fmi2GetTypesPlatform(void) { return "default"; }
+EXPORT const char *fmi2GetVersion(void) { return "2.0"; }
+
+EXPORT fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2String fmuGUID,
+                                     fmi2String fmuResourceLocation, const fmi2CallbackFunctions *functions,
+                                     fmi2Boolean visible, fmi2Boolean loggingOn)
+{
+    pthread_once(&load_once, load_inner);
+    if (inner_handle == NULL) {
+        if (functions != NULL && functions->logger != NULL)
+            log_to(functions, instanceName, fmi2Fatal, "logStatusFatal", load_error);
+        return NULL;
+    }
+    Shim *s = calloc(1, sizeof *s);
+    if (s == NULL) return NULL;
+    s->name = strdup(instanceName ? instanceName : "");
+    if (functions != NULL) s->cb = *functions;
+    if (s->cb.logger == NULL) s->cb.logger = noop_logger;
+    s->state = SHIM_OK;
+    set_logging(s, loggingOn, 0, NULL);
+    s->inner_cb = s->cb;
+    s->inner_cb.logger = forward_log;
+    s->inner_cb.stepFinished = NULL;
+    s->inner_cb.componentEnvironment = s;
+    if (s->name != NULL)
+        s->inner = inner.Instantiate(instanceName, fmuType, fmuGUID, fmuResourceLocation, &s->inner_cb,
+                                     visible, 1 /* filtering is done by forward_log */);
+    if (s->inner == NULL) {
+        free(s->name);
+        free(s);
+        return NULL;
+    }
+    return s;
+}
+
+EXPORT void fmi2FreeInstance(fmi2Component c)
+{
+    Shim *S = (Shim *)c;
+    if (S == NULL) return;
+    if (S->state == SHIM_FATAL) {
+        /* pythonfmu's destructor would DECREF already-released Python objects
+           again (use-after-free): leak the inner instance, and keep this
+           struct too since the leaked instance still points at inner_cb. */
+        free_categories(S);
+        return;
+    }
+    inner.FreeInstance(S->inner);
+    free_categories(S);
+    free(S->name);
+    free(S);
+}
+
+/* Not forwarded: the inner instance always logs, forward_log filters. */
+EXPORT fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingOn, size_t n, const fmi2String cats[])
+{
+    SHIM(c); ALLOW_IN_ERROR();
+    set_logging(S, loggingOn, n, cats);
+    return fmi2OK;
+}
+
+EXPORT fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean tolDef, fmi2Real tol, fmi2Real tStart,
+                                      fmi2Boolean stopDef, fmi2Real tStop)
+{
+    SHIM(c); ONLY_IN_OK("fmi2SetupExperiment");
+    return settle(S, inner.SetupExperiment(S->inner, tolDef, tol, tStart, stopDef, tStop), 0);
+}
+
+EXPORT fmi2Status fmi2EnterInitializationMode(fmi2Component c)
+{
+    SHIM(c); ONLY_IN_OK("fmi2EnterInitializationMode");
+    return settle(S, inner.EnterInitializationMode(S->inner), 0);
+}
+
+EXPORT fmi2Status fmi2ExitInitializationMode(fmi2Component c)
+{
+    SHIM(c); ONLY_IN_OK("fmi2ExitInitializationMode");
+    return settle(S, inner.ExitInitializationMode(S->inner), 0);
+}
+
+EXPORT fmi2Status fmi2Terminate(fmi2Component c)
+{
+    SHIM(c); ONLY_IN_OK("fmi2Terminate");
+    return note(S, inner.Terminate(S->inner));
+}
+
+EXPORT fmi2Status fmi2Reset(fmi2Component c)
+{
+    SHIM(c); ALLOW_IN_ERROR();
+    return settle(S, inner.Reset(S->inner), 1);
+}
+
+/* getters: allowed after an error; after a fatal the outputs are not touched */
+#define GETTER(Name, T)                                                                         \
+    EXPORT fmi2Status fmi2Get##Name(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, T value[]) \
+    {                                                                                           \
+        SHIM(c); ALLOW_IN_ERROR();                                                              \
+        return note(S, inner.Get##Name(S->inner, vr, nvr, value));                              \
+    }
+GETTER(Real, fmi2Real)
+GETTER(Integer, fmi2Integer)
+GETTER(Boolean, fmi2Boolean)
+GETTER(String, fmi2String)
+
+#define SETTER(Name, T)                                                                         \
+    EXPORT fmi2Status fmi2Set##Name(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const T value[]) \
+    {                                                                                           \
+        SHIM(c); ONLY_IN_OK("fmi2Set" #Name);                                                   \
+        return settle(S, inner.Set##Name(S->inner, vr, nvr, value), 0);                         \
+    }
+SETTER(Real, fmi2Real)
+SETTER(Integer, fmi2Integer)
+SETTER(Boolean, fmi2Boolean)
+SETTER(String, fmi2String)
+
+EXPORT fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *state)
+{
+    SHIM(c); ALLOW_IN_ERROR();
+    return note(S, inner.GetFMUstate(S->inner, state));
+}
+
+EXPORT fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate state)
+{
+    SHIM(c); ALLOW_IN_ERROR();
+    return settle(S, inner.SetFMUstate(S->inner, state), 1);
+}
+
+EXPORT fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *state)
+{
+    SHIM(c); ALLOW_IN_ERROR();
+    return note(S, inner.FreeFMUstate(S->inner, state));
+}
+
+EXPORT fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate state, size_t *size)
+{
+    SHIM(c); ALLOW_IN_ERROR();
+    return note(S, inner.SerializedFMUstateSize(S->inner, state, size));
+}
+
+EXPORT fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate state, fmi2Byte bytes[], size_t size)
+{
+    SHIM(c); ALLOW_IN_ERROR();
+    return note(S, inner.SerializeFMUstate(S->inner, state, bytes, size));
+}
+
+/* Allowed after an error.  It only builds a state object (pythonfmu calls a
+   static method, the slave instance is not involved), so the status flag is
+   not consulted: in the error state it would still hold 3 and turn every
+   successful deserialization into an fmi2Error. */
+EXPORT fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte bytes[], size_t size, fmi2FMUstate *state)
+{
+    SHIM(c); ALLOW_IN_ERROR();
+    return note(S, inner.DeSerializeFMUstate(S->inner, bytes, size, state));
+}
+
+EXPORT fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReference vU[], size_t nU,
+                                               const fmi2ValueReference vK[], size_t nK,
+                                               const fmi2Real dvK[], fmi2Real dvU[])
+{
+    SHIM(c); ALLOW_IN_ERROR();
+    return note(S, inner.GetDirectionalDerivative(S->inner, vU, nU, vK, nK, dvK, dvU));
+}
+
+EXPORT fmi2Status fmi2SetRealInputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+                                              const fmi2Integer order[], const fmi2Real value[])
+{
+    SHIM(c); ONLY_IN_OK("fmi2SetRealInputDerivatives");
+    return note(S, inner.SetRealInputDerivatives(S->inner, vr, nvr, order, value));
+}
+
+EXPORT fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+                                               const fmi2Integer order[], fmi2Real value[])
+{
+    SHIM(c); ALLOW_IN_ERROR();
+    return note(S, inner.GetRealOutputDerivatives(S->inner, vr, nvr, order, value));
+}
+
+EXPORT fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean noSetPrior)
+{
+    SHIM(c); ONLY_IN_OK("fmi2DoStep");
+    return settle(S, inner.DoStep(S->inner, t, h, noSetPrior), 0);
+}
+
+EXPORT fmi2Status fmi2CancelStep(fmi2Component c)
+{
+    SHIM(c); ONLY_IN_OK("fmi2CancelStep");
+    return note(S, inner.CancelStep(S->inner));
+}
+
+#define STATUS_GETTER(Name, T)                                                                  \
+    EXPORT fmi2Status fmi2Get##Name(fmi2Component c, const fmi2StatusKind k, T *value)          \
+    {                                                                                           \
+        SHIM(c); ALLOW_IN_ERROR();                                                              \
+        return note(S, inner.Get##Name(S->inner, k, value));                                    \
+    }
+STATUS_GETTER(Status, fmi2Status)
+STATUS_GETTER(RealStatus, fmi2Real)
+STATUS_GETTER(IntegerStatus, fmi2Integer)
+STATUS_GETTER(BooleanStatus, fmi2Boolean)
+STATUS_GETTER(StringStatus, fmi2String)

@@ -1,0 +1,96 @@
+"""Install an FMI 2.0 status shim into a pythonfmu-built FMU.
+
+Why this exists -- pythonfmu 0.7.0 gives a Python slave no way to make an
+FMI call return ``fmi2Error``:
+
+* a ``do_step`` returning False makes ``fmi2DoStep`` return ``fmi2Discard``;
+* the return value of ``exit_initialization_mode`` (and the other hooks) is
+  ignored, the call always returns ``fmi2OK``;
+* any Python exception becomes ``fmi2Fatal`` and pythonfmu's C++ layer
+  (``handle_py_exception`` -> ``cleanPyObject``) releases the Python slave
+  object while keeping the pointer, so any later call on that instance --
+  including ``fmi2FreeInstance`` -- is a use-after-free that can crash the
+  host.
+
+The shim (``fmu_src/fmi2_status_shim.c``) is a small C library that becomes
+``binaries/linux64/<modelIdentifier>.so``; pythonfmu's library is kept beside
+it as ``<modelIdentifier>_pythonfmu.so`` and loaded at run time.  After each
+state-changing call the shim reads an Integer status variable of the slave
+(0 = ok, 3 = error) and turns the result into ``fmi2Error`` when it is 3.
+After an ``fmi2Fatal`` it stops forwarding calls (and leaks the broken inner
+instance rather than freeing it).  pythonfmu also drops every log message,
+errors included, unless the host turned debug logging on; the shim therefore
+runs it with logging on and itself passes warnings/errors/fatals to the host
+always, fmi2OK messages only when logging is on.  See the C file for the
+exact rules.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import tempfile
+import xml.etree.ElementTree as ET
+import zipfile
+from pathlib import Path
+
+SHIM_SOURCE = Path(__file__).resolve().parents[2] / "fmu_src" / "fmi2_status_shim.c"
+
+
+def _model_identifier_and_check_vr(model_description: bytes, status_vr: int) -> str:
+    root = ET.fromstring(model_description)
+    cs = root.find("CoSimulation")
+    if cs is None or not cs.get("modelIdentifier"):
+        raise ValueError("modelDescription.xml has no CoSimulation modelIdentifier")
+    # A wrong value reference would make pythonfmu raise a Python KeyError on
+    # every flag read, i.e. turn every call into fmi2Fatal: refuse it here.
+    for sv in root.iter("ScalarVariable"):
+        if sv.get("valueReference") == str(status_vr) and sv.find("Integer") is not None:
+            return cs.get("modelIdentifier")
+    raise ValueError(f"no Integer variable with valueReference {status_vr} in the FMU")
+
+
+def _compile_shim(status_vr: int, out: Path) -> None:
+    cmd = ["gcc", "-shared", "-fPIC", "-O2", "-fvisibility=hidden",
+           f"-DSTATUS_VR={int(status_vr)}", "-o", str(out), str(SHIM_SOURCE), "-ldl", "-pthread"]
+    proc = subprocess.run(cmd, capture_output=True, text=True)
+    if proc.returncode != 0:
+        raise RuntimeError(f"compiling the status shim failed ({' '.join(cmd)}):\n{proc.stderr}")
+
+
+def install_status_shim(fmu_path: Path, status_vr: int) -> None:
+    """Rewrite ``fmu_path`` in place so that linux64 uses the status shim.
+
+    ``status_vr`` is the value reference of the slave's Integer status flag.
+    Only linux64 gets the shim: the binaries of all other platforms (pythonfmu
+    also packs a win64 dll) are dropped, so that no platform in the FMU keeps
+    the old error semantics.  Running it again on a shimmed FMU replaces the
+    shim and keeps the original pythonfmu library.
+    """
+    fmu_path = Path(fmu_path)
+    with zipfile.ZipFile(fmu_path) as zin:
+        model_id = _model_identifier_and_check_vr(zin.read("modelDescription.xml"), status_vr)
+        names = zin.namelist()
+        shim_name = f"binaries/linux64/{model_id}.so"
+        inner_name = f"binaries/linux64/{model_id}_pythonfmu.so"
+        original = inner_name if inner_name in names else shim_name
+        if original not in names:
+            raise ValueError(f"{fmu_path} has no {shim_name}")
+
+        with tempfile.TemporaryDirectory() as tmp:
+            shim_so = Path(tmp) / "shim.so"
+            _compile_shim(status_vr, shim_so)
+            fd, tmp_fmu = tempfile.mkstemp(suffix=".fmu", dir=fmu_path.parent)
+            os.close(fd)
+            try:
+                with zipfile.ZipFile(tmp_fmu, "w", zipfile.ZIP_DEFLATED) as zout:
+                    for info in zin.infolist():
+                        if info.filename.startswith("binaries/"):
+                            continue
+                        zout.writestr(info, zin.read(info.filename))
+                    zout.writestr(inner_name, zin.read(original))
+                    zout.write(shim_so, shim_name)
+                os.replace(tmp_fmu, fmu_path)
+            except BaseException:
+                Path(tmp_fmu).unlink(missing_ok=True)
+                raise
