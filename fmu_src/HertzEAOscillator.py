@@ -55,7 +55,7 @@ class HertzEAOscillator(Fmi2Slave):
                                        description="0 ok, 3 error (read by the status shim)"))
         self.plant = None
         self.halted = "the FMU has not been initialised"  # why doStep refuses, or None
-        self.experiment_tolerance = None
+        self.start_time, self.experiment_tolerance = 0.0, None
 
     def _set_outputs(self, x, v, a, F_contact, F_electrostatic, in_contact):
         self.x, self.v, self.a = x, v, a
@@ -79,7 +79,7 @@ class HertzEAOscillator(Fmi2Slave):
             rtol = self.rtol if self.experiment_tolerance is None else self.experiment_tolerance
             settings = Settings(fidelity=int(self.fidelity), solver=int(self.solver),
                                 rtol=float(rtol), max_step=float(self.max_step))
-            self.plant = Plant(scene, settings, t0=float(getattr(self, "start_time", 0.0)))
+            self.plant = Plant(scene, settings, t0=float(self.start_time))
             self._publish(self.plant.outputs())
             self.halted = None
         except ParameterError as error:

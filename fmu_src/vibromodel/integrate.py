@@ -63,7 +63,6 @@ class Dop853:
         self.rtol, self.atol, self.max_step = rtol, rtol * ATOL_PER_RTOL, max_step
         self.nfev = 0
         self.n_steps = 0
-        self.contact_side = {}
         self._restart(t0, x0, v0, U)
         self.h = None  # chosen on the first step
 

@@ -82,7 +82,7 @@ class Plant:
             raise ParameterError("currentCommunicationPoint", t, f"the plant is at tau = {self.t!r}")
         self.integrator.set_input(self.t, U)
         self.U = U
-        t_end = self.t + h
+        t_end = t + h  # the host's clock: no drift from summing steps
         self.integrator.advance(t_end)
         self.t = t_end
         return self.outputs()
