@@ -36,3 +36,21 @@ def test_start_values_are_the_paper_example(plant_fmu):
     assert math.isclose(float(variables["omega"].start), math.sqrt(1 - 8e-3 / 3 - 8e-4 / 3) + 2e-4, rel_tol=1e-15)
     assert math.isclose(PAPER_OMEGA, 0.9987322562, abs_tol=1e-10)
     assert int(variables["fidelity"].start) == 0 and int(variables["solver"].start) == 0
+
+
+def test_fmu_runs_on_the_vibromodel_packed_in_its_resources(plant_fmu, tmp_path):
+    """In a fresh process that never imported vibromodel, the FMU imports its own packed copy."""
+    import subprocess
+    import sys
+
+    script = (
+        "import sys\n"
+        "from fmpy import simulate_fmu\n"
+        f"r = simulate_fmu({str(plant_fmu)!r}, stop_time=1.0, output_interval=0.1)\n"
+        "print(sys.modules['vibromodel'].__file__)\n"
+        "print(r['x'][-1])\n"
+    )
+    out = subprocess.run([sys.executable, "-c", script], cwd=tmp_path, capture_output=True, text=True, check=True)
+    module_file, x_end = out.stdout.split()
+    assert "/resources/vibromodel/" in module_file
+    assert math.isfinite(float(x_end))
