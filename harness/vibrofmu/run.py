@@ -107,6 +107,10 @@ def run_fmu(fmu_path: Path | str, start_values: dict, stop_time: float, output_i
     booleans = [n for n in names if instance.variables[n].type == "Boolean"]
     real_refs, bool_refs = instance.value_references(reals), instance.value_references(booleans)
     n_steps = int(round(stop_time / output_interval))
+
+    def read_outputs():
+        return fmu.getReal(real_refs) + [float(b) for b in fmu.getBoolean(bool_refs)]
+
     times, rows = [], []
     stop_reason = None
     try:
@@ -121,7 +125,7 @@ def run_fmu(fmu_path: Path | str, start_values: dict, stop_time: float, output_i
     t_loop = time.perf_counter()
     if stop_reason is None:
         times.append(0.0)
-        rows.append(fmu.getReal(real_refs) + [float(b) for b in fmu.getBoolean(bool_refs)])
+        rows.append(read_outputs())
         for i in range(n_steps):
             t = i * output_interval
             try:
@@ -130,7 +134,7 @@ def run_fmu(fmu_path: Path | str, start_values: dict, stop_time: float, output_i
                 stop_reason = _reason(error, instance.log)
                 break
             times.append((i + 1) * output_interval)
-            rows.append(fmu.getReal(real_refs) + [float(b) for b in fmu.getBoolean(bool_refs)])
+            rows.append(read_outputs())
             if progress is not None:
                 progress(i + 1, n_steps)
     wall_time = time.perf_counter() - t_loop
