@@ -5,13 +5,15 @@ destroys the instance): errors are logged with the parameter and value, `fmi_sta
 the status shim (fmu_src/fmi2_status_shim.c) returns fmi2Error to the host.
 """
 import math
+from pathlib import Path
 
 from pythonfmu import Boolean, DefaultExperiment, Fmi2Causality, Fmi2Slave, Fmi2Variability, Integer, Real
 from pythonfmu.enums import Fmi2Initial, Fmi2Status
 
+from vibromodel.analytic import OafmSettings
 from vibromodel.integrate import IntegrationError
 from vibromodel.parameters import ParameterError, Scene, scene_names
-from vibromodel.plant import Plant, Settings
+from vibromodel.plant import DEFAULT_EXPERIMENT, Plant, Settings
 
 STATUS_OK, STATUS_ERROR = 0, 3
 OUTPUTS = ("x", "v", "a", "F_contact", "F_electrostatic")
@@ -20,7 +22,7 @@ OUTPUTS = ("x", "v", "a", "F_contact", "F_electrostatic")
 class HertzEAOscillator(Fmi2Slave):
     author = "vibrofmu"
     description = "Hertzian-contact oscillator with two-sided electrostatic actuation (PAPER Eq. 3, ERRATA §3.1)"
-    default_experiment = DefaultExperiment(start_time=0.0, stop_time=200.0, step_size=0.1)
+    default_experiment = DefaultExperiment(*DEFAULT_EXPERIMENT)
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
@@ -33,7 +35,8 @@ class HertzEAOscillator(Fmi2Slave):
         self.rtol, self.max_step = settings.rtol, settings.max_step
         self.register_variable(Integer("fidelity", causality=Fmi2Causality.parameter,
                                        variability=Fmi2Variability.fixed,
-                                       description="0 exact Eq. 3, 1 polynomial Eq. 7, 2 Eq. 7 printed coefficients"))
+                                       description="0 exact Eq. 3, 1 polynomial Eq. 7, 2 Eq. 7 printed "
+                                                   "coefficients, 4 OAFM analytic"))
         self.register_variable(Integer("solver", causality=Fmi2Causality.parameter,
                                        variability=Fmi2Variability.fixed,
                                        description="0 adaptive DOP853, 1 fixed-step RK4"))
@@ -42,6 +45,16 @@ class HertzEAOscillator(Fmi2Slave):
         self.register_variable(Real("max_step", causality=Fmi2Causality.parameter,
                                     variability=Fmi2Variability.fixed,
                                     description="RK4 step / adaptive step ceiling; 0 = automatic"))
+        oafm = OafmSettings()
+        self.oafm_order, self.tau_star, self.oafm_tau_end = oafm.order, oafm.tau_star, oafm.tau_end
+        self.register_variable(Integer("oafm_order", causality=Fmi2Causality.parameter,
+                                       variability=Fmi2Variability.fixed,
+                                       description="fidelity 4: order of the harmonic OAFM basis"))
+        self.register_variable(Real("tau_star", causality=Fmi2Causality.parameter, variability=Fmi2Variability.fixed,
+                                    description="fidelity 4: end of the transient domain; 0 = automatic"))
+        self.register_variable(Real("oafm_tau_end", causality=Fmi2Causality.parameter,
+                                    variability=Fmi2Variability.fixed,
+                                    description="fidelity 4: end of the fit; 0 = automatic, at least the stop time"))
         self.U = 0.0
         self.register_variable(Real("U", causality=Fmi2Causality.input, description="control force"))
         self._set_outputs(scene.x_start, scene.v_start, 0.0, 0.0, 0.0, True)
@@ -55,7 +68,7 @@ class HertzEAOscillator(Fmi2Slave):
                                        description="0 ok, 3 error (read by the status shim)"))
         self.plant = None
         self.halted = "the FMU has not been initialised"  # why doStep refuses, or None
-        self.start_time, self.experiment_tolerance = 0.0, None
+        self.start_time, self.stop_time, self.experiment_tolerance = 0.0, None, None
 
     def _set_outputs(self, x, v, a, F_contact, F_electrostatic, in_contact):
         self.x, self.v, self.a = x, v, a
@@ -70,22 +83,31 @@ class HertzEAOscillator(Fmi2Slave):
         self._error(message)
 
     def setup_experiment(self, start_time, stop_time=None, tolerance=None):
-        self.start_time = start_time
+        self.start_time, self.stop_time = start_time, stop_time
         self.experiment_tolerance = tolerance
 
     def exit_initialization_mode(self):
         try:
             scene = Scene(**{name: float(getattr(self, name)) for name in scene_names()})
             rtol = self.rtol if self.experiment_tolerance is None else self.experiment_tolerance
+            oafm = OafmSettings(order=int(self.oafm_order), tau_star=float(self.tau_star),
+                                tau_end=float(self.oafm_tau_end))
             settings = Settings(fidelity=int(self.fidelity), solver=int(self.solver),
-                                rtol=float(rtol), max_step=float(self.max_step))
-            self.plant = Plant(scene, settings, t0=float(self.start_time))
+                                rtol=float(rtol), max_step=float(self.max_step), oafm=oafm)
+            self.plant = Plant(scene, settings, t0=float(self.start_time), stop_time=self.stop_time,
+                               cache_dirs=self._cache_dirs())
+            for note in self.plant.notes:
+                self.log(note, Fmi2Status.ok)
             self._publish(self.plant.outputs())
             self.halted = None
         except ParameterError as error:
             self._halt(f"{error}")
         except Exception as error:  # never let an exception reach pythonfmu (fmi2Fatal)
             self._halt(f"initialisation failed: {error!r}")
+
+    def _cache_dirs(self):
+        """OAFM solutions packed at build time (resources/oafm_cache)."""
+        return (Path(self.resources) / "oafm_cache",) if self.resources else ()
 
     def do_step(self, current_time, step_size):
         if self.halted is not None:

@@ -1,5 +1,13 @@
-"""Shared fixtures: the plant FMU is built once per test session into a temporary folder."""
+"""Shared fixtures: the plant FMU is built once per test session into a temporary folder.
+
+OAFM solutions fitted during the tests go to a fresh cache folder, never the user's cache.
+"""
+import os
+import tempfile
+
 import pytest
+
+os.environ["VIBROFMU_CACHE_DIR"] = tempfile.mkdtemp(prefix="vibrofmu-test-cache-")
 
 from vibrofmu.build import build_plant
 from vibrofmu.run import run_fmu

@@ -19,6 +19,8 @@ class Fidelity(IntEnum):
     EXACT = 0
     POLYNOMIAL = 1
     POLYNOMIAL_PAPER = 2
+    AVERAGED = 3  # slow flow: not built yet (issue 4); Settings.validate refuses it
+    ANALYTIC = 4  # OAFM closed form (analytic.py); its forces are those of Eq. 3 at x~
 
 
 @dataclass(frozen=True)
@@ -125,8 +127,8 @@ class PolynomialModel:
 
 
 def make_model(scene: Scene, fidelity: int):
-    """The plant model of a fidelity level (0, 1 or 2)."""
+    """The plant model of a fidelity level: 0, 1, 2; 4 gets Eq. 3 (for the forces at the analytic x~)."""
     fidelity = Fidelity(fidelity)
-    if fidelity is Fidelity.EXACT:
+    if fidelity in (Fidelity.EXACT, Fidelity.ANALYTIC):
         return ExactModel(scene)
     return PolynomialModel(scene, printed=fidelity is Fidelity.POLYNOMIAL_PAPER)

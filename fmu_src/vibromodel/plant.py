@@ -6,14 +6,16 @@ directly (no FMI) to measure what the FMI layer costs.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from enum import IntEnum
 
 from . import forces
+from .analytic import OafmSettings, cached_solve, covering
 from .integrate import Dop853, IntegrationError, Rk4
 from .models import Fidelity, make_model
 from .parameters import ParameterError, Scene, validate, validate_max_step, validate_tolerance
 
+DEFAULT_EXPERIMENT = (0.0, 200.0, 0.1)  # start, stop, communication step of the FMU's DefaultExperiment
 RK4_DEFAULT_STEP = 0.01  # RK4 step when max_step = 0 ("automatic")
 TIME_TOLERANCE = 1e-9  # relative mismatch allowed between the host's time and the plant's
 
@@ -29,10 +31,15 @@ class Settings:
     solver: int = Solver.ADAPTIVE
     rtol: float = 1e-8
     max_step: float = 0.0  # 0: automatic (no ceiling for the adaptive solver, 0.01 for RK4)
+    oafm: OafmSettings = field(default_factory=OafmSettings)  # fidelity 4 only
 
     def validate(self) -> None:
         if self.fidelity not in set(Fidelity):
             raise ParameterError("fidelity", self.fidelity, f"must be one of {[int(f) for f in Fidelity]}")
+        if self.fidelity == Fidelity.AVERAGED:
+            raise ParameterError("fidelity", self.fidelity, "3 (averaged slow flow) is not available yet")
+        if self.fidelity == Fidelity.ANALYTIC:
+            self.oafm.validate()
         if self.solver not in set(Solver):
             raise ParameterError("solver", self.solver, "must be 0 (adaptive) or 1 (RK4)")
         validate_tolerance(self.rtol)
@@ -51,22 +58,39 @@ class Outputs:
 
 
 class Plant:
-    """Scene + settings -> a steppable plant. Raises ParameterError for bad input."""
+    """Scene + settings -> a steppable plant. Raises ParameterError for bad input.
 
-    def __init__(self, scene: Scene, settings: Settings, t0: float = 0.0):
+    Fidelity 4 has no integrator: the OAFM solution is fitted here (or read from a cache in
+    cache_dirs or the user cache) to cover [t0, stop_time], and doStep evaluates closed forms.
+    `notes` says what initialisation did, for the FMU's log.
+    """
+
+    def __init__(self, scene: Scene, settings: Settings, t0: float = 0.0, stop_time: float | None = None,
+                 cache_dirs: tuple = ()):
         validate(scene)
         settings.validate()
         self.scene, self.settings = scene, settings
         self.model = make_model(scene, settings.fidelity)
-        if settings.solver == Solver.ADAPTIVE:
+        self.t = t0
+        self.U = 0.0
+        self.notes: list[str] = []
+        self.integrator = self.analytic = None
+        if settings.fidelity == Fidelity.ANALYTIC:
+            span = None if stop_time is None else stop_time - t0
+            oafm = covering(scene, settings.oafm, span)
+            self.analytic, source = cached_solve(scene, oafm, t0, read_dirs=cache_dirs)
+            self.notes.append(f"OAFM {oafm.basis} basis, tau* = {self.analytic.pieces[1].start:.6g}, fit to "
+                              f"tau = {self.analytic.tau_end:.6g} ({source})")
+            if stop_time is None:
+                self.notes.append(f"no stop time given: beyond tau = {self.analytic.tau_end:.6g} the analytic "
+                                  "solution extrapolates the fit")
+        elif settings.solver == Solver.ADAPTIVE:
             max_step = settings.max_step or math.inf
             self.integrator = Dop853(self.model.accel, self.model.events, t0, scene.x_start, scene.v_start,
                                      0.0, settings.rtol, max_step)
         else:
             self.integrator = Rk4(self.model.accel, self.model.events, t0, scene.x_start, scene.v_start,
                                   0.0, settings.max_step or RK4_DEFAULT_STEP)
-        self.t = t0
-        self.U = 0.0
 
     def do_step(self, t: float, h: float, U: float) -> Outputs:
         """Advance from the communication point t to t + h with input U held constant.
@@ -80,20 +104,29 @@ class Plant:
             raise ParameterError("U", U, "input must be a finite number")
         if not (math.isfinite(t) and abs(t - self.t) <= TIME_TOLERANCE * max(1.0, abs(t))):
             raise ParameterError("currentCommunicationPoint", t, f"the plant is at tau = {self.t!r}")
-        self.integrator.set_input(self.t, U)
-        self.U = U
         t_end = t + h  # the host's clock: no drift from summing steps
-        self.integrator.advance(t_end)
+        if self.analytic is not None:
+            if U != 0.0:
+                raise ParameterError("U", U, "fidelity 4 (OAFM analytic) is open loop: the input must be 0")
+        else:
+            self.integrator.set_input(self.t, U)
+            self.U = U
+            self.integrator.advance(t_end)
         self.t = t_end
         return self.outputs()
 
     def outputs(self) -> Outputs:
+        if self.analytic is not None:
+            return self.outputs_at(self.t, *self.analytic.state(self.t))
         x, v = self.integrator.value_at(self.t)
         return self.outputs_at(self.t, x, v)
 
-    def outputs_at(self, t: float, x: float, v: float) -> Outputs:
+    def outputs_at(self, t: float, x: float, v: float, a: float | None = None) -> Outputs:
+        """Outputs at a state; a = x'' of the model unless given (the analytic solution's own x~'')."""
         f_contact, f_electrostatic = self.model.forces(t, x)
-        return Outputs(x=x, v=v, a=self.model.accel(t, x, v, self.U), F_contact=f_contact,
+        if a is None:
+            a = self.model.accel(t, x, v, self.U)
+        return Outputs(x=x, v=v, a=a, F_contact=f_contact,
                        F_electrostatic=f_electrostatic, in_contact=forces.contact_indentation(x) > 0.0)
 
 

@@ -41,3 +41,46 @@ def plot_x(path: Path, time, x, title: str, reference_x=None) -> None:
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
+
+
+def plot_analytic(path: Path, tau, x, x_ref, boundaries, title: str) -> None:
+    """Analytic and numerical x(tau) on top, |error| on a log axis below; domain boundaries marked."""
+    fig, (top, bottom) = plt.subplots(2, 1, figsize=(10, 6.5), sharex=True, height_ratios=[3, 2])
+    top.plot(tau, x_ref, lw=1.6, color="0.6", label="numerical (DOP853, rtol 1e-12)")
+    top.plot(tau, x, "--", lw=0.9, color="tab:blue", label="analytic (OAFM)")
+    top.set_ylabel("x")
+    top.legend(loc="upper right")
+    top.set_title(title)
+    bottom.semilogy(tau, np.maximum(np.abs(np.asarray(x) - np.asarray(x_ref)), 1e-18), lw=0.6, color="tab:red")
+    bottom.set_ylabel("|x_oafm - x_num|")
+    bottom.set_xlabel("tau")
+    for ax in (top, bottom):
+        for boundary in boundaries:
+            ax.axvline(boundary, color="k", lw=0.6, ls=":")
+        ax.grid(True, which="major", alpha=0.3)
+    for boundary, name in zip(boundaries, ("tau*", "fit ends")):
+        top.annotate(name, (boundary, 1.0), xycoords=("data", "axes fraction"), fontsize=8, ha="left", va="top")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def plot_convergence(path: Path, rows: list[dict]) -> None:
+    """Error and residual against the number of convergence-control parameters, one line per domain."""
+    fig, ax = plt.subplots(figsize=(7, 4.5))
+    for domain, marker in ((0, "o"), (1, "s")):
+        n = [r["unknowns"][domain] for r in rows]
+        ax.loglog(n, [r["max_abs_error"][domain] for r in rows], marker + "-", label=f"max |error|, domain {domain + 1}")
+        ax.loglog(n, [r["residual_rms"][domain] for r in rows], marker + "--", alpha=0.6,
+                  label=f"RMS residual, domain {domain + 1}")
+        for r, count in zip(rows, n):
+            ax.annotate(f"{r['order']}", (count, r["max_abs_error"][domain]), fontsize=7,
+                        textcoords="offset points", xytext=(3, 3))
+    ax.set_xlabel("number of convergence-control parameters C_i (labels: order)")
+    ax.set_ylabel("error / residual")
+    ax.set_title("OAFM harmonic basis: convergence")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)

@@ -133,7 +133,7 @@ def run_fmu(fmu_path: Path | str, start_values: dict, stop_time: float, output_i
             except FMICallException as error:
                 stop_reason = _reason(error, instance.log)
                 break
-            times.append((i + 1) * output_interval)
+            times.append(t + output_interval)  # the FMU's own clock: t + h
             rows.append(read_outputs())
             if progress is not None:
                 progress(i + 1, n_steps)

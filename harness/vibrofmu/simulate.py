@@ -15,12 +15,16 @@ from .compare import errors
 from .reference import REFERENCE_ATOL, REFERENCE_RTOL, Reference, reference_solution
 from .run import RunResult, run_fmu
 
-FIDELITIES = {"exact": 0, "polynomial": 1, "polynomial-paper": 2}
+FIDELITIES = {"exact": 0, "polynomial": 1, "polynomial-paper": 2, "analytic": 4}
 SOLVERS = {"adaptive": 0, "rk4": 1}
 
 
 def start_values(scene: Scene, settings: Settings) -> dict:
-    return {**scene.as_dict(), **dataclasses.asdict(settings)}
+    """FMU start values (DESIGN.md names) of a scene and settings."""
+    oafm = settings.oafm
+    return {**scene.as_dict(), "fidelity": settings.fidelity, "solver": settings.solver, "rtol": settings.rtol,
+            "max_step": settings.max_step, "oafm_order": oafm.order, "tau_star": oafm.tau_star,
+            "oafm_tau_end": oafm.tau_end}
 
 
 def check_inputs(scene: Scene, settings: Settings, stop_time: float, output_interval: float) -> list[str]:

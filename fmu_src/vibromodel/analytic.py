@@ -1,0 +1,165 @@
+"""The OAFM analytic solution of a scene (fidelity 4): settings, tau* rule, the two-domain solve, cache.
+
+Domain 1 is [t0, t0 + tau*] (the decaying free vibration dominates), domain 2 is [t0 + tau*, t0 + tau_end]
+(the forced vibration dominates); x~ and x~' are continuous at tau*. The last piece is also used
+beyond tau_end: its terms are periodic or decaying, so it extrapolates the steady vibration.
+"""
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import math
+import os
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+from .models import ExactModel
+from .oafm import AnalyticSolution, Grid, Piece, continue_from, fit_domain
+from .oafm_bases import FAMILIES, eq11_operator, forced_x0
+from .parameters import ParameterError, Scene, validate
+
+CACHE_VERSION = 1  # bump when the bases or the functional change: old cache entries no longer apply
+FREE_DECAY_SPAN = 20.0  # tau_end - tau* = FREE_DECAY_SPAN / mu: the free vibration decays by e^-10 ...
+MAX_STEADY_SPAN = 1000.0  # ... but at most this long (light damping: the fit would grow without bound)
+FORCED_FLOOR = 1e-3  # without forcing, tau* is where the free vibration has decayed to this fraction
+
+
+@dataclass(frozen=True)
+class OafmSettings:
+    basis: str = "harmonic"
+    order: int = 3  # harmonic family: highest combination order (ignored by `paper`)
+    tau_star: float = 0.0  # length of domain 1; 0 = automatic
+    tau_end: float = 0.0  # end of the steady domain's fit, from t0; 0 = automatic
+    grid: Grid = field(default_factory=Grid)
+
+    def validate(self) -> None:
+        if self.basis not in FAMILIES:
+            raise ParameterError("basis", self.basis, f"known bases: {', '.join(FAMILIES)}")
+        if not 1 <= self.order <= 8:
+            raise ParameterError("oafm_order", self.order, "must be 1..8")
+        for name in ("tau_star", "tau_end"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0.0):
+                raise ParameterError(name, value, "must be a finite number >= 0 (0 = automatic)")
+        if self.tau_end and self.tau_star and self.tau_end <= self.tau_star:
+            raise ParameterError("tau_end", self.tau_end, f"must exceed tau_star = {self.tau_star:g}")
+        if not (self.grid.panel > 0 and self.grid.nodes >= 2):
+            raise ParameterError("grid", self.grid, "panel must be > 0 and nodes >= 2")
+
+
+def automatic_tau_star(scene: Scene) -> float:
+    """Where the envelope of the free vibration, |free(0)| e^(-mu tau/2), falls to the forced amplitude.
+
+    Both from L of Eq. 11: the forced amplitude Delta/|a1 - w^2 + i mu w|, the free amplitude from the
+    initial state minus the forced particular solution. At least one free period 2 pi/q.
+    """
+    _require_damping(scene, "tau_star")
+    L = eq11_operator(scene)
+    free = forced_x0(L, scene, 0.0, scene.x_start, scene.v_start).merged()
+    homogeneous = (free.sigma == 0.5 * scene.mu) & (free.nu == L.q)
+    free_amplitude = math.hypot(float(free.a[homogeneous].sum()), float(free.b[homogeneous].sum()))
+    forced_amplitude = scene.Delta / abs(complex(L.k - scene.omega**2, scene.mu * scene.omega))
+    ratio = free_amplitude / max(forced_amplitude, FORCED_FLOOR * free_amplitude, 1e-300)
+    return max(2.0 * math.log(max(ratio, 1.0)) / scene.mu, 2.0 * math.pi / L.q)
+
+
+def _require_damping(scene: Scene, name: str) -> None:
+    if not scene.mu > 0.0:
+        raise ParameterError(name, 0.0, f"automatic {name} needs damping mu > 0 (mu = {scene.mu:g}); give it")
+
+
+def covering(scene: Scene, settings: OafmSettings, span: float | None) -> OafmSettings:
+    """Settings whose fit reaches at least `span` past the start (an FMU's stop time): no extrapolation
+    inside the experiment. Explicit tau_star / tau_end are kept; automatic ones are resolved to numbers."""
+    if settings.tau_end:
+        return settings
+    tau_star, tau_end = domains(scene, settings)
+    return dataclasses.replace(settings, tau_star=tau_star, tau_end=max(tau_end, span or 0.0))
+
+
+def domains(scene: Scene, settings: OafmSettings) -> tuple[float, float]:
+    """(tau*, tau_end) measured from the start time, automatic where the settings say 0."""
+    tau_star = settings.tau_star or automatic_tau_star(scene)
+    if settings.tau_end:
+        tau_end = settings.tau_end
+    else:
+        _require_damping(scene, "tau_end")
+        tau_end = tau_star + min(FREE_DECAY_SPAN / scene.mu, MAX_STEADY_SPAN)
+    if tau_end <= tau_star:
+        raise ParameterError("tau_end", tau_end, f"must exceed tau* = {tau_star:g}")
+    return tau_star, tau_end
+
+
+def solve(scene: Scene, settings: OafmSettings = OafmSettings(), t0: float = 0.0) -> AnalyticSolution:
+    """Fit both domains: the optimal C_i of each, joined with x, x' continuous at tau*."""
+    validate(scene)
+    settings.validate()
+    accel = ExactModel(scene).accel
+    return _chain(scene, settings, t0, lambda i, basis, start, end: fit_domain(accel, basis, start, end, settings.grid))
+
+
+def assemble(scene: Scene, settings: OafmSettings, t0: float, C: list) -> AnalyticSolution:
+    """The solution from known C_i (a cache entry) without fitting: same bases, same closed forms."""
+    return _chain(scene, settings, t0, lambda i, basis, start, end: Piece(
+        start=start, end=end, basis_name=basis.name, C=tuple(C[i]), x=basis.solution(C[i])))
+
+
+def _chain(scene: Scene, settings: OafmSettings, t0: float, make_piece) -> AnalyticSolution:
+    """Domain after domain, each starting from the previous one's x~, x~' at its end."""
+    tau_star, tau_end = domains(scene, settings)
+    pieces, x, v, start = [], scene.x_start, scene.v_start, t0
+    for i, (make_basis, end) in enumerate(zip(FAMILIES[settings.basis], (t0 + tau_star, t0 + tau_end))):
+        basis = make_basis(scene, start, end - start, x, v, settings.order)
+        pieces.append(make_piece(i, basis, start, end))
+        x, v = continue_from(pieces[-1], end)
+        start = end
+    return AnalyticSolution(pieces)
+
+
+# ---------------------------------------------------------------- cache keyed by the parameters
+
+def cache_key(scene: Scene, settings: OafmSettings, t0: float) -> str:
+    text = json.dumps({"version": CACHE_VERSION, "scene": asdict(scene), "settings": asdict(settings), "t0": t0},
+                      sort_keys=True)
+    return hashlib.sha256(text.encode()).hexdigest()[:32]
+
+
+def user_cache_dir() -> Path:
+    """$VIBROFMU_CACHE_DIR, else $XDG_CACHE_HOME/vibrofmu/oafm, else ~/.cache/vibrofmu/oafm."""
+    if os.environ.get("VIBROFMU_CACHE_DIR"):
+        return Path(os.environ["VIBROFMU_CACHE_DIR"])
+    base = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
+    return Path(base) / "vibrofmu" / "oafm"
+
+
+def cached_solve(scene: Scene, settings: OafmSettings, t0: float = 0.0, read_dirs: tuple[Path, ...] = (),
+                 write_dir: Path | None = None) -> tuple[AnalyticSolution, str]:
+    """The solution from the first cache that has it (read_dirs, then write_dir), else solve and store it in
+    write_dir (default: the user cache; a failed write is not an error). Returns (solution, its source)."""
+    name = cache_key(scene, settings, t0) + ".json"
+    write_dir = Path(write_dir) if write_dir is not None else user_cache_dir()
+    for directory in (*read_dirs, write_dir):
+        path = Path(directory) / name
+        if path.is_file():
+            try:
+                entry = json.loads(path.read_text())
+                return assemble(scene, settings, t0, entry["C"]), str(path)
+            except (OSError, ValueError, KeyError, TypeError):
+                continue  # unreadable entry: fall through to the next cache or a fresh fit
+    solution = solve(scene, settings, t0)
+    write_cache_entry(write_dir / name, solution)
+    return solution, "fitted"
+
+
+def write_cache_entry(path: Path, solution: AnalyticSolution) -> bool:
+    entry = {"C": [list(p.C) for p in solution.pieces],
+             "residual_rms": [p.residual_rms for p in solution.pieces]}
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_suffix(f".{os.getpid()}.tmp")
+        tmp.write_text(json.dumps(entry))
+        tmp.replace(path)
+        return True
+    except OSError:
+        return False
