@@ -46,6 +46,41 @@
  * itself and does not forward).
  *
  * NULL component pointers give fmi2Error (fmi2FreeInstance(NULL) is a no-op).
+ *
+ * Process exit.  pythonfmu 0.7.0 (PySlaveInstance.cpp) keeps its interpreter
+ * holder in a global std::shared_ptr<PyState> and has two exit paths for it:
+ * the shared_ptr's static destructor (registered with __cxa_atexit when the
+ * library is loaded) and an ELF destructor, onLibraryUnload, that runs
+ * finalizePythonInterpreter() { pyState = nullptr; } on the same object.  At
+ * exit() the atexit list runs before _dl_fini, so the static destructor frees
+ * the PyState block first and onLibraryUnload then reads its freed reference
+ * count (valgrind: "Invalid read of size 4 at finalizePythonInterpreter",
+ * inside a block of size 128 freed in __run_exit_handlers).  In a host that
+ * is not Python, pythonfmu also owns the interpreter, and destroying PyState
+ * makes its worker thread run Py_Finalize at exit; with the slave's scipy
+ * imports that reads freed memory too (a type object made by scipy's _uarray,
+ * freed by its module's free function, decref'd again while the final GC
+ * clears a dict) and typically kills the host with SIGSEGV after it has
+ * finished its work.  RTLD_NODELETE would not help: it only keeps dlclose
+ * from unmapping the library; _dl_fini still runs onLibraryUnload last.
+ * So, when it loads the inner library, the shim
+ *   1. initializes the interpreter itself if the host has not, then releases
+ *      the GIL (Py_InitializeEx(0): unlike pythonfmu's Py_Initialize() it
+ *      leaves the host's signal handling alone -- no SIGINT turned into a
+ *      KeyboardInterrupt of whatever Python code runs next, no SIGPIPE
+ *      ignored).  pythonfmu then finds an initialized interpreter and never
+ *      finalizes it, exactly as under a Python host such as FMPy.  The shim
+ *      does not finalize it either: the process's end reclaims it (Python-level
+ *      atexit handlers do not run and unflushed sys.stdout output is lost; the
+ *      slave reports through the FMI logger).
+ *   2. registers with atexit() a call of pythonfmu's exported
+ *      finalizePythonInterpreter().  Exit handlers run in reverse order of
+ *      registration, so it empties the shared_ptr before the static destructor
+ *      registered earlier by the inner library runs, and both that destructor
+ *      and onLibraryUnload then find an empty pointer.  The handler belongs to
+ *      the shim, so it runs when the host dlclose()s the shim, or at exit; with
+ *      the interpreter not owned by pythonfmu it only joins PyState's finished
+ *      thread.  A later fmi2Instantiate makes a new PyState as needed.
  */
 
 #define _GNU_SOURCE
@@ -55,6 +90,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <wchar.h>
 
 #ifndef STATUS_VR
 #error "compile with -DSTATUS_VR=<value reference of the Integer status flag>"
@@ -140,6 +176,26 @@ static void *inner_handle = NULL;
 static char load_error[8192] = "";
 static pthread_once_t load_once = PTHREAD_ONCE_INIT;
 
+/* Step 1 of "Process exit" above.  libpython is already in the process (the
+   inner library needs its symbols to load), so its functions are looked up.
+   The program name is pythonfmu's, so that Python finds its installation the
+   same way as when pythonfmu initializes it. */
+static void adopt_python_interpreter(void)
+{
+    int (*is_initialized)(void);
+    void (*set_program_name)(const wchar_t *);
+    void (*initialize_ex)(int);
+    void *(*save_thread)(void);
+    *(void **)(&is_initialized) = dlsym(RTLD_DEFAULT, "Py_IsInitialized");
+    *(void **)(&set_program_name) = dlsym(RTLD_DEFAULT, "Py_SetProgramName");
+    *(void **)(&initialize_ex) = dlsym(RTLD_DEFAULT, "Py_InitializeEx");
+    *(void **)(&save_thread) = dlsym(RTLD_DEFAULT, "PyEval_SaveThread");
+    if (is_initialized == NULL || initialize_ex == NULL || save_thread == NULL || is_initialized()) return;
+    if (set_program_name != NULL) set_program_name(L"./PythonFMU");
+    initialize_ex(0);
+    save_thread();
+}
+
 /* A static function: its address cannot be interposed by another library. */
 static void anchor(void) {}
 
@@ -185,6 +241,10 @@ static void load_inner(void)
     RESOLVE(GetStatus); RESOLVE(GetRealStatus); RESOLVE(GetIntegerStatus);
     RESOLVE(GetBooleanStatus); RESOLVE(GetStringStatus);
 #undef RESOLVE
+    adopt_python_interpreter();
+    void (*release_py_state)(void);
+    *(void **)(&release_py_state) = dlsym(h, "finalizePythonInterpreter");
+    if (release_py_state != NULL) atexit(release_py_state);
     inner_handle = h; /* never dlclose'd: pythonfmu keeps a Python thread alive */
 }
 

@@ -1,15 +1,21 @@
-"""The `vibrofmu` command: build, simulate, demo."""
+"""The `vibrofmu` command: build, simulate, demo, oafm, doctor."""
 from __future__ import annotations
 
 import argparse
 import sys
+import tempfile
 from pathlib import Path
 
+from vibromodel.analytic import OafmSettings
+from vibromodel.oafm import Grid
+from vibromodel.oafm_bases import FAMILIES
 from vibromodel.parameters import ParameterError, Scene
 from vibromodel.plant import Settings
 
+from . import doctor
 from .build import PLANT_FMU, build_plant
 from .demo import run_demo
+from .oafm_study import run_oafm
 from .simulate import FIDELITIES, SOLVERS, simulate
 
 
@@ -77,6 +83,43 @@ def cmd_demo(args) -> int:
     return run_demo(Path(args.out))
 
 
+def cmd_oafm(args) -> int:
+    scene = Scene().with_values(**parse_set(args.set))
+    settings = OafmSettings(basis=args.basis, order=args.order, tau_star=args.tau_star, tau_end=args.tau_end,
+                            grid=Grid(panel=args.panel, nodes=args.nodes))
+    orders = range(1, args.study_max_order + 1) if args.study_max_order else ()
+    fmu = None if args.no_fmu else ensure_fmu(Path(args.fmu))
+    summary = run_oafm(scene, settings, Path(args.out), study_orders=orders, fmu=fmu)
+    for domain in summary["domains"]:
+        lo, hi = domain["interval"]
+        print(f"[{lo:g}, {hi:g}] {domain['basis']}: {len(domain['C'])} C_i, RMS residual "
+              f"{domain['residual_rms']:.2e}, max |x~ - x_ref| = {domain['error']['max_abs_error']:.3e}")
+    extrapolation = summary["extrapolation"]
+    print(f"beyond the fit, [{extrapolation['interval'][0]:g}, {extrapolation['interval'][1]:g}]: "
+          f"max |x~ - x_ref| = {extrapolation['max_abs_error']:.3e}")
+    print(summary["verdict"])
+    check = summary.get("fmu_check")
+    if check and "error" in check:
+        print(f"error: FMU fidelity 4: {check['error']}", file=sys.stderr)
+        return 1
+    if check:
+        print(f"FMU fidelity 4 vs this fit: max |dx| = {check['max_abs_difference_x']:.2e}; cost per doStep "
+              f"{1e6 * check['seconds_per_step_fidelity_4']:.1f} us = {check['cost_ratio_4_over_0']:.2f} x fidelity 0")
+    print(f"wrote {args.out}/summary.json, oafm.csv, oafm.png" + (", convergence.png" if orders else ""))
+    return 0
+
+
+def cmd_doctor(args) -> int:
+    with tempfile.TemporaryDirectory() as work_dir:
+        env, result = doctor.check(Path(args.fmu), Path(work_dir))
+    print(doctor.export_lines(env))
+    if not result.ok:
+        print(f"error: {result.message}", file=sys.stderr)
+        return 1
+    print(f"# ok: {result.message}")
+    return 0
+
+
 def make_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="vibrofmu", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
@@ -99,9 +142,27 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True)
     p.set_defaults(func=cmd_simulate)
 
+    p = sub.add_parser("oafm", help="OAFM analytic solution: fit, compare with the reference, reproduce the paper")
+    p.add_argument("--basis", choices=list(FAMILIES), default="harmonic")
+    p.add_argument("--order", type=int, default=OafmSettings.order, help="harmonic basis order (1..8)")
+    p.add_argument("--tau-star", type=float, default=0.0, help="end of the transient domain; 0 = automatic")
+    p.add_argument("--tau-end", type=float, default=0.0, help="end of the steady domain's fit; 0 = automatic")
+    p.add_argument("--panel", type=float, default=Grid.panel, help="collocation panel length")
+    p.add_argument("--nodes", type=int, default=Grid.nodes, help="Gauss-Legendre nodes per panel")
+    p.add_argument("--study-max-order", type=int, default=6, help="convergence study up to this order; 0 = none")
+    p.add_argument("--fmu", default=str(PLANT_FMU), help="plant FMU checked at fidelity 4 (built when missing)")
+    p.add_argument("--no-fmu", action="store_true", help="skip the FMU check")
+    p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", help="scene parameter")
+    p.add_argument("--out", required=True)
+    p.set_defaults(func=cmd_oafm)
+
     p = sub.add_parser("demo", help="build + simulate + compare on the paper's example (Omega = 2)")
     p.add_argument("--out", default="out/demo")
     p.set_defaults(func=cmd_demo)
+
+    p = sub.add_parser("doctor", help="print the environment a C host needs for FMU, and check it with a C host")
+    p.add_argument("fmu")
+    p.set_defaults(func=cmd_doctor)
     return parser
 
 

@@ -1,0 +1,224 @@
+/*
+ * fmi2_host.c -- minimal FMI 2.0 co-simulation host for tests (compiled by the
+ * tests and by `vibrofmu doctor`, never committed as a binary).
+ *
+ * Drives one FMU binary through the C API the way system-simulation tools do:
+ *   dlopen, fmi2Instantiate (logger prints to stderr), fmi2SetupExperiment,
+ *   fmi2EnterInitializationMode, fmi2SetReal of the VR=VALUE arguments,
+ *   fmi2ExitInitializationMode, fmi2DoStep loop with fmi2GetReal of the output
+ *   value references after each step, fmi2Terminate, fmi2FreeInstance, dlclose.
+ *
+ * Usage: fmi2_host LIBRARY RESOURCE_URI GUID START STOP STEP VR[,VR...] [VR=VALUE ...]
+ *
+ * stdout: CSV, header "time,<vr>,...", one row at START and one after every
+ * step, numbers printed with %.17g (round-trips doubles exactly).
+ * Communication points are computed as FMPy's simulate_fmu does
+ * (START + n*STEP, the last one clipped to STOP), so both hosts make the same calls.
+ *
+ * Exit code: 0 success; 1 usage or loading error; 2 an FMI call returned
+ * fmi2Error or fmi2Fatal (named on stderr).  After fmi2Error the instance is
+ * still freed (fmi2Terminate is not allowed in the error state); after
+ * fmi2Fatal nothing more is called, as the standard requires.
+ */
+
+#include <dlfcn.h>
+#include <math.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+/* ---- the few FMI 2.0 types used here (fmi2TypesPlatform.h / fmi2FunctionTypes.h) ---- */
+
+typedef void *fmi2Component;
+typedef void *fmi2ComponentEnvironment;
+typedef unsigned int fmi2ValueReference;
+typedef double fmi2Real;
+typedef int fmi2Boolean;
+typedef const char *fmi2String;
+
+typedef enum { fmi2OK, fmi2Warning, fmi2Discard, fmi2Error, fmi2Fatal, fmi2Pending } fmi2Status;
+typedef enum { fmi2ModelExchange, fmi2CoSimulation } fmi2Type;
+
+typedef struct {
+    void (*logger)(fmi2ComponentEnvironment, fmi2String, fmi2Status, fmi2String, fmi2String, ...);
+    void *(*allocateMemory)(size_t, size_t);
+    void (*freeMemory)(void *);
+    void (*stepFinished)(fmi2ComponentEnvironment, fmi2Status);
+    fmi2ComponentEnvironment componentEnvironment;
+} fmi2CallbackFunctions;
+
+typedef struct {
+    fmi2Component (*Instantiate)(fmi2String, fmi2Type, fmi2String, fmi2String,
+                                 const fmi2CallbackFunctions *, fmi2Boolean, fmi2Boolean);
+    void (*FreeInstance)(fmi2Component);
+    fmi2Status (*SetupExperiment)(fmi2Component, fmi2Boolean, fmi2Real, fmi2Real, fmi2Boolean, fmi2Real);
+    fmi2Status (*EnterInitializationMode)(fmi2Component);
+    fmi2Status (*ExitInitializationMode)(fmi2Component);
+    fmi2Status (*Terminate)(fmi2Component);
+    fmi2Status (*GetReal)(fmi2Component, const fmi2ValueReference[], size_t, fmi2Real[]);
+    fmi2Status (*SetReal)(fmi2Component, const fmi2ValueReference[], size_t, const fmi2Real[]);
+    fmi2Status (*DoStep)(fmi2Component, fmi2Real, fmi2Real, fmi2Boolean);
+} Api;
+
+#define MAX_VRS 64
+
+static const char *const STATUS_NAMES[] = {"fmi2OK", "fmi2Warning", "fmi2Discard",
+                                           "fmi2Error", "fmi2Fatal", "fmi2Pending"};
+
+static const char *status_name(fmi2Status s)
+{
+    return (unsigned)s < sizeof STATUS_NAMES / sizeof *STATUS_NAMES ? STATUS_NAMES[s] : "unknown status";
+}
+
+static void logger(fmi2ComponentEnvironment env, fmi2String instance, fmi2Status status,
+                   fmi2String category, fmi2String message, ...)
+{
+    (void)env;
+    va_list args;
+    fprintf(stderr, "[%s] %s (%s): ", status_name(status), instance ? instance : "",
+            category ? category : "");
+    va_start(args, message);
+    vfprintf(stderr, message ? message : "", args);
+    va_end(args);
+    fputc('\n', stderr);
+}
+
+static int die(const char *what, const char *detail)
+{
+    fprintf(stderr, "fmi2_host: %s%s%s\n", what, detail ? ": " : "", detail ? detail : "");
+    return 1;
+}
+
+static int load_api(void *lib, Api *api)
+{
+#define LOAD(name)                                                      \
+    if ((*(void **)&api->name = dlsym(lib, "fmi2" #name)) == NULL) return 0
+    LOAD(Instantiate); LOAD(FreeInstance); LOAD(SetupExperiment);
+    LOAD(EnterInitializationMode); LOAD(ExitInitializationMode); LOAD(Terminate);
+    LOAD(GetReal); LOAD(SetReal); LOAD(DoStep);
+#undef LOAD
+    return 1;
+}
+
+/* "15,16" -> vrs; returns the count, 0 on a malformed list */
+static size_t parse_vrs(char *text, fmi2ValueReference vrs[MAX_VRS])
+{
+    size_t n = 0;
+    for (char *tok = strtok(text, ","); tok != NULL; tok = strtok(NULL, ",")) {
+        char *end;
+        unsigned long v = strtoul(tok, &end, 10);
+        if (*end != '\0' || end == tok || n == MAX_VRS) return 0;
+        vrs[n++] = (fmi2ValueReference)v;
+    }
+    return n;
+}
+
+static int parse_real(const char *text, double *out)
+{
+    char *end;
+    *out = strtod(text, &end);
+    return end != text && *end == '\0';
+}
+
+/* "7=-1" -> (7, -1.0); 0 when malformed */
+static int parse_param(const char *text, fmi2ValueReference *vr, fmi2Real *value)
+{
+    char *end;
+    unsigned long v = strtoul(text, &end, 10);
+    if (end == text || *end != '=' || !parse_real(end + 1, value)) return 0;
+    *vr = (fmi2ValueReference)v;
+    return 1;
+}
+
+/* math.isclose(a, b) with its default rel_tol = 1e-9, as used by FMPy's simulate_fmu */
+static int isclose(double a, double b)
+{
+    return fabs(a - b) <= 1e-9 * fmax(fabs(a), fabs(b));
+}
+
+/* Non-zero when st is worse than fmi2Warning; says which call failed. */
+static int failed(const char *call, fmi2Status st, double t)
+{
+    if (st <= fmi2Warning) return 0;
+    fprintf(stderr, "fmi2_host: %s returned %s (%d) at t = %.17g\n", call, status_name(st), (int)st, t);
+    return 1;
+}
+
+static void print_row(double t, const fmi2Real *values, size_t n)
+{
+    printf("%.17g", t);
+    for (size_t i = 0; i < n; i++) printf(",%.17g", values[i]);
+    putchar('\n');
+}
+
+typedef struct {
+    double start, stop, step;
+    fmi2ValueReference out[MAX_VRS];
+    size_t nout;
+    fmi2ValueReference param_vr[MAX_VRS];
+    fmi2Real param_value[MAX_VRS];
+    size_t nparams;
+} Experiment;
+
+/* Initialise with the parameters, step to the stop time, print the outputs.
+   Returns the first status worse than fmi2Warning, or fmi2OK. */
+static fmi2Status simulate(const Api *api, fmi2Component c, const Experiment *e)
+{
+    fmi2Status st;
+    fmi2Real values[MAX_VRS];
+    double t = e->start;
+
+    if (failed("fmi2SetupExperiment", st = api->SetupExperiment(c, 0, 0.0, t, 1, e->stop), t)) return st;
+    if (failed("fmi2EnterInitializationMode", st = api->EnterInitializationMode(c), t)) return st;
+    if (e->nparams > 0
+        && failed("fmi2SetReal", st = api->SetReal(c, e->param_vr, e->nparams, e->param_value), t))
+        return st;
+    if (failed("fmi2ExitInitializationMode", st = api->ExitInitializationMode(c), t)) return st;
+
+    printf("time");
+    for (size_t i = 0; i < e->nout; i++) printf(",%u", e->out[i]);
+    putchar('\n');
+    if (failed("fmi2GetReal", st = api->GetReal(c, e->out, e->nout, values), t)) return st;
+    print_row(t, values, e->nout);
+    for (long n = 1; !(t > e->stop || isclose(t, e->stop)); n++) {
+        double next = e->start + n * e->step;
+        if (next > e->stop && !isclose(next, e->stop)) next = e->stop;
+        if (failed("fmi2DoStep", st = api->DoStep(c, t, next - t, 1), t)) return st;
+        t = next;
+        if (failed("fmi2GetReal", st = api->GetReal(c, e->out, e->nout, values), t)) return st;
+        print_row(t, values, e->nout);
+    }
+    if (failed("fmi2Terminate", st = api->Terminate(c), t)) return st;
+    return fmi2OK;
+}
+
+int main(int argc, char **argv)
+{
+    Experiment e;
+    if (argc < 8)
+        return die("usage", "fmi2_host LIBRARY RESOURCE_URI GUID START STOP STEP VR[,VR...] [VR=VALUE ...]");
+    if (!parse_real(argv[4], &e.start) || !parse_real(argv[5], &e.stop) || !parse_real(argv[6], &e.step)
+        || !(e.step > 0))
+        return die("START STOP STEP must be numbers, STEP > 0", NULL);
+    if ((e.nout = parse_vrs(argv[7], e.out)) == 0) return die("bad value reference list", argv[7]);
+    if (argc - 8 > MAX_VRS) return die("too many parameters", NULL);
+    for (e.nparams = 0; e.nparams < (size_t)(argc - 8); e.nparams++)
+        if (!parse_param(argv[8 + e.nparams], &e.param_vr[e.nparams], &e.param_value[e.nparams]))
+            return die("expected VR=VALUE, got", argv[8 + e.nparams]);
+
+    void *lib = dlopen(argv[1], RTLD_NOW | RTLD_LOCAL);
+    if (lib == NULL) return die("cannot load the FMU binary", dlerror());
+    Api api;
+    if (!load_api(lib, &api)) return die("missing FMI function", dlerror());
+
+    fmi2CallbackFunctions callbacks = {logger, calloc, free, NULL, NULL};
+    fmi2Component c = api.Instantiate("c_host", fmi2CoSimulation, argv[3], argv[2], &callbacks, 0, 0);
+    if (c == NULL) return die("fmi2Instantiate failed", NULL);
+
+    fmi2Status st = simulate(&api, c, &e);
+    fflush(stdout);
+    if (st != fmi2Fatal) api.FreeInstance(c);
+    dlclose(lib);
+    return st == fmi2OK ? 0 : 2;
+}
