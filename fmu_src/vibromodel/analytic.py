@@ -19,7 +19,8 @@ from .oafm import AnalyticSolution, Grid, Piece, continue_from, fit_domain
 from .oafm_bases import FAMILIES, eq11_operator, forced_x0
 from .parameters import ParameterError, Scene, validate
 
-CACHE_VERSION = 1  # bump when the bases or the functional change: old cache entries no longer apply
+# The cache key holds the source of every module the fit depends on: an edit there retires old entries.
+FIT_SOURCES = ("analytic.py", "closedform.py", "oafm.py", "oafm_bases.py", "models.py", "forces.py", "parameters.py")
 FREE_DECAY_SPAN = 20.0  # tau_end - tau* = FREE_DECAY_SPAN / mu: the free vibration decays by e^-10 ...
 MAX_STEADY_SPAN = 1000.0  # ... but at most this long (light damping: the fit would grow without bound)
 FORCED_FLOOR = 1e-3  # without forcing, tau* is where the free vibration has decayed to this fraction
@@ -56,7 +57,7 @@ def automatic_tau_star(scene: Scene) -> float:
     """
     _require_damping(scene, "tau_star")
     L = eq11_operator(scene)
-    free = forced_x0(L, scene, 0.0, scene.x_start, scene.v_start).merged()
+    free = forced_x0(L, scene, 0.0, scene.x_start, scene.v_start)[0].merged()
     homogeneous = (free.sigma == 0.5 * scene.mu) & (free.nu == L.q)
     free_amplitude = math.hypot(float(free.a[homogeneous].sum()), float(free.b[homogeneous].sum()))
     forced_amplitude = scene.Delta / abs(complex(L.k - scene.omega**2, scene.mu * scene.omega))
@@ -110,7 +111,7 @@ def _chain(scene: Scene, settings: OafmSettings, t0: float, make_piece) -> Analy
     tau_star, tau_end = domains(scene, settings)
     pieces, x, v, start = [], scene.x_start, scene.v_start, t0
     for i, (make_basis, end) in enumerate(zip(FAMILIES[settings.basis], (t0 + tau_star, t0 + tau_end))):
-        basis = make_basis(scene, start, end - start, x, v, settings.order)
+        basis = make_basis(scene, start, x, v, settings.order)
         pieces.append(make_piece(i, basis, start, end))
         x, v = continue_from(pieces[-1], end)
         start = end
@@ -119,8 +120,13 @@ def _chain(scene: Scene, settings: OafmSettings, t0: float, make_piece) -> Analy
 
 # ---------------------------------------------------------------- cache keyed by the parameters
 
+def _source_digest() -> str:
+    here = Path(__file__).parent
+    return hashlib.sha256(b"".join((here / name).read_bytes() for name in FIT_SOURCES)).hexdigest()
+
+
 def cache_key(scene: Scene, settings: OafmSettings, t0: float) -> str:
-    text = json.dumps({"version": CACHE_VERSION, "scene": asdict(scene), "settings": asdict(settings), "t0": t0},
+    text = json.dumps({"code": _source_digest(), "scene": asdict(scene), "settings": asdict(settings), "t0": t0},
                       sort_keys=True)
     return hashlib.sha256(text.encode()).hexdigest()[:32]
 

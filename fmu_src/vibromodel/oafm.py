@@ -31,12 +31,18 @@ RIDGE = 1e-5  # rho of the Tikhonov term, relative to the RMS of each y_i''
 
 @dataclass(frozen=True)
 class Basis:
-    """One domain's ansatz: L, the initial approximation x0 and the functions y_i (Eq. 13, 17)."""
+    """One domain's ansatz: L, the initial approximation x0 and the functions y_i (Eq. 13, 17).
+
+    Each closed form answers its defining problem: L[x0] = x0_forcing with the domain's initial
+    state, L[y_i] = forcings[i] with y_i(0) = y_i'(0) = 0.
+    """
 
     name: str
     operator: LinearOperator
     x0: Terms
+    x0_forcing: Terms
     functions: tuple[Terms, ...]
+    forcings: tuple[Terms, ...]
     labels: tuple[str, ...]
 
     def solution(self, C) -> Terms:
@@ -85,27 +91,28 @@ class Piece:
         self._stack()
 
     def _stack(self) -> None:
-        """x, x', x'' over one shared set of (power, sigma, nu): one exp/cos/sin per term and time."""
+        """x, x', x'' over one shared set of (power, sigma, nu), as Re[sum c s^m e^((-sigma + i nu) s)]:
+        one complex exp per term and time."""
         keys = {}
         for row, terms in enumerate((self.x, self.v, self.a)):
             for m, sigma, nu, a, b in terms.rows():
-                keys.setdefault((m, sigma, nu), np.zeros((2, 3)))[:, row] += (a, b)
-        self._power, self._sigma, self._nu = (np.array([k[i] for k in keys]) for i in range(3))
-        coefficients = np.array(list(keys.values()))  # (K, 2, 3)
-        self._cos_coefficients = np.ascontiguousarray(coefficients[:, 0, :].T)  # (3, K)
-        self._sin_coefficients = np.ascontiguousarray(coefficients[:, 1, :].T)
+                keys.setdefault((m, sigma, nu), np.zeros(3, dtype=complex))[row] += complex(a, -b)
+        self._secular = np.array([k[0] == 1 for k in keys])
+        self._rates = np.array([complex(-k[1], k[2]) for k in keys])
+        self._coefficients = np.ascontiguousarray(np.array(list(keys.values())).T)  # (3, K)
 
     def evaluate(self, s) -> np.ndarray:
         """(x, x', x'') at local time(s) s: shape (3,) for a scalar, (len(s), 3) for an array.
 
-        The sum runs over the last axis for a scalar and for an array alike, so both give the same
-        bits: the FMU (one time per doStep) and the harness (arrays) agree exactly.
+        Re[(a - ib) e^((-sigma + i nu) s)] = e^(-sigma s)(a cos nu s + b sin nu s). The sum runs over the
+        last axis for a scalar and an array alike, so both give the same bits: the FMU (one time per
+        doStep) and the harness (arrays) agree exactly.
         """
-        s_col = np.asarray(s, dtype=float)[..., None, None]
-        envelope = np.exp(-s_col * self._sigma) * np.where(self._power == 1, s_col, 1.0)
-        phase = s_col * self._nu
-        terms = envelope * (np.cos(phase) * self._cos_coefficients + np.sin(phase) * self._sin_coefficients)
-        return terms.sum(axis=-1)
+        s_col = np.asarray(s, dtype=float)[..., None]
+        z = np.exp(s_col * self._rates)
+        if self._secular.any():
+            z = np.where(self._secular, s_col * z, z)
+        return (z[..., None, :] * self._coefficients).sum(axis=-1).real
 
 
 class AnalyticSolution:

@@ -20,6 +20,7 @@ from vibromodel.parameters import Scene, consistency_warning
 
 from . import export
 from .reference import reference_solution
+from .run import run_fmu
 
 ERROR_SPACING = 0.02  # 300+ points per forcing period
 BREAKDOWN_FRACTION = 0.01  # error above 1 % of the domain's amplitude: not a valid approximation there
@@ -92,7 +93,7 @@ def paper_reproduction(scene: Scene, reference) -> dict:
     if scene != Scene():
         return {"note": "the printed C1..C7 belong to the paper's example; not evaluated for this scene"}
     printed = printed_solution(scene)
-    basis = paper_transient_basis(scene, 0.0, TAU_STAR, scene.x_start, scene.v_start)
+    basis = paper_transient_basis(scene, 0.0, scene.x_start, scene.v_start)
     tau = uniform(0.0, TAU_STAR)
     target = reference(tau)[0] - basis.x0(tau)
     Y = np.column_stack([f(tau) for f in basis.functions])
@@ -127,8 +128,29 @@ def _minimax_fit(Y: np.ndarray, target: np.ndarray) -> np.ndarray:
     return result.x[:n]
 
 
-def run_oafm(scene: Scene, settings: OafmSettings, out_dir: Path, study_orders=range(1, 7)) -> dict:
-    """Fit, compare, study; write out_dir/summary.json, oafm.csv, oafm.png and convergence.png."""
+def fmu_check(fmu: Path, scene: Scene, settings: OafmSettings, solution, tau_end: float) -> dict:
+    """The plant FMU at fidelity 4 with the same settings against this fit, and its cost per doStep
+    against fidelity 0 (adaptive DOP853, rtol 1e-8) on the same grid (output interval 0.1), side by side."""
+    tau_star = solution.pieces[1].start
+    values = {**scene.as_dict(), "oafm_order": settings.order, "tau_star": tau_star, "oafm_tau_end": tau_end}
+    runs = {fidelity: run_fmu(fmu, {**values, "fidelity": fidelity}, tau_end, 0.1) for fidelity in (4, 0)}
+    analytic = runs[4]
+    if not analytic.completed:
+        return {"error": f"the FMU stopped at tau = {analytic.end_time:g}: {analytic.stop_reason}"}
+    steps = {fidelity: len(run.time) - 1 for fidelity, run in runs.items()}
+    per_step = {fidelity: run.wall_time / max(steps[fidelity], 1) for fidelity, run in runs.items()}
+    return {"fmu": str(fmu), "steps": steps[4], "log": analytic.log[:3],
+            "max_abs_difference_x": float(np.max(np.abs(analytic.outputs["x"] - solution(analytic.time)[0]))),
+            "max_abs_difference_v": float(np.max(np.abs(analytic.outputs["v"] - solution(analytic.time)[1]))),
+            "seconds_per_step_fidelity_4": per_step[4], "seconds_per_step_fidelity_0": per_step[0],
+            "cost_ratio_4_over_0": per_step[4] / per_step[0],
+            "instantiate_seconds_fidelity_4": analytic.instantiate_time}
+
+
+def run_oafm(scene: Scene, settings: OafmSettings, out_dir: Path, study_orders=range(1, 7),
+             fmu: Path | None = None) -> dict:
+    """Fit, compare, study (and check the FMU when given one); write out_dir/summary.json, oafm.csv,
+    oafm.png and convergence.png."""
     settings.validate()
     tau_star, tau_end = domains(scene, settings)
     extrapolate_to = EXTRAPOLATION_FACTOR * tau_end
@@ -157,6 +179,9 @@ def run_oafm(scene: Scene, settings: OafmSettings, out_dir: Path, study_orders=r
     if study_orders:
         summary["convergence"] = convergence_study(scene, settings, reference, list(study_orders))
     summary["paper_reproduction"] = paper_reproduction(scene, reference)
+    if fmu is not None and settings.basis == "harmonic":
+        print(f"oafm: running {fmu} at fidelity 4 and 0 ...", file=sys.stderr, flush=True)
+        summary["fmu_check"] = fmu_check(fmu, scene, settings, solution, tau_end)
     write_outputs(out_dir, summary, solution, reference, extrapolate_to)
     return summary
 
