@@ -195,7 +195,7 @@ def fit_domain(accel, basis: Basis, start: float, end: float, grid: Grid) -> Pie
     return Piece(start=start, end=end, basis_name=basis.name, C=tuple(float(c) for c in C),
                  x=basis.solution(C), residual_rms=float(np.sqrt(np.sum(w * R * R) / length)),
                  residual_max=float(np.max(np.abs(R))),
-                 fit={"unknowns": n, "grid_points": int(s.size), "panel": grid.panel, "nodes": grid.nodes,
+                 fit={"unknowns": n, "functions": list(basis.labels), "grid_points": int(s.size), "panel": grid.panel, "nodes": grid.nodes,
                       "evaluations": int(result.nfev) if result is not None else 0,
                       "status": result.message if result is not None else "no unknowns",
                       "seconds": time.perf_counter() - clock})
