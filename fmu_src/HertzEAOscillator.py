@@ -26,35 +26,18 @@ class HertzEAOscillator(Fmi2Slave):
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
-        scene, settings = Scene(), Settings()
+        scene, settings, oafm = Scene(), Settings(), OafmSettings()
         for name in scene_names():
-            setattr(self, name, getattr(scene, name))
-            self.register_variable(Real(name, causality=Fmi2Causality.parameter,
-                                        variability=Fmi2Variability.fixed))
-        self.fidelity, self.solver = int(settings.fidelity), int(settings.solver)
-        self.rtol, self.max_step = settings.rtol, settings.max_step
-        self.register_variable(Integer("fidelity", causality=Fmi2Causality.parameter,
-                                       variability=Fmi2Variability.fixed,
-                                       description="0 exact Eq. 3, 1 polynomial Eq. 7, 2 Eq. 7 printed "
-                                                   "coefficients, 4 OAFM analytic"))
-        self.register_variable(Integer("solver", causality=Fmi2Causality.parameter,
-                                       variability=Fmi2Variability.fixed,
-                                       description="0 adaptive DOP853, 1 fixed-step RK4"))
-        self.register_variable(Real("rtol", causality=Fmi2Causality.parameter, variability=Fmi2Variability.fixed,
-                                    description="relative tolerance (setupExperiment's tolerance wins)"))
-        self.register_variable(Real("max_step", causality=Fmi2Causality.parameter,
-                                    variability=Fmi2Variability.fixed,
-                                    description="RK4 step / adaptive step ceiling; 0 = automatic"))
-        oafm = OafmSettings()
-        self.oafm_order, self.tau_star, self.oafm_tau_end = oafm.order, oafm.tau_star, oafm.tau_end
-        self.register_variable(Integer("oafm_order", causality=Fmi2Causality.parameter,
-                                       variability=Fmi2Variability.fixed,
-                                       description="fidelity 4: order of the harmonic OAFM basis"))
-        self.register_variable(Real("tau_star", causality=Fmi2Causality.parameter, variability=Fmi2Variability.fixed,
-                                    description="fidelity 4: end of the transient domain; 0 = automatic"))
-        self.register_variable(Real("oafm_tau_end", causality=Fmi2Causality.parameter,
-                                    variability=Fmi2Variability.fixed,
-                                    description="fidelity 4: end of the fit; 0 = automatic, at least the stop time"))
+            self._parameter(Real, name, getattr(scene, name))
+        self._parameter(Integer, "fidelity", int(settings.fidelity),
+                        "0 exact Eq. 3, 1 polynomial Eq. 7, 2 Eq. 7 printed coefficients, 4 OAFM analytic")
+        self._parameter(Integer, "solver", int(settings.solver), "0 adaptive DOP853, 1 fixed-step RK4")
+        self._parameter(Real, "rtol", settings.rtol, "relative tolerance (setupExperiment's tolerance wins)")
+        self._parameter(Real, "max_step", settings.max_step, "RK4 step / adaptive step ceiling; 0 = automatic")
+        self._parameter(Integer, "oafm_order", oafm.order, "fidelity 4: order of the harmonic OAFM basis")
+        self._parameter(Real, "tau_star", oafm.tau_star, "fidelity 4: end of the transient domain; 0 = automatic")
+        self._parameter(Real, "oafm_tau_end", oafm.tau_end,
+                        "fidelity 4: end of the fit; 0 = automatic, at least the stop time")
         self.U = 0.0
         self.register_variable(Real("U", causality=Fmi2Causality.input, description="control force"))
         self._set_outputs(scene.x_start, scene.v_start, 0.0, 0.0, 0.0, True)
@@ -69,6 +52,12 @@ class HertzEAOscillator(Fmi2Slave):
         self.plant = None
         self.halted = "the FMU has not been initialised"  # why doStep refuses, or None
         self.start_time, self.stop_time, self.experiment_tolerance = 0.0, None, None
+
+    def _parameter(self, kind, name, value, description=None):
+        """A fixed parameter with its start value."""
+        setattr(self, name, value)
+        self.register_variable(kind(name, causality=Fmi2Causality.parameter, variability=Fmi2Variability.fixed,
+                                    description=description))
 
     def _set_outputs(self, x, v, a, F_contact, F_electrostatic, in_contact):
         self.x, self.v, self.a = x, v, a
