@@ -28,25 +28,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-/* ---- the few FMI 2.0 types used here (fmi2TypesPlatform.h / fmi2FunctionTypes.h) ---- */
-
-typedef void *fmi2Component;
-typedef void *fmi2ComponentEnvironment;
-typedef unsigned int fmi2ValueReference;
-typedef double fmi2Real;
-typedef int fmi2Boolean;
-typedef const char *fmi2String;
-
-typedef enum { fmi2OK, fmi2Warning, fmi2Discard, fmi2Error, fmi2Fatal, fmi2Pending } fmi2Status;
-typedef enum { fmi2ModelExchange, fmi2CoSimulation } fmi2Type;
-
-typedef struct {
-    void (*logger)(fmi2ComponentEnvironment, fmi2String, fmi2Status, fmi2String, fmi2String, ...);
-    void *(*allocateMemory)(size_t, size_t);
-    void (*freeMemory)(void *);
-    void (*stepFinished)(fmi2ComponentEnvironment, fmi2Status);
-    fmi2ComponentEnvironment componentEnvironment;
-} fmi2CallbackFunctions;
+#include "fmi2_types.h"  /* fmu_src/: the FMI 2.0 types, shared with the status shim */
 
 typedef struct {
     fmi2Component (*Instantiate)(fmi2String, fmi2Type, fmi2String, fmi2String,
