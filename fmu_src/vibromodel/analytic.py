@@ -7,6 +7,7 @@ beyond tau_end: its terms are periodic or decaying, so it extrapolates the stead
 from __future__ import annotations
 
 import dataclasses
+import functools
 import hashlib
 import json
 import math
@@ -120,6 +121,7 @@ def _chain(scene: Scene, settings: OafmSettings, t0: float, make_piece) -> Analy
 
 # ---------------------------------------------------------------- cache keyed by the parameters
 
+@functools.cache
 def _source_digest() -> str:
     here = Path(__file__).parent
     return hashlib.sha256(b"".join((here / name).read_bytes() for name in FIT_SOURCES)).hexdigest()
@@ -158,7 +160,8 @@ def cached_solve(scene: Scene, settings: OafmSettings, t0: float = 0.0, read_dir
     return solution, "fitted"
 
 
-def write_cache_entry(path: Path, solution: AnalyticSolution) -> bool:
+def write_cache_entry(path: Path, solution: AnalyticSolution) -> None:
+    """Write atomically (temporary file, then rename); a cache that cannot be written is skipped."""
     entry = {"C": [list(p.C) for p in solution.pieces],
              "residual_rms": [p.residual_rms for p in solution.pieces]}
     try:
@@ -166,6 +169,5 @@ def write_cache_entry(path: Path, solution: AnalyticSolution) -> bool:
         tmp = path.with_suffix(f".{os.getpid()}.tmp")
         tmp.write_text(json.dumps(entry))
         tmp.replace(path)
-        return True
     except OSError:
-        return False
+        pass

@@ -131,16 +131,20 @@ class AnalyticSolution:
         """End of the last fitted domain: beyond it the solution extrapolates."""
         return self.pieces[-1].end
 
+    def _index(self, tau):
+        """Index of the piece holding each tau (times before the first start go to the first piece)."""
+        return np.clip(np.searchsorted(self.starts, tau, side="right") - 1, 0, len(self.pieces) - 1)
+
     def state(self, tau: float) -> tuple[float, float, float]:
         """(x, x', x'') at one time: only closed forms are evaluated."""
-        piece = self.pieces[max(0, int(np.searchsorted(self.starts, tau, side="right")) - 1)]
+        piece = self.pieces[int(self._index(tau))]
         x, v, a = piece.evaluate(tau - piece.start)
         return float(x), float(v), float(a)
 
     def __call__(self, tau) -> np.ndarray:
         """(x, x', x'') at the times tau; shape (3, len(tau))."""
         tau = np.atleast_1d(np.asarray(tau, dtype=float))
-        index = np.clip(np.searchsorted(self.starts, tau, side="right") - 1, 0, len(self.pieces) - 1)
+        index = self._index(tau)
         out = np.empty((3, tau.size))
         for i, piece in enumerate(self.pieces):
             inside = index == i
@@ -166,7 +170,7 @@ def fit_domain(accel, basis: Basis, start: float, end: float, grid: Grid) -> Pie
     length = end - start
     s, w = grid.points(length, len(basis.functions))
     tau = start + s
-    X0 = [basis.x0(s), basis.x0.derivative()(s), basis.x0.derivative().derivative()(s)]
+    X0 = [derivatives[0](s) for derivatives in _derivative_table([basis.x0])]
     Y = [np.column_stack([f(s) for f in derivatives]) if derivatives else np.zeros((s.size, 0))
          for derivatives in _derivative_table(basis.functions)]
     weight = np.sqrt(w / length)
@@ -195,7 +199,8 @@ def fit_domain(accel, basis: Basis, start: float, end: float, grid: Grid) -> Pie
     return Piece(start=start, end=end, basis_name=basis.name, C=tuple(float(c) for c in C),
                  x=basis.solution(C), residual_rms=float(np.sqrt(np.sum(w * R * R) / length)),
                  residual_max=float(np.max(np.abs(R))),
-                 fit={"unknowns": n, "functions": list(basis.labels), "grid_points": int(s.size), "panel": grid.panel, "nodes": grid.nodes,
+                 fit={"unknowns": n, "functions": list(basis.labels), "grid_points": int(s.size),
+                      "panel": grid.panel, "nodes": grid.nodes,
                       "evaluations": int(result.nfev) if result is not None else 0,
                       "status": result.message if result is not None else "no unknowns",
                       "seconds": time.perf_counter() - clock})

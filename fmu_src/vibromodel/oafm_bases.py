@@ -22,6 +22,7 @@ from .forces import coefficients
 from .oafm import Basis
 from .parameters import Scene
 
+
 def linear_forcing(scene: Scene, start: float) -> list[tuple[float, float, float]]:
     """(nu, C, S) with sum C cos(nu s) + S sin(nu s) = gamma + Delta cos w tau + beta sin W tau - gamma cos 2W tau,
     tau = start + s: the terms of Eq. 7 that do not depend on x."""
