@@ -3,6 +3,12 @@
 No physics here. No Python exception may leave a callback (pythonfmu turns it into fmi2Fatal and
 destroys the instance): errors are logged with the parameter and value, `fmi_status` is set to 3 and
 the status shim (fmu_src/fmi2_status_shim.c) returns fmi2Error to the host.
+
+FMU state (fmi2GetFMUstate & co.): every FMI variable, the fields in RUN_FIELDS and the plant's
+snapshot (integrator included); the plant itself is rebuilt from the parameters on restore.
+pythonfmu keeps the object _get_fmu_state returns as the state and hands it to _set_fmu_state as is,
+possibly several times, so both sides copy. fmi2Reset makes a new slave object (pythonfmu), i.e. the
+state after fmi2Instantiate.
 """
 import math
 from pathlib import Path
@@ -10,6 +16,7 @@ from pathlib import Path
 from pythonfmu import Boolean, DefaultExperiment, Fmi2Causality, Fmi2Slave, Fmi2Variability, Integer, Real
 from pythonfmu.enums import Fmi2Initial, Fmi2Status
 
+from vibromodel import snapshot
 from vibromodel.analytic import OafmSettings
 from vibromodel.integrate import IntegrationError
 from vibromodel.parameters import ParameterError, Scene, scene_names
@@ -17,6 +24,8 @@ from vibromodel.plant import DEFAULT_EXPERIMENT, Plant, Settings
 
 STATUS_OK, STATUS_ERROR = 0, 3
 OUTPUTS = ("x", "v", "a", "F_contact", "F_electrostatic")
+RUN_FIELDS = ("halted", "initialised", "start_time", "stop_time", "experiment_tolerance")  # in the FMU state
+STATE_FORMAT = "HertzEAOscillator state 1"
 
 
 class HertzEAOscillator(Fmi2Slave):
@@ -51,6 +60,7 @@ class HertzEAOscillator(Fmi2Slave):
                                        description="0 ok, 3 error (read by the status shim)"))
         self.plant = None
         self.halted = "the FMU has not been initialised"  # why doStep refuses, or None
+        self.initialised = False  # exitInitializationMode was called: only inputs may be set
         self.start_time, self.stop_time, self.experiment_tolerance = 0.0, None, None
 
     def _parameter(self, kind, name, value, description=None):
@@ -76,15 +86,9 @@ class HertzEAOscillator(Fmi2Slave):
         self.experiment_tolerance = tolerance
 
     def exit_initialization_mode(self):
+        self.initialised = True
         try:
-            scene = Scene(**{name: float(getattr(self, name)) for name in scene_names()})
-            rtol = self.rtol if self.experiment_tolerance is None else self.experiment_tolerance
-            oafm = OafmSettings(order=int(self.oafm_order), tau_star=float(self.tau_star),
-                                tau_end=float(self.oafm_tau_end))
-            settings = Settings(fidelity=int(self.fidelity), solver=int(self.solver),
-                                rtol=float(rtol), max_step=float(self.max_step), oafm=oafm)
-            self.plant = Plant(scene, settings, t0=float(self.start_time), stop_time=self.stop_time,
-                               cache_dirs=self._cache_dirs())
+            self.plant = self._make_plant()
             for note in self.plant.notes:
                 self.log(note, Fmi2Status.ok)
             self._publish(self.plant.outputs())
@@ -93,6 +97,17 @@ class HertzEAOscillator(Fmi2Slave):
             self._halt(f"{error}")
         except Exception as error:  # never let an exception reach pythonfmu (fmi2Fatal)
             self._halt(f"initialisation failed: {error!r}")
+
+    def _make_plant(self):
+        """The plant of the current parameters and experiment; raises ParameterError for bad ones."""
+        scene = Scene(**{name: float(getattr(self, name)) for name in scene_names()})
+        rtol = self.rtol if self.experiment_tolerance is None else self.experiment_tolerance
+        oafm = OafmSettings(order=int(self.oafm_order), tau_star=float(self.tau_star),
+                            tau_end=float(self.oafm_tau_end))
+        settings = Settings(fidelity=int(self.fidelity), solver=int(self.solver),
+                            rtol=float(rtol), max_step=float(self.max_step), oafm=oafm)
+        return Plant(scene, settings, t0=float(self.start_time), stop_time=self.stop_time,
+                     cache_dirs=self._cache_dirs())
 
     def _cache_dirs(self):
         """OAFM solutions packed at build time (resources/oafm_cache)."""
@@ -110,6 +125,9 @@ class HertzEAOscillator(Fmi2Slave):
         except IntegrationError as error:
             self._publish(self.plant.outputs_at(error.t, error.x, error.v))
             self._halt(f"simulation stopped: {error}")
+        except ArithmeticError as error:  # e.g. a scene of 1e300-sized parameters
+            self._halt(f"simulation stopped: floating-point failure after tau = {current_time!r} ({error!r}); "
+                       "the parameters are beyond the model's numerical range")
         except Exception as error:
             self._halt(f"doStep failed at tau = {current_time!r}: {error!r}")
         return False
@@ -118,3 +136,90 @@ class HertzEAOscillator(Fmi2Slave):
         values = (out.x, out.v, out.a, out.F_contact, out.F_electrostatic)
         if all(math.isfinite(value) for value in values):
             self._set_outputs(*values, out.in_contact)
+
+    # -- setting variables: FMI 2.0 rules, refusals logged and flagged (never raised) -----------------
+    def set_real(self, vrs, values):
+        self._set_values(Fmi2Slave.set_real, vrs, values)
+
+    def set_integer(self, vrs, values):
+        self._set_values(Fmi2Slave.set_integer, vrs, values)
+
+    def set_boolean(self, vrs, values):
+        self._set_values(Fmi2Slave.set_boolean, vrs, values)
+
+    def set_string(self, vrs, values):
+        self._set_values(Fmi2Slave.set_string, vrs, values)
+
+    def _set_values(self, setter, vrs, values):
+        for vr, value in zip(vrs, values):
+            var = self.vars.get(vr)
+            name = var.name if var is not None else f"with valueReference {vr}"
+            refusal = "no such variable" if var is None else self._set_refusal(var)
+            if refusal is None:
+                try:
+                    setter(self, [vr], [value])
+                    continue
+                except TypeError as error:  # pythonfmu's type check: wrong setter for the variable
+                    refusal = f"{error}"
+            self._error(f"{ParameterError(name, value, refusal)}")
+
+    def _set_refusal(self, var):
+        """Why FMI 2.0 forbids setting var now, or None (fmi2SetXXX in the co-simulation state machine)."""
+        if var.causality == Fmi2Causality.input:
+            return None
+        if var.causality == Fmi2Causality.parameter and var.variability == Fmi2Variability.tunable:
+            return None
+        settable_start = var.causality == Fmi2Causality.parameter or var.initial in (Fmi2Initial.exact,
+                                                                                     Fmi2Initial.approx)
+        if not settable_start:
+            return f"a {var.causality.name} variable computed by the FMU cannot be set"
+        if self.initialised:
+            kind = f"{(var.variability or Fmi2Variability.continuous).name} {var.causality.name}"
+            return (f"a {kind} cannot be set after fmi2ExitInitializationMode (FMI 2.0: only inputs and "
+                    f"tunable parameters); it keeps {getattr(self, var.local_name)!r}")
+        return None
+
+    # -- FMU state ------------------------------------------------------------------------------------
+    def _get_fmu_state(self):
+        return {
+            "format": STATE_FORMAT,
+            "variables": super()._get_fmu_state(),
+            "run": {name: getattr(self, name) for name in RUN_FIELDS},
+            "plant": None if self.plant is None else self.plant.snapshot(),
+        }
+
+    def _set_fmu_state(self, state):
+        try:
+            self._restore(state)
+        except Exception as error:  # a foreign or damaged state: refuse, never raise
+            self._halt(f"fmi2SetFMUstate refused: not a state of this FMU ({error!r})")
+            return
+        if self.fmi_status == STATUS_ERROR:
+            self.log(f"restored a state saved after an error: {self.halted or 'a call had failed'}",
+                     Fmi2Status.error)
+
+    def _restore(self, state):
+        if state.get("format") != STATE_FORMAT:
+            raise ValueError(f"format {state.get('format')!r}, expected {STATE_FORMAT!r}")
+        variables = state["variables"]
+        for var in self.vars.values():  # not through the setters: a state may hold any value
+            setattr(self, var.local_name, variables[var.name])
+        for name in RUN_FIELDS:
+            setattr(self, name, state["run"][name])
+        self.plant = None
+        if state["plant"] is not None:
+            self.plant = self._make_plant()
+            self.plant.restore(state["plant"])
+
+    @staticmethod
+    def _fmu_state_to_bytes(state):
+        return snapshot.to_bytes(state)
+
+    @staticmethod
+    def _fmu_state_from_bytes(data):
+        """Never raises (pythonfmu would turn it into fmi2Fatal): bad bytes give a state that
+        fmi2SetFMUstate refuses with fmi2Error."""
+        try:
+            return snapshot.from_bytes(data)
+        except Exception as error:
+            return {"format": f"unreadable ({error!r})"}

@@ -26,3 +26,28 @@ def run_plant(plant_fmu):
         return run_fmu(plant_fmu, start_values, stop_time, output_interval)
 
     return run
+
+
+@pytest.fixture(scope="session")
+def plant_unzipped(plant_fmu, tmp_path_factory):
+    """The plant FMU extracted once, for tests that make many instances in this process."""
+    from fmpy import extract
+
+    return extract(str(plant_fmu), str(tmp_path_factory.mktemp("plant_unzipped")))
+
+
+@pytest.fixture(scope="session")
+def start_plant(plant_fmu, plant_unzipped):
+    """start_plant(stop_time=None, **start_values) -> FmuInstance in step mode at tau = 0 (the caller
+    closes it); raises FMICallException if initialisation fails."""
+    from vibrofmu.run import FmuInstance
+
+    def start(stop_time=None, **start_values):
+        instance = FmuInstance(plant_fmu, unzip_dir=plant_unzipped)
+        instance.fmu.setupExperiment(startTime=0.0, stopTime=stop_time)
+        instance.fmu.enterInitializationMode()
+        instance.set(start_values)
+        instance.fmu.exitInitializationMode()
+        return instance
+
+    return start

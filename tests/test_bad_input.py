@@ -101,3 +101,30 @@ def test_cli_rejects_bad_input_with_one_line(tmp_path, capsys, plant_fmu, args, 
     assert code == 2
     assert len(err) == 1 and err[0].startswith("error: ") and needle in err[0], err
     assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("name,value", [("mu", 0.2), ("fidelity", 1), ("x", 0.5), ("fmi_status", 0)])
+def test_setting_fixed_parameters_or_outputs_after_initialisation_is_refused(plant_fmu, name, value):
+    instance = initialise(plant_fmu, {})
+    try:
+        instance.fmu.exitInitializationMode()
+        with pytest.raises(FMICallException) as failure:
+            instance.set({name: value})
+        assert failure.value.status == 3
+        assert f"parameter {name} = {value!r}: " in instance.log.errors()[-1]
+        if name != "fmi_status":
+            assert "cannot be set after fmi2ExitInitializationMode" in instance.log.errors()[-1]
+    finally:
+        instance.close()
+
+
+def test_the_input_may_be_set_between_steps(plant_fmu):
+    instance = initialise(plant_fmu, {})
+    try:
+        instance.fmu.exitInitializationMode()
+        instance.fmu.doStep(currentCommunicationPoint=0.0, communicationStepSize=0.1)
+        instance.set({"U": 0.01})
+        instance.fmu.doStep(currentCommunicationPoint=0.1, communicationStepSize=0.1)
+        assert outputs_are_finite(instance) and instance.log.errors() == []
+    finally:
+        instance.close()

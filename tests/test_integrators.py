@@ -94,3 +94,11 @@ def test_adaptive_solver_survives_a_stiff_scene():
         ig.advance(t)
     x, _ = ig.value_at(100.0)
     assert math.isfinite(x)
+
+
+def test_adaptive_step_budget_stops_an_endless_doStep():
+    model = make_model(Scene(), 0)
+    integrator = Dop853(model.accel, model.events, 0.0, 0.04, 0.0, 0.0, 1e-8, step_budget=5)
+    with pytest.raises(IntegrationError, match="5 steps reached only tau = "):
+        integrator.advance(100.0)
+    assert 0.0 < integrator.t < 100.0

@@ -121,7 +121,7 @@ def test_light_damping_breaks_down_beyond_the_fit():
 @pytest.mark.parametrize("settings, name", [
     (OafmSettings(basis="fourier"), "basis"), (OafmSettings(order=0), "oafm_order"),
     (OafmSettings(tau_star=-1.0), "tau_star"), (OafmSettings(tau_star=float("nan")), "tau_star"),
-    (OafmSettings(tau_star=50.0, tau_end=40.0), "tau_end"),
+    (OafmSettings(tau_star=50.0, tau_end=40.0), "oafm_tau_end"), (OafmSettings(tau_end=-1.0), "oafm_tau_end"),
 ])
 def test_bad_settings_name_the_parameter(settings, name):
     with pytest.raises(ParameterError, match=f"parameter {name} ="):

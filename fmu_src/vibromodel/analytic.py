@@ -40,12 +40,12 @@ class OafmSettings:
             raise ParameterError("basis", self.basis, f"known bases: {', '.join(FAMILIES)}")
         if not 1 <= self.order <= 8:
             raise ParameterError("oafm_order", self.order, "must be 1..8")
-        for name in ("tau_star", "tau_end"):
+        for name, fmu_name in (("tau_star", "tau_star"), ("tau_end", "oafm_tau_end")):  # named as in the FMU
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0.0):
-                raise ParameterError(name, value, "must be a finite number >= 0 (0 = automatic)")
+                raise ParameterError(fmu_name, value, "must be a finite number >= 0 (0 = automatic)")
         if self.tau_end and self.tau_star and self.tau_end <= self.tau_star:
-            raise ParameterError("tau_end", self.tau_end, f"must exceed tau_star = {self.tau_star:g}")
+            raise ParameterError("oafm_tau_end", self.tau_end, f"must exceed tau_star = {self.tau_star:g}")
         if not (self.grid.panel > 0 and self.grid.nodes >= 2):
             raise ParameterError("grid", self.grid, "panel must be > 0 and nodes >= 2")
 
@@ -86,10 +86,10 @@ def domains(scene: Scene, settings: OafmSettings) -> tuple[float, float]:
     if settings.tau_end:
         tau_end = settings.tau_end
     else:
-        _require_damping(scene, "tau_end")
+        _require_damping(scene, "oafm_tau_end")
         tau_end = tau_star + min(FREE_DECAY_SPAN / scene.mu, MAX_STEADY_SPAN)
     if tau_end <= tau_star:
-        raise ParameterError("tau_end", tau_end, f"must exceed tau* = {tau_star:g}")
+        raise ParameterError("oafm_tau_end", tau_end, f"must exceed tau* = {tau_star:g}")
     return tau_star, tau_end
 
 

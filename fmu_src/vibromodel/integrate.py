@@ -58,9 +58,10 @@ def _dot(coefficients, values):
 class Dop853:
     """Adaptive DOP853 with dense output and event location; restartable between doSteps."""
 
-    def __init__(self, accel, events, t0, x0, v0, U, rtol, max_step=math.inf):
+    def __init__(self, accel, events, t0, x0, v0, U, rtol, max_step=math.inf, step_budget=math.inf):
         self.accel, self.events = accel, events
         self.rtol, self.atol, self.max_step = rtol, rtol * ATOL_PER_RTOL, max_step
+        self.step_budget = step_budget  # most steps one advance may take
         self.nfev = 0
         self.n_steps = 0
         self._restart(t0, x0, v0, U)
@@ -94,13 +95,18 @@ class Dop853:
         """Step until t_target is covered (self.t >= t_target, maybe beyond it).
 
         Raises TerminalEvent if a terminal event lies at or before t_target, IntegrationError if the
-        step size collapses or the state stops being finite.
+        step size collapses, the state stops being finite or the step budget is spent.
         """
+        steps = 0
         while self.t < t_target:
             if self.stop is not None:
                 name, t, x, v = self.stop
                 raise TerminalEvent(f"{name} at tau = {t:.10g}, x = {x:.10g}", t, x, v)
+            if steps >= self.step_budget:
+                raise IntegrationError(f"{steps} steps reached only tau = {self.t:.10g} of {t_target:.10g}: "
+                                       "make smaller communication steps", self.t, self.x, self.v)
             self._step()
+            steps += 1
         if self.stop is not None and self.stop[1] <= t_target:
             name, t, x, v = self.stop
             raise TerminalEvent(f"{name} at tau = {t:.10g}, x = {x:.10g}", t, x, v)

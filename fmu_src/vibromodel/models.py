@@ -12,7 +12,7 @@ from enum import IntEnum
 from typing import Callable
 
 from . import forces
-from .parameters import PULL_IN_GAP, Scene
+from .parameters import PULL_IN_GAP, ParameterError, Scene
 
 
 class Fidelity(IntEnum):
@@ -93,10 +93,14 @@ class PolynomialModel:
         self.scene = scene
         self.fidelity = Fidelity.POLYNOMIAL_PAPER if printed else Fidelity.POLYNOMIAL
         make = forces.coefficients_printed if printed else forces.coefficients
-        self.a = make(scene.alpha, scene.gamma, scene.R)
-        self.g1 = forces.series_g1_printed(scene.R) if printed else forces.series_g1()
-        self.g2 = forces.series_g2(scene.R)
-        self.g3 = forces.series_g3(scene.R)
+        try:
+            self.a = make(scene.alpha, scene.gamma, scene.R)
+            self.g1 = forces.series_g1_printed(scene.R) if printed else forces.series_g1()
+            self.g2 = forces.series_g2(scene.R)
+            self.g3 = forces.series_g3(scene.R)
+        except ArithmeticError:
+            raise ParameterError("R", scene.R, "out of range of the series of Eq. 7 (powers of R up to R^5 "
+                                 "overflow or vanish)") from None
         self.accel = self._make_accel(scene, self.a, self.g3)
 
     @staticmethod

@@ -5,10 +5,14 @@ Every formula here is the corrected one of ERRATA.md, not the printed one of PAP
 from __future__ import annotations
 
 import math
+import sys
 from dataclasses import asdict, dataclass, fields, replace
 
 # Paper example (PAPER §4, ERRATA §4): delta*epsilon is the detuning of omega from sqrt(a1).
 PAPER_DETUNING = 0.02 * 0.01
+
+# Forcing frequencies beyond this (times the natural frequency) are refused.
+MAX_FREQUENCY = 1e4
 
 # Pull-in: the run stops when an electrode gap 1 -/+ 2x/(3R) falls below this.
 PULL_IN_GAP = 1e-3
@@ -79,10 +83,11 @@ def validate(scene: Scene) -> None:
     for name in ("mu", "alpha", "gamma"):
         if getattr(scene, name) < 0:
             raise ParameterError(name, getattr(scene, name), "must be >= 0")
-    if scene.omega < 0:
-        raise ParameterError("omega", scene.omega, "forcing frequency must be >= 0")
-    if scene.Omega < 0:
-        raise ParameterError("Omega", scene.Omega, "AC frequency must be >= 0")
+    for name in ("omega", "Omega"):
+        if not 0.0 <= getattr(scene, name) <= MAX_FREQUENCY:
+            raise ParameterError(name, getattr(scene, name),
+                                 f"forcing frequency must be in [0, {MAX_FREQUENCY:g}] (the integrators resolve "
+                                 "every forcing period: faster forcing would make a doStep take forever)")
     upper, lower = electrode_gaps(scene.x_start, scene.R)
     if upper <= PULL_IN_GAP:
         raise ParameterError(
@@ -94,9 +99,14 @@ def validate(scene: Scene) -> None:
             f"at or beyond the lower electrode x = -3R/2 = {-1.5 * scene.R:g} (gap 1+2x/(3R) = {lower:.3g})")
 
 
+MIN_RTOL = 100.0 * sys.float_info.epsilon  # below it the error control only sees rounding (scipy's floor too)
+
+
 def validate_tolerance(rtol: float) -> None:
     if not (math.isfinite(rtol) and rtol > 0):
         raise ParameterError("rtol", rtol, "must be a finite number > 0")
+    if rtol < MIN_RTOL:
+        raise ParameterError("rtol", rtol, f"must be >= {MIN_RTOL:.3g} (100 machine epsilons)")
 
 
 def validate_max_step(max_step: float) -> None:

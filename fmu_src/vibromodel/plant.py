@@ -14,10 +14,15 @@ from .analytic import OafmSettings, cached_solve, covering
 from .integrate import Dop853, IntegrationError, Rk4
 from .models import Fidelity, make_model
 from .parameters import ParameterError, Scene, validate, validate_max_step, validate_tolerance
+from .snapshot import plain_attributes, restore_attributes
 
 DEFAULT_EXPERIMENT = (0.0, 200.0, 0.1)  # start, stop, communication step of the FMU's DefaultExperiment
 RK4_DEFAULT_STEP = 0.01  # RK4 step when max_step = 0 ("automatic")
 TIME_TOLERANCE = 1e-9  # relative mismatch allowed between the host's time and the plant's
+MAX_STEPS_PER_DOSTEP = 10**6  # more steps in one doStep: refused up front (step ceiling) or stopped
+# What a snapshot leaves out: built from the scene and settings by the constructor.
+PLANT_REBUILT = ("scene", "settings", "model", "integrator", "analytic")
+INTEGRATOR_REBUILT = ("accel", "events")
 
 
 class Solver(IntEnum):
@@ -87,7 +92,7 @@ class Plant:
         elif settings.solver == Solver.ADAPTIVE:
             max_step = settings.max_step or math.inf
             self.integrator = Dop853(self.model.accel, self.model.events, t0, scene.x_start, scene.v_start,
-                                     0.0, settings.rtol, max_step)
+                                     0.0, settings.rtol, max_step, step_budget=MAX_STEPS_PER_DOSTEP)
         else:
             self.integrator = Rk4(self.model.accel, self.model.events, t0, scene.x_start, scene.v_start,
                                   0.0, settings.max_step or RK4_DEFAULT_STEP)
@@ -102,6 +107,10 @@ class Plant:
             raise ParameterError("communicationStepSize", h, "must be a finite number > 0")
         if not math.isfinite(U):
             raise ParameterError("U", U, "input must be a finite number")
+        ceiling = math.inf if self.integrator is None else self.integrator.max_step
+        if h / ceiling > MAX_STEPS_PER_DOSTEP:
+            raise ParameterError("communicationStepSize", h, f"needs more than {MAX_STEPS_PER_DOSTEP} steps of "
+                                 f"{ceiling:g} (max_step); make smaller communication steps or raise max_step")
         if not (math.isfinite(t) and abs(t - self.t) <= TIME_TOLERANCE * max(1.0, abs(t))):
             raise ParameterError("currentCommunicationPoint", t, f"the plant is at tau = {self.t!r}")
         t_end = t + h  # the host's clock: no drift from summing steps
@@ -114,6 +123,21 @@ class Plant:
             self.integrator.advance(t_end)
         self.t = t_end
         return self.outputs()
+
+    def snapshot(self) -> dict:
+        """Everything that decides the plant's future beyond its constructor's arguments, as plain data."""
+        integrator = None if self.integrator is None else plain_attributes(self.integrator, INTEGRATOR_REBUILT)
+        return {"plant": plain_attributes(self, PLANT_REBUILT), "integrator": integrator}
+
+    def restore(self, snapshot: dict) -> None:
+        """Return a plant built with the same arguments to the moment `snapshot` was taken.
+
+        Fidelity 4's analytic solution is not in the snapshot: the constructor re-derives it
+        deterministically from the scene and settings (or reads the same fit from a cache).
+        """
+        restore_attributes(self, snapshot["plant"], PLANT_REBUILT)
+        if self.integrator is not None:
+            restore_attributes(self.integrator, snapshot["integrator"], INTEGRATOR_REBUILT)
 
     def outputs(self) -> Outputs:
         if self.analytic is not None:

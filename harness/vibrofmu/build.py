@@ -1,4 +1,5 @@
-"""Build the FMUs: pythonfmu packs the slave and the vibromodel package; the status shim goes on top."""
+"""Build the FMUs: pythonfmu packs the slave and the vibromodel package; the status shim goes on top;
+the reference result of the default experiment goes into the documentation."""
 from __future__ import annotations
 
 import tempfile
@@ -11,6 +12,7 @@ from vibromodel.analytic import OafmSettings, cached_solve, covering
 from vibromodel.parameters import Scene
 from vibromodel.plant import DEFAULT_EXPERIMENT
 
+from .refresult import pack_reference
 from .shim import install_status_shim
 
 FMU_SRC = Path(vibromodel.__file__).resolve().parents[1]
@@ -21,12 +23,14 @@ PLANT_FMU = BUILD_DIR / "HertzEAOscillator.fmu"
 
 
 def build_fmu(slave: Path, out_dir: Path = BUILD_DIR, extra_resources: tuple[Path, ...] = ()) -> Path:
-    """Build out_dir/<slave name>.fmu with vibromodel (and extra_resources) in its resources and the
-    status shim installed."""
+    """Build out_dir/<slave name>.fmu with vibromodel (and extra_resources) in its resources, FMU state
+    save/restore and serialization declared, the status shim installed and the reference result packed."""
     out_dir.mkdir(parents=True, exist_ok=True)
-    fmu = Path(FmuBuilder.build_FMU(slave, dest=out_dir, project_files=[FMU_SRC / "vibromodel", *extra_resources]))
+    fmu = Path(FmuBuilder.build_FMU(slave, dest=out_dir, project_files=[FMU_SRC / "vibromodel", *extra_resources],
+                                    canGetAndSetFMUstate=True, canSerializeFMUstate=True))
     status = next(v for v in read_model_description(str(fmu)).modelVariables if v.name == "fmi_status")
     install_status_shim(fmu, status.valueReference)
+    pack_reference(fmu)
     return fmu
 
 
