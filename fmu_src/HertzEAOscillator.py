@@ -30,7 +30,8 @@ class HertzEAOscillator(Fmi2Slave):
         for name in scene_names():
             self._parameter(Real, name, getattr(scene, name))
         self._parameter(Integer, "fidelity", int(settings.fidelity),
-                        "0 exact Eq. 3, 1 polynomial Eq. 7, 2 Eq. 7 printed coefficients, 4 OAFM analytic")
+                        "0 exact Eq. 3, 1 polynomial Eq. 7, 2 Eq. 7 printed coefficients, 3 averaged slow flow, "
+                        "4 OAFM analytic")
         self._parameter(Integer, "solver", int(settings.solver), "0 adaptive DOP853, 1 fixed-step RK4")
         self._parameter(Real, "rtol", settings.rtol, "relative tolerance (setupExperiment's tolerance wins)")
         self._parameter(Real, "max_step", settings.max_step, "RK4 step / adaptive step ceiling; 0 = automatic")
