@@ -1,4 +1,4 @@
-"""The `vibrofmu` command: build, simulate, demo, oafm, doctor."""
+"""The `vibrofmu` command: build, simulate, demo, oafm, stability, doctor."""
 from __future__ import annotations
 
 import argparse
@@ -7,6 +7,7 @@ import tempfile
 from pathlib import Path
 
 from vibromodel.analytic import OafmSettings
+from vibromodel.averaging import averaged, steady_states
 from vibromodel.oafm import Grid
 from vibromodel.oafm_bases import FAMILIES
 from vibromodel.parameters import ParameterError, Scene
@@ -17,6 +18,7 @@ from .build import PLANT_FMU, build_plant
 from .demo import run_demo
 from .oafm_study import run_oafm
 from .simulate import FIDELITIES, SOLVERS, simulate
+from .stability import default_range, stability_study, write_study
 
 
 def parse_set(items: list[str]) -> dict[str, float]:
@@ -109,6 +111,51 @@ def cmd_oafm(args) -> int:
     return 0
 
 
+def cmd_stability(args) -> int:
+    scene = Scene().with_values(**parse_set(args.set))
+    model = averaged(scene)
+    lo, hi = (args.omega_range[0], args.omega_range[1]) if args.omega_range else default_range(model)
+    n = int(args.omega_range[2]) if args.omega_range else 201
+    if not (0 < lo < hi and n >= 3):
+        raise ParameterError("omega-range", args.omega_range, "need 0 < LO < HI and N >= 3")
+    fmu = None if args.no_fmu else ensure_fmu(Path(args.fmu))
+
+    def progress(label, done, total):
+        if done == total or done % max(1, total // 10) == 0:
+            print(f"{label}: {done}/{total}", file=sys.stderr, flush=True)
+
+    study = stability_study(scene, (lo, hi), n, fmu=fmu, sweep_points=args.sweep_points, progress=progress)
+    write_study(study, Path(args.out))
+    summary = study["summary"]
+    states = steady_states(model.flow(), model.r_max)
+    print(f"omega = {scene.omega:.8g} (omega_e = {model.omega_e:.8g}): "
+          + ", ".join(f"r = {s.r:.5g} {s.kind}" for s in states))
+    agree = summary["classification_agreement"]
+    excluded = f", points within {agree['excluded_margin']:.2g} of a fold excluded" if study["folds"] else ""
+    print(f"slow flow vs Floquet classification: {agree['points_agreeing']}/{agree['points_compared']} grid points "
+          f"agree ({100 * agree['fraction']:.1f} %){excluded}")
+    errors = summary["slow_flow_vs_shooting"]
+    print(f"slow flow vs shooting: max relative r error {errors['max_relative_r_error']:.2e} (omega "
+          f"{errors['at_omega']:.6g}), max |exp(lambda T) - rho| {errors['max_multiplier_error']:.2e} (omega "
+          f"{errors['at_omega_multiplier']:.6g})")
+    for row in summary["fold_frequencies"]["folds"]:
+        print("fold: " + ", ".join(f"{k} {v:.8g}" for k, v in row.items() if not k.startswith("r_")))
+    for direction, sweep in ((d, summary["fmu_sweeps"][d]) for d in ("up", "down") if "fmu_sweeps" in summary):
+        print(f"FMU sweep {direction}: {sweep['settled_points']}/{len(sweep['omega'])} points settled, max relative "
+              f"difference to the slow flow {sweep['max_relative_difference_to_slow_flow_settled']:.2e}")
+    check = summary.get("fidelity_3")
+    if check and "error" in check:
+        print(f"error: fidelity 3 check: {check['error']}", file=sys.stderr)
+        return 1
+    if check:
+        print(f"fidelity 3 vs 0 after the transient: max |dx| = {check['max_abs_error_after_transient']:.2e} "
+              f"({100 * check['relative_to_amplitude']:.2f} % of the amplitude); speed-up end to end "
+              f"{check['end_to_end_speedup']:.1f}x, model {check['model_speedup']:.1f}x, "
+              f"integration alone {check['integration_speedup']:.1f}x")
+    print(f"wrote {args.out}/summary.json, frequency_response.png")
+    return 0
+
+
 def cmd_doctor(args) -> int:
     with tempfile.TemporaryDirectory() as work_dir:
         env, result = doctor.check(Path(args.fmu), Path(work_dir))
@@ -155,6 +202,16 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", help="scene parameter")
     p.add_argument("--out", required=True)
     p.set_defaults(func=cmd_oafm)
+
+    p = sub.add_parser("stability", help="steady vibrations vs omega: slow flow, shooting/Floquet, FMU sweeps")
+    p.add_argument("--omega-range", nargs=3, type=float, metavar=("LO", "HI", "N"),
+                   help="frequency grid (default: omega_e -+ max(5 mu, 3 |kappa(r_peak)|), 201 points)")
+    p.add_argument("--sweep-points", type=int, default=25, help="frequencies per FMU sweep direction")
+    p.add_argument("--fmu", default=str(PLANT_FMU), help="plant FMU for the sweeps (built when missing)")
+    p.add_argument("--no-fmu", action="store_true", help="skip the FMU sweeps and the fidelity-3 check")
+    p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", help="scene parameter")
+    p.add_argument("--out", required=True)
+    p.set_defaults(func=cmd_stability)
 
     p = sub.add_parser("demo", help="build + simulate + compare on the paper's example (Omega = 2)")
     p.add_argument("--out", default="out/demo")

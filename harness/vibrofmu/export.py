@@ -84,3 +84,40 @@ def plot_convergence(path: Path, rows: list[dict]) -> None:
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
+
+
+def plot_frequency_response(path: Path, curve, continuation, sweeps, folds, omega_range, title: str) -> None:
+    """Amplitude r against omega: the slow flow's curve (stable solid, unstable dashed), the shooting
+    continuation (Floquet: filled stable, open unstable), FMU sweeps up/down, and the folds (dotted).
+    With folds, a second panel zooms onto the hysteresis interval."""
+    panels = [omega_range]
+    if len(folds) >= 2:
+        width = folds[-1] - folds[0]
+        panels.append((folds[0] - 1.5 * width, folds[-1] + 1.5 * width))
+    fig, axes = plt.subplots(1, len(panels), figsize=(7 * len(panels), 5.5), squeeze=False)
+    omega, r, stable = (np.asarray(a) for a in curve)
+    c_omega, c_r, c_stable = (np.asarray(a) for a in continuation)
+    for ax, (lo, hi) in zip(axes[0], panels):
+        ax.plot(omega, np.where(stable, r, np.nan), "-", color="tab:blue", lw=1.6, label="slow flow, stable")
+        ax.plot(omega, np.where(stable, np.nan, r), "--", color="tab:blue", lw=1.2, label="slow flow, unstable")
+        ax.plot(c_omega[c_stable], c_r[c_stable], "o", ms=3, color="k", label="shooting, stable (Floquet)")
+        ax.plot(c_omega[~c_stable], c_r[~c_stable], "o", ms=3, mfc="none", color="k",
+                label="shooting, unstable (Floquet)")
+        for sweep, marker, color in zip(sweeps, ("^", "v"), ("tab:red", "tab:green")):
+            ax.plot(sweep.omega, sweep.r, marker, ms=7, mfc="none", color=color, label=f"FMU sweep {sweep.direction}")
+        for fold in folds:
+            ax.axvline(fold, color="0.5", lw=0.7, ls=":")
+        inside = (omega >= lo) & (omega <= hi)
+        top = max(np.max(r[inside], initial=0.0), np.max(c_r, initial=0.0))
+        ax.set_xlim(lo, hi)
+        ax.set_ylim(0.0, 1.08 * top)
+        ax.set_xlabel("forcing frequency omega")
+        ax.set_ylabel("first-harmonic amplitude r")
+        ax.grid(True, alpha=0.3)
+    axes[0][0].legend(fontsize=8, loc="upper left")
+    if len(panels) > 1:
+        axes[0][1].set_title("hysteresis interval (folds dotted)", fontsize=10)
+    fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)

@@ -61,10 +61,12 @@ class FmuLog:
 class FmuInstance:
     """One instantiated co-simulation FMU with name-based access to its variables."""
 
-    def __init__(self, fmu_path: Path | str, instance_name: str = "instance"):
+    def __init__(self, fmu_path: Path | str, instance_name: str = "instance", unzip_dir: str | None = None):
+        """unzip_dir: an FMU already extracted there (kept on close); by default a fresh one per instance."""
         self.model_description = read_model_description(str(fmu_path))
         self.variables = {v.name: v for v in self.model_description.modelVariables}
-        self.unzip_dir = extract(str(fmu_path))
+        self.owns_unzip_dir = unzip_dir is None
+        self.unzip_dir = extract(str(fmu_path)) if unzip_dir is None else unzip_dir
         self.log = FmuLog()
         self.fmu = FMU2Slave(guid=self.model_description.guid, unzipDirectory=self.unzip_dir,
                              modelIdentifier=self.model_description.coSimulation.modelIdentifier,
@@ -93,7 +95,8 @@ class FmuInstance:
         except FMICallException:
             pass
         self.fmu.freeInstance()
-        shutil.rmtree(self.unzip_dir, ignore_errors=True)
+        if self.owns_unzip_dir:
+            shutil.rmtree(self.unzip_dir, ignore_errors=True)
 
 
 def run_fmu(fmu_path: Path | str, start_values: dict, stop_time: float, output_interval: float,
