@@ -364,3 +364,31 @@ def validity_notes(model: Averaged) -> list[str]:
         notes.append(f"omega = {s.omega:.4g} is far from resonance omega_e = {w:.4g}: averaging assumes "
                      "|omega - omega_e| small")
     return notes
+
+
+def ghost_margin(model, fold: Fold, wait: float) -> float:
+    """How far past a fold a sweep that waits `wait` (tau) can still sit on the vanished branch.
+
+    Past a saddle-node the flow creeps through the fold's ghost: on the centre direction the slow flow is
+    s' = a (omega - omega_f) + b s^2, and the passage takes pi / sqrt(|a b d omega|) (Strogatz, Nonlinear
+    Dynamics and Chaos, §4.3). This returns the d omega at which that equals `wait`. a and b come from the
+    slow flow at the fold: left and right null vectors w, v of J; a = w.dF/domega / w.v,
+    b = w.D2F[v, v] / (2 w.v), by central differences.
+    """
+    flow = model.flow(fold.omega)
+    state = steady_state(flow, fold.r)
+    Z = np.array([state.A, state.B])
+    J = flow.jacobian(*Z)
+    values, right = np.linalg.eig(J)
+    v = right[:, np.argmin(np.abs(values))].real
+    values, left = np.linalg.eig(J.T)
+    w = left[:, np.argmin(np.abs(values))].real
+
+    def F(point, omega):
+        return np.array(model.flow(omega).rhs(*point))
+
+    d_omega, d_state = 1e-7 * fold.omega, 1e-4 * fold.r
+    a = w @ (F(Z, fold.omega + d_omega) - F(Z, fold.omega - d_omega)) / (2 * d_omega) / (w @ v)
+    b = 0.5 * w @ (F(Z + d_state * v, fold.omega) - 2 * F(Z, fold.omega) + F(Z - d_state * v, fold.omega)) \
+        / d_state**2 / (w @ v)
+    return float(math.pi**2 / (abs(a * b) * wait**2))

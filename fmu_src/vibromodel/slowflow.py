@@ -33,12 +33,25 @@ class SlowFlowSolution:
             self.Omega, self.p, self.q = s.Omega, -s.beta / s.Omega**2, s.gamma / (4 * s.Omega**2)
         self.rtol, self.atol, self.max_step = rtol, 1e-2 * rtol, max_step
         psi, dpsi, _ = fast_response(t0, s.beta, s.gamma, s.Omega)
-        c, sn, w = math.cos(self.omega * t0), math.sin(self.omega * t0), self.omega
-        y, dy = x0 - self.x_e - psi, (v0 - dpsi) / w  # van der Pol: y = A c + B s, y'/omega = -A s + B c
         self.t0, self.cells, self.spacing = t0, [], 1.0
         self.integration_seconds = 0.0  # time spent integrating the slow flow itself (not tabulating)
-        self._start(t0, (y * c - dy * sn, y * sn + dy * c))
+        self._start(t0, self._initial_slow_state(t0, x0 - self.x_e - psi, v0 - dpsi))
         self.extend(t_end if t_end is not None else t0 + CHUNK)
+
+    def _initial_slow_state(self, t0, y, dy, iterations=30):
+        """(A, B) at t0 such that the reconstructed x and its exact derivative equal the initial state:
+        y = A c + B s and dy = (A' + w B) c + (B' - w A) s with (A', B') from the slow flow. Fixed-point
+        iteration from van der Pol's (A', B') = 0; it contracts by |d(A', B')/d(A, B)| / w << 1."""
+        w, c, s = self.omega, math.cos(self.omega * t0), math.sin(self.omega * t0)
+        dA = dB = 0.0
+        for _ in range(iterations):
+            u = (dy - dA * c - dB * s) / w  # = -A s + B c
+            A, B = y * c - u * s, y * s + u * c
+            dA_new, dB_new = self.flow.rhs(A, B)
+            if dA_new == dA and dB_new == dB:
+                break
+            dA, dB = dA_new, dB_new
+        return A, B
 
     def _start(self, t, Z):
         self.t_end, self.Z_end = t, Z
