@@ -118,6 +118,44 @@ def plot_frequency_response(path: Path, curve, continuation, sweeps, folds, omeg
     if len(panels) > 1:
         axes[0][1].set_title("hysteresis interval (folds dotted)", fontsize=10)
     fig.suptitle(title, fontsize=10)
+
+
+def plot_closed_loop(out_dir: Path, time, series: dict, theta: dict, title: str) -> list[Path]:
+    """Closed loop: x vs x_ref, e1 and e2, V on a log axis, each estimate against its true value (dashed)."""
+    paths = [out_dir / name for name in ("tracking.png", "errors.png", "lyapunov.png", "estimates.png")]
+    fig, ax = plt.subplots(figsize=(10, 4.5))
+    ax.plot(time, series["x"], lw=1.0, label="x (plant)")
+    ax.plot(time, series["x_ref"], "--", lw=1.0, label="x_ref")
+    _finish(fig, ax, paths[0], title, "x")
+    fig, ax = plt.subplots(figsize=(10, 4.5))
+    for name in ("e1", "e2"):
+        ax.plot(time, series[name], lw=0.8, label=name)
+    ax.set_yscale("symlog", linthresh=1e-6)
+    _finish(fig, ax, paths[1], title, "tracking error (symlog)")
+    fig, ax = plt.subplots(figsize=(10, 4.5))
+    ax.semilogy(time, series["V"], lw=1.0, label="V")
+    _finish(fig, ax, paths[2], title, "Lyapunov function V")
+    fig, axes = plt.subplots(3, 3, figsize=(12, 8), sharex=True)
+    for ax, (name, true) in zip(axes.flat, theta.items()):
+        ax.plot(time, series[f"{name}_hat"], lw=1.0, label="estimate")
+        ax.axhline(true, color="k", ls="--", lw=0.8, label="true")
+        ax.set_title(name, fontsize=9)
+    axes.flat[0].legend(fontsize=7)
+    for ax in axes[-1]:
+        ax.set_xlabel("tau")
+    fig.suptitle(title)
+    fig.tight_layout()
+    fig.savefig(paths[3], dpi=100)
+    plt.close(fig)
+    return paths
+
+
+def _finish(fig, ax, path: Path, title: str, ylabel: str) -> None:
+    ax.set_xlabel("tau")
+    ax.set_ylabel(ylabel)
+    ax.set_title(title)
+    ax.grid(True, alpha=0.3)
+    ax.legend(loc="upper right")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
