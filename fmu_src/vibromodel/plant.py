@@ -121,12 +121,11 @@ class Plant:
     def advance(self, t_end: float, U: float = 0.0) -> tuple[float, float, float]:
         """Move to t_end with U held and return (x, x', x''): the model's own work, without the checks
         and the output forces of do_step (what the speed measurements call model computation)."""
+        if self.solution is None:
+            self.integrator.set_input(self.t, U)  # at the old time: U changes there
+            self.U = U
+            self.integrator.advance(t_end)
         self.t = t_end
-        if self.solution is not None:
-            return self.solution.state(t_end)
-        self.integrator.set_input(self.t, U)
-        self.U = U
-        self.integrator.advance(t_end)
         return self.state()
 
     def state(self) -> tuple[float, float, float]:
