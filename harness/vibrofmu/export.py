@@ -118,6 +118,9 @@ def plot_frequency_response(path: Path, curve, continuation, sweeps, folds, omeg
     if len(panels) > 1:
         axes[0][1].set_title("hysteresis interval (folds dotted)", fontsize=10)
     fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
 
 
 def plot_closed_loop(out_dir: Path, time, series: dict, theta: dict, title: str) -> list[Path]:
