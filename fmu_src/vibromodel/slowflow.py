@@ -1,7 +1,7 @@
 """Fidelity 3: the averaged slow flow integrated in time, and x reconstructed from it (ERRATA §3.4).
 
-x ~ x_e + A(t) cos(omega t) + B(t) sin(omega t) + psi(t), with (A, B) from the slow flow and psi the
-fast AC response (Eq. 46). The slow flow is integrated with large steps (DOP853, SciPy) and tabulated as
+x ~ x_e + A(t) cos(omega t) + B(t) sin(omega t) + y2 + psi(t), with (A, B) from the slow flow, y2 the
+second-order harmonics of the quadratic stiffness and psi the fast AC response (Eq. 46). The slow flow is integrated with large steps (DOP853, SciPy) and tabulated as
 cubic Hermite pieces on a uniform grid whose spacing is refined until the table matches the
 integrator's dense output to the tolerance; one output then costs one table lookup and a few
 trigonometric terms. v and a are the exact time derivatives of the reconstructed x.
@@ -14,7 +14,7 @@ import time
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from .averaging import Averaged, fast_response
+from .averaging import Averaged
 
 CHUNK = 200.0  # tau covered per integration when the end of the experiment is not known
 MAX_REFINEMENTS = 24
@@ -30,27 +30,29 @@ class SlowFlowSolution:
         self.omega, self.x_e = s.omega, model.eq.x_e
         self.ac = s.beta != 0.0 or s.gamma != 0.0  # a scene without AC actuation skips psi
         if self.ac:  # psi = p sin(Omega t) + q cos(2 Omega t), Eq. 46
-            self.Omega, self.p, self.q = s.Omega, -s.beta / s.Omega**2, s.gamma / (4 * s.Omega**2)
+            self.Omega, self.psi_sin, self.psi_cos = s.Omega, -s.beta / s.Omega**2, s.gamma / (4 * s.Omega**2)
         self.rtol, self.atol, self.max_step = rtol, 1e-2 * rtol, max_step
-        psi, dpsi, _ = fast_response(t0, s.beta, s.gamma, s.Omega)
         self.t0, self.cells, self.spacing = t0, [], 1.0
         self.integration_seconds = 0.0  # time spent integrating the slow flow itself (not tabulating)
-        self._start(t0, self._initial_slow_state(t0, x0 - self.x_e - psi, v0 - dpsi))
+        _, k1, k2 = model.eq.k[:3]
+        self.harmonic, self.mean_shift = k2 / (6 * k1), k2 / (2 * k1)
+        self._start(t0, self._initial_slow_state(t0, x0, v0))
         self.extend(t_end if t_end is not None else t0 + CHUNK)
 
-    def _initial_slow_state(self, t0, y, dy, iterations=30):
-        """(A, B) at t0 such that the reconstructed x and its exact derivative equal the initial state:
-        y = A c + B s and dy = (A' + w B) c + (B' - w A) s with (A', B') from the slow flow. Fixed-point
-        iteration from van der Pol's (A', B') = 0; it contracts by |d(A', B')/d(A, B)| / w << 1."""
+    def _initial_slow_state(self, t0, x0, v0, iterations=50):
+        """(A, B) at t0 such that the reconstructed x and its exact derivative equal (x0, v0), with (A', B')
+        from the slow flow. Iterated from van der Pol's start: each step corrects (A, B) by van der Pol's
+        inverse of the remaining mismatch; it contracts by ~ |d(A', B')/d(A, B)|/w + 2 |k2| r/k1 << 1."""
         w, c, s = self.omega, math.cos(self.omega * t0), math.sin(self.omega * t0)
-        dA = dB = 0.0
+        A = B = 0.0
         for _ in range(iterations):
-            u = (dy - dA * c - dB * s) / w  # = -A s + B c
-            A, B = y * c - u * s, y * s + u * c
-            dA_new, dB_new = self.flow.rhs(A, B)
-            if dA_new == dA and dB_new == dB:
+            dA, dB = self.flow.rhs(A, B)
+            x, v, _ = self._reconstruct(t0, A, B, dA, dB, 0.0, 0.0)
+            dy, du = x0 - x, (v0 - v) / w  # mismatch; van der Pol: y = A c + B s, y'/w = -A s + B c
+            A_new, B_new = A + dy * c - du * s, B + dy * s + du * c
+            if A_new == A and B_new == B:
                 break
-            dA, dB = dA_new, dB_new
+            A, B = A_new, B_new
         return A, B
 
     def _start(self, t, Z):
@@ -103,26 +105,41 @@ class SlowFlowSolution:
         return list(map(tuple, coefficients.transpose(2, 1, 0).reshape(n, 8).tolist())), error
 
     def state(self, t: float) -> tuple[float, float, float]:
-        """(x, x', x'') at t: x = x_e + A cos + B sin + psi and its exact derivatives (one table lookup)."""
+        """(x, x', x'') at t, from one table lookup."""
         if t > self.t_end:
             self.extend(t)
         u = (t - self.t0) / self.spacing
         i = min(int(u), len(self.cells) - 1)
         s = u - i
         a0, a1, a2, a3, b0, b1, b2, b3 = self.cells[i]
-        g, w = 1.0 / self.spacing, self.omega
-        A, B = a0 + s * (a1 + s * (a2 + s * a3)), b0 + s * (b1 + s * (b2 + s * b3))
-        dA, dB = g * (a1 + s * (2 * a2 + 3 * s * a3)), g * (b1 + s * (2 * b2 + 3 * s * b3))
-        ddA, ddB = g * g * (2 * a2 + 6 * s * a3), g * g * (2 * b2 + 6 * s * b3)
+        g = 1.0 / self.spacing
+        return self._reconstruct(t, a0 + s * (a1 + s * (a2 + s * a3)), b0 + s * (b1 + s * (b2 + s * b3)),
+                                 g * (a1 + s * (2 * a2 + 3 * s * a3)), g * (b1 + s * (2 * b2 + 3 * s * b3)),
+                                 g * g * (2 * a2 + 6 * s * a3), g * g * (2 * b2 + 6 * s * b3))
+
+    def _reconstruct(self, t, A, B, dA, dB, ddA, ddB):
+        """x = x_e + p + y2 + psi and its exact first and second derivatives, from A, B and theirs.
+
+        p = A cos(w t) + B sin(w t) = r cos(theta) (first order); q = A sin - B cos = r sin(theta).
+        y2 = k2/(6 k1) r^2 cos(2 theta) - k2/(2 k1) r^2: the second-order harmonics of the quadratic term
+        (y'' + k1 y + k2 y^2, Nayfeh & Mook §4.1), the reconstruction that belongs to the Lindstedt
+        backbone, which is second order in k2. psi: the fast AC response, Eq. 46.
+        """
+        w = self.omega
         c, sn = math.cos(w * t), math.sin(w * t)
-        x = self.x_e + A * c + B * sn
-        v = (dA + w * B) * c + (dB - w * A) * sn
-        a = (ddA + 2 * w * dB - w * w * A) * c + (ddB - 2 * w * dA - w * w * B) * sn
+        p, q = A * c + B * sn, A * sn - B * c
+        dp, dq = dA * c + dB * sn - w * q, dA * sn - dB * c + w * p
+        ddp = ddA * c + ddB * sn - 2 * w * (dA * sn - dB * c) - w * w * p
+        ddq = ddA * sn - ddB * c + 2 * w * (dA * c + dB * sn) - w * w * q
+        h, m = self.harmonic, self.mean_shift
+        x = self.x_e + p + h * (p * p - q * q) - m * (A * A + B * B)
+        v = dp + 2 * h * (p * dp - q * dq) - 2 * m * (A * dA + B * dB)
+        a = ddp + 2 * h * (dp * dp + p * ddp - dq * dq - q * ddq) - 2 * m * (dA * dA + A * ddA + dB * dB + B * ddB)
         if self.ac:  # psi of Eq. 46 and its derivatives, inlined: this is the per-output hot path
-            p, q, W = self.p, self.q, self.Omega
+            P, Q, W = self.psi_sin, self.psi_cos, self.Omega
             s1, c1 = math.sin(W * t), math.cos(W * t)
             s2, c2 = 2.0 * s1 * c1, c1 * c1 - s1 * s1
-            x += p * s1 + q * c2
-            v += W * (p * c1 - 2.0 * q * s2)
-            a -= W * W * (p * s1 + 4.0 * q * c2)
+            x += P * s1 + Q * c2
+            v += W * (P * c1 - 2.0 * Q * s2)
+            a -= W * W * (P * s1 + 4.0 * Q * c2)
         return x, v, a

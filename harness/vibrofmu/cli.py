@@ -195,8 +195,9 @@ def cmd_stability(args) -> int:
     for row in summary["fold_frequencies"]["folds"]:
         print("fold: " + ", ".join(f"{k} {v:.8g}" for k, v in row.items() if not k.startswith("r_")))
     for direction, sweep in ((d, summary["fmu_sweeps"][d]) for d in ("up", "down") if "fmu_sweeps" in summary):
-        print(f"FMU sweep {direction}: {sweep['settled_points']}/{len(sweep['omega'])} points settled, max relative "
-              f"difference to the slow flow {sweep['max_relative_difference_to_slow_flow_settled']:.2e}")
+        print(f"FMU sweep {direction}: {sum(sweep['settled'])}/{len(sweep['omega'])} points settled; max relative "
+              f"difference to the slow flow {sweep['max_relative_difference_to_slow_flow']:.2e} at the "
+              f"{sweep['points_compared']} settled points away from the folds")
     check = summary.get("fidelity_3")
     if check and "error" in check:
         print(f"error: fidelity 3 check: {check['error']}", file=sys.stderr)
@@ -274,7 +275,7 @@ def make_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("stability", help="steady vibrations vs omega: slow flow, shooting/Floquet, FMU sweeps")
     p.add_argument("--omega-range", nargs=3, type=float, metavar=("LO", "HI", "N"),
-                   help="frequency grid (default: omega_e -+ max(5 mu, 3 |kappa(r_peak)|), 201 points)")
+                   help="frequency grid (default: omega_e -+ max(3 mu, 3 |kappa(r_peak)|), 201 points)")
     p.add_argument("--sweep-points", type=int, default=25, help="frequencies per FMU sweep direction")
     p.add_argument("--fmu", default=str(PLANT_FMU), help="plant FMU for the sweeps (built when missing)")
     p.add_argument("--no-fmu", action="store_true", help="skip the FMU sweeps and the fidelity-3 check")

@@ -115,30 +115,35 @@ def sweep_grid(model: av.Averaged, folds: list, lo: float, hi: float, n: int) ->
     return np.linspace(lo, hi, n)
 
 
-def sweep_summary(sweeps: list[Sweep], model: av.Averaged) -> dict:
-    """Measured amplitudes (settled points) against the slow flow's nearest branch."""
+def sweep_tolerance(model: av.Averaged, fold: av.Fold, sweep_step: float) -> float:
+    """A sweep's fold is placed within half a step of where its branch ends, and a branch can outlive its
+    fold by the ghost margin of the sweep's longest wait (MAX_PERIODS): one step plus that margin."""
+    return sweep_step + av.ghost_margin(model, fold, MAX_PERIODS * 2 * math.pi / fold.omega)
+
+
+def sweep_summary(sweeps: list[Sweep], model: av.Averaged, folds: list, sweep_step: float) -> dict:
+    """Measured amplitudes against the slow flow's nearest branch, at the settled points farther than the
+    sweep tolerance from a fold (nearer, a settled-looking point may still creep past the fold's ghost)."""
+    near = [(fold.omega, sweep_tolerance(model, fold, sweep_step)) for fold in folds]
     summary = {}
     for s in sweeps:
         errors = []
-        for p in (p for p in s.points if p.settled):
+        for p in s.points:
+            if not p.settled or any(abs(p.omega - w) <= margin for w, margin in near):
+                continue
             predicted = [st.r for st in av.steady_states(model.flow(p.omega), model.r_max)]
             nearest = min(predicted, key=lambda r: abs(r - p.r))
             errors.append(abs(p.r - nearest) / nearest)
         summary[s.direction] = {
             "omega": s.omega.tolist(), "r": s.r.tolist(), "settled": [p.settled for p in s.points],
             "periods": [p.periods for p in s.points], "stop_reason": s.stop_reason,
-            "settled_points": len(errors),
-            "max_relative_difference_to_slow_flow_settled": max(errors, default=math.nan)}
+            "points_compared": len(errors),
+            "max_relative_difference_to_slow_flow": max(errors, default=math.nan)}
     return summary
 
 
 def fold_agreement(model: av.Averaged, slow: list, continuation: list, sweeps: list[Sweep], sweep_step: float) -> dict:
-    """Fold frequencies by each method, paired in increasing omega.
-
-    A sweep's jump is placed within half a step of where its branch ends, and a branch can outlive its
-    fold by the ghost margin (av.ghost_margin for the sweep's longest wait, MAX_PERIODS): the stated
-    tolerance of each sweep fold is one step plus that margin.
-    """
+    """Fold frequencies by each method, paired in increasing omega; sweep folds with `sweep_tolerance`."""
     jumps = hysteresis_jumps(*sweeps) if len(sweeps) == 2 else []
     sweep_folds = [jump["omega"] for jump in jumps]
     rows = []
@@ -150,7 +155,7 @@ def fold_agreement(model: av.Averaged, slow: list, continuation: list, sweeps: l
         if len(sweep_folds) == len(slow):
             row["fmu_sweep"] = sweep_folds[i]
             row["fmu_sweep_minus_continuation"] = sweep_folds[i] - row.get("continuation", math.nan)
-            row["sweep_tolerance"] = sweep_step + av.ghost_margin(model, fold, MAX_PERIODS * 2 * math.pi / fold.omega)
+            row["sweep_tolerance"] = sweep_tolerance(model, fold, sweep_step)
         rows.append(row)
     return {"folds": rows, "sweep_jumps": jumps, "sweep_step": sweep_step,
             "sweep_folds_within_tolerance": bool(rows) and all(
@@ -299,6 +304,7 @@ def stability_study(scene: Scene, omega_range: tuple[float, float] | None = None
     if fmu is not None:
         started = time.perf_counter()
         omegas = sweep_grid(model, slow_folds, lo, hi, sweep_points)
+        step = float(omegas[1] - omegas[0]) if len(omegas) > 1 else math.nan
         for order, label in ((omegas, "up"), (omegas[::-1], "down")):
             sweeps.append(sweep(fmu, scene.with_values(omega=order[0]), order, settings,
                                 progress=(lambda i, k, label=label: progress(f"FMU sweep {label}", i, k))
@@ -306,8 +312,7 @@ def stability_study(scene: Scene, omega_range: tuple[float, float] | None = None
         timings["fmu_sweeps_s"] = time.perf_counter() - started
         summary["fmu_sweeps"] = {
             "criterion": f"complex first harmonic settled to {SETTLE_TOLERANCE:g} relative, windows of "
-                         f"{WINDOW_PERIODS} periods (sweep.py)", **sweep_summary(sweeps, model)}
-        step = float(omegas[1] - omegas[0]) if len(omegas) > 1 else math.nan
+                         f"{WINDOW_PERIODS} periods (sweep.py)", **sweep_summary(sweeps, model, slow_folds, step)}
         summary["fidelity_3"] = fidelity3_check(fmu, scene, stop_time=fidelity3_stop_time(scene))
     else:
         step = math.nan
