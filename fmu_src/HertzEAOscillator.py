@@ -1,8 +1,6 @@
 """FMI 2.0 co-simulation slave of the plant (DESIGN.md contract): FMI variables <-> vibromodel.Plant.
 
-No physics here. No Python exception may leave a callback (pythonfmu turns it into fmi2Fatal and
-destroys the instance): errors are logged with the parameter and value, `fmi_status` is set to 3 and
-the status shim (fmu_src/fmi2_status_shim.c) returns fmi2Error to the host.
+No physics here; the FMI error handling and the rules for setting variables are slave_support.StatusSlave's.
 
 FMU state (fmi2GetFMUstate & co.): every FMI variable, the fields in RUN_FIELDS and the plant's
 snapshot (integrator included); the plant itself is rebuilt from the parameters on restore.
@@ -10,25 +8,21 @@ pythonfmu keeps the object _get_fmu_state returns as the state and hands it to _
 possibly several times, so both sides copy. fmi2Reset makes a new slave object (pythonfmu), i.e. the
 state after fmi2Instantiate.
 """
-import math
-from pathlib import Path
-
-from pythonfmu import Boolean, DefaultExperiment, Fmi2Causality, Fmi2Slave, Fmi2Variability, Integer, Real
+from pythonfmu import Boolean, DefaultExperiment, Fmi2Causality, Fmi2Variability, Integer, Real
 from pythonfmu.enums import Fmi2Initial, Fmi2Status
 
+from slave_support import STATUS_ERROR, StatusSlave
 from vibromodel import snapshot
 from vibromodel.analytic import OafmSettings
-from vibromodel.integrate import IntegrationError
-from vibromodel.parameters import ParameterError, Scene, scene_names
+from vibromodel.parameters import Scene, scene_names
 from vibromodel.plant import DEFAULT_EXPERIMENT, Plant, Settings
 
-STATUS_OK, STATUS_ERROR = 0, 3
 OUTPUTS = ("x", "v", "a", "F_contact", "F_electrostatic")
 RUN_FIELDS = ("halted", "initialised", "start_time", "stop_time", "experiment_tolerance")  # in the FMU state
 STATE_FORMAT = "HertzEAOscillator state 1"
 
 
-class HertzEAOscillator(Fmi2Slave):
+class HertzEAOscillator(StatusSlave):
     author = "vibrofmu"
     description = "Hertzian-contact oscillator with two-sided electrostatic actuation (PAPER Eq. 3, ERRATA §3.1)"
     default_experiment = DefaultExperiment(*DEFAULT_EXPERIMENT)
@@ -39,7 +33,8 @@ class HertzEAOscillator(Fmi2Slave):
         for name in scene_names():
             self._parameter(Real, name, getattr(scene, name))
         self._parameter(Integer, "fidelity", int(settings.fidelity),
-                        "0 exact Eq. 3, 1 polynomial Eq. 7, 2 Eq. 7 printed coefficients, 4 OAFM analytic")
+                        "0 exact Eq. 3, 1 polynomial Eq. 7, 2 Eq. 7 printed coefficients, 3 averaged slow flow, "
+                        "4 OAFM analytic")
         self._parameter(Integer, "solver", int(settings.solver), "0 adaptive DOP853, 1 fixed-step RK4")
         self._parameter(Real, "rtol", settings.rtol, "relative tolerance (setupExperiment's tolerance wins)")
         self._parameter(Real, "max_step", settings.max_step, "RK4 step / adaptive step ceiling; 0 = automatic")
@@ -49,54 +44,20 @@ class HertzEAOscillator(Fmi2Slave):
                         "fidelity 4: end of the fit; 0 = automatic, at least the stop time")
         self.U = 0.0
         self.register_variable(Real("U", causality=Fmi2Causality.input, description="control force"))
-        self._set_outputs(scene.x_start, scene.v_start, 0.0, 0.0, 0.0, True)
-        for name in OUTPUTS:
-            self.register_variable(Real(name, causality=Fmi2Causality.output, initial=Fmi2Initial.exact))
+        self._outputs(OUTPUTS, (scene.x_start, scene.v_start, 0.0, 0.0, 0.0))
+        self.in_contact = True
         self.register_variable(Boolean("in_contact", causality=Fmi2Causality.output,
                                        variability=Fmi2Variability.discrete, initial=Fmi2Initial.exact))
-        self.fmi_status = STATUS_OK
-        self.register_variable(Integer("fmi_status", causality=Fmi2Causality.local,
-                                       variability=Fmi2Variability.discrete,
-                                       description="0 ok, 3 error (read by the status shim)"))
         self.plant = None
-        self.halted = "the FMU has not been initialised"  # why doStep refuses, or None
-        self.initialised = False  # exitInitializationMode was called: only inputs may be set
-        self.start_time, self.stop_time, self.experiment_tolerance = 0.0, None, None
-
-    def _parameter(self, kind, name, value, description=None):
-        """A fixed parameter with its start value."""
-        setattr(self, name, value)
-        self.register_variable(kind(name, causality=Fmi2Causality.parameter, variability=Fmi2Variability.fixed,
-                                    description=description))
-
-    def _set_outputs(self, x, v, a, F_contact, F_electrostatic, in_contact):
-        self.x, self.v, self.a = x, v, a
-        self.F_contact, self.F_electrostatic, self.in_contact = F_contact, F_electrostatic, in_contact
-
-    def _error(self, message):
-        self.fmi_status = STATUS_ERROR
-        self.log(message, Fmi2Status.error)
-
-    def _halt(self, message):
-        self.halted = message
-        self._error(message)
-
-    def setup_experiment(self, start_time, stop_time=None, tolerance=None):
-        self.start_time, self.stop_time = start_time, stop_time
-        self.experiment_tolerance = tolerance
 
     def exit_initialization_mode(self):
-        self.initialised = True
-        try:
-            self.plant = self._make_plant()
-            for note in self.plant.notes:
-                self.log(note, Fmi2Status.ok)
-            self._publish(self.plant.outputs())
-            self.halted = None
-        except ParameterError as error:
-            self._halt(f"{error}")
-        except Exception as error:  # never let an exception reach pythonfmu (fmi2Fatal)
-            self._halt(f"initialisation failed: {error!r}")
+        self._initialise(self._start)
+
+    def _start(self):
+        self.plant = self._make_plant()
+        for note in self.plant.notes:
+            self.log(note, Fmi2Status.ok)
+        self._publish(self.plant.outputs())
 
     def _make_plant(self):
         """The plant of the current parameters and experiment; raises ParameterError for bad ones."""
@@ -109,75 +70,14 @@ class HertzEAOscillator(Fmi2Slave):
         return Plant(scene, settings, t0=float(self.start_time), stop_time=self.stop_time,
                      cache_dirs=self._cache_dirs())
 
-    def _cache_dirs(self):
-        """OAFM solutions packed at build time (resources/oafm_cache)."""
-        return (Path(self.resources) / "oafm_cache",) if self.resources else ()
-
     def do_step(self, current_time, step_size):
-        if self.halted is not None:
-            self._error(f"doStep refused: {self.halted}")
-            return False
-        try:
-            self._publish(self.plant.do_step(current_time, step_size, float(self.U)))
-            return True
-        except ParameterError as error:
-            self._error(f"doStep refused: {error}")
-        except IntegrationError as error:
-            self._publish(self.plant.outputs_at(error.t, error.x, error.v))
-            self._halt(f"simulation stopped: {error}")
-        except ArithmeticError as error:  # e.g. a scene of 1e300-sized parameters
-            self._halt(f"simulation stopped: floating-point failure after tau = {current_time!r} ({error!r}); "
-                       "the parameters are beyond the model's numerical range")
-        except Exception as error:
-            self._halt(f"doStep failed at tau = {current_time!r}: {error!r}")
-        return False
+        return self._guarded_step(
+            current_time, lambda: self._publish(self.plant.do_step(current_time, step_size, float(self.U))),
+            lambda error: self._publish(self.plant.outputs_at(error.t, error.x, error.v)))
 
     def _publish(self, out):
-        values = (out.x, out.v, out.a, out.F_contact, out.F_electrostatic)
-        if all(math.isfinite(value) for value in values):
-            self._set_outputs(*values, out.in_contact)
-
-    # -- setting variables: FMI 2.0 rules, refusals logged and flagged (never raised) -----------------
-    def set_real(self, vrs, values):
-        self._set_values(Fmi2Slave.set_real, vrs, values)
-
-    def set_integer(self, vrs, values):
-        self._set_values(Fmi2Slave.set_integer, vrs, values)
-
-    def set_boolean(self, vrs, values):
-        self._set_values(Fmi2Slave.set_boolean, vrs, values)
-
-    def set_string(self, vrs, values):
-        self._set_values(Fmi2Slave.set_string, vrs, values)
-
-    def _set_values(self, setter, vrs, values):
-        for vr, value in zip(vrs, values):
-            var = self.vars.get(vr)
-            name = var.name if var is not None else f"with valueReference {vr}"
-            refusal = "no such variable" if var is None else self._set_refusal(var)
-            if refusal is None:
-                try:
-                    setter(self, [vr], [value])
-                    continue
-                except TypeError as error:  # pythonfmu's type check: wrong setter for the variable
-                    refusal = f"{error}"
-            self._error(f"{ParameterError(name, value, refusal)}")
-
-    def _set_refusal(self, var):
-        """Why FMI 2.0 forbids setting var now, or None (fmi2SetXXX in the co-simulation state machine)."""
-        if var.causality == Fmi2Causality.input:
-            return None
-        if var.causality == Fmi2Causality.parameter and var.variability == Fmi2Variability.tunable:
-            return None
-        settable_start = var.causality == Fmi2Causality.parameter or var.initial in (Fmi2Initial.exact,
-                                                                                     Fmi2Initial.approx)
-        if not settable_start:
-            return f"a {var.causality.name} variable computed by the FMU cannot be set"
-        if self.initialised:
-            kind = f"{(var.variability or Fmi2Variability.continuous).name} {var.causality.name}"
-            return (f"a {kind} cannot be set after fmi2ExitInitializationMode (FMI 2.0: only inputs and "
-                    f"tunable parameters); it keeps {getattr(self, var.local_name)!r}")
-        return None
+        self._set_finite({**dict(zip(OUTPUTS, (out.x, out.v, out.a, out.F_contact, out.F_electrostatic))),
+                          "in_contact": out.in_contact})
 
     # -- FMU state ------------------------------------------------------------------------------------
     def _get_fmu_state(self):

@@ -9,13 +9,23 @@ import pytest
 
 os.environ["VIBROFMU_CACHE_DIR"] = tempfile.mkdtemp(prefix="vibrofmu-test-cache-")
 
-from vibrofmu.build import build_plant
+from vibrofmu.build import build_closed_loop, build_controller, build_plant
 from vibrofmu.run import run_fmu
 
 
 @pytest.fixture(scope="session")
 def plant_fmu(tmp_path_factory):
     return build_plant(tmp_path_factory.mktemp("fmu"))
+
+
+@pytest.fixture(scope="session")
+def controller_fmu(plant_fmu):
+    return build_controller(plant_fmu.parent)
+
+
+@pytest.fixture(scope="session")
+def closed_loop_fmu(plant_fmu):
+    return build_closed_loop(plant_fmu.parent)
 
 
 @pytest.fixture(scope="session")

@@ -2,6 +2,7 @@
 import json
 
 import numpy as np
+import pytest
 
 from vibromodel.analytic import OafmSettings, covering, solve
 from vibromodel.parameters import Scene
@@ -40,15 +41,11 @@ def test_oafm_command_checks_the_fmu(tmp_path, plant_fmu, capsys):
         assert (out / name).stat().st_size > 0
 
 
-def test_input_force_is_refused(plant_fmu):
-    run = run_fmu(plant_fmu, {"fidelity": 4, "U": 0.01}, 10.0, 0.1)
+@pytest.mark.parametrize("fidelity", [3, 4])
+def test_input_force_is_refused_by_the_open_loop_fidelities(plant_fmu, fidelity):
+    run = run_fmu(plant_fmu, {"fidelity": fidelity, "U": 0.01}, 10.0, 0.1)
     assert not run.completed and run.end_time == 0.0
     assert "parameter U = 0.01" in run.stop_reason and "open loop" in run.stop_reason
-
-
-def test_averaged_fidelity_is_refused_with_a_reason(run_plant):
-    run = run_plant(10.0, 0.1, fidelity=3)
-    assert not run.completed and "fidelity = 3" in run.stop_reason
 
 
 def test_fmu_check_reports_a_stop(plant_fmu):

@@ -19,6 +19,7 @@ CASES = {  # start values, input U changes, tau1
     "adaptive": ({}, True, TAU1),
     "rk4": ({"solver": 1}, True, TAU1),
     "polynomial": ({"fidelity": 1}, True, TAU1),
+    "averaged": ({"fidelity": 3}, False, TAU1),  # open loop: U stays 0
     "analytic": ({"fidelity": 4}, False, TAU1),  # open loop: U stays 0
     "between-contacts": (CONTACT_SCENE, True, 0.2),  # in free flight at tau1, re-impacts after it
     "rk4-between-contacts": ({**CONTACT_SCENE, "solver": 1}, True, 0.2),

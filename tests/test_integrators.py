@@ -7,6 +7,7 @@ import pytest
 from vibromodel.integrate import Dop853, IntegrationError, Rk4
 from vibromodel.models import make_model
 from vibromodel.parameters import Scene
+from vibromodel.plant import Plant, Settings
 
 MU, K = 0.1, 1.0
 
@@ -102,3 +103,15 @@ def test_adaptive_step_budget_stops_an_endless_doStep():
     with pytest.raises(IntegrationError, match="5 steps reached only tau = "):
         integrator.advance(100.0)
     assert 0.0 < integrator.t < 100.0
+
+
+def test_input_change_restarts_the_integrator_at_the_communication_point():
+    """U switched on at tau = 1 acts from tau = 1 on: after it, x differs from the U = 0 run by ~ U t^2/2."""
+    scene = Scene()
+    runs = []
+    for U in (0.0, 1e-3):
+        plant = Plant(scene, Settings(rtol=1e-12), 0.0, 2.0)
+        plant.do_step(0.0, 1.0, 0.0)
+        runs.append(plant.do_step(1.0, 0.1, U).x)
+    # the plant responds to a constant force step like a mass over 0.1 of tau: dx = U h^2/2 to first order
+    assert runs[1] - runs[0] == pytest.approx(1e-3 * 0.1**2 / 2, rel=0.05)

@@ -73,3 +73,35 @@ def coefficients_printed(alpha: float, gamma: float, R: float) -> tuple[float, .
         1.0 / 432.0 - 80.0 * gamma / (81.0 * R**5),
         1.0 / 1296.0 - 128.0 * alpha / (81.0 * R**5) - 64.0 * gamma / (81.0 * R**5),
     )
+
+
+# Derivatives d/dx of the forces of Eq. 3 (variational equations of the shooting method, issue 4).
+def hertz_stiffness(x: float) -> float:
+    """dH/dx = (1 + 2x/3)^(1/2) in contact, 0 without: continuous at contact loss (H is C^1 there)."""
+    s = 1.0 + 2.0 * x / 3.0
+    return math.sqrt(s) if s > 0.0 else 0.0
+
+
+def electrostatic_gradient(x: float, alpha: float, drive: float, R: float) -> float:
+    """d/dx of alpha[(1-u)^-2 - (1+u)^-2] + drive (1-u)^-2, u = 2x/(3R), at a fixed drive value."""
+    u = 2.0 * x / (3.0 * R)
+    upper, lower = 1.0 / (1.0 - u) ** 3, 1.0 / (1.0 + u) ** 3
+    return 4.0 / (3.0 * R) * (alpha * (upper + lower) + drive * upper)
+
+
+def electrostatic_stiffness(t: float, x: float, alpha: float, beta: float, gamma: float, Omega: float,
+                            R: float) -> float:
+    """d/dx of electrostatic(t, x, ...): the drive beta sin Omega t + gamma(1 - cos 2 Omega t) at time t."""
+    drive = beta * math.sin(Omega * t) + gamma * (1.0 - math.cos(2.0 * Omega * t))
+    return electrostatic_gradient(x, alpha, drive, R)
+
+
+def electrostatic_mean(x: float, alpha: float, gamma: float, R: float) -> float:
+    """Mean of electrostatic(t, x, ...) over the AC period at fixed x: alpha G2(x) + gamma G3(x) (exact forms)."""
+    u = 2.0 * x / (3.0 * R)
+    return (alpha + gamma) / ((1.0 - u) * (1.0 - u)) - alpha / ((1.0 + u) * (1.0 + u))
+
+
+def electrostatic_mean_stiffness(x: float, alpha: float, gamma: float, R: float) -> float:
+    """d/dx of electrostatic_mean: the drive at its mean value gamma."""
+    return electrostatic_gradient(x, alpha, gamma, R)

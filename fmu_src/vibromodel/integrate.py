@@ -10,11 +10,17 @@
   longer than max_step.
 
 Both work on Python floats (a 2-state system is far faster this way than with numpy arrays).
+
+Extra first-order states (a closed loop's parameter estimates) ride in the input slot: by default the
+input U is held between set_input calls (U' = 0, zero-order hold); given `rates`, U is a numpy vector
+integrated with x and v by the same stages, U' = rates(t, x, v, U), and accel(t, x, v, U) reads it.
+The plant's scalar path only pays one `is None` test per stage.
 """
 from __future__ import annotations
 
 import math
 
+import numpy as np
 from scipy.integrate._ivp import dop853_coefficients as _dop
 from scipy.optimize import brentq
 
@@ -42,9 +48,12 @@ B = tuple(float(b) for b in _dop.B)
 C = tuple(float(c) for c in _dop.C[:N_STAGES])
 E3 = tuple(float(e) for e in _dop.E3)
 E5 = tuple(float(e) for e in _dop.E5)
+D = tuple(tuple(float(d) for d in row) for row in _dop.D)
 A_EXTRA = _rows(_dop.A, 3, start=N_STAGES + 1)
 C_EXTRA = tuple(float(c) for c in _dop.C[N_STAGES + 1:])
-D = tuple(tuple(float(d) for d in row) for row in _dop.D)
+# Stages 2..12 (row of A, node c), then the first-same-as-last stage at the new state (row B, node 1).
+STAGES = tuple(zip(A[1:], C[1:])) + ((B, 1.0),)
+EXTRA_STAGES = tuple(zip(A_EXTRA, C_EXTRA))  # the three stages of the dense output
 
 SAFETY, MIN_FACTOR, MAX_FACTOR = 0.9, 0.2, 10.0
 ERROR_EXPONENT = -1.0 / 8.0  # error estimator of order 7
@@ -56,10 +65,11 @@ def _dot(coefficients, values):
 
 
 class Dop853:
-    """Adaptive DOP853 with dense output and event location; restartable between doSteps."""
+    """Adaptive DOP853 with dense output and event location; restartable between doSteps.
+    With `rates`, the input slot U carries extra first-order states (see the module docstring)."""
 
-    def __init__(self, accel, events, t0, x0, v0, U, rtol, max_step=math.inf, step_budget=math.inf):
-        self.accel, self.events = accel, events
+    def __init__(self, accel, events, t0, x0, v0, U, rtol, max_step=math.inf, rates=None, step_budget=math.inf):
+        self.accel, self.events, self.rates = accel, events, rates
         self.rtol, self.atol, self.max_step = rtol, rtol * ATOL_PER_RTOL, max_step
         self.step_budget = step_budget  # most steps one advance may take
         self.nfev = 0
@@ -72,6 +82,7 @@ class Dop853:
         """Start afresh at (t, x, v) with input U: a new derivative, no interpolant yet."""
         self.t, self.x, self.v, self.U = t, x, v, U
         self.a = self._f(t, x, v)
+        self.dU = None if self.rates is None else self.rates(t, x, v, U)
         self.t_old = None
         self._dense = None
         self.stop = None  # (event name, t, x, v) once a terminal event is reached
@@ -122,7 +133,7 @@ class Dop853:
             if not h >= min_step:
                 raise IntegrationError(
                     f"step size collapsed to {h:.3g} at tau = {t:.10g}, x = {x:.10g} (stiff or singular)", t, x, v)
-            x_new, v_new, kx, kv, error = self._trial(t, x, v, h)
+            x_new, v_new, stages, error = self._trial(t, x, v, h)
             if error < 1.0:
                 factor = MAX_FACTOR if error == 0.0 else min(MAX_FACTOR, SAFETY * error**ERROR_EXPONENT)
                 self.h = h * (min(1.0, factor) if rejected else factor)
@@ -132,43 +143,61 @@ class Dop853:
             else:
                 h *= max(MIN_FACTOR, SAFETY * error**ERROR_EXPONENT)
             rejected = True
-        self._accept(t, x, v, h, x_new, v_new, kx, kv)
+        self._accept(t, x, v, h, x_new, v_new, stages)
         self._handle_events(t, x, v)
 
     def _trial(self, t, x, v, h):
-        """One DOP853 step of size h: new state, stages, scaled error norm (inf on overflow)."""
-        accel, U = self.accel, self.U
-        kx, kv = [v], [self.a]
+        """One DOP853 step of size h: new state, stages (kx, kv, kU), scaled error norm (inf on overflow).
+        With extra states their new value is left in self.U_new."""
+        stages = ([v], [self.a], [self.dU])
         try:
-            for s in range(1, N_STAGES):
-                row = A[s]
-                xs = x + h * _dot(row, kx)
-                vs = v + h * _dot(row, kv)
-                kx.append(vs)
-                kv.append(accel(t + C[s] * h, xs, vs, U))
-            x_new = x + h * _dot(B, kx)
-            v_new = v + h * _dot(B, kv)
-            kx.append(v_new)
-            kv.append(accel(t + h, x_new, v_new, U))
+            x_new, v_new, self.U_new = self._run_stages(t, x, v, self.U, h, STAGES, stages)
         except (ArithmeticError, ValueError):  # a stage beyond a singularity: treat as a failed step
-            self.nfev += len(kv)
-            return x, v, kx, kv, math.inf
+            self.nfev += len(stages[1])
+            return x, v, stages, math.inf
         self.nfev += N_STAGES
+        kx, kv, kU = stages
         sx = self.atol + self.rtol * max(abs(x), abs(x_new))
         sv = self.atol + self.rtol * max(abs(v), abs(v_new))
         e5 = (_dot(E5, kx) / sx) ** 2 + (_dot(E5, kv) / sv) ** 2
         e3 = (_dot(E3, kx) / sx) ** 2 + (_dot(E3, kv) / sv) ** 2
+        n = 2
+        if self.rates is not None:
+            sU = self.atol + self.rtol * np.maximum(np.abs(self.U), np.abs(self.U_new))
+            e5 += float(np.sum((_dot(E5, kU) / sU) ** 2))
+            e3 += float(np.sum((_dot(E3, kU) / sU) ** 2))
+            n += len(sU)
         if not math.isfinite(e5 + e3):
-            return x, v, kx, kv, math.inf
+            return x, v, stages, math.inf
         if e5 == 0.0 and e3 == 0.0:
-            return x_new, v_new, kx, kv, 0.0
-        return x_new, v_new, kx, kv, abs(h) * e5 / math.sqrt((e5 + 0.01 * e3) * 2.0)
+            return x_new, v_new, stages, 0.0
+        return x_new, v_new, stages, abs(h) * e5 / math.sqrt((e5 + 0.01 * e3) * n)
 
-    def _accept(self, t, x, v, h, x_new, v_new, kx, kv):
+    def _run_stages(self, t, x, v, U0, h, nodes, stages):
+        """Append the stages of `nodes` ((row of A, c) pairs) from (t, x, v, U0) with step h to
+        stages = (kx, kv, kU); return the last stage's (x, v, U). kU is used only with extra states."""
+        accel, rates = self.accel, self.rates
+        kx, kv, kU = stages
+        U = U0
+        for row, c in nodes:
+            ts = t + c * h
+            xs = x + h * _dot(row, kx)
+            vs = v + h * _dot(row, kv)
+            if rates is not None:
+                U = U0 + h * _dot(row, kU)
+                kU.append(rates(ts, xs, vs, U))
+            kx.append(vs)
+            kv.append(accel(ts, xs, vs, U))
+        return xs, vs, U
+
+    def _accept(self, t, x, v, h, x_new, v_new, stages):
         self.t_old, self.x_old, self.v_old, self.a_old = t, x, v, self.a
-        self._stages = (kx, kv)
+        self.U_old, self.dU_old = self.U, self.dU
+        self._stages = stages
         self._dense = None
-        self.t, self.x, self.v, self.a = t + h, x_new, v_new, kv[-1]
+        self.t, self.x, self.v, self.a = t + h, x_new, v_new, stages[1][-1]
+        if self.rates is not None:
+            self.U, self.dU = self.U_new, stages[2][-1]
         self.n_steps += 1
 
     def _initial_step(self):
@@ -203,8 +232,9 @@ class Dop853:
         h = t_event - t0
         if h > 0.0:
             self.t, self.x, self.v, self.a = t0, x0, v0, self.a_old
-            x_new, v_new, kx, kv, _ = self._trial(t0, x0, v0, h)
-            self._accept(t0, x0, v0, h, x_new, v_new, kx, kv)
+            self.U, self.dU = self.U_old, self.dU_old
+            x_new, v_new, stages, _ = self._trial(t0, x0, v0, h)
+            self._accept(t0, x0, v0, h, x_new, v_new, stages)
         if event.terminal:
             self.stop = (event.name, self.t, self.x, self.v)
         else:
@@ -223,45 +253,57 @@ class Dop853:
         """(x, v) at t in [t_old, t] of the last step (7th-order interpolant)."""
         if t == self.t:
             return self.x, self.v
+        s, (fx, fv, _) = self._interpolant(t)
+        return self.x_old + _evaluate(fx, s), self.v_old + _evaluate(fv, s)
+
+    def U_at(self, t):
+        """The extra states (or the held input) at t in [t_old, t] of the last step."""
+        if t == self.t or self.rates is None:
+            return self.U
+        s, (_, _, fU) = self._interpolant(t)
+        return self.U_old + _evaluate(fU, s)
+
+    def _interpolant(self, t):
+        """(fraction of the last step at t, dense-output coefficients of x, v and the extra states)."""
         if self.t_old is None or not (self.t_old <= t <= self.t):
             raise ValueError(f"tau = {t} is outside the last step [{self.t_old}, {self.t}]")
         if self._dense is None:
             self._dense = self._build_dense()
-        fx, fv = self._dense
-        s = (t - self.t_old) / (self.t - self.t_old)
-        x = v = 0.0
-        for i in range(len(fx) - 1, -1, -1):
-            x += fx[i]
-            v += fv[i]
-            w = s if (len(fx) - 1 - i) % 2 == 0 else 1.0 - s
-            x *= w
-            v *= w
-        return x + self.x_old, v + self.v_old
+        return (t - self.t_old) / (self.t - self.t_old), self._dense
 
     def _build_dense(self):
         """Coefficients F of scipy's Dop853DenseOutput, from three extra stages."""
-        kx, kv = list(self._stages[0]), list(self._stages[1])
+        stages = tuple(list(k) for k in self._stages)
         t, x, v, h = self.t_old, self.x_old, self.v_old, self.t - self.t_old
-        for row, c in zip(A_EXTRA, C_EXTRA):
-            xs = x + h * _dot(row, kx)
-            vs = v + h * _dot(row, kv)
-            kx.append(vs)
-            kv.append(self._f(t + c * h, xs, vs))
-        dense = []
-        for y_old, y_new, f_old, f_new, k in (
-            (x, self.x, v, self.v, kx),
-            (v, self.v, self.a_old, self.a, kv),
-        ):
+        self._run_stages(t, x, v, self.U_old, h, EXTRA_STAGES, stages)
+        self.nfev += len(EXTRA_STAGES)
+        kx, kv, kU = stages
+        components = [(x, self.x, v, self.v, kx), (v, self.v, self.a_old, self.a, kv)]
+        if self.rates is not None:
+            components.append((self.U_old, self.U, self.dU_old, self.dU, kU))
+        dense = [None, None, None]
+        for i, (y_old, y_new, f_old, f_new, k) in enumerate(components):
             dy = y_new - y_old
-            dense.append([dy, h * f_old - dy, 2.0 * dy - h * (f_new + f_old)] + [h * _dot(row, k) for row in D])
+            dense[i] = [dy, h * f_old - dy, 2.0 * dy - h * (f_new + f_old)] + [h * _dot(row, k) for row in D]
         return dense
 
 
-class Rk4:
-    """Fixed-step classic Runge-Kutta 4; steps end exactly on the communication points."""
+def _evaluate(coefficients, s):
+    """Dense output increment y(s) - y_old at the fraction s of the step (scipy's Dop853DenseOutput)."""
+    y = 0.0
+    n = len(coefficients)
+    for i in range(n - 1, -1, -1):
+        y += coefficients[i]
+        y *= s if (n - 1 - i) % 2 == 0 else 1.0 - s
+    return y
 
-    def __init__(self, accel, events, t0, x0, v0, U, max_step):
-        self.accel, self.events, self.max_step = accel, events, max_step
+
+class Rk4:
+    """Fixed-step classic Runge-Kutta 4; steps end exactly on the communication points.
+    With `rates`, the input slot U carries extra first-order states (see the module docstring)."""
+
+    def __init__(self, accel, events, t0, x0, v0, U, max_step, rates=None):
+        self.accel, self.events, self.max_step, self.rates = accel, events, max_step, rates
         self.t, self.x, self.v, self.U = t0, x0, v0, U
         self.nfev = 0
         self.n_steps = 0
@@ -308,15 +350,22 @@ class Rk4:
                     f"{2.5 / abs(lam):.3g}", t, x, v)
 
     def _step(self, h):
-        f, U, t, x, v = self.accel, self.U, self.t, self.x, self.v
+        f, rates, U, t, x, v = self.accel, self.rates, self.U, self.t, self.x, self.v
+        half = 0.5 * h
         try:
+            # each stage: the extra states' rates (if any) before accel, which may reuse what rates computed
+            U2 = U if rates is None else U + half * (d1 := rates(t, x, v, U))
             a1 = f(t, x, v, U)
-            a2 = f(t + 0.5 * h, x + 0.5 * h * v, v + 0.5 * h * a1, U)
-            v2 = v + 0.5 * h * a1
-            a3 = f(t + 0.5 * h, x + 0.5 * h * v2, v + 0.5 * h * a2, U)
-            v3 = v + 0.5 * h * a2
-            a4 = f(t + h, x + h * v3, v + h * a3, U)
-            v4 = v + h * a3
+            x2, v2 = x + half * v, v + half * a1
+            U3 = U if rates is None else U + half * (d2 := rates(t + half, x2, v2, U2))
+            a2 = f(t + half, x2, v2, U2)
+            x3, v3 = x + half * v2, v + half * a2
+            U4 = U if rates is None else U + h * (d3 := rates(t + half, x3, v3, U3))
+            a3 = f(t + half, x3, v3, U3)
+            x4, v4 = x + h * v3, v + h * a3
+            if rates is not None:
+                U_new = U + h / 6.0 * (d1 + 2.0 * d2 + 2.0 * d3 + rates(t + h, x4, v4, U4))
+            a4 = f(t + h, x4, v4, U4)
         except (ArithmeticError, ValueError):
             raise IntegrationError(
                 f"RK4 step h = {h:.3g} from tau = {t:.10g} left the model's domain (x = {x:.10g}); "
@@ -332,9 +381,18 @@ class Rk4:
             if event.terminal and event.g(x_new) <= 0.0:
                 raise TerminalEvent(f"{event.name} at tau = {t + h:.10g}, x = {x_new:.10g}", t + h, x_new, v_new)
         self.x, self.v = x_new, v_new
+        if rates is not None:
+            self.U = U_new
         self.n_steps += 1
 
     def value_at(self, t):
+        self._require_current(t)
+        return self.x, self.v
+
+    def U_at(self, t):
+        self._require_current(t)
+        return self.U
+
+    def _require_current(self, t):
         if t != self.t:
             raise ValueError(f"RK4 holds only tau = {self.t}, not {t}")
-        return self.x, self.v

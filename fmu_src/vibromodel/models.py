@@ -19,7 +19,7 @@ class Fidelity(IntEnum):
     EXACT = 0
     POLYNOMIAL = 1
     POLYNOMIAL_PAPER = 2
-    AVERAGED = 3  # slow flow: not built yet (issue 4); Settings.validate refuses it
+    AVERAGED = 3  # slow flow (averaging.py, slowflow.py); its forces are those of Eq. 3 at x
     ANALYTIC = 4  # OAFM closed form (analytic.py); its forces are those of Eq. 3 at x~
 
 
@@ -131,8 +131,8 @@ class PolynomialModel:
 
 
 def make_model(scene: Scene, fidelity: int):
-    """The plant model of a fidelity level: 0, 1, 2; 4 gets Eq. 3 (for the forces at the analytic x~)."""
+    """The plant model of a fidelity level: 0, 1, 2; 3 and 4 get Eq. 3 (for the forces at their x)."""
     fidelity = Fidelity(fidelity)
-    if fidelity in (Fidelity.EXACT, Fidelity.ANALYTIC):
+    if fidelity in (Fidelity.EXACT, Fidelity.AVERAGED, Fidelity.ANALYTIC):
         return ExactModel(scene)
     return PolynomialModel(scene, printed=fidelity is Fidelity.POLYNOMIAL_PAPER)

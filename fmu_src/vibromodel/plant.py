@@ -11,9 +11,11 @@ from enum import IntEnum
 
 from . import forces
 from .analytic import OafmSettings, cached_solve, covering
+from .averaging import averaged, validity_notes
 from .integrate import Dop853, IntegrationError, Rk4
 from .models import Fidelity, make_model
 from .parameters import ParameterError, Scene, validate, validate_max_step, validate_tolerance
+from .slowflow import SlowFlowSolution
 from .snapshot import plain_attributes, restore_attributes
 
 DEFAULT_EXPERIMENT = (0.0, 200.0, 0.1)  # start, stop, communication step of the FMU's DefaultExperiment
@@ -21,8 +23,9 @@ RK4_DEFAULT_STEP = 0.01  # RK4 step when max_step = 0 ("automatic")
 TIME_TOLERANCE = 1e-9  # relative mismatch allowed between the host's time and the plant's
 MAX_STEPS_PER_DOSTEP = 10**6  # more steps in one doStep: refused up front (step ceiling) or stopped
 # What a snapshot leaves out: built from the scene and settings by the constructor.
-PLANT_REBUILT = ("scene", "settings", "model", "integrator", "analytic")
+PLANT_REBUILT = ("scene", "settings", "model", "integrator", "solution")
 INTEGRATOR_REBUILT = ("accel", "events")
+SLOW_FLOW_REBUILT = ("model", "flow")  # fidelity 3: its table and integration end are plain data
 
 
 class Solver(IntEnum):
@@ -41,8 +44,6 @@ class Settings:
     def validate(self) -> None:
         if self.fidelity not in set(Fidelity):
             raise ParameterError("fidelity", self.fidelity, f"must be one of {[int(f) for f in Fidelity]}")
-        if self.fidelity == Fidelity.AVERAGED:
-            raise ParameterError("fidelity", self.fidelity, "3 (averaged slow flow) is not available yet")
         if self.fidelity == Fidelity.ANALYTIC:
             self.oafm.validate()
         if self.solver not in set(Solver):
@@ -65,9 +66,10 @@ class Outputs:
 class Plant:
     """Scene + settings -> a steppable plant. Raises ParameterError for bad input.
 
-    Fidelity 4 has no integrator: the OAFM solution is fitted here (or read from a cache in
-    cache_dirs or the user cache) to cover [t0, stop_time], and doStep evaluates closed forms.
-    `notes` says what initialisation did, for the FMU's log.
+    Fidelities 3 and 4 have no integrator of Eq. 3 and are open loop (U = 0): fidelity 3 integrates the
+    averaged slow flow here with large steps; fidelity 4 fits the OAFM solution here (or reads it from a
+    cache in cache_dirs or the user cache) to cover [t0, stop_time]. doStep then evaluates their
+    `solution.state`. `notes` says what initialisation did, for the FMU's log.
     """
 
     def __init__(self, scene: Scene, settings: Settings, t0: float = 0.0, stop_time: float | None = None,
@@ -79,15 +81,23 @@ class Plant:
         self.t = t0
         self.U = 0.0
         self.notes: list[str] = []
-        self.integrator = self.analytic = None
-        if settings.fidelity == Fidelity.ANALYTIC:
+        self.integrator = self.solution = None
+        if settings.fidelity == Fidelity.AVERAGED:
+            model = averaged(scene)
+            self.solution = SlowFlowSolution(model, t0, scene.x_start, scene.v_start, settings.rtol,
+                                             settings.max_step or math.inf, stop_time)
+            self.notes.append(f"averaged slow flow (ERRATA §3.4, {model.backbone.kind} backbone): x_e = "
+                              f"{model.eq.x_e:.6g}, omega_e = {model.omega_e:.8g}, table spacing "
+                              f"{self.solution.spacing:.3g}")
+            self.notes += [f"outside the averaging's validity: {note}" for note in validity_notes(model)]
+        elif settings.fidelity == Fidelity.ANALYTIC:
             span = None if stop_time is None else stop_time - t0
             oafm = covering(scene, settings.oafm, span)
-            self.analytic, source = cached_solve(scene, oafm, t0, read_dirs=cache_dirs)
-            self.notes.append(f"OAFM {oafm.basis} basis, tau* = {self.analytic.pieces[1].start:.6g}, fit to "
-                              f"tau = {self.analytic.tau_end:.6g} ({source})")
+            self.solution, source = cached_solve(scene, oafm, t0, read_dirs=cache_dirs)
+            self.notes.append(f"OAFM {oafm.basis} basis, tau* = {self.solution.pieces[1].start:.6g}, fit to "
+                              f"tau = {self.solution.tau_end:.6g} ({source})")
             if stop_time is None:
-                self.notes.append(f"no stop time given: beyond tau = {self.analytic.tau_end:.6g} the analytic "
+                self.notes.append(f"no stop time given: beyond tau = {self.solution.tau_end:.6g} the analytic "
                                   "solution extrapolates the fit")
         elif settings.solver == Solver.ADAPTIVE:
             max_step = settings.max_step or math.inf
@@ -113,40 +123,55 @@ class Plant:
                                  f"{ceiling:g} (max_step); make smaller communication steps or raise max_step")
         if not (math.isfinite(t) and abs(t - self.t) <= TIME_TOLERANCE * max(1.0, abs(t))):
             raise ParameterError("currentCommunicationPoint", t, f"the plant is at tau = {self.t!r}")
-        t_end = t + h  # the host's clock: no drift from summing steps
-        if self.analytic is not None:
-            if U != 0.0:
-                raise ParameterError("U", U, "fidelity 4 (OAFM analytic) is open loop: the input must be 0")
-        else:
-            self.integrator.set_input(self.t, U)
+        if self.solution is not None and U != 0.0:
+            raise ParameterError("U", U, f"fidelity {self.settings.fidelity} "
+                                 f"({Fidelity(self.settings.fidelity).name.lower()}) is open loop: the input must be 0")
+        return self.outputs_at(self.t, *self.advance(t + h, U))  # t + h: the host's clock, no drift from sums
+
+    def advance(self, t_end: float, U: float = 0.0) -> tuple[float, float, float]:
+        """Move to t_end with U held and return (x, x', x''): the model's own work, without the checks
+        and the output forces of do_step (what the speed measurements call model computation)."""
+        if self.solution is None:
+            self.integrator.set_input(self.t, U)  # at the old time: U changes there
             self.U = U
             self.integrator.advance(t_end)
         self.t = t_end
-        return self.outputs()
+        return self.state()
+
+    def state(self) -> tuple[float, float, float]:
+        """(x, x', x'') now; x'' is the model's acceleration (fidelities 3 and 4: the solution's own x'')."""
+        if self.solution is not None:
+            return self.solution.state(self.t)
+        x, v = self.integrator.value_at(self.t)
+        return x, v, self.model.accel(self.t, x, v, self.U)
 
     def snapshot(self) -> dict:
         """Everything that decides the plant's future beyond its constructor's arguments, as plain data."""
         integrator = None if self.integrator is None else plain_attributes(self.integrator, INTEGRATOR_REBUILT)
-        return {"plant": plain_attributes(self, PLANT_REBUILT), "integrator": integrator}
+        slow_flow = plain_attributes(self.solution, SLOW_FLOW_REBUILT) if self._slow_flow() else None
+        return {"plant": plain_attributes(self, PLANT_REBUILT), "integrator": integrator, "slow_flow": slow_flow}
 
     def restore(self, snapshot: dict) -> None:
         """Return a plant built with the same arguments to the moment `snapshot` was taken.
 
         Fidelity 4's analytic solution is not in the snapshot: the constructor re-derives it
-        deterministically from the scene and settings (or reads the same fit from a cache).
+        deterministically from the scene and settings (or reads the same fit from a cache). Fidelity 3's
+        table is: without a stop time it grows in chunks that depend on the steps taken.
         """
         restore_attributes(self, snapshot["plant"], PLANT_REBUILT)
         if self.integrator is not None:
             restore_attributes(self.integrator, snapshot["integrator"], INTEGRATOR_REBUILT)
+        if self._slow_flow():
+            restore_attributes(self.solution, snapshot["slow_flow"], SLOW_FLOW_REBUILT)
+
+    def _slow_flow(self) -> bool:
+        return self.settings.fidelity == Fidelity.AVERAGED
 
     def outputs(self) -> Outputs:
-        if self.analytic is not None:
-            return self.outputs_at(self.t, *self.analytic.state(self.t))
-        x, v = self.integrator.value_at(self.t)
-        return self.outputs_at(self.t, x, v)
+        return self.outputs_at(self.t, *self.state())
 
     def outputs_at(self, t: float, x: float, v: float, a: float | None = None) -> Outputs:
-        """Outputs at a state; a = x'' of the model unless given (the analytic solution's own x~'')."""
+        """Outputs at a state; a = x'' of the model unless given."""
         f_contact, f_electrostatic = self.model.forces(t, x)
         if a is None:
             a = self.model.accel(t, x, v, self.U)

@@ -1,5 +1,5 @@
-"""Build the FMUs: pythonfmu packs the slave and the vibromodel package; the status shim goes on top;
-the reference result of the default experiment goes into the documentation."""
+"""Build the FMUs: pythonfmu packs the slave, slave_support and the vibromodel package; the status shim goes on
+top; the reference result of the default experiment goes into the documentation."""
 from __future__ import annotations
 
 import tempfile
@@ -19,27 +19,52 @@ FMU_SRC = Path(vibromodel.__file__).resolve().parents[1]
 REPO_ROOT = FMU_SRC.parent
 BUILD_DIR = REPO_ROOT / "build"
 PLANT_SLAVE = FMU_SRC / "HertzEAOscillator.py"
+CONTROLLER_SLAVE = FMU_SRC / "AdaptiveLyapunovController.py"
+CLOSED_LOOP_SLAVE = FMU_SRC / "HertzEAClosedLoop.py"
 PLANT_FMU = BUILD_DIR / "HertzEAOscillator.fmu"
+CONTROLLER_FMU = BUILD_DIR / "AdaptiveLyapunovController.fmu"
+CLOSED_LOOP_FMU = BUILD_DIR / "HertzEAClosedLoop.fmu"
 
 
-def build_fmu(slave: Path, out_dir: Path = BUILD_DIR, extra_resources: tuple[Path, ...] = ()) -> Path:
-    """Build out_dir/<slave name>.fmu with vibromodel (and extra_resources) in its resources, FMU state
-    save/restore and serialization declared, the status shim installed and the reference result packed."""
+def build_fmu(slave: Path, out_dir: Path = BUILD_DIR, extra_resources: tuple[Path, ...] = (),
+              fmu_state: bool = False) -> Path:
+    """Build out_dir/<slave name>.fmu with vibromodel, slave_support (and extra_resources) in its resources,
+    the status shim installed and the reference result packed. fmu_state: declare state save/restore and
+    serialization (only for slaves that save their whole state: pythonfmu alone saves registered variables)."""
     out_dir.mkdir(parents=True, exist_ok=True)
-    fmu = Path(FmuBuilder.build_FMU(slave, dest=out_dir, project_files=[FMU_SRC / "vibromodel", *extra_resources],
-                                    canGetAndSetFMUstate=True, canSerializeFMUstate=True))
+    project_files = [FMU_SRC / "vibromodel", FMU_SRC / "slave_support.py", *extra_resources]
+    fmu = Path(FmuBuilder.build_FMU(slave, dest=out_dir, project_files=project_files,
+                                    canGetAndSetFMUstate=fmu_state, canSerializeFMUstate=fmu_state))
     status = next(v for v in read_model_description(str(fmu)).modelVariables if v.name == "fmi_status")
     install_status_shim(fmu, status.valueReference)
     pack_reference(fmu)
     return fmu
 
 
-def build_plant(out_dir: Path = BUILD_DIR) -> Path:
-    """The plant FMU, with the OAFM solution of its default scene and experiment packed in
-    resources/oafm_cache: fidelity 4 starts without a fit there."""
+def build_with_default_oafm(slave: Path, scene: Scene, out_dir: Path, fmu_state: bool = False) -> Path:
+    """Build with the OAFM solution of `scene` over the default experiment packed in resources/oafm_cache:
+    an OAFM reference of that scene starts without a fit."""
     with tempfile.TemporaryDirectory() as tmp:
         cache = Path(tmp) / "oafm_cache"
         start, stop, _ = DEFAULT_EXPERIMENT
-        scene = Scene()
         cached_solve(scene, covering(scene, OafmSettings(), stop - start), start, write_dir=cache)
-        return build_fmu(PLANT_SLAVE, out_dir, extra_resources=(cache,))
+        return build_fmu(slave, out_dir, extra_resources=(cache,), fmu_state=fmu_state)
+
+
+def build_plant(out_dir: Path = BUILD_DIR) -> Path:
+    """The plant FMU; fidelity 4 of its default scene starts without a fit."""
+    return build_with_default_oafm(PLANT_SLAVE, Scene(), out_dir, fmu_state=True)
+
+
+def build_controller(out_dir: Path = BUILD_DIR) -> Path:
+    """The controller FMU (no physics of its own beyond the regressor: nothing to pack)."""
+    return build_fmu(CONTROLLER_SLAVE, out_dir)
+
+
+def build_closed_loop(out_dir: Path = BUILD_DIR) -> Path:
+    """The monolithic closed loop; its OAFM reference (x~(0) = 0.04, x~'(0) = 0: the paper example) is packed."""
+    return build_with_default_oafm(CLOSED_LOOP_SLAVE, Scene(), out_dir)
+
+
+def build_all(out_dir: Path = BUILD_DIR) -> list[Path]:
+    return [build(out_dir) for build in (build_plant, build_controller, build_closed_loop)]

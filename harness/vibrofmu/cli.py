@@ -1,4 +1,4 @@
-"""The `vibrofmu` command: build, simulate, demo, oafm, doctor."""
+"""The `vibrofmu` command: build, simulate, closed-loop, demo, oafm, stability, doctor."""
 from __future__ import annotations
 
 import argparse
@@ -7,16 +7,21 @@ import tempfile
 from pathlib import Path
 
 from vibromodel.analytic import OafmSettings
+from vibromodel.averaging import averaged, steady_states
+from vibromodel.control import Law
 from vibromodel.oafm import Grid
 from vibromodel.oafm_bases import FAMILIES
 from vibromodel.parameters import ParameterError, Scene
 from vibromodel.plant import Settings
+from vibromodel.tracking import ReferenceKind
 
-from . import doctor
-from .build import PLANT_FMU, build_plant
+from . import closed_loop, doctor
+from .build import BUILD_DIR, CLOSED_LOOP_FMU, CONTROLLER_FMU, PLANT_FMU, build_all, build_plant
+from .cosim import SceneError, load_scene
 from .demo import run_demo
 from .oafm_study import run_oafm
 from .simulate import FIDELITIES, SOLVERS, simulate
+from .stability import default_range, stability_study, write_study
 
 
 def parse_set(items: list[str]) -> dict[str, float]:
@@ -54,8 +59,59 @@ def ensure_fmu(path: Path) -> Path:
 
 
 def cmd_build(args) -> int:
-    fmu = build_plant(Path(args.out_dir))
-    print(f"built {fmu}")
+    for fmu in build_all(Path(args.out_dir)):
+        print(f"built {fmu}")
+    return 0
+
+
+DEFAULT_SCENE = Path(__file__).parent / "scenes" / "closed_loop.toml"
+
+
+def cmd_closed_loop(args) -> int:
+    fmu_dir = Path(args.fmu_dir)
+    if not all((fmu_dir / fmu.name).exists() for fmu in (PLANT_FMU, CONTROLLER_FMU, CLOSED_LOOP_FMU)):
+        print(f"building the FMUs into {fmu_dir} ...", file=sys.stderr)
+        build_all(fmu_dir)
+    law = Law.from_label(args.law) if args.law else None
+    progress = progress_printer("closed-loop")
+    if args.mode == "monolithic":
+        values = {"law": int(law or Law.PAPER_CORRECTED), "reference": int(ReferenceKind[args.reference.upper()])}
+        H, stop_time = args.H or 0.1, args.stop_time or 200.0
+        result = closed_loop.monolithic(fmu_dir / CLOSED_LOOP_FMU.name, values, stop_time, H, progress)
+        theta = closed_loop.true_values({})
+        title = f"HertzEAClosedLoop: {(law or Law.PAPER_CORRECTED).label}, reference {args.reference}"
+        summary = {"mode": "monolithic", "parameters": values, "H": H, "rtol": closed_loop.TOLERANCE,
+                   **closed_loop.summarise(result, theta)}
+    else:
+        try:
+            scene = closed_loop.with_law(load_scene(args.scene, fmu_dir).with_settings(
+                step=args.H, stop_time=args.stop_time), law)
+        except SceneError as error:
+            print(f"error: {error}", file=sys.stderr)
+            return 2
+        plant = next((spec.parameters for spec in scene.fmus if spec.name == "plant"), {})
+        theta = closed_loop.true_values(plant)
+        result = closed_loop.cosimulation(scene, progress)
+        title = f"co-simulation {Path(args.scene).name}: H = {scene.step:g}, {scene.ordering}"
+        summary = {"mode": "cosim", "scene": str(args.scene), "H": scene.step, "ordering": scene.ordering,
+                   **closed_loop.summarise(result, theta), "fmu_log": result["log"]}
+        if not args.no_study:
+            print("convergence study (H = " + ", ".join(f"{h:g}" for h in closed_loop.STUDY_STEPS) + ") ...",
+                  file=sys.stderr)
+            summary["convergence"] = closed_loop.convergence_study(scene, fmu_dir / CLOSED_LOOP_FMU.name)
+    out = Path(args.out)
+    closed_loop.write_results(out, result, summary, theta, title)
+    print(f"wrote {out}/result.csv, summary.json, tracking.png, errors.png, lyapunov.png, estimates.png")
+    if "V_end" in summary:
+        print(f"V: {summary['V_start']:.6e} -> {summary['V_end']:.6e}, max increase between outputs "
+              f"{summary['max_V_increase']:.3e}; final |e1| = {summary['final_abs_e1']:.3e}, "
+              f"|e2| = {summary['final_abs_e2']:.3e}")
+    for ordering, rows in summary.get("convergence", {}).get("table", {}).items():
+        print(f"{ordering}: " + ", ".join(f"H={r['H']:g}: {r['max_abs_error_x']:.2e}"
+                                          + (f" (order {r['order']:.2f})" if "order" in r else "") for r in rows))
+    if not result["completed"]:
+        print(f"error: the run stopped before the stop time: {result['stop_reason']}", file=sys.stderr)
+        return 1
     return 0
 
 
@@ -109,6 +165,52 @@ def cmd_oafm(args) -> int:
     return 0
 
 
+def cmd_stability(args) -> int:
+    scene = Scene().with_values(**parse_set(args.set))
+    model = averaged(scene)
+    lo, hi = (args.omega_range[0], args.omega_range[1]) if args.omega_range else default_range(model)
+    n = int(args.omega_range[2]) if args.omega_range else 201
+    if not (0 < lo < hi and n >= 3):
+        raise ParameterError("omega-range", args.omega_range, "need 0 < LO < HI and N >= 3")
+    fmu = None if args.no_fmu else ensure_fmu(Path(args.fmu))
+
+    def progress(label, done, total):
+        if done == total or done % max(1, total // 10) == 0:
+            print(f"{label}: {done}/{total}", file=sys.stderr, flush=True)
+
+    study = stability_study(scene, (lo, hi), n, fmu=fmu, sweep_points=args.sweep_points, progress=progress)
+    write_study(study, Path(args.out))
+    summary = study["summary"]
+    states = steady_states(model.flow(), model.r_max)
+    print(f"omega = {scene.omega:.8g} (omega_e = {model.omega_e:.8g}): "
+          + ", ".join(f"r = {s.r:.5g} {s.kind}" for s in states))
+    agree = summary["classification_agreement"]
+    excluded = f", points within {agree['excluded_margin']:.2g} of a fold excluded" if study["folds"] else ""
+    print(f"slow flow vs Floquet classification: {agree['points_agreeing']}/{agree['points_compared']} grid points "
+          f"agree ({100 * agree['fraction']:.1f} %){excluded}")
+    errors = summary["slow_flow_vs_shooting"]
+    print(f"slow flow vs shooting: max relative r error {errors['max_relative_r_error']:.2e} (omega "
+          f"{errors['at_omega']:.6g}), max |exp(lambda T) - rho| {errors['max_multiplier_error']:.2e} (omega "
+          f"{errors['at_omega_multiplier']:.6g})")
+    for row in summary["fold_frequencies"]["folds"]:
+        print("fold: " + ", ".join(f"{k} {v:.8g}" for k, v in row.items() if not k.startswith("r_")))
+    for direction, sweep in ((d, summary["fmu_sweeps"][d]) for d in ("up", "down") if "fmu_sweeps" in summary):
+        print(f"FMU sweep {direction}: {sum(sweep['settled'])}/{len(sweep['omega'])} points settled; max relative "
+              f"difference to the slow flow {sweep['max_relative_difference_to_slow_flow']:.2e} at the "
+              f"{sweep['points_compared']} settled points away from the folds")
+    check = summary.get("fidelity_3")
+    if check and "error" in check:
+        print(f"error: fidelity 3 check: {check['error']}", file=sys.stderr)
+        return 1
+    if check:
+        print(f"fidelity 3 vs 0 after the transient: max |dx| = {check['max_abs_error_after_transient']:.2e} "
+              f"({100 * check['relative_to_amplitude']:.2f} % of the amplitude); speed-up end to end "
+              f"{check['end_to_end_speedup']:.1f}x, model {check['model_speedup']:.1f}x, "
+              f"integration alone {check['integration_speedup']:.1f}x")
+    print(f"wrote {args.out}/summary.json, frequency_response.png")
+    return 0
+
+
 def cmd_doctor(args) -> int:
     with tempfile.TemporaryDirectory() as work_dir:
         env, result = doctor.check(Path(args.fmu), Path(work_dir))
@@ -124,7 +226,7 @@ def make_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="vibrofmu", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
 
-    p = sub.add_parser("build", help="build build/HertzEAOscillator.fmu")
+    p = sub.add_parser("build", help="build the plant, controller and closed-loop FMUs into build/")
     p.add_argument("--out-dir", default=str(PLANT_FMU.parent))
     p.set_defaults(func=cmd_build)
 
@@ -142,6 +244,21 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True)
     p.set_defaults(func=cmd_simulate)
 
+    p = sub.add_parser("closed-loop", help="adaptive Lyapunov controller on the plant: monolithic FMU or co-simulation")
+    p.add_argument("--mode", choices=["monolithic", "cosim"], default="monolithic")
+    p.add_argument("--H", type=float, default=None,
+                   help="communication step (cosim; default: the scene's) / output interval (monolithic; default 0.1)")
+    p.add_argument("--law", choices=[law.label for law in Law], default=None,
+                   help="control law (default paper-corrected; cosim: the scene's)")
+    p.add_argument("--reference", choices=[k.name.lower() for k in ReferenceKind], default="errata",
+                   help="monolithic: reference trajectory")
+    p.add_argument("--scene", default=str(DEFAULT_SCENE), help="cosim: scene file (TOML or JSON)")
+    p.add_argument("--stop-time", type=float, default=None, help="default: 200 (monolithic) / the scene's")
+    p.add_argument("--no-study", action="store_true", help="cosim: skip the H convergence study")
+    p.add_argument("--fmu-dir", default=str(BUILD_DIR), help="where the FMUs are (built when missing)")
+    p.add_argument("--out", required=True)
+    p.set_defaults(func=cmd_closed_loop)
+
     p = sub.add_parser("oafm", help="OAFM analytic solution: fit, compare with the reference, reproduce the paper")
     p.add_argument("--basis", choices=list(FAMILIES), default="harmonic")
     p.add_argument("--order", type=int, default=OafmSettings.order, help="harmonic basis order (1..8)")
@@ -155,6 +272,16 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", help="scene parameter")
     p.add_argument("--out", required=True)
     p.set_defaults(func=cmd_oafm)
+
+    p = sub.add_parser("stability", help="steady vibrations vs omega: slow flow, shooting/Floquet, FMU sweeps")
+    p.add_argument("--omega-range", nargs=3, type=float, metavar=("LO", "HI", "N"),
+                   help="frequency grid (default: omega_e -+ max(3 mu, 3 |kappa(r_peak)|), 201 points)")
+    p.add_argument("--sweep-points", type=int, default=25, help="frequencies per FMU sweep direction")
+    p.add_argument("--fmu", default=str(PLANT_FMU), help="plant FMU for the sweeps (built when missing)")
+    p.add_argument("--no-fmu", action="store_true", help="skip the FMU sweeps and the fidelity-3 check")
+    p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", help="scene parameter")
+    p.add_argument("--out", required=True)
+    p.set_defaults(func=cmd_stability)
 
     p = sub.add_parser("demo", help="build + simulate + compare on the paper's example (Omega = 2)")
     p.add_argument("--out", default="out/demo")

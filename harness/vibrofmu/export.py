@@ -84,3 +84,81 @@ def plot_convergence(path: Path, rows: list[dict]) -> None:
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
+
+
+def plot_frequency_response(path: Path, curve, continuation, sweeps, folds, omega_range, title: str) -> None:
+    """Amplitude r against omega: the slow flow's curve (stable solid, unstable dashed), the shooting
+    continuation (Floquet: filled stable, open unstable), FMU sweeps up/down, and the folds (dotted).
+    With folds, a second panel zooms onto the hysteresis interval."""
+    panels = [omega_range]
+    if len(folds) >= 2:
+        width = folds[-1] - folds[0]
+        panels.append((folds[0] - 1.5 * width, folds[-1] + 1.5 * width))
+    fig, axes = plt.subplots(1, len(panels), figsize=(7 * len(panels), 5.5), squeeze=False)
+    omega, r, stable = (np.asarray(a) for a in curve)
+    c_omega, c_r, c_stable = (np.asarray(a) for a in continuation)
+    for ax, (lo, hi) in zip(axes[0], panels):
+        ax.plot(omega, np.where(stable, r, np.nan), "-", color="tab:blue", lw=1.6, label="slow flow, stable")
+        ax.plot(omega, np.where(stable, np.nan, r), "--", color="tab:blue", lw=1.2, label="slow flow, unstable")
+        ax.plot(c_omega[c_stable], c_r[c_stable], "o", ms=3, color="k", label="shooting, stable (Floquet)")
+        ax.plot(c_omega[~c_stable], c_r[~c_stable], "o", ms=3, mfc="none", color="k",
+                label="shooting, unstable (Floquet)")
+        for sweep, marker, color in zip(sweeps, ("^", "v"), ("tab:red", "tab:green")):
+            ax.plot(sweep.omega, sweep.r, marker, ms=7, mfc="none", color=color, label=f"FMU sweep {sweep.direction}")
+        for fold in folds:
+            ax.axvline(fold, color="0.5", lw=0.7, ls=":")
+        inside = (omega >= lo) & (omega <= hi)
+        top = max(np.max(r[inside], initial=0.0), np.max(c_r, initial=0.0))
+        ax.set_xlim(lo, hi)
+        ax.set_ylim(0.0, 1.08 * top)
+        ax.set_xlabel("forcing frequency omega")
+        ax.set_ylabel("first-harmonic amplitude r")
+        ax.grid(True, alpha=0.3)
+    axes[0][0].legend(fontsize=8, loc="upper left")
+    if len(panels) > 1:
+        axes[0][1].set_title("hysteresis interval (folds dotted)", fontsize=10)
+    fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def plot_closed_loop(out_dir: Path, time, series: dict, theta: dict, title: str) -> list[Path]:
+    """Closed loop: x vs x_ref, e1 and e2, V on a log axis, each estimate against its true value (dashed)."""
+    paths = [out_dir / name for name in ("tracking.png", "errors.png", "lyapunov.png", "estimates.png")]
+    fig, ax = plt.subplots(figsize=(10, 4.5))
+    ax.plot(time, series["x"], lw=1.0, label="x (plant)")
+    ax.plot(time, series["x_ref"], "--", lw=1.0, label="x_ref")
+    _finish(fig, ax, paths[0], title, "x")
+    fig, ax = plt.subplots(figsize=(10, 4.5))
+    for name in ("e1", "e2"):
+        ax.plot(time, series[name], lw=0.8, label=name)
+    ax.set_yscale("symlog", linthresh=1e-6)
+    _finish(fig, ax, paths[1], title, "tracking error (symlog)")
+    fig, ax = plt.subplots(figsize=(10, 4.5))
+    ax.semilogy(time, series["V"], lw=1.0, label="V")
+    _finish(fig, ax, paths[2], title, "Lyapunov function V")
+    fig, axes = plt.subplots(3, 3, figsize=(12, 8), sharex=True)
+    for ax, (name, true) in zip(axes.flat, theta.items()):
+        ax.plot(time, series[f"{name}_hat"], lw=1.0, label="estimate")
+        ax.axhline(true, color="k", ls="--", lw=0.8, label="true")
+        ax.set_title(name, fontsize=9)
+    axes.flat[0].legend(fontsize=7)
+    for ax in axes[-1]:
+        ax.set_xlabel("tau")
+    fig.suptitle(title)
+    fig.tight_layout()
+    fig.savefig(paths[3], dpi=100)
+    plt.close(fig)
+    return paths
+
+
+def _finish(fig, ax, path: Path, title: str, ylabel: str) -> None:
+    ax.set_xlabel("tau")
+    ax.set_ylabel(ylabel)
+    ax.set_title(title)
+    ax.grid(True, alpha=0.3)
+    ax.legend(loc="upper right")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)

@@ -39,14 +39,19 @@ class RunResult:
 
 
 class FmuLog:
-    """FMI logger callback that keeps the messages (and the ctypes objects alive)."""
+    """FMI logger callback that keeps the messages (and the ctypes objects alive).
+
+    FMPy's native logger proxy is process-wide: the last FmuLog created receives the messages of every
+    instance, so FMUs that run together share one FmuLog and tell their messages apart by instance name."""
 
     def __init__(self):
         self.messages: list[str] = []
+        self.instances: list[str] = []  # the instance name of each message
 
-        def logger(_env, _instance, status, category, message):
+        def logger(_env, instance, status, category, message):
             label = STATUS_NAMES[status] if 0 <= status < len(STATUS_NAMES) else str(status)
             self.messages.append(f"[{label}] {message.decode(errors='replace')}")
+            self.instances.append(instance.decode(errors="replace") if instance else "")
 
         self.callbacks = fmi2CallbackFunctions()
         self.callbacks.logger = fmi2CallbackLoggerTYPE(logger)
@@ -54,20 +59,26 @@ class FmuLog:
         self.callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
         addLoggerProxy(byref(self.callbacks))
 
-    def errors(self) -> list[str]:
-        return [m for m in self.messages if m.startswith(("[error]", "[fatal]", "[discard]"))]
+    def of(self, instance: str) -> list[str]:
+        return [m for m, name in zip(self.messages, self.instances) if name == instance]
+
+    def errors(self, instance: str | None = None) -> list[str]:
+        messages = self.messages if instance is None else self.of(instance)
+        return [m for m in messages if m.startswith(("[error]", "[fatal]", "[discard]"))]
 
 
 class FmuInstance:
     """One instantiated co-simulation FMU with name-based access to its variables."""
 
-    def __init__(self, fmu_path: Path | str, instance_name: str = "instance", unzip_dir: Path | str | None = None):
-        """unzip_dir: the FMU already extracted there (kept on close); default: extract it afresh."""
+    def __init__(self, fmu_path: Path | str, instance_name: str = "instance", log: FmuLog | None = None,
+                 unzip_dir: Path | str | None = None):
+        """log: shared by several instances (FMPy's logger is process-wide); unzip_dir: an FMU already
+        extracted there (kept on close); by default a fresh one per instance."""
         self.model_description = read_model_description(str(fmu_path))
         self.variables = {v.name: v for v in self.model_description.modelVariables}
         self.owns_unzip_dir = unzip_dir is None
         self.unzip_dir = extract(str(fmu_path)) if unzip_dir is None else str(unzip_dir)
-        self.log = FmuLog()
+        self.log = log or FmuLog()
         self.fmu = FMU2Slave(guid=self.model_description.guid, unzipDirectory=self.unzip_dir,
                              modelIdentifier=self.model_description.coSimulation.modelIdentifier,
                              instanceName=instance_name)
@@ -89,6 +100,21 @@ class FmuInstance:
     def output_names(self):
         return [v.name for v in self.model_description.modelVariables if v.causality == "output"]
 
+    def output_columns(self) -> list[str]:
+        """The Real outputs, then the Boolean ones: the order of read_outputs."""
+        names = self.output_names()
+        return ([n for n in names if self.variables[n].type == "Real"]
+                + [n for n in names if self.variables[n].type == "Boolean"])
+
+    def read_outputs(self) -> list[float]:
+        """Every output's current value (Booleans as 0.0/1.0), in the order of output_columns."""
+        if not hasattr(self, "_output_refs"):
+            columns = self.output_columns()
+            self._output_refs = (self.value_references([n for n in columns if self.variables[n].type == "Real"]),
+                                 self.value_references([n for n in columns if self.variables[n].type == "Boolean"]))
+        reals, booleans = self._output_refs
+        return self.fmu.getReal(reals) + [float(b) for b in self.fmu.getBoolean(booleans)]
+
     def close(self):
         try:
             self.fmu.terminate()
@@ -105,14 +131,9 @@ def run_fmu(fmu_path: Path | str, start_values: dict, stop_time: float, output_i
     t0 = time.perf_counter()
     instance = FmuInstance(fmu_path)
     fmu = instance.fmu
-    names = instance.output_names()
-    reals = [n for n in names if instance.variables[n].type == "Real"]
-    booleans = [n for n in names if instance.variables[n].type == "Boolean"]
-    real_refs, bool_refs = instance.value_references(reals), instance.value_references(booleans)
+    columns = instance.output_columns()
+    read_outputs = instance.read_outputs
     n_steps = int(round(stop_time / output_interval))
-
-    def read_outputs():
-        return fmu.getReal(real_refs) + [float(b) for b in fmu.getBoolean(bool_refs)]
 
     times, rows = [], []
     stop_reason = None
@@ -143,14 +164,14 @@ def run_fmu(fmu_path: Path | str, start_values: dict, stop_time: float, output_i
     wall_time = time.perf_counter() - t_loop
     instance.close()
 
-    data = np.array(rows, dtype=float).reshape(len(rows), len(reals) + len(booleans))
-    outputs = {name: data[:, j] for j, name in enumerate(reals + booleans)}
+    data = np.array(rows, dtype=float).reshape(len(rows), len(columns))
+    outputs = {name: data[:, j] for j, name in enumerate(columns)}
     return RunResult(time=np.array(times), outputs=outputs, stop_time=stop_time,
                      completed=stop_reason is None, stop_reason=stop_reason, log=instance.log.messages,
                      wall_time=wall_time, instantiate_time=instantiate_time)
 
 
-def _reason(error: FMICallException, log: FmuLog) -> str:
-    messages = log.errors()
+def _reason(error: FMICallException, log: FmuLog, instance: str | None = None) -> str:
+    messages = log.errors(instance)
     detail = messages[-1] if messages else "no log message"
     return f"{str(error).rstrip('.')}: {detail}"

@@ -15,7 +15,7 @@ from .compare import errors
 from .reference import REFERENCE_ATOL, REFERENCE_RTOL, Reference, reference_solution
 from .run import RunResult, run_fmu
 
-FIDELITIES = {"exact": 0, "polynomial": 1, "polynomial-paper": 2, "analytic": 4}
+FIDELITIES = {"exact": 0, "polynomial": 1, "polynomial-paper": 2, "averaged": 3, "analytic": 4}
 SOLVERS = {"adaptive": 0, "rk4": 1}
 
 

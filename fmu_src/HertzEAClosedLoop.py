@@ -1,0 +1,66 @@
+"""FMI 2.0 co-simulation slave of plant + adaptive controller + reference in one FMU (DESIGN.md contract):
+FMI variables <-> vibromodel.closedloop.ClosedLoop. The plant, the nine estimates and the reference are
+integrated together by the plant's integrators (adaptive DOP853 or RK4, `solver`).
+No physics here; the FMI error handling is slave_support.StatusSlave's.
+"""
+from pythonfmu import DefaultExperiment, Integer, Real
+from pythonfmu.enums import Fmi2Status
+
+from slave_support import StatusSlave
+from vibromodel.closedloop import ERRATA_SCENE, ClosedLoop, LoopSettings
+from vibromodel.control import ESTIMATE_NAMES
+from vibromodel.parameters import Scene, scene_names
+from vibromodel.plant import DEFAULT_EXPERIMENT, Settings
+from vibromodel.tracking import ReferenceSettings
+
+OUTPUTS = ("x", "v", "x_ref", "U", "e1", "e2", "V", "V_rate", "V_rate_promised")
+
+
+class HertzEAClosedLoop(StatusSlave):
+    author = "vibrofmu"
+    description = "Hertzian-contact oscillator under adaptive Lyapunov tracking control, monolithic (ERRATA §3.5)"
+    default_experiment = DefaultExperiment(*DEFAULT_EXPERIMENT)
+
+    def __init__(self, **kwargs):
+        super().__init__(**kwargs)
+        scene, settings, reference = ERRATA_SCENE, Settings(), ReferenceSettings()
+        for name in scene_names():
+            self._parameter(Real, name, getattr(scene, name))
+        self._parameter(Integer, "fidelity", int(settings.fidelity),
+                        "plant: 0 exact Eq. 3, 1 polynomial Eq. 7, 2 Eq. 7 printed coefficients")
+        self._parameter(Integer, "solver", int(settings.solver), "0 adaptive DOP853, 1 fixed-step RK4")
+        self._parameter(Real, "rtol", settings.rtol, "relative tolerance (setupExperiment's tolerance wins)")
+        self._parameter(Real, "max_step", settings.max_step, "RK4 step / adaptive step ceiling; 0 = automatic")
+        self._parameter(Integer, "reference", int(reference.kind),
+                        "0 OAFM analytic solution, 1 ERRATA §3.5 x0 + X_f cos(w t - psi), 2 the same + tones "
+                        "(persistent excitation)")
+        self._parameter(Real, "x_ref_start", reference.x_start, "reference's initial x")
+        self._parameter(Real, "v_ref_start", reference.v_start, "reference's initial x'")
+        self._controller_parameters()
+        self._outputs(OUTPUTS, (scene.x_start, scene.v_start) + (0.0,) * (len(OUTPUTS) - 2))
+        self._outputs(ESTIMATE_NAMES, [getattr(self, f"{name}_start") for name in ESTIMATE_NAMES], "estimate")
+        self.loop = None
+
+    def exit_initialization_mode(self):
+        self._initialise(self._start)
+
+    def _start(self):
+        scene = Scene(**{name: float(getattr(self, name)) for name in scene_names()})
+        rtol = self.rtol if self.experiment_tolerance is None else self.experiment_tolerance
+        settings = Settings(fidelity=int(self.fidelity), solver=int(self.solver), rtol=float(rtol),
+                            max_step=float(self.max_step))
+        law, gains, estimates = self._controller_settings()
+        reference = ReferenceSettings(kind=int(self.reference), x_start=float(self.x_ref_start),
+                                      v_start=float(self.v_ref_start))
+        loop = LoopSettings(law=law, gains=gains, estimates=estimates, reference=reference)
+        self.loop = ClosedLoop(scene, settings, loop, t0=float(self.start_time), stop_time=self.stop_time,
+                               cache_dirs=self._cache_dirs())
+        for note in self.loop.notes:
+            self.log(note, Fmi2Status.ok)
+        self._publish(self.loop.outputs())
+
+    def do_step(self, current_time, step_size):
+        return self._guarded_step(current_time, lambda: self._publish(self.loop.do_step(current_time, step_size)))
+
+    def _publish(self, out):
+        self._set_finite({**{name: out[name] for name in OUTPUTS}, **dict(zip(ESTIMATE_NAMES, out["estimates"]))})

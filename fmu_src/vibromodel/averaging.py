@@ -1,0 +1,394 @@
+"""Averaging, slow flow and local stability of the primary resonance (ERRATA §3.4; replaces PAPER Eqs 45-72).
+
+Chain: fast AC moments m_j, q_j -> averaged coefficients A_k -> static equilibrium x_e and the shifted
+coefficients k_j -> backbone kappa(r) -> slow flow for (A, B) -> steady states at a forcing frequency,
+their Jacobian, eigenvalues and type -> fold (jump) frequencies.
+
+The averaged equation is valid for Omega >> sqrt(a1) with Omega away from omega, 2 omega and omega/2,
+and weak nonlinearity at the amplitude r (ERRATA §3.4(a), (b)): `validity_notes` says where a scene
+leaves that range; nothing is refused.
+"""
+from __future__ import annotations
+
+import cmath
+import math
+from dataclasses import dataclass
+from math import comb
+
+import numpy as np
+from numpy.polynomial import polynomial as P
+from scipy.optimize import brentq
+
+from . import forces
+from .parameters import Scene
+
+ORDER = 5  # the polynomial model Eq. 7 has degree 5
+FOLD_DET_TOLERANCE = 1e-12  # |det J| below this times its scale counts as a fold (det J = 0)
+
+
+# --- (a) fast/slow split -------------------------------------------------------------------------
+
+def fast_moments(beta: float, gamma: float, Omega: float) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    """m_j = <psi^j> and q_j = <(beta sin Omega t - gamma cos 2 Omega t) psi^j>, j = 0..5 (ERRATA §3.4(a)).
+
+    psi = -beta sin(Omega t)/Omega^2 + gamma cos(2 Omega t)/(4 Omega^2) is the fast AC response (Eq. 46).
+    """
+    if beta == 0.0 and gamma == 0.0:
+        return (1.0, 0.0, 0.0, 0.0, 0.0, 0.0), (0.0,) * 6
+    b2, g2, W = beta * beta, gamma * gamma, Omega * Omega
+    m = (1.0, 0.0,
+         (16 * b2 + g2) / (32 * W**2),
+         -3 * b2 * gamma / (16 * W**3),
+         3 * (256 * b2**2 + 64 * b2 * g2 + g2**2) / (2048 * W**4),
+         -5 * b2 * gamma * (32 * b2 + 3 * g2) / (512 * W**5))
+    q = (0.0,
+         -(4 * b2 + g2) / (8 * W),
+         3 * b2 * gamma / (8 * W**2),
+         -3 * (64 * b2**2 + 40 * b2 * g2 + g2**2) / (512 * W**3),
+         b2 * gamma * (128 * b2 + 21 * g2) / (256 * W**4),
+         -5 * (1024 * b2**3 + 1344 * b2**2 * g2 + 108 * b2 * g2**2 + g2**3) / (16384 * W**5))
+    return m, q
+
+
+def fast_response(t: float, beta: float, gamma: float, Omega: float) -> tuple[float, float, float]:
+    """psi, psi', psi'' of Eq. 46 (ERRATA §3.4(a)): the fast part of x, x = X + psi."""
+    if beta == 0.0 and gamma == 0.0:
+        return 0.0, 0.0, 0.0
+    s1, c1 = math.sin(Omega * t), math.cos(Omega * t)
+    s2, c2 = 2.0 * s1 * c1, c1 * c1 - s1 * s1
+    W = Omega * Omega
+    return (-beta * s1 / W + gamma * c2 / (4 * W),
+            -beta * c1 / Omega - gamma * s2 / (2 * Omega),
+            beta * s1 - gamma * c2)
+
+
+def averaged_coefficients(scene: Scene) -> tuple[float, ...]:
+    """A_0..A_5 of the slow equation X'' + mu X' + sum A_k X^k = Delta cos(omega t) (ERRATA §3.4(a)).
+
+    A_k = sum_{n>=k} C(n,k) a_n m_{n-k} - sum_{n>=k+1} C(n,k) f_n q_{n-k}; a_n of Eq. 8 (a_0 = -gamma),
+    f_n of G3 (Eq. 5).
+    """
+    a = forces.coefficients(scene.alpha, scene.gamma, scene.R)
+    f = forces.series_g3(scene.R)
+    m, q = fast_moments(scene.beta, scene.gamma, scene.Omega)
+    return tuple(sum(comb(n, k) * a[n] * m[n - k] for n in range(k, ORDER + 1))
+                 - sum(comb(n, k) * f[n] * q[n - k] for n in range(k + 1, ORDER + 1))
+                 for k in range(ORDER + 1))
+
+
+# --- (b) static equilibrium ----------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class Equilibrium:
+    """x_e, the averaged A_k, and k_j = sum_{n>=j} C(n,j) A_n x_e^(n-j) (k_0 = 0): y = x - x_e obeys
+    y'' + mu y' + k1 y + ... + k5 y^5 = Delta cos(omega t) (ERRATA §3.4(b))."""
+
+    x_e: float
+    A: tuple[float, ...]
+    k: tuple[float, ...]
+
+    @property
+    def omega_e(self) -> float:
+        return math.sqrt(self.k[1])
+
+
+def shifted(A, x_e: float) -> tuple[float, ...]:
+    """k_j = sum_{n>=j} C(n, j) A_n x_e^(n-j): the Taylor coefficients of sum A_n x^n at x_e."""
+    return tuple(float(sum(comb(n, j) * A[n] * x_e ** (n - j) for n in range(j, len(A)))) for j in range(len(A)))
+
+
+def equilibrium(scene: Scene) -> Equilibrium:
+    """Root x_e of sum A_k x^k near -Gamma/A_1, by Newton's method (ERRATA §3.4(b))."""
+    A = averaged_coefficients(scene)
+    x = -A[0] / A[1]
+    for _ in range(50):
+        value, slope = P.polyval(x, A), P.polyval(x, P.polyder(A))
+        step = value / slope
+        x -= step
+        if abs(step) <= 4 * np.finfo(float).eps * max(1.0, abs(x)):
+            break
+    x = float(x)
+    k = shifted(A, x)
+    return Equilibrium(x_e=x, A=A, k=(0.0,) + k[1:])
+
+
+# --- (c) backbone and slow flow ------------------------------------------------------------------
+
+BACKBONES = ("lindstedt", "first-order")
+
+
+@dataclass(frozen=True)
+class Backbone:
+    """kappa(r) = kappa2 r^2 + kappa4 r^4: amplitude-dependent frequency shift (ERRATA §3.4(c))."""
+
+    kappa2: float
+    kappa4: float
+    kind: str
+
+    def kappa(self, r):
+        r2 = r * r
+        return r2 * (self.kappa2 + self.kappa4 * r2)
+
+    def slope(self, r):
+        """kappa'(r)."""
+        return r * (2.0 * self.kappa2 + 4.0 * self.kappa4 * r * r)
+
+
+def backbone(eq: Equilibrium, kind: str = "lindstedt") -> Backbone:
+    """Strict first order: 3k3/(8 w_e), 5k5/(16 w_e). Lindstedt (k2 not small): ERRATA §3.4(c)."""
+    _, k1, k2, k3, k4, k5 = eq.k
+    if kind == "first-order":
+        w = math.sqrt(k1)
+        return Backbone(3 * k3 / (8 * w), 5 * k5 / (16 * w), kind)
+    if kind == "lindstedt":
+        kappa2 = (9 * k1 * k3 - 10 * k2**2) / (24 * k1**1.5)
+        kappa4 = (2160 * k1**3 * k5 - 6048 * k1**2 * k2 * k4 - 405 * k1**2 * k3**2 + 6228 * k1 * k2**2 * k3
+                  - 1940 * k2**4) / (6912 * k1**3.5)
+        return Backbone(kappa2, kappa4, kind)
+    raise ValueError(f"backbone kind {kind!r}: must be one of {BACKBONES}")
+
+
+@dataclass(frozen=True)
+class SlowFlow:
+    """A' = -mu/2 A - nu(r) B, B' = -mu/2 B + nu(r) A + Delta/(2 omega) (ERRATA §3.4(c)), tau-time.
+
+    y = x - x_e ~ A cos(omega t) + B sin(omega t); nu(r) = detuning - kappa(r), with the detuning
+    (omega^2 - k1)/(2 omega) ~ omega - omega_e and the drive Delta/(2 omega).
+    """
+
+    mu: float
+    omega: float
+    detuning: float
+    drive: float
+    backbone: Backbone
+
+    def nu(self, r):
+        return self.detuning - self.backbone.kappa(r)
+
+    def rhs(self, A, B):
+        """(A', B'); A and B may be floats or numpy arrays."""
+        nu = self.nu((A * A + B * B) ** 0.5)
+        half_mu = 0.5 * self.mu
+        return -half_mu * A - nu * B, -half_mu * B + nu * A + self.drive
+
+    def jacobian(self, A: float, B: float) -> np.ndarray:
+        """ERRATA §3.4(e)."""
+        r = math.hypot(A, B)
+        nu, half_mu = self.nu(r), 0.5 * self.mu
+        g = self.backbone.slope(r) / r if r > 0.0 else 0.0  # kappa'(r)/r, finite as r -> 0
+        return np.array([[-half_mu + g * A * B, -nu + g * B * B],
+                         [nu - g * A * A, -half_mu - g * A * B]])
+
+
+@dataclass(frozen=True)
+class Averaged:
+    """The averaged model of a scene (ERRATA §3.4): its equilibrium, backbone, and slow flow at any omega."""
+
+    scene: Scene
+    eq: Equilibrium
+    backbone: Backbone
+
+    @property
+    def omega_e(self) -> float:
+        return self.eq.omega_e
+
+    @property
+    def r_max(self) -> float:
+        """Largest amplitude before x = x_e - r leaves the contact (1 + 2x/3 = 0): the series' edge."""
+        return 1.5 + self.eq.x_e
+
+    def flow(self, omega: float | None = None) -> SlowFlow:
+        s = self.scene
+        omega = s.omega if omega is None else omega
+        return SlowFlow(s.mu, omega, (omega * omega - self.eq.k[1]) / (2.0 * omega), s.Delta / (2.0 * omega),
+                        self.backbone)
+
+
+def averaged(scene: Scene, kind: str = "lindstedt") -> Averaged:
+    eq = equilibrium(scene)
+    return Averaged(scene, eq, backbone(eq, kind))
+
+
+# --- (d), (e) steady states and their stability --------------------------------------------------
+
+@dataclass(frozen=True)
+class SteadyState:
+    """An equilibrium (A, B) of the slow flow = a T-periodic vibration of amplitude r (ERRATA §3.4(d)-(f))."""
+
+    A: float
+    B: float
+    r: float
+    nu: float
+    det: float  # det J = mu^2/4 + nu (nu - r kappa'(r))
+    eigenvalues: tuple[complex, complex]  # lambda = -mu/2 +- sqrt(nu (r kappa' - nu)), tau-time
+    kind: str
+
+    def multipliers(self, omega: float) -> tuple[complex, complex]:
+        """exp(lambda T), T = 2 pi/omega: the Floquet multipliers to O(epsilon) (ERRATA §3.4(f))."""
+        T = 2.0 * math.pi / omega
+        return tuple(cmath.exp(lam * T) for lam in self.eigenvalues)
+
+    @property
+    def stable(self) -> bool:
+        return self.kind.startswith("stable")
+
+
+def classify(mu: float, det: float, discriminant: float, scale: float) -> str:
+    """Type of an equilibrium from tr J = -mu and det J (ERRATA §3.4(e), §5.1 corrected)."""
+    if abs(det) <= FOLD_DET_TOLERANCE * scale:
+        return "fold"
+    if det < 0.0:
+        return "saddle"
+    shape = "node" if discriminant >= 0.0 else "focus"
+    if mu > 0.0:
+        return f"stable {shape}"
+    return "center" if mu == 0.0 else f"unstable {shape}"
+
+
+def steady_state(flow: SlowFlow, r: float) -> SteadyState:
+    """The equilibrium of amplitude r (a root of the frequency-response equation) with its stability."""
+    nu, mu, d = flow.nu(r), flow.mu, flow.drive
+    denominator = mu * mu + 4 * nu * nu
+    A, B = -4 * nu * d / denominator, 2 * mu * d / denominator  # ERRATA §3.4(d)
+    r_kappa = r * flow.backbone.slope(r)
+    det = mu * mu / 4 + nu * (nu - r_kappa)
+    discriminant = nu * (r_kappa - nu)  # (lambda + mu/2)^2
+    root = cmath.sqrt(discriminant)
+    scale = mu * mu / 4 + nu * nu + abs(nu * r_kappa)
+    return SteadyState(float(A), float(B), float(math.hypot(A, B)), float(nu), float(det),
+                       (-mu / 2 + root, -mu / 2 - root), classify(mu, det, discriminant, scale))
+
+
+def response_polynomial(flow: SlowFlow) -> np.ndarray:
+    """Coefficients (ascending in u = r^2) of u (mu^2/4 + nu(u)^2) - drive^2 (ERRATA §3.4(d))."""
+    nu = np.array([flow.detuning, -flow.backbone.kappa2, -flow.backbone.kappa4])
+    inner = P.polyadd([flow.mu**2 / 4], P.polymul(nu, nu))
+    return P.polysub(P.polymul([0.0, 1.0], inner), [flow.drive**2])
+
+
+def steady_states(flow: SlowFlow, r_max: float = math.inf) -> list[SteadyState]:
+    """Every steady state of the flow with 0 < r < r_max, by increasing r.
+
+    The real positive roots u of the response polynomial are polished by Newton's method and checked
+    against the residual; r_max drops roots outside the model's range (beyond contact loss).
+    """
+    if flow.drive == 0.0:
+        return [steady_state(flow, 0.0)]
+    poly = np.trim_zeros(response_polynomial(flow), "b")
+    derivative = P.polyder(poly)
+    radii = []
+    for root in P.polyroots(poly):
+        u = root.real
+        if abs(root.imag) > 1e-6 * max(abs(u), flow.drive**2) or u <= 0.0:
+            continue
+        for _ in range(8):
+            slope = P.polyval(u, derivative)
+            if slope == 0.0:
+                break
+            u -= P.polyval(u, poly) / slope
+        scale = np.sum(np.abs(poly) * np.abs(u) ** np.arange(len(poly)))
+        if u > 0.0 and abs(P.polyval(u, poly)) <= 1e-9 * scale and math.sqrt(u) < r_max:
+            radii.append(math.sqrt(u))
+    return [steady_state(flow, r) for r in sorted(set(radii))]
+
+
+# --- folds -----------------------------------------------------------------------------------------
+
+def frequency_on_curve(model, r: float, side: int) -> float | None:
+    """omega at which amplitude r is a steady state, left (side = -1, nu < 0) or right (+1) of the
+    backbone: detuning(omega) = kappa(r) + side sqrt(drive(omega)^2/r^2 - mu^2/4) (ERRATA §3.4(d)).
+
+    model: anything with omega_e and flow(omega) (the corrected `Averaged` or the printed one).
+    """
+    def mismatch(omega):
+        flow = model.flow(omega)
+        radicand = (flow.drive / r) ** 2 - flow.mu**2 / 4
+        return flow.nu(r) - side * math.sqrt(max(radicand, 0.0))
+
+    centre = model.omega_e + model.backbone.kappa(r)  # detuning ~ omega - omega_e
+    width = 2.0 * (model.flow(centre).drive / r + model.scene.mu) + 1e-12
+    lo, hi = (centre - width, centre) if side < 0 else (centre, centre + width)
+    for _ in range(20):  # widen until the root is bracketed
+        if mismatch(lo) * mismatch(hi) <= 0.0:
+            return brentq(mismatch, lo, hi, xtol=1e-15, rtol=4 * np.finfo(float).eps)
+        lo, hi = (lo - width, hi) if side < 0 else (lo, hi + width)
+        width *= 2.0
+        if lo <= 0.0:
+            return None
+    return None
+
+
+@dataclass(frozen=True)
+class Fold:
+    omega: float
+    r: float
+    side: int  # -1: left of the backbone, +1: right
+
+
+def folds(model, samples: int = 2000) -> list[Fold]:
+    """Saddle-node points (det J = 0, d omega/dr = 0) of the frequency-response curve (ERRATA §3.4(e)).
+
+    The curve is traced by amplitude r on both sides of the backbone up to the peak (or the model's
+    r_max); det J changes sign at a fold, which is located there by Brent's method.
+    """
+    s = model.scene
+    if s.Delta == 0.0 or s.mu <= 0.0:
+        return []
+    r_peak = min(s.Delta / (s.mu * model.omega_e), model.r_max)  # drive^2/r^2 >= mu^2/4
+    found = []
+    radii = np.geomspace(r_peak * 1e-4, r_peak * (1 - 1e-9), samples)
+    for side in (-1, 1):
+        def det_on_curve(r):
+            omega = frequency_on_curve(model, r, side)
+            return math.nan if omega is None else steady_state(model.flow(omega), r).det
+
+        values = [det_on_curve(r) for r in radii]
+        for r0, r1, d0, d1 in zip(radii, radii[1:], values, values[1:]):
+            if d0 * d1 < 0.0:
+                r = brentq(det_on_curve, r0, r1, xtol=1e-14)
+                found.append(Fold(frequency_on_curve(model, r, side), r, side))
+    return sorted(found, key=lambda fold: fold.omega)
+
+
+def validity_notes(model: Averaged) -> list[str]:
+    """Where the scene leaves the averaging's range of validity (ERRATA §3.4(a), (b)); empty if inside."""
+    s, w = model.scene, model.omega_e
+    notes = []
+    if s.beta or s.gamma:
+        if s.Omega < 2.0 * w:
+            notes.append(f"Omega = {s.Omega:g} is not >> sqrt(A1) = {w:.4g}")
+        for label, value in (("omega", s.omega), ("2 omega", 2 * s.omega), ("omega/2", s.omega / 2)):
+            if abs(s.Omega - value) < 0.05 * value:
+                notes.append(f"Omega = {s.Omega:g} is near {label} = {value:.4g}")
+    if abs(s.omega - w) > 0.2 * w:
+        notes.append(f"omega = {s.omega:.4g} is far from resonance omega_e = {w:.4g}: averaging assumes "
+                     "|omega - omega_e| small")
+    return notes
+
+
+def ghost_margin(model, fold: Fold, wait: float) -> float:
+    """How far past a fold a sweep that waits `wait` (tau) can still sit on the vanished branch.
+
+    Past a saddle-node the flow creeps through the fold's ghost: on the centre direction the slow flow is
+    s' = a (omega - omega_f) + b s^2, and the passage takes pi / sqrt(|a b d omega|) (Strogatz, Nonlinear
+    Dynamics and Chaos, §4.3). This returns the d omega at which that equals `wait`. a and b come from the
+    slow flow at the fold: left and right null vectors w, v of J; a = w.dF/domega / w.v,
+    b = w.D2F[v, v] / (2 w.v), by central differences.
+    """
+    flow = model.flow(fold.omega)
+    state = steady_state(flow, fold.r)
+    Z = np.array([state.A, state.B])
+    J = flow.jacobian(*Z)
+    values, right = np.linalg.eig(J)
+    v = right[:, np.argmin(np.abs(values))].real
+    values, left = np.linalg.eig(J.T)
+    w = left[:, np.argmin(np.abs(values))].real
+
+    def F(point, omega):
+        return np.array(model.flow(omega).rhs(*point))
+
+    d_omega, d_state = 1e-7 * fold.omega, 1e-4 * fold.r
+    a = w @ (F(Z, fold.omega + d_omega) - F(Z, fold.omega - d_omega)) / (2 * d_omega) / (w @ v)
+    b = 0.5 * w @ (F(Z + d_state * v, fold.omega) - 2 * F(Z, fold.omega) + F(Z - d_state * v, fold.omega)) \
+        / d_state**2 / (w @ v)
+    return float(math.pi**2 / (abs(a * b) * wait**2))

@@ -1,0 +1,102 @@
+"""Plant + adaptive controller + reference as one co-simulation unit (the monolithic closed loop).
+
+The state is (x, v, theta^): the plant model (fidelity 0, 1, 2 of models.py) with U = the control law, and the
+nine estimates as extra first-order states of the plant's integrators (integrate.py, `rates`). The reference
+is a closed form (tracking.py) evaluated at every stage.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .control import ERRATA_INITIAL_ESTIMATES, Controller, Gains, Law, validate_estimates
+from .integrate import Dop853, Rk4
+from .models import Fidelity, make_model
+from .parameters import ParameterError, Scene, validate
+from .plant import RK4_DEFAULT_STEP, TIME_TOLERANCE, Settings, Solver
+from .tracking import ReferenceSettings, make_reference
+
+# ERRATA §3.5 simulation: the plant starts at x(0) = 0.06, x'(0) = 0.01, off the reference.
+ERRATA_SCENE = Scene(x_start=0.06, v_start=0.01)
+PLANT_FIDELITIES = (Fidelity.EXACT, Fidelity.POLYNOMIAL, Fidelity.POLYNOMIAL_PAPER)
+
+
+@dataclass(frozen=True)
+class LoopSettings:
+    law: int = Law.PAPER_CORRECTED
+    gains: Gains = field(default_factory=Gains)
+    estimates: tuple[float, ...] = ERRATA_INITIAL_ESTIMATES
+    reference: ReferenceSettings = field(default_factory=ReferenceSettings)
+
+    def validate(self) -> None:
+        if self.law not in set(Law):
+            raise ParameterError("law", self.law, f"must be one of {[int(law) for law in Law]}")
+        self.gains.validate()
+        validate_estimates(self.estimates)
+        self.reference.validate()
+
+
+class ClosedLoop:
+    """Scene + plant settings + loop settings -> a steppable closed loop. Raises ParameterError for bad input."""
+
+    def __init__(self, scene: Scene, settings: Settings, loop: LoopSettings, t0: float = 0.0,
+                 stop_time: float | None = None, cache_dirs: tuple = ()):
+        validate(scene)
+        settings.validate()
+        loop.validate()
+        if settings.fidelity not in PLANT_FIDELITIES:
+            raise ParameterError("fidelity", settings.fidelity, "the closed loop's plant must be 0, 1 or 2")
+        self.model = make_model(scene, settings.fidelity)
+        self.controller = Controller(scene, loop.gains, loop.law)
+        self.reference, note = make_reference(scene, loop.reference, t0, stop_time, cache_dirs)
+        self.notes = [note]
+        self.t = t0
+        self._stage = (None, None, None, None, None)  # (t, x, v, theta^, U) of the last rates() call
+        theta0 = np.array(loop.estimates, dtype=float)
+        if settings.solver == Solver.ADAPTIVE:
+            self.integrator = Dop853(self._accel, self.model.events, t0, scene.x_start, scene.v_start, theta0,
+                                     settings.rtol, settings.max_step or math.inf, rates=self._rates)
+        else:
+            self.integrator = Rk4(self._accel, self.model.events, t0, scene.x_start, scene.v_start, theta0,
+                                  settings.max_step or RK4_DEFAULT_STEP, rates=self._rates)
+
+    # The integrators call rates(t, x, v, theta^) and then accel(t, x, v, theta^) at each stage: the control
+    # U computed for the first is reused by the second.
+    def _rates(self, t, x, v, theta_hat):
+        ref = self.reference.state(t)
+        U = self.controller.control(t, x, v, ref, theta_hat)
+        self._stage = (t, x, v, theta_hat, U)
+        return self.controller.rates(t, x, v, ref)
+
+    def _accel(self, t, x, v, theta_hat):
+        st, sx, sv, s_theta, U = self._stage
+        if not (t == st and x == sx and v == sv and theta_hat is s_theta):
+            U = self.controller.control(t, x, v, self.reference.state(t), theta_hat)
+        return self.model.accel(t, x, v, U)
+
+    def do_step(self, t: float, h: float) -> dict:
+        """Advance from the communication point t to t + h. Raises ParameterError for a bad step,
+        IntegrationError (TerminalEvent for pull-in) when the loop cannot be advanced."""
+        if not (math.isfinite(h) and h > 0.0):
+            raise ParameterError("communicationStepSize", h, "must be a finite number > 0")
+        if not (math.isfinite(t) and abs(t - self.t) <= TIME_TOLERANCE * max(1.0, abs(t))):
+            raise ParameterError("currentCommunicationPoint", t, f"the closed loop is at tau = {self.t!r}")
+        self.integrator.advance(t + h)
+        self.t = t + h
+        return self.outputs()
+
+    def outputs(self) -> dict:
+        x, v = self.integrator.value_at(self.t)
+        return self.outputs_at(self.t, x, v, self.integrator.U_at(self.t))
+
+    def outputs_at(self, t: float, x: float, v: float, theta_hat) -> dict:
+        """x, v, x_ref, U, e1, e2, V, dV/dt (chain rule), the dV/dt the law promises, and the estimates."""
+        c = self.controller
+        ref = self.reference.state(t)
+        U = c.control(t, x, v, ref, theta_hat)
+        e1, e2 = c.errors(x, v, ref)
+        rate = c.lyapunov_rate(x, v, self.model.accel(t, x, v, U), ref, theta_hat, c.rates(t, x, v, ref))
+        return {"x": x, "v": v, "x_ref": ref[0], "U": U, "e1": e1, "e2": e2, "V": c.lyapunov(e1, e2, theta_hat),
+                "V_rate": rate, "V_rate_promised": c.promised_rate(e1, e2), "estimates": tuple(map(float, theta_hat))}

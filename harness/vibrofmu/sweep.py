@@ -1,0 +1,147 @@
+"""Brute-force frequency sweeps with the plant FMU itself: up and down in omega, each point continued
+from the previous point's end state, each run until the transient has decayed.
+
+Settling criterion (stated in every result): the complex first-harmonic coefficient c (amplitude and
+phase: the slow-flow point A - iB) is measured over windows of WINDOW_PERIODS forcing periods. Near a
+steady state c - c* ~ e^(lambda t) with Re lambda = -mu/2 for a focus (tr J = -mu; ERRATA §3.4(e)), so
+the step between two windows bounds what is left: |c_w - c_(w-1)| / (1 - e^(-mu T_w/2)) <=
+SETTLE_TOLERANCE * |c_w|. The complex c is used, not |c|: on a slow spiral |c| can stand still while c
+moves. Close to a fold the slow eigenvalue tends to 0 and the bound is optimistic. A point that does
+not settle within MAX_PERIODS is kept and flagged.
+"""
+from __future__ import annotations
+
+import math
+import shutil
+from dataclasses import dataclass
+
+import numpy as np
+from fmpy import extract
+from fmpy.fmi1 import FMICallException
+
+from vibromodel.parameters import Scene
+from vibromodel.plant import Settings
+
+from .run import FmuInstance, _reason
+from .simulate import start_values
+
+WINDOW_PERIODS = 10
+SAMPLES_PER_PERIOD = 32  # communication steps per forcing period; the first harmonic is exact for these
+# relative to |c|. Enough to tell the branches apart (> 20 % apart), and not tighter: with Omega near 2 omega
+# (the paper's Omega = 2) the AC drive modulates a steady vibration by ~0.5 % over ~150 periods, so c never
+# stops moving by more than that
+SETTLE_TOLERANCE = 3e-2
+MAX_PERIODS = 1500
+
+
+@dataclass
+class SweepPoint:
+    omega: float
+    r: float  # first-harmonic amplitude |2/T int x e^(-i omega t)| over the last window
+    mean: float
+    settled: bool
+    periods: int  # forcing periods simulated at this frequency
+    end_state: tuple[float, float]
+
+
+@dataclass
+class Sweep:
+    direction: str  # "up" or "down"
+    points: list[SweepPoint]
+    stop_reason: str | None = None  # the FMU stopped early: its log message
+
+    @property
+    def omega(self) -> np.ndarray:
+        return np.array([p.omega for p in self.points])
+
+    @property
+    def r(self) -> np.ndarray:
+        return np.array([p.r for p in self.points])
+
+
+HYSTERESIS_THRESHOLD = 0.05  # up and down amplitudes this far apart (relative) are on different branches
+
+
+def hysteresis_jumps(up: Sweep, down: Sweep) -> list[dict]:
+    """Jumps read off the two sweeps over the same grid: where up and down both settle, on different
+    branches, the response is bistable; the up sweep jumps just past the high end of that interval, the
+    down sweep just past its low end. A point still unsettled is in transit (near a fold the jump can
+    outlast MAX_PERIODS) and is not counted as bistable. Each jump is placed midway between the last point
+    on the old branch and the next grid point (error <= half a step)."""
+    omega = up.omega
+    r_down = down.r[::-1]  # the down sweep ran over the same grid in reverse
+    if len(down.points) != len(up.points) or not np.allclose(omega, down.omega[::-1], rtol=0, atol=1e-15):
+        return []
+    settled = np.array([p.settled for p in up.points]) & np.array([p.settled for p in down.points][::-1])
+    apart = np.abs(up.r - r_down) > HYSTERESIS_THRESHOLD * np.maximum(up.r, r_down)
+    bistable = np.flatnonzero(apart & settled)
+    if bistable.size == 0:
+        return []
+    jumps = []
+    first, last = bistable[0], bistable[-1]
+    if last + 1 < len(omega):
+        jumps.append({"sweep": "up", "omega": 0.5 * (omega[last] + omega[last + 1]),
+                      "r_before": float(up.r[last]), "r_after": float(up.r[last + 1])})
+    if first > 0:
+        jumps.append({"sweep": "down", "omega": 0.5 * (omega[first] + omega[first - 1]),
+                      "r_before": float(r_down[first]), "r_after": float(r_down[first - 1])})
+    return sorted(jumps, key=lambda jump: jump["omega"])
+
+
+def first_harmonic(x: np.ndarray) -> tuple[complex, float]:
+    """(2/N sum x_k e^(-2 pi i k/SAMPLES_PER_PERIOD), mean) over whole periods, x_k at phase 2 pi k/SAMPLES."""
+    phase = np.exp(-2j * np.pi * np.arange(len(x)) / SAMPLES_PER_PERIOD)
+    return complex(2.0 * np.mean(x * phase)), float(np.mean(x))
+
+
+def settle(fmu_path, unzip_dir: str, scene: Scene, settings: Settings) -> SweepPoint:
+    """Run one frequency from the scene's start state until the transient has decayed (module docstring)."""
+    T = 2 * math.pi / scene.omega
+    h = T / SAMPLES_PER_PERIOD
+    decay = 1.0 - math.exp(-scene.mu * WINDOW_PERIODS * T / 2)
+    instance = FmuInstance(fmu_path, unzip_dir=unzip_dir)
+    fmu = instance.fmu
+    refs = instance.value_references(["x", "v"])
+    try:
+        fmu.setupExperiment(startTime=0.0)
+        fmu.enterInitializationMode()
+        instance.set(start_values(scene, settings))
+        fmu.exitInitializationMode()
+        c_previous, step, periods = complex(math.nan), 0, 0
+        while True:
+            x = np.empty(WINDOW_PERIODS * SAMPLES_PER_PERIOD)
+            for k in range(len(x)):
+                fmu.doStep(currentCommunicationPoint=step * h, communicationStepSize=h)
+                step += 1
+                x[k] = fmu.getReal(refs[:1])[0]
+            periods += WINDOW_PERIODS
+            c, mean = first_harmonic(np.roll(x, 1))  # x[k] is at (k + 1) h: roll so that index = phase
+            settled = abs(c - c_previous) <= SETTLE_TOLERANCE * abs(c) * decay
+            if settled or periods >= MAX_PERIODS:
+                state = tuple(fmu.getReal(refs))
+                return SweepPoint(scene.omega, abs(c), mean, settled, periods, state)
+            c_previous = c
+    finally:
+        instance.close()
+
+
+def sweep(fmu_path, scene: Scene, omegas, settings: Settings = Settings(), progress=None) -> Sweep:
+    """Sweep through omegas in the given order (increasing: up, decreasing: down); each point starts
+    from the previous point's end state, which lies at phase 0 of its forcing (whole periods)."""
+    omegas = [float(w) for w in omegas]
+    direction = "up" if omegas[-1] > omegas[0] else "down"
+    unzip_dir = extract(str(fmu_path))
+    points, current = [], scene
+    try:
+        for i, omega in enumerate(omegas):
+            try:
+                point = settle(fmu_path, unzip_dir, current.with_values(omega=omega), settings)
+            except FMICallException as error:
+                return Sweep(direction, points, f"at omega = {omega:.8g}: {error}")
+            points.append(point)
+            current = current.with_values(x_start=point.end_state[0], v_start=point.end_state[1])
+            if progress is not None:
+                progress(i + 1, len(omegas))
+    finally:
+        shutil.rmtree(unzip_dir, ignore_errors=True)
+    return Sweep(direction, points)
