@@ -155,14 +155,21 @@ def cmd_oafm(args) -> int:
           f"max |x~ - x_ref| = {extrapolation['max_abs_error']:.3e}")
     print(summary["verdict"])
     check = summary.get("fmu_check")
-    if check and "error" in check:
-        print(f"error: FMU fidelity 4: {check['error']}", file=sys.stderr)
+    if failed(check, "FMU fidelity 4"):
         return 1
     if check:
         print(f"FMU fidelity 4 vs this fit: max |dx| = {check['max_abs_difference_x']:.2e}; cost per doStep "
               f"{1e6 * check['seconds_per_step_fidelity_4']:.1f} us = {check['cost_ratio_4_over_0']:.2f} x fidelity 0")
     print(f"wrote {args.out}/summary.json, oafm.csv, oafm.png" + (", convergence.png" if orders else ""))
     return 0
+
+
+def failed(check: dict | None, label: str) -> bool:
+    """A check that could not run (an FMU stopped): say why on stderr."""
+    if check and "error" in check:
+        print(f"error: {label}: {check['error']}", file=sys.stderr)
+        return True
+    return False
 
 
 def cmd_stability(args) -> int:
@@ -199,8 +206,7 @@ def cmd_stability(args) -> int:
               f"difference to the slow flow {sweep['max_relative_difference_to_slow_flow']:.2e} at the "
               f"{sweep['points_compared']} settled points away from the folds")
     check = summary.get("fidelity_3")
-    if check and "error" in check:
-        print(f"error: fidelity 3 check: {check['error']}", file=sys.stderr)
+    if failed(check, "fidelity 3 check"):
         return 1
     if check:
         print(f"fidelity 3 vs 0 after the transient: max |dx| = {check['max_abs_error_after_transient']:.2e} "
