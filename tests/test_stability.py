@@ -119,3 +119,10 @@ def test_cli_writes_summary_and_plot(tmp_path):
 def test_cli_refuses_a_bad_range(tmp_path, capsys):
     assert main(["stability", "--no-fmu", "--omega-range", "1.2", "0.8", "11", "--out", str(tmp_path)]) == 2
     assert "omega-range" in capsys.readouterr().err
+
+
+def test_a_sweep_that_hits_pull_in_says_why(plant_fmu):
+    """R = 0.2 puts the electrode at x = 0.3: the forced vibration from x_start = 0.29 pulls in at once."""
+    scene = Scene(R=0.2, x_start=0.29)
+    result = sweep(plant_fmu, scene, [scene.omega, scene.omega + 0.01])
+    assert result.points == [] and "pull-in" in result.stop_reason

@@ -94,8 +94,13 @@ def first_harmonic(x: np.ndarray) -> tuple[complex, float]:
     return complex(2.0 * np.mean(x * phase)), float(np.mean(x))
 
 
+class SweepStopped(RuntimeError):
+    """The FMU refused a call during a sweep; the message carries its log message."""
+
+
 def settle(fmu_path, unzip_dir: str, scene: Scene, settings: Settings) -> SweepPoint:
-    """Run one frequency from the scene's start state until the transient has decayed (module docstring)."""
+    """Run one frequency from the scene's start state until the transient has decayed (module docstring).
+    Raises SweepStopped with the FMU's own log message if the FMU fails."""
     T = 2 * math.pi / scene.omega
     h = T / SAMPLES_PER_PERIOD
     decay = 1.0 - math.exp(-scene.mu * WINDOW_PERIODS * T / 2)
@@ -121,6 +126,8 @@ def settle(fmu_path, unzip_dir: str, scene: Scene, settings: Settings) -> SweepP
                 state = tuple(fmu.getReal(refs))
                 return SweepPoint(scene.omega, abs(c), mean, settled, periods, state)
             c_previous = c
+    except FMICallException as error:
+        raise SweepStopped(_reason(error, instance.log)) from None
     finally:
         instance.close()
 
@@ -136,7 +143,7 @@ def sweep(fmu_path, scene: Scene, omegas, settings: Settings = Settings(), progr
         for i, omega in enumerate(omegas):
             try:
                 point = settle(fmu_path, unzip_dir, current.with_values(omega=omega), settings)
-            except FMICallException as error:
+            except SweepStopped as error:
                 return Sweep(direction, points, f"at omega = {omega:.8g}: {error}")
             points.append(point)
             current = current.with_values(x_start=point.end_state[0], v_start=point.end_state[1])
