@@ -6,14 +6,16 @@ input is set. The estimates are the controller's states. Method: inside doStep(t
 (zero-order hold), so the update law's right-hand side lambda2 Lambda^-1 phi(x, v, tau) e2 depends on tau
 only and is integrated exactly in closed form (vibromodel.control.Controller.increment). V uses the true
 theta of the model parameters (a diagnostic; only paper-literal also reads the true Delta, as Eq. 78 does).
-No physics here; the FMI error handling is slave_support.StatusSlave's.
+No physics here; the FMI error handling and the FMU state are slave_support.StatusSlave's; the state's model
+part is the estimates and the controller's time (HeldInputEstimator.snapshot), the inputs held over a step
+are FMI variables, the controller is rebuilt from the parameters.
 """
 import numpy as np
 from pythonfmu import DefaultExperiment, Fmi2Causality, Real
 
 from slave_support import MODEL_PARAMETERS, StatusSlave
-from vibromodel.control import ESTIMATE_NAMES, Controller, validate_estimates
-from vibromodel.parameters import ParameterError, Scene, validate
+from vibromodel.control import ESTIMATE_NAMES, HeldInputEstimator
+from vibromodel.parameters import ParameterError, Scene
 from vibromodel.plant import DEFAULT_EXPERIMENT, TIME_TOLERANCE
 
 INPUTS = ("x", "v", "x_ref", "v_ref", "a_ref")
@@ -24,6 +26,7 @@ class AdaptiveLyapunovController(StatusSlave):
     author = "vibrofmu"
     description = "Adaptive Lyapunov tracking controller of the Hertzian-contact oscillator (ERRATA §3.5)"
     default_experiment = DefaultExperiment(*DEFAULT_EXPERIMENT)
+    state_format = "AdaptiveLyapunovController state 1"
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
@@ -37,21 +40,19 @@ class AdaptiveLyapunovController(StatusSlave):
                                         setter=lambda value, name=name: self._set_input(name, value)))
         self._outputs(OUTPUTS, (0.0, 0.0, 0.0, 0.0))
         self._outputs(ESTIMATE_NAMES, [getattr(self, f"{name}_start") for name in ESTIMATE_NAMES], "estimate")
-        self.controller = self.theta_hat = None
-        self.t = 0.0
 
     def exit_initialization_mode(self):
         self._initialise(self._start)
 
     def _start(self):
-        scene = Scene(**{name: float(getattr(self, name)) for name in MODEL_PARAMETERS})
-        validate(scene)
-        law, gains, estimates = self._controller_settings()
-        validate_estimates(estimates)
-        self.controller = Controller(scene, gains, law)
-        self.theta_hat = np.array(estimates)
-        self.t = float(self.start_time)
+        self.model = self._make_model()
         self._publish()
+
+    def _make_model(self):
+        """The estimator of the current parameters and experiment; raises ParameterError for bad ones."""
+        scene = Scene(**{name: float(getattr(self, name)) for name in MODEL_PARAMETERS})
+        law, gains, estimates = self._controller_settings()
+        return HeldInputEstimator(scene, gains, law, estimates, float(self.start_time))
 
     def _set_input(self, name, value):
         setattr(self, name, value)
@@ -66,11 +67,12 @@ class AdaptiveLyapunovController(StatusSlave):
 
     def _publish(self):
         """U, e1, e2, V at the controller's time from the current inputs and estimates."""
-        c, x, v, ref = self.controller, float(self.x), float(self.v), self._reference()
+        model, x, v, ref = self.model, float(self.x), float(self.v), self._reference()
+        c, theta_hat = model.controller, model.theta_hat
         e1, e2 = c.errors(x, v, ref)
-        values = {"U": c.control(self.t, x, v, ref, self.theta_hat), "e1": e1, "e2": e2,
-                  "V": c.lyapunov(e1, e2, self.theta_hat)}
-        self._set_finite({**values, **dict(zip(ESTIMATE_NAMES, map(float, self.theta_hat)))})
+        values = {"U": c.control(model.t, x, v, ref, theta_hat), "e1": e1, "e2": e2,
+                  "V": c.lyapunov(e1, e2, theta_hat)}
+        self._set_finite({**values, **dict(zip(ESTIMATE_NAMES, map(float, theta_hat)))})
 
     def do_step(self, current_time, step_size):
         return self._guarded_step(current_time, lambda: self._step(current_time, step_size))
@@ -79,12 +81,10 @@ class AdaptiveLyapunovController(StatusSlave):
         """theta^(t + h) = theta^(t) + the exact integral of the update law with the inputs held."""
         if not (np.isfinite(h) and h > 0.0):
             raise ParameterError("communicationStepSize", h, "must be a finite number > 0")
-        if not abs(t - self.t) <= TIME_TOLERANCE * max(1.0, abs(t)):
-            raise ParameterError("currentCommunicationPoint", t, f"the controller is at tau = {self.t!r}")
+        if not (np.isfinite(t) and abs(t - self.model.t) <= TIME_TOLERANCE * max(1.0, abs(t))):
+            raise ParameterError("currentCommunicationPoint", t, f"the controller is at tau = {self.model.t!r}")
         for name in INPUTS:
             if not np.isfinite(getattr(self, name)):
                 raise ParameterError(name, getattr(self, name), "input must be a finite number")
-        self.theta_hat = self.theta_hat + self.controller.increment(t, h, float(self.x), float(self.v),
-                                                                    self._reference())
-        self.t = t + h
+        self.model.advance(t, h, float(self.x), float(self.v), self._reference())
         self._publish()

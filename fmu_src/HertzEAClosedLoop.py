@@ -1,7 +1,8 @@
 """FMI 2.0 co-simulation slave of plant + adaptive controller + reference in one FMU (DESIGN.md contract):
 FMI variables <-> vibromodel.closedloop.ClosedLoop. The plant, the nine estimates and the reference are
 integrated together by the plant's integrators (adaptive DOP853 or RK4, `solver`).
-No physics here; the FMI error handling is slave_support.StatusSlave's.
+No physics here; the FMI error handling and the FMU state are slave_support.StatusSlave's; the state's model
+part is ClosedLoop.snapshot() (integrator with the estimates), the loop is rebuilt from the parameters.
 """
 from pythonfmu import DefaultExperiment, Integer, Real
 from pythonfmu.enums import Fmi2Status
@@ -20,6 +21,7 @@ class HertzEAClosedLoop(StatusSlave):
     author = "vibrofmu"
     description = "Hertzian-contact oscillator under adaptive Lyapunov tracking control, monolithic (ERRATA §3.5)"
     default_experiment = DefaultExperiment(*DEFAULT_EXPERIMENT)
+    state_format = "HertzEAClosedLoop state 1"
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
@@ -39,12 +41,18 @@ class HertzEAClosedLoop(StatusSlave):
         self._controller_parameters()
         self._outputs(OUTPUTS, (scene.x_start, scene.v_start) + (0.0,) * (len(OUTPUTS) - 2))
         self._outputs(ESTIMATE_NAMES, [getattr(self, f"{name}_start") for name in ESTIMATE_NAMES], "estimate")
-        self.loop = None
 
     def exit_initialization_mode(self):
         self._initialise(self._start)
 
     def _start(self):
+        self.model = self._make_model()
+        for note in self.model.notes:
+            self.log(note, Fmi2Status.ok)
+        self._publish(self.model.outputs())
+
+    def _make_model(self):
+        """The closed loop of the current parameters and experiment; raises ParameterError for bad ones."""
         scene = Scene(**{name: float(getattr(self, name)) for name in scene_names()})
         rtol = self.rtol if self.experiment_tolerance is None else self.experiment_tolerance
         settings = Settings(fidelity=int(self.fidelity), solver=int(self.solver), rtol=float(rtol),
@@ -53,14 +61,11 @@ class HertzEAClosedLoop(StatusSlave):
         reference = ReferenceSettings(kind=int(self.reference), x_start=float(self.x_ref_start),
                                       v_start=float(self.v_ref_start))
         loop = LoopSettings(law=law, gains=gains, estimates=estimates, reference=reference)
-        self.loop = ClosedLoop(scene, settings, loop, t0=float(self.start_time), stop_time=self.stop_time,
-                               cache_dirs=self._cache_dirs())
-        for note in self.loop.notes:
-            self.log(note, Fmi2Status.ok)
-        self._publish(self.loop.outputs())
+        return ClosedLoop(scene, settings, loop, t0=float(self.start_time), stop_time=self.stop_time,
+                          cache_dirs=self._cache_dirs())
 
     def do_step(self, current_time, step_size):
-        return self._guarded_step(current_time, lambda: self._publish(self.loop.do_step(current_time, step_size)))
+        return self._guarded_step(current_time, lambda: self._publish(self.model.do_step(current_time, step_size)))
 
     def _publish(self, out):
         self._set_finite({**{name: out[name] for name in OUTPUTS}, **dict(zip(ESTIMATE_NAMES, out["estimates"]))})

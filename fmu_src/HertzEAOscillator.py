@@ -1,31 +1,25 @@
 """FMI 2.0 co-simulation slave of the plant (DESIGN.md contract): FMI variables <-> vibromodel.Plant.
 
-No physics here; the FMI error handling and the rules for setting variables are slave_support.StatusSlave's.
-
-FMU state (fmi2GetFMUstate & co.): every FMI variable, the fields in RUN_FIELDS and the plant's
-snapshot (integrator included); the plant itself is rebuilt from the parameters on restore.
-pythonfmu keeps the object _get_fmu_state returns as the state and hands it to _set_fmu_state as is,
-possibly several times, so both sides copy. fmi2Reset makes a new slave object (pythonfmu), i.e. the
-state after fmi2Instantiate.
+No physics here; the FMI error handling, the rules for setting variables and the FMU state are
+slave_support.StatusSlave's. The state's model part is the plant's snapshot (integrator included); the
+plant itself is rebuilt from the parameters on restore.
 """
 from pythonfmu import Boolean, DefaultExperiment, Fmi2Causality, Fmi2Variability, Integer, Real
 from pythonfmu.enums import Fmi2Initial, Fmi2Status
 
-from slave_support import STATUS_ERROR, StatusSlave
-from vibromodel import snapshot
+from slave_support import StatusSlave
 from vibromodel.analytic import OafmSettings
 from vibromodel.parameters import Scene, scene_names
 from vibromodel.plant import DEFAULT_EXPERIMENT, Plant, Settings
 
 OUTPUTS = ("x", "v", "a", "F_contact", "F_electrostatic")
-RUN_FIELDS = ("halted", "initialised", "start_time", "stop_time", "experiment_tolerance")  # in the FMU state
-STATE_FORMAT = "HertzEAOscillator state 1"
 
 
 class HertzEAOscillator(StatusSlave):
     author = "vibrofmu"
     description = "Hertzian-contact oscillator with two-sided electrostatic actuation (PAPER Eq. 3, ERRATA §3.1)"
     default_experiment = DefaultExperiment(*DEFAULT_EXPERIMENT)
+    state_format = "HertzEAOscillator state 2"
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
@@ -48,18 +42,17 @@ class HertzEAOscillator(StatusSlave):
         self.in_contact = True
         self.register_variable(Boolean("in_contact", causality=Fmi2Causality.output,
                                        variability=Fmi2Variability.discrete, initial=Fmi2Initial.exact))
-        self.plant = None
 
     def exit_initialization_mode(self):
         self._initialise(self._start)
 
     def _start(self):
-        self.plant = self._make_plant()
-        for note in self.plant.notes:
+        self.model = self._make_model()
+        for note in self.model.notes:
             self.log(note, Fmi2Status.ok)
-        self._publish(self.plant.outputs())
+        self._publish(self.model.outputs())
 
-    def _make_plant(self):
+    def _make_model(self):
         """The plant of the current parameters and experiment; raises ParameterError for bad ones."""
         scene = Scene(**{name: float(getattr(self, name)) for name in scene_names()})
         rtol = self.rtol if self.experiment_tolerance is None else self.experiment_tolerance
@@ -72,54 +65,9 @@ class HertzEAOscillator(StatusSlave):
 
     def do_step(self, current_time, step_size):
         return self._guarded_step(
-            current_time, lambda: self._publish(self.plant.do_step(current_time, step_size, float(self.U))),
-            lambda error: self._publish(self.plant.outputs_at(error.t, error.x, error.v)))
+            current_time, lambda: self._publish(self.model.do_step(current_time, step_size, float(self.U))),
+            lambda error: self._publish(self.model.outputs_at(error.t, error.x, error.v)))
 
     def _publish(self, out):
         self._set_finite({**dict(zip(OUTPUTS, (out.x, out.v, out.a, out.F_contact, out.F_electrostatic))),
                           "in_contact": out.in_contact})
-
-    # -- FMU state ------------------------------------------------------------------------------------
-    def _get_fmu_state(self):
-        return {
-            "format": STATE_FORMAT,
-            "variables": super()._get_fmu_state(),
-            "run": {name: getattr(self, name) for name in RUN_FIELDS},
-            "plant": None if self.plant is None else self.plant.snapshot(),
-        }
-
-    def _set_fmu_state(self, state):
-        try:
-            self._restore(state)
-        except Exception as error:  # a foreign or damaged state: refuse, never raise
-            self._halt(f"fmi2SetFMUstate refused: not a state of this FMU ({error!r})")
-            return
-        if self.fmi_status == STATUS_ERROR:
-            self.log(f"restored a state saved after an error: {self.halted or 'a call had failed'}",
-                     Fmi2Status.error)
-
-    def _restore(self, state):
-        if state.get("format") != STATE_FORMAT:
-            raise ValueError(f"format {state.get('format')!r}, expected {STATE_FORMAT!r}")
-        variables = state["variables"]
-        for var in self.vars.values():  # not through the setters: a state may hold any value
-            setattr(self, var.local_name, variables[var.name])
-        for name in RUN_FIELDS:
-            setattr(self, name, state["run"][name])
-        self.plant = None
-        if state["plant"] is not None:
-            self.plant = self._make_plant()
-            self.plant.restore(state["plant"])
-
-    @staticmethod
-    def _fmu_state_to_bytes(state):
-        return snapshot.to_bytes(state)
-
-    @staticmethod
-    def _fmu_state_from_bytes(data):
-        """Never raises (pythonfmu would turn it into fmi2Fatal): bad bytes give a state that
-        fmi2SetFMUstate refuses with fmi2Error."""
-        try:
-            return snapshot.from_bytes(data)
-        except Exception as error:
-            return {"format": f"unreadable ({error!r})"}

@@ -1,6 +1,7 @@
 """What every vibrofmu FMI slave shares: fixed parameters, the `fmi_status` flag read by the status shim
-(fmu_src/fmi2_status_shim.c), error logging, the experiment's start/stop/tolerance, and the controller's
-parameters (law, gains, initial estimates) used by the controller and the closed-loop FMUs.
+(fmu_src/fmi2_status_shim.c), error logging, the experiment's start/stop/tolerance, the FMU state
+(fmi2GetFMUstate & co.), and the controller's parameters (law, gains, initial estimates) used by the
+controller and the closed-loop FMUs.
 
 No physics here. No Python exception may leave a callback (pythonfmu turns it into fmi2Fatal and destroys the
 instance): errors are logged with the parameter and value, `fmi_status` is set to 3 and the shim returns
@@ -12,17 +13,29 @@ from pathlib import Path
 from pythonfmu import Fmi2Causality, Fmi2Slave, Fmi2Variability, Integer, Real
 from pythonfmu.enums import Fmi2Initial, Fmi2Status
 
+from vibromodel import snapshot
 from vibromodel.control import ERRATA_INITIAL_ESTIMATES, ESTIMATE_NAMES, GAIN_NAMES, Gains, Law
 from vibromodel.integrate import IntegrationError
 from vibromodel.parameters import ParameterError, scene_names
 
 STATUS_OK, STATUS_ERROR = 0, 3
+RUN_FIELDS = ("halted", "initialised", "start_time", "stop_time", "experiment_tolerance")  # in the FMU state
 # The scene's parameters without the plant's initial state (the controller's view of the plant).
 MODEL_PARAMETERS = tuple(name for name in scene_names() if name not in ("x_start", "v_start"))
 
 
 class StatusSlave(Fmi2Slave):
-    """Base of the vibrofmu slaves: subclasses register their variables and call _error/_halt on failure."""
+    """Base of the vibrofmu slaves: subclasses register their variables and call _error/_halt on failure.
+
+    FMU state: every FMI variable, the fields in RUN_FIELDS and the snapshot of the subclass's `model`
+    (None before initialisation). A subclass names its state format (`state_format`, changed whenever
+    its state changes shape) and supplies _make_model(), the model of the current parameters and
+    experiment; the model supplies snapshot() (plain data, see vibromodel.snapshot) and restore().
+    pythonfmu keeps the object _get_fmu_state returns as the state and hands it to _set_fmu_state as is,
+    possibly several times, so both sides copy. fmi2Reset makes a new slave object (pythonfmu), i.e. the
+    state after fmi2Instantiate.
+    """
+    state_format = None  # "<slave> state <version>"
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
@@ -33,6 +46,7 @@ class StatusSlave(Fmi2Slave):
         self.halted = "the FMU has not been initialised"  # why doStep refuses, or None
         self.initialised = False  # exitInitializationMode was called: only inputs may be set
         self.start_time, self.stop_time, self.experiment_tolerance = 0.0, None, None
+        self.model = None  # built by _make_model() at exitInitializationMode
 
     def _parameter(self, kind, name, value, description=None):
         """A fixed parameter with its start value."""
@@ -77,6 +91,8 @@ class StatusSlave(Fmi2Slave):
             self.halted = None
         except ParameterError as error:
             self._halt(f"{error}")
+        except IntegrationError as error:  # the model cannot even start (e.g. beyond its numerical range)
+            self._halt(f"simulation stopped: {error}")
         except Exception as error:  # never let an exception reach pythonfmu (fmi2Fatal)
             self._halt(f"initialisation failed: {error!r}")
 
@@ -101,6 +117,55 @@ class StatusSlave(Fmi2Slave):
         except Exception as error:
             self._halt(f"doStep failed at tau = {current_time!r}: {error!r}")
         return False
+
+    # -- FMU state -----------------------------------------------------------------------------------
+    def _make_model(self):
+        """The model of the current parameters and experiment; raises ParameterError for bad ones."""
+        raise NotImplementedError
+
+    def _get_fmu_state(self):
+        return {
+            "format": self.state_format,
+            "variables": super()._get_fmu_state(),
+            "run": {name: getattr(self, name) for name in RUN_FIELDS},
+            "model": None if self.model is None else self.model.snapshot(),
+        }
+
+    def _set_fmu_state(self, state):
+        try:
+            self._restore(state)
+        except Exception as error:  # a foreign or damaged state: refuse, never raise
+            self._halt(f"fmi2SetFMUstate refused: not a state of this FMU ({error!r})")
+            return
+        if self.fmi_status == STATUS_ERROR:
+            self.log(f"restored a state saved after an error: {self.halted or 'a call had failed'}",
+                     Fmi2Status.error)
+
+    def _restore(self, state):
+        if state.get("format") != self.state_format:
+            raise ValueError(f"format {state.get('format')!r}, expected {self.state_format!r}")
+        variables = state["variables"]
+        for var in self.vars.values():  # not through the setters: a state may hold any value
+            setattr(self, var.local_name, variables[var.name])
+        for name in RUN_FIELDS:
+            setattr(self, name, state["run"][name])
+        self.model = None
+        if state["model"] is not None:
+            self.model = self._make_model()
+            self.model.restore(state["model"])
+
+    @staticmethod
+    def _fmu_state_to_bytes(state):
+        return snapshot.to_bytes(state)
+
+    @staticmethod
+    def _fmu_state_from_bytes(data):
+        """Never raises (pythonfmu would turn it into fmi2Fatal): bad bytes give a state that
+        fmi2SetFMUstate refuses with fmi2Error."""
+        try:
+            return snapshot.from_bytes(data)
+        except Exception as error:
+            return {"format": f"unreadable ({error!r})"}
 
     # -- setting variables: FMI 2.0 rules, refusals logged and flagged (never raised) -----------------
     def set_real(self, vrs, values):

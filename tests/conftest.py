@@ -38,26 +38,41 @@ def run_plant(plant_fmu):
     return run
 
 
-@pytest.fixture(scope="session")
-def plant_unzipped(plant_fmu, tmp_path_factory):
-    """The plant FMU extracted once, for tests that make many instances in this process."""
-    from fmpy import extract
+def _unzipped_fixture(name):
+    """<name>_unzipped: the FMU extracted once, for tests that make many instances in this process."""
 
-    return extract(str(plant_fmu), str(tmp_path_factory.mktemp("plant_unzipped")))
+    @pytest.fixture(scope="session", name=f"{name}_unzipped")
+    def unzipped(request, tmp_path_factory):
+        from fmpy import extract
+
+        return extract(str(request.getfixturevalue(f"{name}_fmu")), str(tmp_path_factory.mktemp(f"{name}_unzipped")))
+
+    return unzipped
 
 
-@pytest.fixture(scope="session")
-def start_plant(plant_fmu, plant_unzipped):
-    """start_plant(stop_time=None, **start_values) -> FmuInstance in step mode at tau = 0 (the caller
+def _starter_fixture(name):
+    """start_<name>: start(stop_time=None, **start_values) -> FmuInstance in step mode at tau = 0 (the caller
     closes it); raises FMICallException if initialisation fails."""
-    from vibrofmu.run import FmuInstance
 
-    def start(stop_time=None, **start_values):
-        instance = FmuInstance(plant_fmu, unzip_dir=plant_unzipped)
-        instance.fmu.setupExperiment(startTime=0.0, stopTime=stop_time)
-        instance.fmu.enterInitializationMode()
-        instance.set(start_values)
-        instance.fmu.exitInitializationMode()
-        return instance
+    @pytest.fixture(scope="session", name=f"start_{name}")
+    def starter(request):
+        from vibrofmu.run import FmuInstance
 
-    return start
+        fmu, unzipped = request.getfixturevalue(f"{name}_fmu"), request.getfixturevalue(f"{name}_unzipped")
+
+        def start(stop_time=None, **start_values):
+            instance = FmuInstance(fmu, unzip_dir=unzipped)
+            instance.fmu.setupExperiment(startTime=0.0, stopTime=stop_time)
+            instance.fmu.enterInitializationMode()
+            instance.set(start_values)
+            instance.fmu.exitInitializationMode()
+            return instance
+
+        return start
+
+    return starter
+
+
+FMU_NAMES = ("plant", "controller", "closed_loop")
+plant_unzipped, controller_unzipped, closed_loop_unzipped = map(_unzipped_fixture, FMU_NAMES)
+start_plant, start_controller, start_closed_loop = map(_starter_fixture, FMU_NAMES)

@@ -3,6 +3,10 @@
 The state is (x, v, theta^): the plant model (fidelity 0, 1, 2 of models.py) with U = the control law, and the
 nine estimates as extra first-order states of the plant's integrators (integrate.py, `rates`). The reference
 is a closed form (tracking.py) evaluated at every stage.
+
+A snapshot (FMU state) holds the loop's time and its integrator's complete numeric state: time, x, v, the
+estimates' vector in the U slot and its rates, step size, stages and dense output, contact-event side,
+counters. The reference is a function of time only: it is rebuilt with the model and the controller.
 """
 from __future__ import annotations
 
@@ -11,16 +15,19 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .control import ERRATA_INITIAL_ESTIMATES, Controller, Gains, Law, validate_estimates
+from .control import ERRATA_INITIAL_ESTIMATES, Controller, Gains, Law, validate_estimates, validate_law
 from .integrate import Dop853, Rk4
 from .models import Fidelity, make_model
 from .parameters import ParameterError, Scene, validate
-from .plant import RK4_DEFAULT_STEP, TIME_TOLERANCE, Settings, Solver
+from .plant import INTEGRATOR_REBUILT, RK4_DEFAULT_STEP, TIME_TOLERANCE, Settings, Solver
+from .snapshot import plain_attributes, restore_attributes
 from .tracking import ReferenceSettings, make_reference
 
 # ERRATA §3.5 simulation: the plant starts at x(0) = 0.06, x'(0) = 0.01, off the reference.
 ERRATA_SCENE = Scene(x_start=0.06, v_start=0.01)
 PLANT_FIDELITIES = (Fidelity.EXACT, Fidelity.POLYNOMIAL, Fidelity.POLYNOMIAL_PAPER)
+# What a snapshot leaves out: built by the constructor (_stage is a cache of the last stage's control U).
+LOOP_REBUILT = ("model", "controller", "reference", "integrator", "_stage")
 
 
 @dataclass(frozen=True)
@@ -31,8 +38,7 @@ class LoopSettings:
     reference: ReferenceSettings = field(default_factory=ReferenceSettings)
 
     def validate(self) -> None:
-        if self.law not in set(Law):
-            raise ParameterError("law", self.law, f"must be one of {[int(law) for law in Law]}")
+        validate_law(self.law)
         self.gains.validate()
         validate_estimates(self.estimates)
         self.reference.validate()
@@ -86,6 +92,16 @@ class ClosedLoop:
         self.integrator.advance(t + h)
         self.t = t + h
         return self.outputs()
+
+    def snapshot(self) -> dict:
+        """Everything that decides the loop's future beyond its constructor's arguments, as plain data."""
+        return {"loop": plain_attributes(self, LOOP_REBUILT),
+                "integrator": plain_attributes(self.integrator, INTEGRATOR_REBUILT)}
+
+    def restore(self, snapshot: dict) -> None:
+        """Return a loop built with the same arguments to the moment `snapshot` was taken."""
+        restore_attributes(self, snapshot["loop"], LOOP_REBUILT)
+        restore_attributes(self.integrator, snapshot["integrator"], INTEGRATOR_REBUILT)
 
     def outputs(self) -> dict:
         x, v = self.integrator.value_at(self.t)

@@ -23,7 +23,9 @@ from enum import IntEnum
 import numpy as np
 
 from . import forces
-from .parameters import ParameterError, Scene
+from .models import R_OUT_OF_RANGE
+from .parameters import ParameterError, Scene, validate
+from .snapshot import plain_attributes, restore_attributes
 
 THETA_NAMES = ("mu", "a1", "a2", "a3", "a4", "a5", "Delta", "beta", "gamma")
 ESTIMATE_NAMES = tuple(f"{name}_hat" for name in THETA_NAMES)
@@ -49,6 +51,11 @@ class Law(IntEnum):
             if law.label == label:
                 return law
         raise ParameterError("law", label, f"known laws: {', '.join(law.label for law in cls)}")
+
+
+def validate_law(law) -> None:
+    if law not in set(Law):
+        raise ParameterError("law", law, f"must be one of {[int(law) for law in Law]}")
 
 
 def _positive(name: str, value: float) -> None:
@@ -133,14 +140,17 @@ class Controller:
         gains.validate()
         self.law, self.gains = Law(law), gains
         self.c = gains.c
-        self.theta = true_theta(scene)
         lambdas = np.array(gains.lambdas)
         self.l1, self.l2, self.Lambda = lambdas[0], lambdas[1], lambdas[2:]
         self.adaptation = self.l2 / self.Lambda  # lambda2 Lambda^-1
-        self.phi = Regressor(scene)
         literal = self.law is Law.PAPER_LITERAL
-        # Eq. 81 as printed: -cos tau for Delta^, cos Omega tau for gamma^
-        self.phi_update = Regressor(scene, 1.0, -1.0, scene.Omega) if literal else self.phi
+        try:
+            self.theta = true_theta(scene)
+            self.phi = Regressor(scene)
+            # Eq. 81 as printed: -cos tau for Delta^, cos Omega tau for gamma^
+            self.phi_update = Regressor(scene, 1.0, -1.0, scene.Omega) if literal else self.phi
+        except ArithmeticError:
+            raise ParameterError("R", scene.R, R_OUT_OF_RANGE) from None
         self.true_delta = scene.Delta if literal else None
 
     def errors(self, x: float, v: float, ref) -> tuple[float, float]:
@@ -192,3 +202,30 @@ class Controller:
         if self.law is Law.DAMPED:
             return -self.l1 * self.c * e1 * e1 - self.l2 * self.gains.k_damping * e2 * e2
         return -self.l1**1.5 / math.sqrt(self.l2) * e1 * e1
+
+
+class HeldInputEstimator:
+    """The estimates theta^ of one controller advanced over communication steps with the controller's inputs
+    (x, v, reference) held over each: the controller FMU's model. Its snapshot is theta^ and the time; the
+    controller itself is rebuilt from the arguments. Raises ParameterError for bad arguments."""
+
+    REBUILT = ("controller",)
+
+    def __init__(self, scene: Scene, gains: Gains, law: int, estimates: tuple[float, ...], t0: float = 0.0):
+        validate(scene)
+        validate_law(law)
+        validate_estimates(estimates)
+        self.controller = Controller(scene, gains, law)
+        self.theta_hat = np.array(estimates, dtype=float)
+        self.t = t0
+
+    def advance(self, t: float, h: float, x: float, v: float, ref) -> None:
+        """theta^(t + h) = theta^(t) + the exact integral of the update law with x, v, ref held."""
+        self.theta_hat = self.theta_hat + self.controller.increment(t, h, x, v, ref)
+        self.t = t + h
+
+    def snapshot(self) -> dict:
+        return plain_attributes(self, self.REBUILT)
+
+    def restore(self, snapshot: dict) -> None:
+        restore_attributes(self, snapshot, self.REBUILT)

@@ -14,6 +14,8 @@ from typing import Callable
 from . import forces
 from .parameters import PULL_IN_GAP, ParameterError, Scene
 
+R_OUT_OF_RANGE = "out of range of the series of Eq. 7 (powers of R up to R^5 overflow or vanish)"
+
 
 class Fidelity(IntEnum):
     EXACT = 0
@@ -99,8 +101,7 @@ class PolynomialModel:
             self.g2 = forces.series_g2(scene.R)
             self.g3 = forces.series_g3(scene.R)
         except ArithmeticError:
-            raise ParameterError("R", scene.R, "out of range of the series of Eq. 7 (powers of R up to R^5 "
-                                 "overflow or vanish)") from None
+            raise ParameterError("R", scene.R, R_OUT_OF_RANGE) from None
         self.accel = self._make_accel(scene, self.a, self.g3)
 
     @staticmethod

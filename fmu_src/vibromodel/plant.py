@@ -24,7 +24,7 @@ TIME_TOLERANCE = 1e-9  # relative mismatch allowed between the host's time and t
 MAX_STEPS_PER_DOSTEP = 10**6  # more steps in one doStep: refused up front (step ceiling) or stopped
 # What a snapshot leaves out: built from the scene and settings by the constructor.
 PLANT_REBUILT = ("scene", "settings", "model", "integrator", "solution")
-INTEGRATOR_REBUILT = ("accel", "events")
+INTEGRATOR_REBUILT = ("accel", "events", "rates")
 SLOW_FLOW_REBUILT = ("model", "flow")  # fidelity 3: its table and integration end are plain data
 
 

@@ -15,6 +15,7 @@ import numpy as np
 from scipy.integrate import solve_ivp
 
 from .averaging import Averaged
+from .integrate import IntegrationError
 
 CHUNK = 200.0  # tau covered per integration when the end of the experiment is not known
 MAX_REFINEMENTS = 24
@@ -53,6 +54,9 @@ class SlowFlowSolution:
             if A_new == A and B_new == B:
                 break
             A, B = A_new, B_new
+        if not (math.isfinite(A) and math.isfinite(B)):
+            raise IntegrationError(f"the averaged model has no finite slow state at tau = {t0!r}: the parameters "
+                                   "are beyond its numerical range", t0, x0, v0)
         return A, B
 
     def _start(self, t, Z):

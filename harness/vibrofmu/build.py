@@ -26,34 +26,33 @@ CONTROLLER_FMU = BUILD_DIR / "AdaptiveLyapunovController.fmu"
 CLOSED_LOOP_FMU = BUILD_DIR / "HertzEAClosedLoop.fmu"
 
 
-def build_fmu(slave: Path, out_dir: Path = BUILD_DIR, extra_resources: tuple[Path, ...] = (),
-              fmu_state: bool = False) -> Path:
+def build_fmu(slave: Path, out_dir: Path = BUILD_DIR, extra_resources: tuple[Path, ...] = ()) -> Path:
     """Build out_dir/<slave name>.fmu with vibromodel, slave_support (and extra_resources) in its resources,
-    the status shim installed and the reference result packed. fmu_state: declare state save/restore and
-    serialization (only for slaves that save their whole state: pythonfmu alone saves registered variables)."""
+    the status shim installed and the reference result packed. It declares state save/restore and serialization:
+    the slaves save their whole state (slave_support.StatusSlave; pythonfmu alone saves registered variables only)."""
     out_dir.mkdir(parents=True, exist_ok=True)
     project_files = [FMU_SRC / "vibromodel", FMU_SRC / "slave_support.py", *extra_resources]
     fmu = Path(FmuBuilder.build_FMU(slave, dest=out_dir, project_files=project_files,
-                                    canGetAndSetFMUstate=fmu_state, canSerializeFMUstate=fmu_state))
+                                    canGetAndSetFMUstate=True, canSerializeFMUstate=True))
     status = next(v for v in read_model_description(str(fmu)).modelVariables if v.name == "fmi_status")
     install_status_shim(fmu, status.valueReference)
     pack_reference(fmu)
     return fmu
 
 
-def build_with_default_oafm(slave: Path, scene: Scene, out_dir: Path, fmu_state: bool = False) -> Path:
+def build_with_default_oafm(slave: Path, scene: Scene, out_dir: Path) -> Path:
     """Build with the OAFM solution of `scene` over the default experiment packed in resources/oafm_cache:
     an OAFM reference of that scene starts without a fit."""
     with tempfile.TemporaryDirectory() as tmp:
         cache = Path(tmp) / "oafm_cache"
         start, stop, _ = DEFAULT_EXPERIMENT
         cached_solve(scene, covering(scene, OafmSettings(), stop - start), start, write_dir=cache)
-        return build_fmu(slave, out_dir, extra_resources=(cache,), fmu_state=fmu_state)
+        return build_fmu(slave, out_dir, extra_resources=(cache,))
 
 
 def build_plant(out_dir: Path = BUILD_DIR) -> Path:
     """The plant FMU; fidelity 4 of its default scene starts without a fit."""
-    return build_with_default_oafm(PLANT_SLAVE, Scene(), out_dir, fmu_state=True)
+    return build_with_default_oafm(PLANT_SLAVE, Scene(), out_dir)
 
 
 def build_controller(out_dir: Path = BUILD_DIR) -> Path:
