@@ -38,17 +38,6 @@ def test_fast_moments_match_period_averages():
         assert q[j] == pytest.approx(q_j, abs=64 * EPS * scale * beta)
 
 
-def test_fast_response_derivatives_are_consistent():
-    beta, gamma, Omega, t, h = 0.3, 0.2, 1.7, 0.37, 1e-5
-    x, v, a = av.fast_response(t, beta, gamma, Omega)
-    assert x == pytest.approx(psi(t, beta, gamma, Omega), abs=1e-15)
-    # central differences: error h^2/6 |x'''| ~ 2e-11
-    assert v == pytest.approx((av.fast_response(t + h, beta, gamma, Omega)[0]
-                               - av.fast_response(t - h, beta, gamma, Omega)[0]) / (2 * h), abs=1e-9)
-    assert a == pytest.approx((av.fast_response(t + h, beta, gamma, Omega)[1]
-                               - av.fast_response(t - h, beta, gamma, Omega)[1]) / (2 * h), abs=1e-9)
-
-
 def test_averaged_coefficients_equal_the_period_average_of_the_polynomial_model():
     """Independent of the binomial formula: average a(X + psi) - (beta sin - gamma cos 2) G3(X + psi) over
     a period, as a polynomial in X, by composing polynomials numerically."""

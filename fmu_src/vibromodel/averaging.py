@@ -50,18 +50,6 @@ def fast_moments(beta: float, gamma: float, Omega: float) -> tuple[tuple[float, 
     return m, q
 
 
-def fast_response(t: float, beta: float, gamma: float, Omega: float) -> tuple[float, float, float]:
-    """psi, psi', psi'' of Eq. 46 (ERRATA §3.4(a)): the fast part of x, x = X + psi."""
-    if beta == 0.0 and gamma == 0.0:
-        return 0.0, 0.0, 0.0
-    s1, c1 = math.sin(Omega * t), math.cos(Omega * t)
-    s2, c2 = 2.0 * s1 * c1, c1 * c1 - s1 * s1
-    W = Omega * Omega
-    return (-beta * s1 / W + gamma * c2 / (4 * W),
-            -beta * c1 / Omega - gamma * s2 / (2 * Omega),
-            beta * s1 - gamma * c2)
-
-
 def averaged_coefficients(scene: Scene) -> tuple[float, ...]:
     """A_0..A_5 of the slow equation X'' + mu X' + sum A_k X^k = Delta cos(omega t) (ERRATA §3.4(a)).
 

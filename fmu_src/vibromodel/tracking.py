@@ -6,6 +6,10 @@
 - MULTITONE: ERRATA's reference plus extra tones sum A_k cos(nu_k t): a persistently exciting reference.
 
 All are `AnalyticSolution`s (sums of damped harmonics), so state(t) gives (x~, x~', x~'').
+
+Persistent excitation (acceptance 4, tests/test_estimates.py): `regressor_gram` measures it along a reference,
+G = (1/T) int phi phi^T dt with x1 = x~, x2 = x~'; `excitation_gains` are the adaptation gains lambda_i = G_ii
+(i = 3..11) that make every direction adapt at a comparable rate; `on_reference` starts the plant on x~.
 """
 from __future__ import annotations
 
@@ -13,10 +17,16 @@ from dataclasses import dataclass
 from enum import IntEnum
 
 from .analytic import OafmSettings, cached_solve, covering
+import numpy as np
+
 from .closedform import Terms
+from .control import Gains, Regressor
 from .oafm import AnalyticSolution, Piece
 from .oafm_bases import eq11_operator
 from .parameters import ParameterError, Scene
+
+# G is averaged over [GRAM_START, GRAM_START + GRAM_SPAN] (after the free part of x0 has decayed) every GRAM_STEP.
+GRAM_START, GRAM_SPAN, GRAM_STEP = 50.0, 2000.0, 0.05
 
 # Persistent excitation (tests/test_closed_loop.py, README): tones incommensurate with each other and with
 # omega, Omega, 2 Omega, large enough that x1^4 and x1^5 are not negligible.
@@ -71,3 +81,45 @@ def make_reference(scene: Scene, settings: ReferenceSettings, t0: float = 0.0, s
     if kind is ReferenceKind.MULTITONE:
         terms = terms + multitone_terms()
     return _closed_form(terms, t0, kind.name.lower()), f"reference: {kind.name.lower()} closed form"
+
+
+def reference_terms(scene: Scene, settings: ReferenceSettings) -> Terms:
+    """x~ of the closed-form references (ERRATA, MULTITONE) as Terms."""
+    settings.validate()
+    if settings.kind == ReferenceKind.OAFM:
+        raise ParameterError("reference", settings.kind, "the OAFM reference is not a closed form")
+    terms = errata_terms(scene, settings.x_start, settings.v_start)
+    return terms + multitone_terms() if settings.kind == ReferenceKind.MULTITONE else terms
+
+
+def _evaluate(terms: Terms, t: np.ndarray) -> np.ndarray:
+    x = np.zeros_like(t)
+    for m, sigma, nu, a, b in terms.rows():
+        x += t**m * np.exp(-sigma * t) * (a * np.cos(nu * t) + b * np.sin(nu * t))
+    return x
+
+
+def regressor_gram(scene: Scene, settings: ReferenceSettings, start: float = GRAM_START, span: float = GRAM_SPAN,
+                   step: float = GRAM_STEP) -> np.ndarray:
+    """G = (1/T) int phi(x~, x~', t) phi^T dt over [start, start + span]: the level of persistent excitation."""
+    terms = reference_terms(scene, settings)
+    t = np.arange(start, start + span, step)
+    phi = Regressor(scene)
+    rows = np.array([phi(ti, xi, vi) for ti, xi, vi in zip(t, _evaluate(terms, t), _evaluate(terms.derivative(), t))])
+    return rows.T @ rows / len(t)
+
+
+def excitation_gains(scene: Scene, settings: ReferenceSettings, lambda1: float = 4.0, lambda2: float = 1.0,
+                     scale: float = 1.0):
+    """Gains (lambda1, lambda2, lambda3..11 = G_ii/scale): lambda2 Lambda^-1 G then has unit diagonal
+    (times scale), so every direction adapts at a comparable rate; any lambda_i > 0 keeps V' <= 0."""
+    G = regressor_gram(scene, settings)
+    return Gains(lambdas=(lambda1, lambda2) + tuple(float(g) / scale for g in np.diag(G)))
+
+
+def on_reference(scene: Scene, settings: ReferenceSettings) -> Scene:
+    """The scene with the plant starting on the reference: x(0) = x~(0), x'(0) = x~'(0)."""
+    terms = reference_terms(scene, settings)
+    zero = np.zeros(1)
+    return scene.with_values(x_start=float(_evaluate(terms, zero)[0]),
+                             v_start=float(_evaluate(terms.derivative(), zero)[0]))
