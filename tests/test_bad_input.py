@@ -7,7 +7,7 @@ import pytest
 from fmpy.fmi1 import FMICallException
 
 from vibrofmu.cli import main
-from vibrofmu.run import FmuInstance
+from vibrofmu.run import FmuInstance, run_fmu
 
 BAD_PARAMETERS = [
     ("R", 0.0), ("R", -1.0), ("x_start", 1.5), ("x_start", 2.0), ("x_start", -1.5), ("rtol", 0.0),
@@ -128,3 +128,9 @@ def test_the_input_may_be_set_between_steps(plant_fmu):
         assert outputs_are_finite(instance) and instance.log.errors() == []
     finally:
         instance.close()
+
+
+def test_non_oscillating_linear_part_is_refused_by_the_analytic_fidelity(plant_fmu):
+    """alpha = 1 makes a1 = 1 - 8/3 - ... < 0: no OAFM solution; the error names alpha (found by the fuzzing)."""
+    run = run_fmu(plant_fmu, {"fidelity": 4, "alpha": 1.0}, 1.0, 0.1)
+    assert not run.completed and "parameter alpha = 1.0" in run.stop_reason and "a1 = " in run.stop_reason

@@ -7,8 +7,8 @@ sizes and current times, input values, setting parameters after initialisation, 
 Properties of every call: it returns a status and never fmi2Fatal (no exception escaped to
 pythonfmu); after fmi2OK the outputs are finite; every fmi2Error comes with an error message that
 names the variable (or step argument) and its value, or says why the simulation stopped, or is the
-shim's refusal after an earlier error. derandomize: the same cases in every run; database=None:
-nothing written outside the temporary folders.
+shim's refusal after an earlier error. derandomize, with hypothesis pinned in pyproject.toml: the same cases
+in every run and on every machine; database=None: nothing written outside the temporary folders.
 """
 import math
 import re

@@ -20,7 +20,7 @@ import math
 from .closedform import LinearOperator, Terms
 from .forces import coefficients
 from .oafm import Basis
-from .parameters import Scene
+from .parameters import ParameterError, Scene
 
 
 def linear_forcing(scene: Scene, start: float) -> list[tuple[float, float, float]]:
@@ -40,8 +40,13 @@ def linear_forcing(scene: Scene, start: float) -> list[tuple[float, float, float
 
 
 def eq11_operator(scene: Scene) -> LinearOperator:
-    """L[x] = x'' + mu x' + a1 x (Eq. 11)."""
-    return LinearOperator(scene.mu, coefficients(scene.alpha, scene.gamma, scene.R)[1])
+    """L[x] = x'' + mu x' + a1 x (Eq. 11). Raises ParameterError unless it oscillates (a1 > mu^2/4), which
+    the analytic solutions built on it (OAFM, the ERRATA reference) need."""
+    a1 = coefficients(scene.alpha, scene.gamma, scene.R)[1]
+    if not a1 > 0.25 * scene.mu**2:
+        raise ParameterError("alpha", scene.alpha, f"a1 = 1 - 8 alpha/(3R) - 4 gamma/(3R) = {a1:.6g} must exceed "
+                             f"mu^2/4 = {0.25 * scene.mu**2:.6g}: the analytic solution needs an oscillating Eq. 11")
+    return LinearOperator(scene.mu, a1)
 
 
 def forced_x0(L: LinearOperator, scene: Scene, start: float, x_init: float, v_init: float) -> tuple[Terms, Terms]:
