@@ -41,9 +41,6 @@ class AdaptiveLyapunovController(StatusSlave):
         self._outputs(OUTPUTS, (0.0, 0.0, 0.0, 0.0))
         self._outputs(ESTIMATE_NAMES, [getattr(self, f"{name}_start") for name in ESTIMATE_NAMES], "estimate")
 
-    def exit_initialization_mode(self):
-        self._initialise(self._start)
-
     def _start(self):
         self.model = self._make_model()
         self._publish()

@@ -5,7 +5,6 @@ No physics here; the FMI error handling and the FMU state are slave_support.Stat
 part is ClosedLoop.snapshot() (integrator with the estimates), the loop is rebuilt from the parameters.
 """
 from pythonfmu import DefaultExperiment, Integer, Real
-from pythonfmu.enums import Fmi2Status
 
 from slave_support import StatusSlave
 from vibromodel.closedloop import ERRATA_SCENE, ClosedLoop, LoopSettings
@@ -41,15 +40,6 @@ class HertzEAClosedLoop(StatusSlave):
         self._controller_parameters()
         self._outputs(OUTPUTS, (scene.x_start, scene.v_start) + (0.0,) * (len(OUTPUTS) - 2))
         self._outputs(ESTIMATE_NAMES, [getattr(self, f"{name}_start") for name in ESTIMATE_NAMES], "estimate")
-
-    def exit_initialization_mode(self):
-        self._initialise(self._start)
-
-    def _start(self):
-        self.model = self._make_model()
-        for note in self.model.notes:
-            self.log(note, Fmi2Status.ok)
-        self._publish(self.model.outputs())
 
     def _make_model(self):
         """The closed loop of the current parameters and experiment; raises ParameterError for bad ones."""

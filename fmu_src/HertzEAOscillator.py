@@ -5,7 +5,7 @@ slave_support.StatusSlave's. The state's model part is the plant's snapshot (int
 plant itself is rebuilt from the parameters on restore.
 """
 from pythonfmu import Boolean, DefaultExperiment, Fmi2Causality, Fmi2Variability, Integer, Real
-from pythonfmu.enums import Fmi2Initial, Fmi2Status
+from pythonfmu.enums import Fmi2Initial
 
 from slave_support import StatusSlave
 from vibromodel.analytic import OafmSettings
@@ -42,15 +42,6 @@ class HertzEAOscillator(StatusSlave):
         self.in_contact = True
         self.register_variable(Boolean("in_contact", causality=Fmi2Causality.output,
                                        variability=Fmi2Variability.discrete, initial=Fmi2Initial.exact))
-
-    def exit_initialization_mode(self):
-        self._initialise(self._start)
-
-    def _start(self):
-        self.model = self._make_model()
-        for note in self.model.notes:
-            self.log(note, Fmi2Status.ok)
-        self._publish(self.model.outputs())
 
     def _make_model(self):
         """The plant of the current parameters and experiment; raises ParameterError for bad ones."""

@@ -118,6 +118,16 @@ class StatusSlave(Fmi2Slave):
             self._halt(f"doStep failed at tau = {current_time!r}: {error!r}")
         return False
 
+    def exit_initialization_mode(self):
+        self._initialise(self._start)
+
+    def _start(self):
+        """Build the model, log its notes, publish its first outputs (the controller, without notes, overrides)."""
+        self.model = self._make_model()
+        for note in self.model.notes:
+            self.log(note, Fmi2Status.ok)
+        self._publish(self.model.outputs())
+
     # -- FMU state -----------------------------------------------------------------------------------
     def _make_model(self):
         """The model of the current parameters and experiment; raises ParameterError for bad ones."""
