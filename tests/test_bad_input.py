@@ -31,8 +31,7 @@ def outputs_are_finite(instance):
 
 @pytest.mark.parametrize("name,value", BAD_PARAMETERS)
 def test_fmu_rejects_bad_parameter_with_fmi2error(plant_fmu, name, value):
-    instance = initialise(plant_fmu, {name: value})
-    try:
+    with initialise(plant_fmu, {name: value}) as instance:
         with pytest.raises(FMICallException) as failure:
             instance.fmu.exitInitializationMode()
         assert failure.value.status == 3  # fmi2Error
@@ -43,35 +42,27 @@ def test_fmu_rejects_bad_parameter_with_fmi2error(plant_fmu, name, value):
             instance.fmu.doStep(currentCommunicationPoint=0.0, communicationStepSize=0.1)
         assert step_failure.value.status == 3
         assert outputs_are_finite(instance)
-    finally:
-        instance.close()
 
 
 @pytest.mark.parametrize("step", [-0.1, 0.0, math.nan, math.inf])
 def test_fmu_rejects_bad_step_size(plant_fmu, step):
-    instance = initialise(plant_fmu, {})
-    try:
+    with initialise(plant_fmu, {}) as instance:
         instance.fmu.exitInitializationMode()
         with pytest.raises(FMICallException) as failure:
             instance.fmu.doStep(currentCommunicationPoint=0.0, communicationStepSize=step)
         assert failure.value.status == 3
         assert "communicationStepSize" in instance.log.errors()[-1]
         assert outputs_are_finite(instance)
-    finally:
-        instance.close()
 
 
 def test_fmu_rejects_nan_input(plant_fmu):
-    instance = initialise(plant_fmu, {})
-    try:
+    with initialise(plant_fmu, {}) as instance:
         instance.fmu.exitInitializationMode()
         instance.set({"U": math.nan})
         with pytest.raises(FMICallException) as failure:
             instance.fmu.doStep(currentCommunicationPoint=0.0, communicationStepSize=0.1)
         assert failure.value.status == 3
         assert "parameter U = nan" in instance.log.errors()[-1]
-    finally:
-        instance.close()
 
 
 @pytest.mark.parametrize("solver", [0, 1])
@@ -105,8 +96,7 @@ def test_cli_rejects_bad_input_with_one_line(tmp_path, capsys, plant_fmu, args, 
 
 @pytest.mark.parametrize("name,value", [("mu", 0.2), ("fidelity", 1), ("x", 0.5), ("fmi_status", 0)])
 def test_setting_fixed_parameters_or_outputs_after_initialisation_is_refused(plant_fmu, name, value):
-    instance = initialise(plant_fmu, {})
-    try:
+    with initialise(plant_fmu, {}) as instance:
         instance.fmu.exitInitializationMode()
         with pytest.raises(FMICallException) as failure:
             instance.set({name: value})
@@ -114,20 +104,15 @@ def test_setting_fixed_parameters_or_outputs_after_initialisation_is_refused(pla
         assert f"parameter {name} = {value!r}: " in instance.log.errors()[-1]
         if name != "fmi_status":
             assert "cannot be set after fmi2ExitInitializationMode" in instance.log.errors()[-1]
-    finally:
-        instance.close()
 
 
 def test_the_input_may_be_set_between_steps(plant_fmu):
-    instance = initialise(plant_fmu, {})
-    try:
+    with initialise(plant_fmu, {}) as instance:
         instance.fmu.exitInitializationMode()
         instance.fmu.doStep(currentCommunicationPoint=0.0, communicationStepSize=0.1)
         instance.set({"U": 0.01})
         instance.fmu.doStep(currentCommunicationPoint=0.1, communicationStepSize=0.1)
         assert outputs_are_finite(instance) and instance.log.errors() == []
-    finally:
-        instance.close()
 
 
 def test_non_oscillating_linear_part_is_refused_by_the_analytic_fidelity(plant_fmu):

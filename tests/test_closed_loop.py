@@ -76,22 +76,18 @@ def test_acceptance_2_paper_literal_lets_v_rise(loop):
                                         ("lambda11", math.inf), ("k_damping", 0.0), ("mu_hat_start", math.nan)])
 def test_acceptance_5_bad_gains_give_fmi2error(controller_fmu, closed_loop_fmu, which, name, value):
     fmu = controller_fmu if which == "controller" else closed_loop_fmu
-    instance = initialise(fmu, {name: value})
-    try:
+    with initialise(fmu, {name: value}) as instance:
         with pytest.raises(FMICallException) as failure:
             instance.fmu.exitInitializationMode()
         assert failure.value.status == 3
         assert f"parameter {name} = " in instance.log.errors()[-1]
         with pytest.raises(FMICallException):
             instance.fmu.doStep(currentCommunicationPoint=0.0, communicationStepSize=0.1)
-    finally:
-        instance.close()
 
 
 def test_controller_output_follows_its_inputs_and_estimates_hold_exactly(controller_fmu):
     """U is algebraic in the inputs (direct feedthrough); doStep integrates the estimates with the inputs held."""
-    instance = initialise(controller_fmu, {})
-    try:
+    with initialise(controller_fmu, {}) as instance:
         instance.fmu.exitInitializationMode()
         U_ref = instance.value_references(["U"])
         before = instance.fmu.getReal(U_ref)[0]
@@ -101,5 +97,3 @@ def test_controller_output_follows_its_inputs_and_estimates_hold_exactly(control
         mu_hat = instance.fmu.getReal(instance.value_references(["mu_hat"]))[0]
         # mu^' = -(lambda2/lambda3) x2 e2 with x2 = 0.01, e2 = 0.01 + 2*0.01 = 0.03 held over 0.5: -1.5e-4
         assert mu_hat == pytest.approx(0.05 - 0.01 * 0.03 * 0.5, rel=1e-12)
-    finally:
-        instance.close()

@@ -94,8 +94,7 @@ def test_restore_and_deserialize_reproduce_the_run_bit_for_bit(start_plant, case
 
 def test_a_state_can_be_restored_more_than_once(start_plant):
     before, after = split(schedule(True), TAU1)
-    instance = start_plant(stop_time=20.0)
-    try:
+    with start_plant(stop_time=20.0) as instance:
         run(instance, before)
         state = instance.fmu.getFMUstate()
         results = []
@@ -103,8 +102,6 @@ def test_a_state_can_be_restored_more_than_once(start_plant):
             instance.fmu.setFMUstate(state)
             results.append(run(instance, after))
         assert results[0] == results[1] == results[2]
-    finally:
-        instance.close()
 
 
 def test_restore_after_pull_in_error_continues_as_before(start_plant):
@@ -174,8 +171,7 @@ def test_a_state_saved_after_an_error_restores_the_error(start_plant):
 
 @pytest.mark.parametrize("data", [b"", b"\xff\xfe", b"[1, 2]", b'{"format": "something else"}', b"{" * 100000])
 def test_foreign_state_bytes_are_refused_with_fmi2error(start_plant, data):
-    instance = start_plant()
-    try:
+    with start_plant() as instance:
         state = instance.fmu.deSerializeFMUstate(data)
         with pytest.raises(FMICallException) as failure:
             instance.fmu.setFMUstate(state)
@@ -187,5 +183,3 @@ def test_foreign_state_bytes_are_refused_with_fmi2error(start_plant, data):
         instance.fmu.exitInitializationMode()
         instance.fmu.doStep(currentCommunicationPoint=0.0, communicationStepSize=0.1)
         assert all(map(math.isfinite, instance.fmu.getReal(instance.value_references(OUTPUTS))))
-    finally:
-        instance.close()

@@ -110,11 +110,8 @@ def test_interleaved_instances_equal_separate_runs(fmu):
     steps = schedule(3.0)
     separate = []
     for values in scenes:
-        instance = start(**values)
-        try:
+        with start(**values) as instance:
             separate.append(run(instance, steps))
-        finally:
-            instance.close()
     instances = [start(**values) for values in scenes]
     try:
         interleaved = [[] for _ in scenes]
@@ -133,8 +130,7 @@ def test_reset_returns_to_start_values_and_reruns_identically(fmu):
     start, run = fmu
     changed = {"law": 1, "lambda2": 2.0, "mu_hat_start": 0.3}
     steps = schedule(3.0)
-    instance = start(**changed)
-    try:
+    with start(**changed) as instance:
         starts = {v.name: v.start for v in read_model_description(instance.unzip_dir).modelVariables}
         first = run(instance, steps)
         instance.fmu.reset()
@@ -149,8 +145,6 @@ def test_reset_returns_to_start_values_and_reruns_identically(fmu):
         instance.set(changed)
         instance.fmu.exitInitializationMode()
         assert run(instance, steps) == first
-    finally:
-        instance.close()
 
 
 @pytest.mark.parametrize("fmu_path", ["plant_fmu", "controller_fmu", "closed_loop_fmu"])

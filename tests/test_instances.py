@@ -22,15 +22,12 @@ def outputs(instance):
 def test_interleaved_instances_equal_separate_runs(start_plant):
     separate = []
     for values in SCENES:
-        instance = start_plant(**values)
-        try:
+        with start_plant(**values) as instance:
             rows = []
             for t, h in STEPS:
                 instance.fmu.doStep(currentCommunicationPoint=t, communicationStepSize=h)
                 rows.append(outputs(instance))
             separate.append(rows)
-        finally:
-            instance.close()
     instances = [start_plant(**values) for values in SCENES]
     try:
         interleaved = [[] for _ in SCENES]
@@ -48,8 +45,7 @@ def test_interleaved_instances_equal_separate_runs(start_plant):
 def test_reset_returns_to_start_values_and_reruns_identically(plant_fmu, start_plant):
     starts = {v.name: v.start for v in read_model_description(str(plant_fmu)).modelVariables}
     changed = {"mu": 0.2, "R": 2.0, "solver": 1}
-    instance = start_plant(**changed)
-    try:
+    with start_plant(**changed) as instance:
         def rerun():
             rows = []
             for t, h in STEPS[:50]:
@@ -71,5 +67,3 @@ def test_reset_returns_to_start_values_and_reruns_identically(plant_fmu, start_p
         instance.set(changed)
         instance.fmu.exitInitializationMode()
         assert rerun() == first
-    finally:
-        instance.close()

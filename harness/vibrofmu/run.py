@@ -115,6 +115,12 @@ class FmuInstance:
         reals, booleans = self._output_refs
         return self.fmu.getReal(reals) + [float(b) for b in self.fmu.getBoolean(booleans)]
 
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
     def close(self):
         try:
             self.fmu.terminate()
