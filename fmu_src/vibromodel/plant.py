@@ -25,7 +25,7 @@ MAX_STEPS_PER_DOSTEP = 10**6  # more steps in one doStep: refused up front (step
 # What a snapshot leaves out: built from the scene and settings by the constructor.
 PLANT_REBUILT = ("scene", "settings", "model", "integrator", "solution")
 INTEGRATOR_REBUILT = ("accel", "events", "rates")
-SLOW_FLOW_REBUILT = ("model", "flow")  # fidelity 3: its table and integration end are plain data
+SLOW_FLOW_REBUILT = ("flow",)  # fidelity 3: its table and integration end are plain data
 
 
 class Solver(IntEnum):

@@ -27,7 +27,7 @@ class SlowFlowSolution:
     def __init__(self, model: Averaged, t0: float, x0: float, v0: float, rtol: float,
                  max_step: float = math.inf, t_end: float | None = None):
         s = model.scene
-        self.model, self.flow = model, model.flow()
+        self.flow = model.flow()
         self.omega, self.x_e = s.omega, model.eq.x_e
         self.ac = s.beta != 0.0 or s.gamma != 0.0  # a scene without AC actuation skips psi
         if self.ac:  # psi = p sin(Omega t) + q cos(2 Omega t), Eq. 46
