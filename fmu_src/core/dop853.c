@@ -249,7 +249,7 @@ int dop_restart(Dop853 *s, DopRhs rhs, void *ctx, double t, const double *y, Dop
 static int initial_step(Dop853 *s, DopRhs rhs, void *ctx, double *h)
 {
     int n = (int)s->n, fault;
-    double scale[DOP_MAX_DIM], w[DOP_MAX_DIM] = {0.0}, y1[DOP_MAX_DIM], f1[DOP_MAX_DIM], t = s->t;
+    double scale[DOP_MAX_DIM], w[DOP_MAX_DIM] = {0.0}, y1[DOP_MAX_DIM] = {0.0}, f1[DOP_MAX_DIM] = {0.0}, t = s->t;
     double root_n = sqrt((double)n);
     for (int i = 0; i < n; i++) scale[i] = s->atol + fabs(s->y[i]) * s->rtol;
     for (int i = 0; i < n; i++) w[i] = s->y[i] / scale[i];
