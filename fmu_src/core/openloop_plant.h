@@ -15,7 +15,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#include "../vibrokernel.h"
+#include "plant.h"
 #include "oafm_eval.h"
 #include "slowflow_eval.h"
 

@@ -350,11 +350,10 @@ class CompiledOpenLoopPlant:
         self._library, self._problem = library, None
         self._plant = OlPlant()
         self._address = ctypes.addressof(self._plant)
-        k = self._plant.plant
+        k = self._plant.plant  # the exact model's constants (its forces), the plant's time, input and outputs
         for name, value in _model_fields(self.scene, python_plant.model).items():
-            setattr(k, name, value if isinstance(value, (int, float)) else (_d * 6)(*value))
-        k.time_tolerance, k.max_step, k.plant_t, k.U_input, k.enabled = \
-            plant_module.TIME_TOLERANCE, math.inf, python_plant.t, 0.0, 1
+            setattr(k.model, name, value if isinstance(value, (int, float)) else (_d * 6)(*value))
+        k.time_tolerance, k.plant_t, k.U_input, k.enabled = plant_module.TIME_TOLERANCE, python_plant.t, 0.0, 1
         self._plant.fidelity = int(self.settings.fidelity)
         if self.settings.fidelity == Fidelity.AVERAGED:
             self._load_table()
