@@ -13,6 +13,7 @@ closed loop itself run in vibromodel at rtol 1e-12 (its x is a different traject
 """
 from __future__ import annotations
 
+import math
 import os
 import subprocess
 import tempfile
@@ -89,7 +90,7 @@ def host_run(host: Path, unzip_dir: Path, start: dict, stop: float, step: float,
 def fmpy_run(fmu: Path, unzip_dir: str, start: dict, stop: float, step: float, repeats: int) -> dict:
     """One rung under FMPy in this process, the same loop as the C host's."""
     record = {"loop": [], "init": [], "t": None, "x": None}
-    n = int(round(stop / step))
+    n = len(communication_points(stop, step))
     for _ in range(repeats):
         started = time.perf_counter()
         with FmuInstance(fmu, instance_name="ladder", unzip_dir=unzip_dir) as instance:
@@ -100,16 +101,31 @@ def fmpy_run(fmu: Path, unzip_dir: str, start: dict, stop: float, step: float, r
             f.exitInitializationMode()
             refs = instance.value_references(["x"])
             xs = np.empty(n)
+            points = communication_points(stop, step)
             do_step, get_real = f.doStep, f.getReal
             loop_started = time.perf_counter()
-            for i in range(n):
-                do_step(i * step, step)
+            t = 0.0
+            for i, next_t in enumerate(points):
+                do_step(t, next_t - t)
                 xs[i] = get_real(refs)[0]
+                t = next_t
             finished = time.perf_counter()
         record["init"].append(loop_started - started)
         record["loop"].append(finished - loop_started)
-    record["t"], record["x"], record["outputs"] = step * np.arange(1, n + 1), xs, n
+    record["t"], record["x"], record["outputs"] = np.array(points), xs, n
     return record
+
+
+def communication_points(stop: float, step: float) -> list[float]:
+    """n step for n = 1, 2, ..., the last clipped to stop: timing_host.c's points (and FMPy's simulate_fmu's)."""
+    points, n, t = [], 1, 0.0
+    while not (t > stop or math.isclose(t, stop)):
+        t = n * step
+        if t > stop and not math.isclose(t, stop):
+            t = stop
+        points.append(t)
+        n += 1
+    return points
 
 
 def closed_loop_reference(stop: float):
