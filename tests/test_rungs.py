@@ -207,3 +207,48 @@ def test_fmu_steps_fidelities_3_and_4_without_python_and_restores_state(start_pl
         fmu.freeFMUstate(saved)
     finally:
         instance.close()
+
+
+# ---------------------------------------------------------------- bounded resources for long stop times (issue 15)
+
+def test_slow_flow_tabulates_in_windows_and_keeps_its_memory_bounded(library):
+    """Stop time 1e6: set-up tabulates slowflow.WINDOW only; the table grows CHUNK at a time as the run advances
+    and drops the cells behind it, so cells and FMU state stay bounded; C and Python still agree bit for bit
+    across the extensions."""
+    from vibromodel import slowflow, snapshot
+
+    scene, settings = Scene(), Settings(fidelity=3)
+    python, c = Plant(scene, settings, 0.0, 1e6), compiled(scene, settings, library, 1e6)
+    assert python.solution.t_end == slowflow.WINDOW
+    window_cells = len(python.solution.cells)
+    sizes = []
+    for i in range(2500):
+        assert outputs(c.do_step(float(i), 1.0, 0.0)) == outputs(python.do_step(float(i), 1.0, 0.0)), i
+        if i in (100, 2499):
+            sizes.append(len(snapshot.to_bytes({"model": c.snapshot()})))
+    solution = python.solution
+    assert solution.t_end >= 2500.0 and solution.first > 0  # extended, and the front dropped
+    assert len(solution.cells) <= window_cells and len(c.solution.cells) <= window_cells
+    assert sizes[1] <= sizes[0]  # the state does not grow with the run
+    with pytest.raises(ValueError, match="no longer holds"):
+        solution.state(10.0)
+
+
+def test_fidelity_4_refuses_fits_beyond_its_limit_up_front():
+    from vibromodel.analytic import MAX_FIT_SPAN
+    from vibromodel.parameters import ParameterError
+
+    cases = [(Scene(), OafmSettings(), 1e6, "stopTime"), (Scene(), OafmSettings(tau_end=1e308), 200.0, "oafm_tau_end"),
+             (Scene(omega=5e-324), OafmSettings(), 200.0, "omega"), (Scene(Omega=5e-324), OafmSettings(), 200.0, "Omega")]
+    for scene, oafm, stop, name in cases:
+        with pytest.raises(ParameterError) as error:
+            Plant(scene, Settings(fidelity=4, oafm=oafm), 0.0, stop)
+        assert error.value.name == name
+    with pytest.raises(ParameterError, match=f"at most tau = {MAX_FIT_SPAN:g}"):
+        Plant(Scene(), Settings(fidelity=4), 0.0, 1e6)
+
+
+def test_fmu_refuses_fidelity_4_with_stop_time_1e6_at_initialisation(plant_fmu):
+    run = run_fmu(plant_fmu, {"fidelity": 4}, 1e6, 1e5)
+    assert not run.completed and run.status == 3 and len(run.time) == 0  # refused at exitInitializationMode
+    assert "stopTime" in run.message and "2000" in run.message

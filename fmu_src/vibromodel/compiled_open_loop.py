@@ -40,7 +40,7 @@ _dp, _ip = ctypes.POINTER(_d), ctypes.POINTER(_i)
 class SfTable(ctypes.Structure):
     _fields_ = [(name, _d) for name in ("t0", "spacing", "omega", "x_e", "harmonic", "mean_shift", "Omega",
                                         "psi_sin", "psi_cos")] + \
-               [("ac", _i), ("n_cells", _i), ("t_end", _d), ("cells", _dp)]
+               [("ac", _i), ("first", _i), ("n_cells", _i), ("t_end", _d), ("cells", _dp)]
 
 
 class OePiece(ctypes.Structure):
@@ -99,7 +99,8 @@ def slowflow_table(solution) -> tuple[SfTable, np.ndarray]:
     table = SfTable(t0=solution.t0, spacing=solution.spacing, omega=solution.omega, x_e=solution.x_e,
                     harmonic=solution.harmonic, mean_shift=solution.mean_shift,
                     Omega=solution.Omega if ac else 0.0, psi_sin=solution.psi_sin if ac else 0.0,
-                    psi_cos=solution.psi_cos if ac else 0.0, ac=int(ac), n_cells=len(cells),
+                    psi_cos=solution.psi_cos if ac else 0.0, ac=int(ac), first=getattr(solution, "first", 0),
+                    n_cells=len(cells),
                     t_end=solution.t_end, cells=cells.ctypes.data_as(_dp))
     return table, cells
 

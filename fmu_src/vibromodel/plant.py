@@ -159,7 +159,7 @@ class Plant:
 
             model = averaged(scene)
             self.solution = SlowFlowSolution(model, t0, scene.x_start, scene.v_start, settings.rtol,
-                                             settings.max_step or math.inf, stop_time)
+                                             settings.max_step or math.inf, stop_time, bounded=True)
             self.notes.append(f"averaged slow flow (ERRATA §3.4, {model.backbone.kind} backbone): x_e = "
                               f"{model.eq.x_e:.6g}, omega_e = {model.omega_e:.8g}, table spacing "
                               f"{self.solution.spacing:.3g}")
