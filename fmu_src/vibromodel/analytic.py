@@ -79,14 +79,17 @@ def _require_damping(scene: Scene, name: str) -> None:
         raise ParameterError(name, 0.0, f"automatic {name} needs damping mu > 0 (mu = {scene.mu:g}); give it")
 
 
-def covering(scene: Scene, settings: OafmSettings, span: float | None) -> OafmSettings:
+def covering(scene: Scene, settings: OafmSettings, span: float | None, strict: bool = False) -> OafmSettings:
     """Settings whose fit reaches at least `span` past the start (an FMU's stop time): no extrapolation
     inside the experiment. Explicit tau_star / tau_end are kept; automatic ones are resolved to numbers.
-    Raises ParameterError (stopTime) when that fit would exceed MAX_FIT_SPAN."""
+    A span beyond MAX_FIT_SPAN: strict (the plant at fidelity 4) raises ParameterError (stopTime); otherwise (a
+    reference) the fit stops at MAX_FIT_SPAN and the steady piece extrapolates beyond it."""
     if settings.tau_end:
         return settings
     tau_star, tau_end = domains(scene, settings)
     if span is not None and span > max(tau_end, MAX_FIT_SPAN):
+        if not strict:
+            return dataclasses.replace(settings, tau_star=tau_star, tau_end=max(tau_end, MAX_FIT_SPAN))
         raise ParameterError("stopTime", span, f"fidelity 4 fits its solution over the whole experiment, at most "
                              f"tau = {MAX_FIT_SPAN:g} past the start (memory and set-up time grow with it); set "
                              f"oafm_tau_end <= {MAX_FIT_SPAN:g} to fit that far and extrapolate the steady vibration "

@@ -166,7 +166,7 @@ class Plant:
             self.notes += [f"outside the averaging's validity: {note}" for note in validity_notes(model)]
         elif settings.fidelity == Fidelity.ANALYTIC:
             span = None if stop_time is None else stop_time - t0
-            oafm = covering(scene, settings.oafm, span)
+            oafm = covering(scene, settings.oafm, span, strict=True)  # refuses a fit beyond analytic.MAX_FIT_SPAN
             self.solution, source = cached_solve(scene, oafm, t0, read_dirs=cache_dirs)
             self.notes.append(f"OAFM {oafm.basis} basis, tau* = {self.solution.pieces[1].start:.6g}, fit to "
                               f"tau = {self.solution.tau_end:.6g} ({source})")
