@@ -93,10 +93,10 @@ def stepped_errors(plant, python, h, n, t0=0.0):
     return worst
 
 
-@pytest.mark.parametrize("scene, oafm", [(Scene(), OafmSettings()), (LIGHT, OafmSettings(order=2)),
-                                         (Scene(), OafmSettings(basis="paper"))],
-                         ids=["paper example", "another scene, order 2", "the paper's basis"])
-@pytest.mark.parametrize("h", [0.1, 1.0, 0.37])
+@pytest.mark.parametrize("scene, oafm, h", [(Scene(), OafmSettings(), 0.1), (Scene(), OafmSettings(), 0.37),
+                                            (LIGHT, OafmSettings(order=2), 1.0), (Scene(), OafmSettings(basis="paper"), 1.0)],
+                         ids=["paper example, h 0.1", "paper example, h 0.37", "another scene, order 2, h 1",
+                              "the paper's basis, h 1"])
 def test_oafm_in_c_is_within_the_derived_bound_of_the_python_sum(library, scene, oafm, h):
     settings = Settings(fidelity=4, oafm=oafm)
     stop = 300.0  # past the fit's end (tau_end = 234.9 for the paper example): the extrapolation too
