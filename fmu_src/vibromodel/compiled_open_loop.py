@@ -14,7 +14,7 @@ term, which changes the rounding: recurrence_error_bound() states how much.
 from __future__ import annotations
 
 import ctypes
-import itertools
+import functools
 import math
 from dataclasses import dataclass
 
@@ -138,14 +138,23 @@ def combinations(values, hints=(), max_bases: int = OE_BASES, top: int = OE_POWE
     return bases, padded
 
 
+@functools.lru_cache(maxsize=None)
+def _search_grid(n_bases: int) -> np.ndarray:
+    """Every integer vector with entries in -reach..reach (reach <= SEARCH_RANGE, fewer for more bases), as rows."""
+    reach = SEARCH_RANGE
+    while reach > 1 and (2 * reach + 1) ** n_bases > SEARCH_LIMIT:
+        reach -= 1
+    axes = np.meshgrid(*[np.arange(-reach, reach + 1, dtype=float)] * n_bases, indexing="ij")
+    grid = np.stack([axis.ravel() for axis in axes], axis=1)
+    grid.flags.writeable = False
+    return grid
+
+
 def _combination(value: float, bases: list[float]):
     """The integer vector n with the smallest sum |n_j| such that sum n_j bases[j] matches value, or None."""
     if not bases:
         return None
-    reach = SEARCH_RANGE
-    while reach > 1 and (2 * reach + 1) ** len(bases) > SEARCH_LIMIT:
-        reach -= 1
-    n = np.array(list(itertools.product(range(-reach, reach + 1), repeat=len(bases))), dtype=float)
+    n = _search_grid(len(bases))
     b = np.array(bases)
     total = n @ b
     scale = np.abs(n) @ np.abs(b) + abs(value)
