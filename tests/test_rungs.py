@@ -230,8 +230,10 @@ def test_slow_flow_tabulates_in_windows_and_keeps_its_memory_bounded(library):
     assert solution.t_end >= 2500.0 and solution.first > 0  # extended, and the front dropped
     assert len(solution.cells) <= window_cells and len(c.solution.cells) <= window_cells
     assert sizes[1] <= sizes[0]  # the state does not grow with the run
-    with pytest.raises(ValueError, match="no longer holds"):
-        solution.state(10.0)
+    for state in (solution.state, c.state_at):  # Python, and C falling back to it
+        with pytest.raises(ValueError, match="no longer holds"):
+            state(10.0)
+    assert c.state_at(3000.5) == python.solution.state(3000.5)  # beyond the table: extended, then the same bits
 
 
 def test_fidelity_4_refuses_fits_beyond_its_limit_up_front():

@@ -394,10 +394,10 @@ class CompiledOpenLoopPlant:
     def state_at(self, tau: float) -> tuple[float, float, float]:
         """(x, x', x'') at tau from the C evaluator (the table extended in Python when needed)."""
         xva = (_d * 3)()
-        if self._library.ol_state(self._address, tau, xva) == OL_BEYOND:
-            self.python.solution.extend(tau)
+        if self._library.ol_state(self._address, tau, xva) == OL_BEYOND:  # outside the table: Python extends it
+            state = self.python.solution.state(tau)  # (or raises for a time a bounded table has dropped)
             self._load_table()
-            self._library.ol_state(self._address, tau, xva)
+            return state
         return tuple(xva)
 
     def state(self) -> tuple[float, float, float]:
