@@ -18,7 +18,7 @@ int ol_do_step(OlPlant *p, double t, double h)
     double tolerance = k->time_tolerance * (fabs(t) > 1.0 ? fabs(t) : 1.0);  /* plant.check_step */
     if (!(isfinite(h) && h > 0.0) || k->U_input != 0.0 || !(isfinite(t) && fabs(t - k->plant_t) <= tolerance))
         return OL_REFUSED;
-    double xva[3], t_start = k->plant_t;
+    double xva[3];
     if (p->fidelity == 3) {
         if (sf_state(&p->slowflow, t + h, xva)) return OL_BEYOND;
     } else {
@@ -27,7 +27,7 @@ int ol_do_step(OlPlant *p, double t, double h)
     double saved[5];  /* a fault or a non-finite output leaves the plant as it was */
     int64_t saved_contact = k->in_contact, saved_enabled = k->enabled;
     for (int i = 0; i < 5; i++) saved[i] = k->out[i];
-    int bad = vk_outputs_at(k, t_start, xva[0], xva[1], &xva[2]) != VK_OK;
+    int bad = vk_outputs_at(k, t + h, xva[0], xva[1], &xva[2]) != VK_OK;  /* every output at t + h */
     for (int i = 0; i < 5 && !bad; i++) bad = !isfinite(k->out[i]);
     if (bad) {
         for (int i = 0; i < 5; i++) k->out[i] = saved[i];

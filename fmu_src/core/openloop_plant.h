@@ -4,8 +4,8 @@
  *
  * One step from the communication point t over h: the checks (h finite and > 0, U = 0, t the plant's time),
  * then (x, x', x'') at t + h from slowflow_eval or oafm_eval, then the outputs x, v, a and the exact model's
- * F_contact, F_electrostatic (vibrokernel's vk_outputs_at, the one C home of Eq. 3's forces) at the time
- * Plant.do_step takes them.  Whatever the C code does not do itself -- a refused step, a time beyond the slow
+ * F_contact, F_electrostatic (plant.c's vk_outputs_at on core/model.c, the one C home of Eq. 3's forces), all
+ * at the new communication point t + h.  Whatever the C code does not do itself -- a refused step, a time beyond the slow
  * flow's table, a non-finite output -- returns a nonzero code and changes nothing: the FMU then takes the
  * Python path (vibromodel.compiled_open_loop), which raises the matching error or extends the table.
  */

@@ -20,10 +20,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import plant as plant_module
 from .compiled import VkPlant, _model_fields
+from .fidelities import entry
 from .models import Fidelity
-from .plant import Outputs, Plant, check_step
+from .plant import Plant
+from .settings import TIME_TOLERANCE, Outputs, check_step
 
 OE_BASES, OE_POWERS, OE_ITEMS, OE_RESYNC, OE_STEP_SLACK = 6, 17, 256, 16, 4.0  # oafm_eval.h
 OL_REFUSED, OL_BEYOND, OL_NONFINITE = 20, 21, 22  # openloop_plant.h
@@ -361,9 +362,9 @@ class CompiledOpenLoopPlant:
         self._plant = OlPlant()
         self._address = ctypes.addressof(self._plant)
         k = self._plant.plant  # the exact model's constants (its forces), the plant's time, input and outputs
-        for name, value in _model_fields(self.scene, python_plant.model).items():
+        for name, value in _model_fields(self.scene, python_plant.model, 0).items():  # 0: the exact model, Eq. 3
             setattr(k.model, name, value if isinstance(value, (int, float)) else (_d * 6)(*value))
-        k.time_tolerance, k.plant_t, k.U_input, k.enabled = plant_module.TIME_TOLERANCE, python_plant.t, 0.0, 1
+        k.time_tolerance, k.plant_t, k.U_input, k.enabled = TIME_TOLERANCE, python_plant.t, 0.0, 1
         self._plant.fidelity = int(self.settings.fidelity)
         if self.settings.fidelity == Fidelity.AVERAGED:
             self._load_table()

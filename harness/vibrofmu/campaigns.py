@@ -25,7 +25,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from vibromodel.integrate import IntegrationError, TerminalEvent
+from vibromodel.forces import hertz
+from vibromodel.integrate import TerminalEvent
 from vibromodel.parameters import Scene
 from vibromodel.plant import Plant, Settings, Solver
 
@@ -214,8 +215,7 @@ def graze_reference(depth: float) -> GrazeReference:
                         limit=200)[0])
 
     def rhs(t, y):
-        s = 1.0 + 2.0 * y[0] / 3.0
-        return [y[1], 1.0 - (s * math.sqrt(s) if s > 0.0 else 0.0)]
+        return [y[1], 1.0 - hertz(y[0])]
 
     contact = solve_ivp(rhs, (0.0, t_contact), [x_max, 0.0], method="DOP853", rtol=1e-13, atol=1e-15,
                         dense_output=True).sol
@@ -223,8 +223,7 @@ def graze_reference(depth: float) -> GrazeReference:
 
 
 def _potential_slope(x: float) -> float:
-    s = 1.0 + 2.0 * x / 3.0
-    return s * math.sqrt(s) - 1.0
+    return hertz(x) - 1.0
 
 
 def graze_scene(reference: GrazeReference) -> Scene:
@@ -253,14 +252,30 @@ def count_contact_losses(plant: Plant, stop_time: float, interval: float) -> tup
 
 
 def main(argv: list[str]) -> None:
+    """Run N scenes (default 10,000) in chunks of 1,000 (seeds SEED*1000 + chunk), printing the running totals after
+    each chunk."""
     from . import kernel
 
     n = int(argv[0]) if argv else 10000
     seed = int(argv[1]) if len(argv) > 1 else 0
-    result = contact_loss_campaign(n, seed, library=kernel.kernel_library())
-    for key, value in result.summary().items():
-        print(f"{key}: {value}")
-    for solver, index, scene, rtol, message in result.halts[:20]:
+    library = kernel.kernel_library()
+    total = CampaignResult()
+    for chunk, start in enumerate(range(0, n, 1000)):
+        part = contact_loss_campaign(min(1000, n - start), seed * 1000 + chunk, library=library)
+        total.scenes += part.scenes
+        for key in total.runs:
+            total.runs[key] += part.runs[key]
+        for key in total.pull_ins:
+            total.pull_ins[key] += part.pull_ins[key]
+        total.halts += part.halts
+        total.twin_mismatches += [(chunk, index) for index in part.twin_mismatches]
+        if part.worst_error > total.worst_error:
+            total.worst_error, total.worst_case = part.worst_error, (chunk, *part.worst_case)
+        total.errors_over_100 += part.errors_over_100
+        total.rk4_worst_abs_error = max(total.rk4_worst_abs_error, part.rk4_worst_abs_error)
+        total.seconds += part.seconds
+        print(f"after {total.scenes} scenes: {total.summary()}", flush=True)
+    for solver, index, scene, rtol, message in total.halts[:20]:
         print(f"halt {solver} #{index} rtol {rtol:.3g}: {message} -- {scene}")
 
 

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
+from vibromodel import fidelities
 from vibromodel.parameters import ParameterError, Scene, consistency_warning, validate
 from vibromodel.plant import Plant, Settings, checked_settings
 
@@ -15,7 +16,7 @@ from .compare import errors
 from .reference import REFERENCE_ATOL, REFERENCE_RTOL, Reference, reference_solution
 from .run import RunResult, run_fmu
 
-FIDELITIES = {"exact": 0, "polynomial": 1, "polynomial-paper": 2, "averaged": 3, "analytic": 4}
+FIDELITIES = fidelities.keys()  # command-line names -> levels (the registry)
 SOLVERS = {"adaptive": 0, "rk4": 1}
 
 
