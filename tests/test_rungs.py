@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from vibrofmu.kernel import kernel_library
-from vibrofmu.run import FmuInstance, run_fmu
+from vibrofmu.run import run_fmu
 from vibromodel import compiled_open_loop as col
 from vibromodel.analytic import OafmSettings
 from vibromodel.oafm_bases import eq11_operator

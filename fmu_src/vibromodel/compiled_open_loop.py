@@ -21,7 +21,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from .compiled import VkPlant, _model_fields
-from .fidelities import entry
 from .models import Fidelity
 from .plant import Plant
 from .settings import TIME_TOLERANCE, Outputs, check_step
