@@ -240,7 +240,7 @@ static void load_inner(void)
 
 typedef enum { SHIM_OK, SHIM_ERROR, SHIM_FATAL } ShimState;
 
-#define FAST_MAX 8
+#define FAST_MAX 32 /* most Real (and Boolean) outputs served; fast_path.FAST_MAX */
 
 typedef struct {
     int (*step)(void *model, double t, double h); /* 0: the step is done */
