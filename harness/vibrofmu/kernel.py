@@ -20,8 +20,8 @@ FMU_SRC = Path(vibromodel.__file__).resolve().parents[1]
 KERNEL_SOURCE = FMU_SRC / "vibrokernel.c"
 KERNEL_HEADERS = (FMU_SRC / "vibrokernel.h", FMU_SRC / "vibrokernel_tableau.h")
 # The controller and the closed loop (fmu_src/core/), compiled into the same library.
-LOOP_SOURCES = (FMU_SRC / "core" / "controller.c",)
-LOOP_HEADERS = (FMU_SRC / "core" / "controller.h",)
+LOOP_SOURCES = (FMU_SRC / "core" / "controller.c", FMU_SRC / "core" / "closedloop.c")
+LOOP_HEADERS = (FMU_SRC / "core" / "controller.h", FMU_SRC / "core" / "closedloop.h")
 TABLEAU_HEADER = KERNEL_HEADERS[1]
 # Bit-identity with the Python integrator needs IEEE double arithmetic as written: no FMA contraction, no
 # -ffast-math; math errno stays on (the kernel reads pow's errno as CPython's float_pow does).
