@@ -12,7 +12,8 @@ are FMI variables, the controller is rebuilt from the parameters.
 
 On the compiled kernel (parameter kernel = 0; vibromodel.compiled_loop.CompiledEstimator on
 fmu_src/core/controller.c) the inputs, outputs and estimates live in the kernel's memory: the status shim's fast
-path (fast_path.py) runs doStep and answers the output getters there without Python.
+path (fast_path.py) runs doStep, sets the inputs (recomputing U, e1, e2, V) and answers the output getters there
+without Python.
 """
 from pathlib import Path
 
@@ -38,6 +39,7 @@ class AdaptiveLyapunovController(fast_path.CompiledModelSlave, StatusSlave):
     state_format = "AdaptiveLyapunovController state 2"
     MEMORY = CONTROLLER_INPUTS + CONTROLLER_OUTPUTS
     FAST_OUTPUTS = CONTROLLER_OUTPUTS
+    FAST_INPUTS = CONTROLLER_INPUTS
     x, v, x_ref, v_ref, a_ref, U, e1, e2, V = (fast_path.memory_variable(name) for name in INPUTS + OUTPUTS)
 
     def __init__(self, **kwargs):

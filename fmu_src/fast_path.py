@@ -32,6 +32,20 @@ def shim_attach(resources: str | None, model_identifier: str):
     return attach
 
 
+def shim_inputs(resources: str | None, model_identifier: str):
+    """The shim's vibro_fast_path_inputs, or None."""
+    if not resources:
+        return None
+    path = Path(resources).parent / "binaries" / "linux64" / f"{model_identifier}.so"
+    try:
+        function = ctypes.CDLL(str(path)).vibro_fast_path_inputs
+    except (OSError, AttributeError):
+        return None
+    function.restype = ctypes.c_int
+    function.argtypes = [ctypes.c_void_p, ctypes.c_size_t, _vr_array, _address_array]
+    return function
+
+
 def attach(shim, plant, real_outputs: dict[int, int], boolean_outputs: dict[int, int]) -> bool:
     """Attach `plant` (a vibromodel.compiled.CompiledPlant) to the shim: real_outputs / boolean_outputs map
     value references to the index of the plant's output. plant None detaches. True if the shim took it."""
@@ -79,6 +93,7 @@ class CompiledModelSlave:
 
     MEMORY: tuple[str, ...] = ()
     FAST_OUTPUTS: tuple[str, ...] = ()
+    FAST_INPUTS: tuple[str, ...] = ()  # set in C when the model has an `inputs_function` (0: done)
     _model = None
     _kernel = None  # the model when it is compiled
     _shim = None  # the status shim's attach function (shim_attach), if any
@@ -87,6 +102,7 @@ class CompiledModelSlave:
         self._values = {}
         super().__init__(**kwargs)
         self._shim = shim_attach(self.resources, type(self).__name__)
+        self._shim_inputs = shim_inputs(self.resources, type(self).__name__) if self.FAST_INPUTS else None
 
     @property
     def model(self):
@@ -106,8 +122,13 @@ class CompiledModelSlave:
             attach_addresses(self._shim, None, None, None, {}, {})
             return
         references = {var.name: vr for vr, var in self.vars.items()}
-        attach_addresses(self._shim, kernel.step_function, kernel.address, kernel.enabled_address,
-                         {references[name]: kernel.variable_address(name) for name in self.FAST_OUTPUTS}, {})
+        attached = attach_addresses(self._shim, kernel.step_function, kernel.address, kernel.enabled_address,
+                                    {references[name]: kernel.variable_address(name) for name in self.FAST_OUTPUTS},
+                                    {})
+        if attached and self._shim_inputs is not None:
+            names = self.FAST_INPUTS
+            self._shim_inputs(kernel.inputs_function, len(names), _vr_array(*(references[n] for n in names)),
+                              _address_array(*(kernel.variable_address(n) for n in names)))
 
     def _enable_fast_path(self):
         if self._kernel is not None:

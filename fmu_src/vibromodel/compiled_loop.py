@@ -65,7 +65,6 @@ def declare(library) -> str | None:
         "vc_advance": (status, [address, d, d, d, d, doubles]),
         "vc_publish": (status, [address]),
         "vc_do_step": (status, [address, d, d]),
-        "vl_reference_state": (None, [address, d, doubles]),
     }
     try:
         for name, (restype, argtypes) in signatures.items():
@@ -168,6 +167,11 @@ class CompiledEstimator:
         return ctypes.cast(self._library.vc_do_step, ctypes.c_void_p).value
 
     @property
+    def inputs_function(self) -> int:
+        """Address of vc_publish(VcController *): the outputs after the inputs changed (fmi2SetReal in C)."""
+        return ctypes.cast(self._library.vc_publish, ctypes.c_void_p).value
+
+    @property
     def fast_path_enabled(self) -> bool:
         return bool(self._c.enabled)
 
@@ -208,37 +212,3 @@ def make_estimator(scene: Scene, gains: Gains, law: int, estimates, t0: float, k
     return HeldInputEstimator(scene, gains, law, estimates, t0)
 
 
-
-# -- the closed loop's reference (fmu_src/core/closedloop.h, VlReference) ----------------------------------------
-class VlReference(ctypes.Structure):
-    _fields_ = [("n_pieces", _int), ("start", ctypes.POINTER(_double)), ("first", ctypes.POINTER(_int)),
-                ("sigma", ctypes.POINTER(_double)), ("nu", ctypes.POINTER(_double)),
-                ("secular", ctypes.POINTER(_int)), ("re", ctypes.POINTER(_double)), ("im", ctypes.POINTER(_double)),
-                ("K", _int)]
-
-
-class CompiledReference:
-    """An oafm.AnalyticSolution (the closed loop's reference x~) as the kernel's VlReference: each piece's terms
-    as oafm.Piece stacks them (one complex rate and three complex coefficients, of x~, x~', x~'', per term).
-    Keeps the arrays the structure points to alive."""
-
-    def __init__(self, solution):
-        pieces = solution.pieces
-        rates = np.concatenate([piece._rates for piece in pieces])
-        coefficients = np.concatenate([piece._coefficients for piece in pieces], axis=1)  # (3, K)
-        counts = np.cumsum([0] + [len(piece._rates) for piece in pieces])
-        self._arrays = [
-            np.ascontiguousarray([piece.start for piece in pieces], dtype=float),
-            np.ascontiguousarray(counts, dtype=np.int64),
-            np.ascontiguousarray(-rates.real), np.ascontiguousarray(rates.imag),
-            np.ascontiguousarray(np.concatenate([piece._secular for piece in pieces]), dtype=np.int64),
-            np.ascontiguousarray(coefficients.real.ravel()), np.ascontiguousarray(coefficients.imag.ravel()),
-        ]
-
-        def pointer(array, kind):
-            return array.ctypes.data_as(ctypes.POINTER(kind))
-
-        start, first, sigma, nu, secular, re, im = self._arrays
-        self.structure = VlReference(len(pieces), pointer(start, _double), pointer(first, _int),
-                                     pointer(sigma, _double), pointer(nu, _double), pointer(secular, _int),
-                                     pointer(re, _double), pointer(im, _double), len(rates))
