@@ -77,8 +77,7 @@ static int raise_fault(VlLoop *l, int fault, double t, const double *y)
     return set_error(l, VL_RAISED, t, y, text);
 }
 
-/* ClosedLoop.outputs: the state at t (dense output or RK4's state), outputs_at, published when all finite */
-static int publish(VlLoop *l)
+int vl_publish(VlLoop *l)
 {
     double y[DOP_MAX_DIM], out[VL_OUTPUTS];
     DopReport r;
@@ -111,7 +110,7 @@ int vl_init(VlLoop *l, double t0, const double *y0)
         int code = dop_restart(&l->dop, loop_rhs, l, t0, y0, &r);
         if (code) return solver_error(l, code, &r);
     }
-    return publish(l);
+    return vl_publish(l);
 }
 
 int vl_do_step(VlLoop *l, double t, double h)
@@ -124,7 +123,7 @@ int vl_do_step(VlLoop *l, double t, double h)
                                    : dop_advance(&l->dop, loop_rhs, l, t + h, &r);
     if (code) return solver_error(l, code, &r);
     l->t = t + h;
-    return publish(l);
+    return vl_publish(l);
 }
 
 void vl_layout(size_t *sizes)

@@ -65,6 +65,9 @@ int vl_init(VlLoop *l, double t0, const double *y0);
    the outputs at t (written only when all are finite). Integration errors and faults stay pending in `error`
    (enabled = 0; the solver keeps the state it reached); while one is pending, vl_do_step returns it. */
 int vl_do_step(VlLoop *l, double t, double h);
+/* ClosedLoop.outputs: the state at t (dense output or RK4's state), its outputs into out[] when all are finite;
+   0 or a pending code. */
+int vl_publish(VlLoop *l);
 /* ClosedLoop.outputs_at(t, x, v, theta^) into out[0..VL_OUTPUTS-1]: 0 or the fault Python raises (nothing pending). */
 int vl_outputs_at(const VlLoop *l, double t, const double *y, double *out);
 

@@ -246,6 +246,7 @@ def declare_loop(library) -> str | None:
                                         ("oe_state", None, [address, d, ctypes.POINTER(_double)]),
                                         ("vl_init", status, [address, d, ctypes.POINTER(_double)]),
                                         ("vl_do_step", status, [address, d, d]),
+                                        ("vl_publish", status, [address]),
                                         ("vl_outputs_at", status, [address, d, ctypes.POINTER(_double),
                                                                    ctypes.POINTER(_double)])):
             function = getattr(library, name)
@@ -314,10 +315,15 @@ class CompiledClosedLoop:
             raise RuntimeError(f"the compiled closed loop refused the step with code {code}, but ClosedLoop "
                                "accepts it (a kernel bug)")
         self._check(code)
-        return self.outputs()
+        return self._outputs()
 
     def outputs(self) -> dict:
-        """The outputs after the last step (as ClosedLoop.outputs; the kernel's out[])."""
+        """ClosedLoop.outputs: computed at t into the kernel's out[] (there only when all are finite)."""
+        self._raise_pending()
+        self._check(self._library.vl_publish(self.address))
+        return self._outputs()
+
+    def _outputs(self) -> dict:
         out = self._l.out[:]
         values = dict(zip(LOOP_OUTPUTS[:9], out[:9]))
         values["estimates"] = tuple(out[9:])
