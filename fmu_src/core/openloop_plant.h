@@ -12,6 +12,7 @@
 #ifndef OPENLOOP_PLANT_H
 #define OPENLOOP_PLANT_H
 
+#include <stddef.h>
 #include <stdint.h>
 
 #include "plant.h"
@@ -35,6 +36,9 @@ typedef struct {
 int ol_state(const OlPlant *p, double tau, double *xva);
 /* Plant.do_step(t, h, U_input): 0 (outputs written, plant_t = t + h) or a nonzero code, nothing changed. */
 int ol_do_step(OlPlant *p, double t, double h);
+/* The compiled floor of fidelities 3 and 4: n do_steps of dt from plant_t, x after each into x_out; stops at the
+   first nonzero code and returns it; *done = the steps done. */
+int ol_run(OlPlant *p, double dt, size_t n, double *x_out, size_t *done);
 /* sizeof(OlPlant), sizeof(OePiece), offsetof(OlPlant, slowflow), offsetof(OlPlant, oafm) into sizes[0..3]. */
 void ol_layout(int64_t *sizes);
 
