@@ -17,13 +17,16 @@
 static int loop_rhs(void *context, double t, const double *y, double *f)
 {
     const VlLoop *l = context;
-    double ref[3], U;
+    double ref[3], U, time[3];
     int fault = FAULT_NONE;
     oe_state(&l->reference, t, ref);
-    if (vc_control_rates(&l->controller, t, y[0], y[1], ref, y + 2, &U, f + 2))
+    if (vc_control_rates(&l->controller, t, y[0], y[1], ref, y + 2, &U, f + 2, time))
         return FAULT_MATH_DOMAIN;  /* math.cos/sin of an infinity */
+    /* the model's drive terms have the same time functions as the control regressor (the same products of the
+       same frequencies and t): evaluated once */
+    VmDrive drive = {time[0], time[1], time[2]};
     f[0] = y[1];
-    f[1] = vm_accel(&l->model, t, y[0], y[1], U, &fault);
+    f[1] = vm_accel_driven(&l->model, t, &drive, y[0], y[1], U, &fault);
     return fault;
 }
 
