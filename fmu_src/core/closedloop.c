@@ -33,14 +33,14 @@ static int loop_rhs(void *context, double t, const double *y, double *f)
 int vl_outputs_at(const VlLoop *l, double t, const double *y, double *out)
 {
     const VcController *c = &l->controller;
-    double ref[3], U, e1, e2, rates[VC_N];
+    double ref[3], U, e1, e2, rates[VC_N], time[3];
     int fault = FAULT_NONE;
     oe_state(&l->reference, t, ref);
-    if (vc_control(c, t, y[0], y[1], ref, y + 2, &U)) return FAULT_MATH_DOMAIN;
+    if (vc_control_rates(c, t, y[0], y[1], ref, y + 2, &U, rates, time)) return FAULT_MATH_DOMAIN;
     vc_errors(c, y[0], y[1], ref, &e1, &e2);
-    double a = vm_accel(&l->model, t, y[0], y[1], U, &fault);
+    VmDrive drive = {time[0], time[1], time[2]};  /* as in loop_rhs */
+    double a = vm_accel_driven(&l->model, t, &drive, y[0], y[1], U, &fault);
     if (fault) return fault;
-    if (vc_rates(c, t, y[0], y[1], ref, rates)) return FAULT_MATH_DOMAIN;
     out[0] = y[0];
     out[1] = y[1];
     out[2] = ref[0];
