@@ -320,6 +320,8 @@ def make_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("doctor", help="print the environment a C host needs for FMU, and check it with a C host")
     p.add_argument("fmu")
     p.set_defaults(func=cmd_doctor)
+    from . import container, report, ssp  # light modules: heavy imports happen inside their commands
+    ssp.add_parser(sub); container.add_parser(sub); report.add_parser(sub)
     return parser
 
 
