@@ -199,6 +199,9 @@ def cmd_stability(args) -> int:
     print(f"slow flow vs shooting: max relative r error {errors['max_relative_r_error']:.2e} (omega "
           f"{errors['at_omega']:.6g}), max |exp(lambda T) - rho| {errors['max_multiplier_error']:.2e} (omega "
           f"{errors['at_omega_multiplier']:.6g})")
+    print("  (expected: the slow flow turns at (omega^2 - k1)/(2 omega) instead of omega - omega_e, a phase error of "
+          "about (omega - omega_e)^2 T/(2 omega) per period that grows away from resonance, where exp(lambda T) "
+          "and rho agree only to first order in the detuning; see docs/numerics.md)")
     for row in summary["fold_frequencies"]["folds"]:
         print("fold: " + ", ".join(f"{k} {v:.8g}" for k, v in row.items() if not k.startswith("r_")))
     for direction, sweep in ((d, summary["fmu_sweeps"][d]) for d in ("up", "down") if "fmu_sweeps" in summary):
