@@ -10,8 +10,10 @@ and `vibrofmu report` rewrites the text between them (the markers stay). Blocks:
 - machine:   where and when the numbers were taken (CPU model, nproc, load average, Python, numpy, scipy).
 - accuracy:  the plant FMU on the paper example against the DOP853 rtol 1e-12 reference: x at five times and
              max |x - x_ref| for rtol 1e-4 ... 1e-12 and RK4 steps (deterministic on one machine).
-- ssp:       fmpy.ssp.simulate_ssp on the closed-loop .ssp against the project's master with FMPy's ordering,
-             and the same scene with the master's own orderings against the monolithic FMU (deterministic).
+- ssp:       fmpy.ssp.simulate_ssp on the closed-loop .ssp against the project's master with FMPy's ordering
+             (deterministic).
+- ssp_orderings: the same scene with each ordering against the monolithic FMU, per H (deterministic, but a
+             minute of runs: not part of --check).
 - container: the container FMU against the monolithic closed-loop FMU and the master, per H.
 - speed:     ratios from the summaries of `bench`, `oafm` and `stability` found in the --from folders
              (bench.json, summary.json); timings, so never compared by --check.
@@ -33,7 +35,7 @@ REPO_ROOT = Path(__file__).resolve().parents[2]
 BLOCK = re.compile(r"<!-- report:(?P<name>[a-z_]+) -->\n(?P<body>.*?)<!-- /report:(?P=name) -->", re.S)
 OPEN = re.compile(r"<!-- report:([a-z_]+) -->")
 CLOSE = re.compile(r"<!-- /report:([a-z_]+) -->")
-NAMES = ("machine", "accuracy", "ssp", "container", "speed")
+NAMES = ("machine", "accuracy", "ssp", "ssp_orderings", "container", "speed")
 DETERMINISTIC = ("accuracy", "ssp")
 ACCURACY_TAUS = (10.0, 25.0, 50.0, 100.0, 200.0)
 ACCURACY_RTOLS = (1e-4, 1e-6, 1e-8, 1e-10, 1e-12)
@@ -129,9 +131,7 @@ def accuracy_block(fmu: Path) -> str:
 def ssp_block(fmu_dir: Path, work_dir: Path) -> str:
     from dataclasses import replace
 
-    import numpy as np
-
-    from . import closed_loop, ssp
+    from . import ssp
     from .cli import DEFAULT_SCENE
     from .cosim import load_scene, run_cosim
 
@@ -141,10 +141,22 @@ def ssp_block(fmu_dir: Path, work_dir: Path) -> str:
     ours = run_cosim(replace(ssp.load_ssp(path), ordering="fmpy"))
     columns = [c for c in ours.outputs if c in theirs]
     worst = max(ssp.max_difference(theirs, ours.outputs, columns).values())
-    lines = [f"`fmpy.ssp.simulate_ssp` on `closed_loop.ssp` (H = {scene.step:g}, τ ∈ [0, {scene.stop_time:g}]) against "
-             f"the project's master with ordering `fmpy`: max |difference| over all {len(columns)} outputs at "
-             f"{len(ours.time)} communication points = **{worst:.3g}**.", "",
-             "Error of the plant's x against the monolithic closed-loop FMU (max over τ = 0, 1, …, 200):", "",
+    return (f"`fmpy.ssp.simulate_ssp` on `closed_loop.ssp` (H = {scene.step:g}, τ ∈ [0, {scene.stop_time:g}]) "
+            f"against the project's master with ordering `fmpy`: max |difference| over all {len(columns)} outputs "
+            f"at {len(ours.time)} communication points = **{worst:.3g}**.")
+
+
+def ssp_orderings_block(fmu_dir: Path) -> str:
+    from dataclasses import replace
+
+    import numpy as np
+
+    from . import closed_loop
+    from .cli import DEFAULT_SCENE
+    from .cosim import load_scene, run_cosim
+
+    scene = load_scene(DEFAULT_SCENE, fmu_dir)
+    lines = ["Error of the plant's x against the monolithic closed-loop FMU (max over τ = 0, 1, …, 200):", "",
              "| H | fmpy (FMPy's loop) | Gauss–Seidel | Jacobi |", "|---|---|---|---|"]
     mono = closed_loop.monolithic(fmu_dir / "HertzEAClosedLoop.fmu", closed_loop.monolithic_equivalent(scene),
                                   scene.stop_time, 1.0)
@@ -210,6 +222,8 @@ def generate(names, fmu_dir: Path, sources: list[Path], quick: bool, work_dir: P
             bodies[name] = accuracy_block(fmu_dir / "HertzEAOscillator.fmu")
         elif name == "ssp":
             bodies[name] = ssp_block(fmu_dir, work_dir)
+        elif name == "ssp_orderings":
+            bodies[name] = ssp_orderings_block(fmu_dir)
         elif name == "container":
             bodies[name] = container_block(fmu_dir, quick)
         elif name == "speed":
