@@ -15,6 +15,8 @@ and `vibrofmu report` rewrites the text between them (the markers stay). Blocks:
 - ssp_orderings: the same scene with each ordering against the monolithic FMU, per H (deterministic, but a
              minute of runs: not part of --check).
 - container: the container FMU against the monolithic closed-loop FMU and the master, per H.
+- oafm:      the paper's OAFM formulas and our harmonic basis against the reference, from an oafm summary.json.
+- stability: slow flow against shooting and the FMU sweeps, from a stability summary.json.
 - speed:     ratios from the summaries of `bench`, `oafm` and `stability` found in the --from folders
              (bench.json, summary.json); timings, so never compared by --check.
 
@@ -35,7 +37,8 @@ REPO_ROOT = Path(__file__).resolve().parents[2]
 BLOCK = re.compile(r"<!-- report:(?P<name>[a-z_]+) -->\n(?P<body>.*?)<!-- /report:(?P=name) -->", re.S)
 OPEN = re.compile(r"<!-- report:([a-z_]+) -->")
 CLOSE = re.compile(r"<!-- /report:([a-z_]+) -->")
-NAMES = ("machine", "accuracy", "ssp", "ssp_orderings", "container", "speed")
+NAMES = ("machine", "accuracy", "ssp", "ssp_orderings", "container", "oafm", "stability", "speed")
+FROM_SUMMARIES = ("oafm", "stability", "speed")  # filled from the --from folders only
 DETERMINISTIC = ("accuracy", "ssp")
 ACCURACY_TAUS = (10.0, 25.0, 50.0, 100.0, 200.0)
 ACCURACY_RTOLS = (1e-4, 1e-6, 1e-8, 1e-10, 1e-12)
@@ -184,6 +187,72 @@ def container_block(fmu_dir: Path, quick: bool) -> str:
                       *container.table_lines(rows)])
 
 
+def _summaries(sources: list[Path], key: str) -> list[dict]:
+    """The summary.json files in the folders that have `key` (oafm: paper_reproduction, stability: folds...)."""
+    found = []
+    for folder in sources:
+        file = folder / "summary.json"
+        if file.is_file():
+            data = json.loads(file.read_text())
+            if key in data:
+                found.append(data)
+    return found
+
+
+def oafm_block(sources: list[Path]) -> str | None:
+    summaries = _summaries(sources, "paper_reproduction")
+    if not summaries:
+        return None
+    s = summaries[0]
+    paper = s["paper_reproduction"]
+    lines = ["| solution | max \\|x̃ − x_ref\\| on [0, 50] | on [50, 200] |", "|---|---|---|"]
+    if "printed_eq30" in paper:
+        lines += [
+            f"| paper, Eqs 30 + 33 + 35 as printed | {paper['printed_eq30']['error_0_50']:.1e} "
+            f"(x̃′(0) = {paper['printed_eq30']['v0']:.2g} ≠ 0) | {paper['printed_steady_eq33_35']['error_50_200']:.1e} |",
+            f"| paper basis, Eq. 15 alone | {paper['x0_alone_eq15']:.1e} | — |",
+            f"| paper basis, best least-squares / best minimax C₁…C₄ | {paper['best_L2_fit_C1_C4']['error_0_50']:.1e} / "
+            f"{paper['best_minimax_fit_C1_C4']['error_0_50']:.1e} | — |",
+            f"| paper basis, OAFM-optimal C₁…C₇ (corrected formulas) | "
+            f"{paper['oafm_optimal_paper_basis']['error_0_50']:.1e} | {paper['oafm_optimal_paper_basis']['error_50_200']:.1e} |"]
+    tau_star, tau_end = s["tau_star"], s["tau_end"]
+    text = ["", f"Our harmonic basis on the automatic domains [0, {tau_star:.4g}] and [{tau_star:.4g}, {tau_end:.4g}] "
+            "(unknowns per domain, max |x̃ − x_ref| on each):", "", "| order | C_i | first domain | second domain |",
+            "|---|---|---|---|"]
+    for row in s.get("convergence", []):
+        text.append(f"| {row['order']} | {row['unknowns'][0]} | {row['max_abs_error'][0]:.1e} | "
+                    f"{row['max_abs_error'][1]:.1e} |")
+    check = s.get("fmu_check") or {}
+    if "max_abs_difference_x" in check:
+        text += ["", f"FMU fidelity 4 against the same fit (order {s['order']}): max |Δx| = "
+                     f"{check['max_abs_difference_x']:.1e}."]
+    return "\n".join(lines + text)
+
+
+def stability_block(sources: list[Path]) -> str | None:
+    summaries = _summaries(sources, "fold_frequencies")
+    if not summaries:
+        return None
+    lines = []
+    for s in summaries:
+        p = s.get("scene", {})
+        agree = s["classification_agreement"]
+        errors = s["slow_flow_vs_shooting"]
+        lines.append(f"- μ = {p.get('mu', float('nan')):g}, Δ = {p.get('Delta', float('nan')):g}: slow-flow and Floquet "
+                     f"classification agree at {agree['points_agreeing']}/{agree['points_compared']} frequencies "
+                     f"away from the folds; slow flow against shooting: max relative amplitude error "
+                     f"{errors['max_relative_r_error']:.2e}, max |exp(λT) − ρ| {errors['max_multiplier_error']:.2e} "
+                     f"(at ω = {errors['at_omega_multiplier']:.6g})")
+        for row in s["fold_frequencies"]["folds"]:
+            lines.append("  - fold: " + ", ".join(f"{k} {v:.8g}" for k, v in row.items() if not k.startswith("r_")))
+        f3 = s.get("fidelity_3") or {}
+        if "max_abs_error_after_transient" in f3:
+            lines.append(f"  - fidelity 3 against fidelity 0 after the transient: max |Δx| = "
+                         f"{f3['max_abs_error_after_transient']:.2e} ({100 * f3['relative_to_amplitude']:.2f} % of the "
+                         "amplitude)")
+    return "\n".join(lines)
+
+
 def speed_block(sources: list[Path]) -> str | None:
     """Ratios from bench.json and the oafm / stability summaries in the given folders; None if there are none."""
     from . import bench
@@ -226,8 +295,8 @@ def generate(names, fmu_dir: Path, sources: list[Path], quick: bool, work_dir: P
             bodies[name] = ssp_orderings_block(fmu_dir)
         elif name == "container":
             bodies[name] = container_block(fmu_dir, quick)
-        elif name == "speed":
-            body = speed_block(sources)
+        elif name in FROM_SUMMARIES:
+            body = {"oafm": oafm_block, "stability": stability_block, "speed": speed_block}[name](sources)
             if body is not None:
                 bodies[name] = body
     return bodies
