@@ -262,20 +262,28 @@ def speed_block(sources: list[Path]) -> str | None:
         bench_file, summary_file = folder / "bench.json", folder / "summary.json"
         if bench_file.is_file():
             data = json.loads(bench_file.read_text())
-            lines.append(f"- `vibrofmu bench{' --quick' if data.get('bench', {}).get('quick') else ''}`:")
+            machine = data.get("machine", {})
+            load = machine.get("load_average_at_start")
+            when = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime(bench_file.stat().st_mtime))
+            lines.append(f"- `vibrofmu bench{' --quick' if data.get('bench', {}).get('quick') else ''}` ({when}, "
+                         f"{machine.get('cpu_count', '?')} CPUs"
+                         + (f", load average {load[0]:.1f} at its start" if load else "") + "):")
             lines += [f"  {line}" for line in bench.summary_lines(data)]
         if summary_file.is_file():
             data = json.loads(summary_file.read_text())
+            when = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime(summary_file.stat().st_mtime))
             check = data.get("fmu_check") or {}
             if "cost_ratio_4_over_0" in check:
-                lines.append(f"- `vibrofmu oafm`: FMU fidelity 4 costs {check['cost_ratio_4_over_0']:.2f}× fidelity 0 "
+                lines.append(f"- `vibrofmu oafm` ({when}): FMU fidelity 4 costs {check['cost_ratio_4_over_0']:.2f}× fidelity 0 "
                              f"per doStep ({1e6 * check['seconds_per_step_fidelity_4']:.1f} µs) in an FMPy loop at "
                              "output interval 0.1")
             f3 = (data.get("summary") or data).get("fidelity_3") or {}
             if "end_to_end_speedup" in f3:
-                lines.append(f"- `vibrofmu stability`: fidelity 3 against fidelity 0: integration alone "
+                lines.append(f"- `vibrofmu stability` ({when}): fidelity 3 against fidelity 0: integration alone "
                              f"{f3['integration_speedup']:.1f}×, model with output evaluation "
                              f"{f3['model_speedup']:.1f}×, end to end under FMPy {f3['end_to_end_speedup']:.1f}×")
+    if lines:
+        lines.append("- Timings were taken on a shared machine; compare ratios measured in the same run only.")
     return "\n".join(lines) if lines else None
 
 
