@@ -105,3 +105,17 @@ def test_container_equals_the_master_with_its_call_sequence(fmu_dir, container_f
     assert len(theirs["x"]) == n
     assert np.max(np.abs(theirs["x"] - ours["x"])) <= 1e-12
     assert np.max(np.abs(theirs["x_ref"] - ours["x_ref"])) <= 1e-12
+
+
+def test_ssp_with_an_unknown_parameter_names_it(ssp_file, tmp_path):
+    import zipfile
+
+    bad = tmp_path / "bad_parameter.ssp"
+    with zipfile.ZipFile(ssp_file) as source, zipfile.ZipFile(bad, "w") as target:
+        for item in source.infolist():
+            data = source.read(item)
+            if item.filename == ssp.SSD_NAME:
+                data = data.replace(b'name="x_start"', b'name="x_begin"')
+            target.writestr(item, data)
+    with pytest.raises(SceneError, match="'x_begin' is not a parameter"):
+        ssp.load_ssp(bad)

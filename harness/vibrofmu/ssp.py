@@ -125,7 +125,7 @@ def load_ssp(path: Path | str, unzip_dir: Path | None = None) -> CosimScene:
     new temporary folder that lives as long as the process). Raises SceneError naming the problem."""
     from fmpy.ssp.ssd import Component, read_ssd
 
-    from .cosim import Connection, CosimScene, FmuSpec, SceneError, _check_numbers
+    from .cosim import Connection, CosimScene, SceneError, _check_numbers, _fmu_spec
 
     path = Path(path)
     try:
@@ -144,7 +144,14 @@ def load_ssp(path: Path | str, unzip_dir: Path | None = None) -> CosimScene:
             for parameter_set in binding.parameterValues:
                 for p in parameter_set.parameters:
                     values[p.name] = int(p.value) if p.type == "Integer" else float(p.value)
-        fmus.append(FmuSpec(name=element.name, path=unzip_dir / element.source, parameters=values))
+        fmu = unzip_dir / (element.source or "")
+        if not element.source or not fmu.is_file():
+            raise SceneError(f"scene {path}: component '{element.name}': no FMU {element.source!r} in the archive")
+        try:  # the same checks as a TOML scene's: parameters exist and are numbers
+            fmus.append(_fmu_spec(len(fmus), {"name": element.name, "path": str(fmu), "parameters": values},
+                                  unzip_dir, unzip_dir))
+        except SceneError as error:
+            raise SceneError(f"scene {path}: {error}") from None
     connections = tuple(Connection(c.startElement, c.startConnector, c.endElement, c.endConnector)
                         for c in ssd.system.connections)
     settings = _annotation(path)
