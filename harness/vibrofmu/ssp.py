@@ -25,7 +25,6 @@ import math
 import tempfile
 import zipfile
 from pathlib import Path
-from xml.sax.saxutils import quoteattr
 
 
 ANNOTATION = "org.vibrofmu.cosim"
@@ -36,6 +35,13 @@ NAMESPACES = {
     "ssv": "http://ssp-standard.org/SSP1/SystemStructureParameterValues",
 }
 SSP_TYPES = {"Real": "Real", "Integer": "Integer", "Boolean": "Boolean", "Enumeration": "Integer"}
+
+
+def quoteattr(text: str) -> str:
+    """An XML attribute value in double quotes (xml.sax.saxutils.quoteattr without its urllib import)."""
+    from html import escape
+
+    return '"' + escape(str(text), quote=True) + '"'
 
 
 def _variables(fmu: Path) -> dict:
