@@ -119,3 +119,18 @@ def test_ssp_with_an_unknown_parameter_names_it(ssp_file, tmp_path):
             target.writestr(item, data)
     with pytest.raises(SceneError, match="'x_begin' is not a parameter"):
         ssp.load_ssp(bad)
+
+
+def test_vibrofmu_ssp_writes_the_shipped_scene(fmu_dir, tmp_path, capsys):
+    """`vibrofmu ssp` writes closed_loop.ssp: the default scene, readable by FMPy's SSD reader (schema-validated)."""
+    from fmpy.ssp.ssd import read_ssd
+
+    from vibrofmu.cli import main
+
+    assert main(["ssp", "--fmu-dir", str(fmu_dir), "--out-dir", str(tmp_path)]) == 0
+    path = tmp_path / "closed_loop.ssp"
+    assert f"wrote {path}" in capsys.readouterr().out
+    assert [c.name for c in read_ssd(str(path)).system.elements] == ["reference", "plant", "controller"]
+    shipped, scene = ssp.load_ssp(path), load_scene(DEFAULT_SCENE, fmu_dir)
+    assert shipped.connections == scene.connections and shipped.step == scene.step
+    assert path.stat().st_mode & 0o777 == 0o644
