@@ -20,8 +20,10 @@ and `vibrofmu report` rewrites the text between them (the markers stay). Blocks:
 - speed:     ratios from the summaries of `bench`, `oafm` and `stability` found in the --from folders
              (bench.json, summary.json); timings, so never compared by --check.
 
-`--check` regenerates the deterministic blocks (accuracy, ssp) and compares them with the documents' text:
-exit 1 naming the block that differs. `--quick` skips the container's H = 0.01 and the speed block's runs.
+Without --from, the oafm, stability and speed blocks come from fresh runs of `vibrofmu oafm`, `stability` and
+`bench` (quick: oafm study to order 3, `bench --quick`). `--check` regenerates the deterministic blocks
+(accuracy, ssp) and compares them with the documents' text: exit 1 naming the block that differs.
+`--quick` also skips the container's H = 0.01.
 """
 from __future__ import annotations
 
@@ -310,13 +312,34 @@ def generate(names, fmu_dir: Path, sources: list[Path], quick: bool, work_dir: P
     return bodies
 
 
+def run_studies(fmu_dir: Path, work_dir: Path, quick: bool) -> list[Path] | None:
+    """Run oafm, stability and bench (quick: fewer orders, quick bench) into work_dir; their folders, or None
+    if one failed (its error is printed)."""
+    from .cli import main
+
+    plant = str(fmu_dir / "HertzEAOscillator.fmu")
+    runs = {"oafm": ["oafm", "--fmu", plant] + (["--study-max-order", "3"] if quick else []),
+            "stability": ["stability", "--fmu", plant],
+            "bench": ["bench", "--fmu", plant] + (["--quick"] if quick else [])}
+    folders = []
+    for name, argv in runs.items():
+        folder = work_dir / name
+        print(f"report: running vibrofmu {' '.join(argv[:1] + argv[3:])} ...", file=sys.stderr, flush=True)
+        if main(argv + ["--out", str(folder)]) != 0:
+            print(f"error: vibrofmu {name} failed; its numbers are not updated", file=sys.stderr)
+            return None
+        folders.append(folder)
+    return folders
+
+
 def add_parser(sub) -> None:
     p = sub.add_parser("report", help="regenerate the numbers in README.md and docs/*.md (blocks between "
                                       "<!-- report:NAME --> markers)")
     p.add_argument("--from", dest="sources", action="append", default=[], metavar="DIR",
-                   help="folder with a bench.json or an oafm/stability summary.json for the speed block "
-                        "(repeatable; default: none, the speed block is left as it is)")
-    p.add_argument("--quick", action="store_true", help="container comparison at H = 0.1, 0.05 only (default: off)")
+                   help="folder with a bench.json or an oafm/stability summary.json for the oafm, stability and "
+                        "speed blocks (repeatable; default: run oafm, stability and bench now)")
+    p.add_argument("--quick", action="store_true", help="container comparison at H = 0.1, 0.05 only; oafm study to "
+                                                        "order 3; bench --quick (default: off, about 20 min)")
     p.add_argument("--check", action="store_true",
                    help="re-compute the deterministic blocks (accuracy, ssp) and compare with the documents; "
                         "write nothing (default: off)")
@@ -351,6 +374,10 @@ def cmd_report(args) -> int:
         build_all(fmu_dir)
     names = DETERMINISTIC if args.check else (args.only or NAMES)
     with tempfile.TemporaryDirectory() as work_dir:
+        if not sources and any(name in FROM_SUMMARIES for name in names):
+            sources = run_studies(fmu_dir, Path(work_dir), args.quick)
+            if sources is None:
+                return 1
         bodies = generate(names, fmu_dir, sources, args.quick, Path(work_dir))
     if args.check:
         stale = [f"{doc.relative_to(root)}: {name}" for doc, blocks in found.items() for name, body in blocks.items()
