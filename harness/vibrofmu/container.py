@@ -257,14 +257,15 @@ def cmd_container(args) -> int:
     import math
     import sys
 
-    from .build import BUILD_DIR, build_all
+    from .build import build_all
+    from .ssp import default_build_dir
 
     steps = tuple(args.compare or (0.1, 0.05, 0.01)) if args.compare is not None else ()
     for H in (args.H, *steps):
         if not (math.isfinite(H) and H > 0 and abs(STOP_TIME / H - round(STOP_TIME / H)) < 1e-9):
             print(f"error: H = {H!r} must be > 0 and divide the stop time {STOP_TIME:g}", file=sys.stderr)
             return 2
-    fmu_dir = Path(args.fmu_dir or BUILD_DIR)
+    fmu_dir = Path(args.fmu_dir or default_build_dir())
     if not all((fmu_dir / name).exists() for name in set(FILES.values()) | {"HertzEAClosedLoop.fmu"}):
         print(f"building the FMUs into {fmu_dir} ...", file=sys.stderr)
         build_all(fmu_dir)

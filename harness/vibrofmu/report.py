@@ -35,7 +35,7 @@ import sys
 import time
 from pathlib import Path
 
-REPO_ROOT = Path(__file__).resolve().parents[2]
+REPO_ROOT = Path(__file__).resolve().parents[2]  # the checkout (README.md, docs/) when run from one
 BLOCK = re.compile(r"<!-- report:(?P<name>[a-z_]+) -->\n(?P<body>.*?)<!-- /report:(?P=name) -->", re.S)
 OPEN = re.compile(r"<!-- report:([a-z_]+) -->")
 CLOSE = re.compile(r"<!-- /report:([a-z_]+) -->")
@@ -353,9 +353,14 @@ def add_parser(sub) -> None:
 def cmd_report(args) -> int:
     import tempfile
 
-    from .build import BUILD_DIR, build_all
+    from .build import build_all
+    from .ssp import default_build_dir
 
     root = Path(args.root)
+    if not (root / "README.md").is_file() or not (root / "docs").is_dir():
+        print(f"error: --root {root}: no README.md and docs/ there (run report in a checkout of vibrofmu, or give "
+              "--root)", file=sys.stderr)
+        return 2
     sources = [Path(s) for s in args.sources]
     for source in sources:
         if not source.is_dir():
@@ -367,7 +372,7 @@ def cmd_report(args) -> int:
     except ReportError as error:
         print(f"error: {error}", file=sys.stderr)
         return 2
-    fmu_dir = Path(args.fmu_dir or BUILD_DIR)
+    fmu_dir = Path(args.fmu_dir or default_build_dir())
     if not all((fmu_dir / n).exists() for n in ("HertzEAOscillator.fmu", "AdaptiveLyapunovController.fmu",
                                                  "HertzEAClosedLoop.fmu")):
         print(f"building the FMUs into {fmu_dir} ...", file=sys.stderr)

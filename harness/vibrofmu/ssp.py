@@ -246,6 +246,17 @@ def max_difference(a: dict, b: dict, columns) -> dict:
     return out
 
 
+def default_build_dir() -> Path:
+    """Where `vibrofmu build` puts the FMUs by default (paths.build_dir where the package has that resolver)."""
+    try:
+        from .paths import build_dir
+    except ImportError:
+        from .build import BUILD_DIR
+
+        return BUILD_DIR
+    return build_dir()
+
+
 def add_parser(sub) -> None:
     """`vibrofmu ssp`: the shipped scenes as .ssp files (hooked into cli.py)."""
     p = sub.add_parser("ssp", help="write the co-simulation scenes as SSP files (default: build/closed_loop.ssp)")
@@ -260,10 +271,10 @@ def add_parser(sub) -> None:
 def cmd_ssp(args) -> int:
     from dataclasses import replace
 
-    from .build import BUILD_DIR, build_all
+    from .build import build_all
     from .cosim import SceneError, run_cosim
 
-    fmu_dir = Path(args.fmu_dir or BUILD_DIR)
+    fmu_dir = Path(args.fmu_dir or default_build_dir())
     if not all((fmu_dir / name).exists() for name in ("HertzEAOscillator.fmu", "AdaptiveLyapunovController.fmu")):
         print(f"building the FMUs into {fmu_dir} ...", flush=True)
         build_all(fmu_dir)
