@@ -28,18 +28,25 @@ static int set_error(VkPlant *p, int code, double t, double x, double v, const c
     return code;
 }
 
-/* A solver's report as the pending error; TerminalEvent(f"{name} at tau = {t:.10g}, x = {x:.10g}") for a stop. */
-static int solver_error(VkPlant *p, int code, const DopReport *r)
+void vk_solver_message(const VkModel *m, int code, const DopReport *r, char *buf, size_t size)
 {
     if (code == DOP_TERMINAL) {
         number_text t_text, x_text, gap_text;
         int upper = r->event == UPPER_GAP;  /* models.pull_in_events' names */
-        return set_error(p, code, r->t, r->y[0], r->y[1],
-                         "pull-in: %s gap 1 %s 2x/(3R) below %s at tau = %s, x = %s", upper ? "upper" : "lower",
-                         upper ? "-" : "+", py_g(gap_text, p->model.pull_in_gap, 6), py_g(t_text, r->t, 10),
-                         py_g(x_text, r->y[0], 10));
+        snprintf(buf, size, "pull-in: %s gap 1 %s 2x/(3R) below %s at tau = %s, x = %s", upper ? "upper" : "lower",
+                 upper ? "-" : "+", py_g(gap_text, m->pull_in_gap, 6), py_g(t_text, r->t, 10),
+                 py_g(x_text, r->y[0], 10));
+        return;
     }
-    return set_error(p, code, r->t, r->y[0], r->y[1], "%s", r->message);
+    snprintf(buf, size, "%s", r->message);
+}
+
+/* A solver's report as the pending error (vk_solver_message). */
+static int solver_error(VkPlant *p, int code, const DopReport *r)
+{
+    char text[VK_MESSAGE];
+    vk_solver_message(&p->model, code, r, text, sizeof text);
+    return set_error(p, code, r->t, r->y[0], r->y[1], "%s", text);
 }
 
 /* The exception a fault raises in Python, at the solver's state. */
@@ -69,7 +76,7 @@ double vk_accel(const VkPlant *p, double t, double x, double v, double U)
 }
 
 /* The model's events as the solvers take them (ExactModel.events: contact, upper gap, lower gap) */
-static void set_events(int64_t *n_events, DopEvent *events, const VkModel *m)
+void vk_set_events(int64_t *n_events, DopEvent *events, const VkModel *m)
 {
     memset(events, 0, sizeof(DopEvent) * DOP_MAX_EVENTS);
     if (m->polynomial) {  /* PolynomialModel.events is empty */
@@ -90,8 +97,8 @@ static void set_events(int64_t *n_events, DopEvent *events, const VkModel *m)
 int vk_init(VkPlant *p, double t0, double x0, double v0)
 {
     p->dop.n = p->rk4.n = 2;
-    set_events(&p->dop.n_events, p->dop.events, &p->model);
-    set_events(&p->rk4.n_events, p->rk4.events, &p->model);
+    vk_set_events(&p->dop.n_events, p->dop.events, &p->model);
+    vk_set_events(&p->rk4.n_events, p->rk4.events, &p->model);
     p->dop.h = 0.0;
     return vk_restart(p, t0, x0, v0, 0.0);
 }

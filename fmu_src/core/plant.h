@@ -64,6 +64,13 @@ void vk_sizes(size_t *sizes);
    are also left pending in p->error (with message, error_t/x/v; enabled = 0) until vibromodel reads them;
    while one is pending, vk_plant_advance, vk_do_step and vk_run return it and change nothing. */
 
+/* The model's events as the solvers take them (ExactModel.events: contact, upper gap, lower gap; none for Eq. 7);
+   also the closed loop's (closedloop.c) */
+void vk_set_events(int64_t *n_events, DopEvent *events, const VkModel *m);
+/* The message of a solver's report: TerminalEvent(f"{name} at tau = {t:.10g}, x = {x:.10g}") for a stop, else the
+   solver's own message; also the closed loop's */
+void vk_solver_message(const VkModel *m, int code, const DopReport *r, char *buf, size_t size);
+
 /* Configure both solvers from the model (n = 2, the model's events; the first DOP853 step not chosen) and
    restart at (t0, x0, v0) with U = 0.  The caller has set model, settings, solver, dop.rtol/atol/max_step/
    step_budget, rk4.max_step. */

@@ -44,7 +44,7 @@ def _averaged_solution(scene, settings, t0, stop_time, cache_dirs):
 
     model = averaged(scene)
     solution = SlowFlowSolution(model, t0, scene.x_start, scene.v_start, settings.rtol, settings.max_step or math.inf,
-                                stop_time)
+                                stop_time, bounded=True)  # a window of the table at a time (slowflow.WINDOW)
     notes = [f"averaged slow flow (ERRATA §3.4, {model.backbone.kind} backbone): x_e = {model.eq.x_e:.6g}, omega_e = "
              f"{model.omega_e:.8g}, table spacing {solution.spacing:.3g}"]
     return solution, notes + [f"outside the averaging's validity: {note}" for note in validity_notes(model)]
@@ -55,7 +55,7 @@ def _analytic_solution(scene, settings, t0, stop_time, cache_dirs):
     from .analytic import cached_solve, covering
 
     span = None if stop_time is None else stop_time - t0
-    oafm = covering(scene, settings.oafm, span)
+    oafm = covering(scene, settings.oafm, span, strict=True)  # refuses a fit beyond analytic.MAX_FIT_SPAN
     solution, source = cached_solve(scene, oafm, t0, read_dirs=cache_dirs)
     notes = [f"OAFM {oafm.basis} basis, tau* = {solution.pieces[1].start:.6g}, fit to tau = {solution.tau_end:.6g} "
              f"({source})"]

@@ -128,6 +128,17 @@ def make_plant(scene: Scene, settings: Settings, t0: float = 0.0, stop_time: flo
     settings.kernel asks for it and library = (vibromodel.compiled.load_library's result) holds one; else Plant.
     The plant's notes say which it is."""
     compiled, reason = library
+    if settings.kernel == Kernel.COMPILED and entry(settings.fidelity).open_loop is not None:
+        plant = Plant(scene, settings, t0, stop_time, cache_dirs)  # the set-up (table, fit) stays in Python
+        if compiled is None:
+            plant.notes.append(f"pure-Python evaluation: the compiled kernel is not available ({reason})")
+            return plant
+        from .compiled_open_loop import CompiledOpenLoopPlant
+
+        wrapped, why = CompiledOpenLoopPlant.make(plant, compiled)
+        plant.notes.append(f"per-output evaluation on the {why}" if wrapped is not None else
+                           f"pure-Python evaluation: {why}")
+        return wrapped if wrapped is not None else plant
     wanted = settings.kernel == Kernel.COMPILED and supports(settings)
     if wanted and compiled is not None:
         plant = CompiledPlant(scene, settings, compiled, t0)
