@@ -270,6 +270,7 @@ class CompiledClosedLoop:
     def __init__(self, python, library):
         from .compiled import ATOL_PER_RTOL, _model_fields
         from .compiled_open_loop import OafmProgram, oafm_hints
+        from .fidelities import entry
         from .plant import RK4_DEFAULT_STEP, Solver
 
         self.python = python
@@ -283,7 +284,8 @@ class CompiledClosedLoop:
         self._l = self._structure()
         self.address = ctypes.addressof(self._l)
         l, settings = self._l, python.settings
-        for name, value in _model_fields(python.scene, python.model).items():
+        polynomial = entry(settings.fidelity).compiled_model  # the fidelity registry: which C model
+        for name, value in _model_fields(python.scene, python.model, polynomial).items():
             setattr(l.model, name, value if isinstance(value, (int, float)) else (_double * 6)(*value))
         fill_controller(l.controller, python.controller, python.scene)
         l.solver, l.time_tolerance = int(settings.solver), TIME_TOLERANCE
