@@ -1,4 +1,4 @@
-"""Cost per output of the closed-loop FMU against the plant FMU at fidelity 0 (issue 13: closed loop <= 3 x plant),
+"""Cost per output of the closed-loop FMU against the plant FMU at fidelity 0 (target: closed loop <= 3 x plant),
 side by side in one run: doStep + getReal(x) over tau in [0, STOP], paper example, best of REPEATS, at intervals
 0.1 and 1, in the plain C host of the bench ladder (timing_host.c, `vibrofmu doctor`'s environment) and under FMPy.
 
