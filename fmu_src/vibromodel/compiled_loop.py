@@ -16,6 +16,7 @@ import math
 import numpy as np
 
 from .control import ESTIMATE_NAMES, Controller, Gains, validate_estimates, validate_law
+from .fidelities import entry
 from .parameters import ParameterError, Scene, validate
 from .plant import TIME_TOLERANCE
 
@@ -270,7 +271,6 @@ class CompiledClosedLoop:
     def __init__(self, python, library):
         from .compiled import ATOL_PER_RTOL, _model_fields
         from .compiled_open_loop import OafmProgram, oafm_hints
-        from .fidelities import entry
         from .plant import RK4_DEFAULT_STEP, Solver
 
         self.python = python
@@ -284,7 +284,7 @@ class CompiledClosedLoop:
         self._l = self._structure()
         self.address = ctypes.addressof(self._l)
         l, settings = self._l, python.settings
-        polynomial = entry(settings.fidelity).compiled_model  # the fidelity registry: which C model
+        polynomial = entry(settings.fidelity).compiled_model  # VkModel.polynomial of the plant's level
         for name, value in _model_fields(python.scene, python.model, polynomial).items():
             setattr(l.model, name, value if isinstance(value, (int, float)) else (_double * 6)(*value))
         fill_controller(l.controller, python.controller, python.scene)
