@@ -320,6 +320,9 @@ def make_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("doctor", help="print the environment a C host needs for FMU, and check it with a C host")
     p.add_argument("fmu")
     p.set_defaults(func=cmd_doctor)
+
+    from .study import add_parser as add_study_parser  # issue 16: harness/vibrofmu/study/
+    add_study_parser(sub)
     return parser
 
 

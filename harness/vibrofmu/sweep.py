@@ -98,34 +98,44 @@ class SweepStopped(RuntimeError):
     """The FMU refused a call during a sweep; the message carries its log message."""
 
 
-def settle(fmu_path, unzip_dir: str, scene: Scene, settings: Settings) -> SweepPoint:
-    """Run one frequency from the scene's start state until the transient has decayed (module docstring).
-    Raises SweepStopped with the FMU's own log message if the FMU fails."""
+def settle_loop(step, scene: Scene) -> tuple[float, float, bool, int]:
+    """The settling loop of the module docstring on any stepper: step(t, h) advances one communication step
+    from t and returns x at t + h (it may raise to stop). Returns (|c|, mean, settled, periods)."""
     T = 2 * math.pi / scene.omega
     h = T / SAMPLES_PER_PERIOD
     decay = 1.0 - math.exp(-scene.mu * WINDOW_PERIODS * T / 2)
+    c_previous, n, periods = complex(math.nan), 0, 0
+    while True:
+        x = np.empty(WINDOW_PERIODS * SAMPLES_PER_PERIOD)
+        for k in range(len(x)):
+            x[k] = step(n * h, h)
+            n += 1
+        periods += WINDOW_PERIODS
+        c, mean = first_harmonic(np.roll(x, 1))  # x[k] is at (k + 1) h: roll so that index = phase
+        settled = abs(c - c_previous) <= SETTLE_TOLERANCE * abs(c) * decay
+        if settled or periods >= MAX_PERIODS:
+            return abs(c), mean, settled, periods
+        c_previous = c
+
+
+def settle(fmu_path, unzip_dir: str, scene: Scene, settings: Settings) -> SweepPoint:
+    """Run one frequency from the scene's start state until the transient has decayed (module docstring).
+    Raises SweepStopped with the FMU's own log message if the FMU fails."""
     instance = FmuInstance(fmu_path, unzip_dir=unzip_dir)
     fmu = instance.fmu
     refs = instance.value_references(["x", "v"])
+
+    def step(t, h):
+        fmu.doStep(currentCommunicationPoint=t, communicationStepSize=h)
+        return fmu.getReal(refs[:1])[0]
+
     try:
         fmu.setupExperiment(startTime=0.0)
         fmu.enterInitializationMode()
         instance.set(start_values(scene, settings))
         fmu.exitInitializationMode()
-        c_previous, step, periods = complex(math.nan), 0, 0
-        while True:
-            x = np.empty(WINDOW_PERIODS * SAMPLES_PER_PERIOD)
-            for k in range(len(x)):
-                fmu.doStep(currentCommunicationPoint=step * h, communicationStepSize=h)
-                step += 1
-                x[k] = fmu.getReal(refs[:1])[0]
-            periods += WINDOW_PERIODS
-            c, mean = first_harmonic(np.roll(x, 1))  # x[k] is at (k + 1) h: roll so that index = phase
-            settled = abs(c - c_previous) <= SETTLE_TOLERANCE * abs(c) * decay
-            if settled or periods >= MAX_PERIODS:
-                state = tuple(fmu.getReal(refs))
-                return SweepPoint(scene.omega, abs(c), mean, settled, periods, state)
-            c_previous = c
+        r, mean, settled, periods = settle_loop(step, scene)
+        return SweepPoint(scene.omega, r, mean, settled, periods, tuple(fmu.getReal(refs)))
     except FMICallException as error:
         raise SweepStopped(_reason(error, instance.log)) from None
     finally:
