@@ -98,9 +98,13 @@ class SweepStopped(RuntimeError):
     """The FMU refused a call during a sweep; the message carries its log message."""
 
 
-def settle_loop(step, scene: Scene) -> tuple[float, float, bool, int]:
+def settle_loop(step, scene: Scene, accept=None) -> tuple[complex, float, bool, int]:
     """The settling loop of the module docstring on any stepper: step(t, h) advances one communication step
-    from t and returns x at t + h (it may raise to stop). Returns (|c|, mean, settled, periods)."""
+    from t and returns x at t + h (it may raise to stop). Returns (c, mean, settled, periods).
+
+    accept(c), if given, must also hold to stop: near a saddle of the slow flow c creeps as slowly as at a
+    settled focus (its unstable eigenvalue is small), and a caller that knows where the attractors are can
+    refuse to stop there."""
     T = 2 * math.pi / scene.omega
     h = T / SAMPLES_PER_PERIOD
     decay = 1.0 - math.exp(-scene.mu * WINDOW_PERIODS * T / 2)
@@ -112,9 +116,9 @@ def settle_loop(step, scene: Scene) -> tuple[float, float, bool, int]:
             n += 1
         periods += WINDOW_PERIODS
         c, mean = first_harmonic(np.roll(x, 1))  # x[k] is at (k + 1) h: roll so that index = phase
-        settled = abs(c - c_previous) <= SETTLE_TOLERANCE * abs(c) * decay
+        settled = abs(c - c_previous) <= SETTLE_TOLERANCE * abs(c) * decay and (accept is None or accept(c))
         if settled or periods >= MAX_PERIODS:
-            return abs(c), mean, settled, periods
+            return c, mean, settled, periods
         c_previous = c
 
 
@@ -134,8 +138,8 @@ def settle(fmu_path, unzip_dir: str, scene: Scene, settings: Settings) -> SweepP
         fmu.enterInitializationMode()
         instance.set(start_values(scene, settings))
         fmu.exitInitializationMode()
-        r, mean, settled, periods = settle_loop(step, scene)
-        return SweepPoint(scene.omega, r, mean, settled, periods, tuple(fmu.getReal(refs)))
+        c, mean, settled, periods = settle_loop(step, scene)
+        return SweepPoint(scene.omega, abs(c), mean, settled, periods, tuple(fmu.getReal(refs)))
     except FMICallException as error:
         raise SweepStopped(_reason(error, instance.log)) from None
     finally:

@@ -26,7 +26,6 @@ from .spec import Spec
 
 Z95 = 1.959963984540054  # two-sided 95 % normal quantile
 BASIN_MARGIN = 0.03  # basins: compared only farther than this from the predicted boundary in (x0, v0/omega)
-BRANCH_MATCH = 0.10  # a settled amplitude within 10 % of a stable branch is on that branch (branches >= 50 % apart)
 
 
 def wilson(k: int, n: int) -> list[float]:
@@ -36,7 +35,7 @@ def wilson(k: int, n: int) -> list[float]:
     p = k / n
     centre = (p + Z95**2 / (2 * n)) / (1 + Z95**2 / n)
     half = Z95 * math.sqrt(p * (1 - p) / n + Z95**2 / (4 * n * n)) / (1 + Z95**2 / n)
-    return [max(0.0, centre - half), min(1.0, centre + half)]
+    return [0.0 if k == 0 else max(0.0, centre - half), 1.0 if k == n else min(1.0, centre + half)]
 
 
 def projection(run: dict, workers: int) -> dict:
@@ -110,16 +109,6 @@ def monte_carlo(spec: Spec, d: dict) -> dict:
 
 # --- basins ------------------------------------------------------------------------------------------
 
-def measured_branch(r: np.ndarray, ok: np.ndarray, stable_r: list[float]) -> np.ndarray:
-    """Index of the stable branch each settled amplitude is on (within BRANCH_MATCH), else -1."""
-    branch = np.full(len(r), -1)
-    for i in np.flatnonzero(ok):
-        k = int(np.argmin([abs(r[i] - s) for s in stable_r]))
-        if abs(r[i] - stable_r[k]) <= BRANCH_MATCH * stable_r[k]:
-            branch[i] = k
-    return branch
-
-
 def stable_manifold(scene, model, bound: float, samples: int = 40000) -> list[np.ndarray]:
     """The saddle's stable manifold: both branches traced backwards in slow time from the saddle along the
     stable eigenvector, until |(A, B)| exceeds `bound` or 40 slow decay times (2/mu) pass; each branch as
@@ -173,9 +162,8 @@ def basins(spec: Spec, d: dict) -> dict:
     scene = spec.base_scene().with_values(omega=omega)
     model = av.averaged(scene)
     stable = [s for s in av.steady_states(model.flow(), model.r_max) if s.stable]
-    stable_r = [s.r for s in stable]
-    ok = _usable(d) & d["settled"] & ~d["contact_loss"]
-    measured = measured_branch(d["r"], ok, stable_r)
+    ok = _usable(d) & ~d["contact_loss"]
+    measured = np.where(ok, d["branch"], -1)
     predicted = d["predicted_branch"]
     x0, v0 = spec.axis("x0"), spec.axis("v0")
     corner = max(math.hypot(x - model.eq.x_e, v / omega) for x in (x0[0], x0[-1]) for v in (v0[0], v0[-1]))
@@ -199,7 +187,7 @@ def basins(spec: Spec, d: dict) -> dict:
         "omega": omega, "stable_states": [{"r": s.r, "A": s.A, "B": s.B, "kind": s.kind} for s in stable],
         "grid": [len(x0), len(v0)],
         "reached": {"branch_" + str(k): int(np.sum(measured == k)) for k in range(len(stable))}
-        | {"other_or_unsettled": int(np.sum(measured == -1)), "contact_loss": int(np.sum(d["contact_loss"])),
+        | {"neither": int(np.sum(measured == -1)), "unsettled_at_max_periods": int(np.sum(~d["settled"])), "contact_loss": int(np.sum(d["contact_loss"])),
            "pull_in": int(np.sum(d["pull_in"]))},
         "agreement": {**table[f"{margin:g}"], "margin": margin,
                       "margin_meaning": "Euclidean distance in (x0, v0/omega) from the predicted boundary",

@@ -3,7 +3,10 @@ worker runs one case into its Parquet rows.
 
 A case is a dict with its id `case` and what the worker needs; `run_case` returns one row per point:
 - monte-carlo: one sample of the toleranced parameters, settled from the scene's start state; 1 row;
-- basins: one initial state (x0, v0) at the bistable point, settled; 1 row with the averaged prediction;
+- basins: one initial state (x0, v0) at the bistable point, settled; 1 row with the averaged prediction.
+  `branch` is the stable state the last window's first harmonic is at (branch_of), also for a run that
+  reached MAX_PERIODS unsettled: with Omega = 2 near 2 omega the AC drive beats the settled vibration by
+  ~0.5 % (sweep.py), more than the settling bound at mu = 0.002 allows, yet the run is at its attractor;
 - response-map: one sweep of omega at one Delta, up or down, each point continued from the previous point's
   end state (as sweep.py does); one row per frequency.
 """
@@ -79,8 +82,11 @@ def run_case(spec: Spec, engine, case: dict) -> list[dict]:
         return [_row(case, 0, scene, engine, engine.settle(scene))]
     if spec.kind == "basins":
         scene = base.with_values(omega=case["omega"], x_start=case["x0"], v_start=case["v0"])
-        row = _row(case, 0, scene, engine, engine.settle(scene))
-        row.update(i=case["i"], j=case["j"], **predicted_attractor(scene))
+        stable = stable_states(scene)
+        outcome = engine.settle(scene, accept=lambda c: branch_of(c.real, -c.imag, stable) >= 0)
+        row = _row(case, 0, scene, engine, outcome)
+        row.update(i=case["i"], j=case["j"], branch=branch_of(outcome.A, outcome.B, stable),
+                   **predicted_attractor(scene, stable))
         return [row]
     rows, scene = [], base.with_values(Delta=case["Delta"])
     stopped = ""
@@ -103,19 +109,35 @@ def run_case(spec: Spec, engine, case: dict) -> list[dict]:
     return rows
 
 
+BRANCH_MATCH = 0.10  # a first harmonic within 0.1 r_k of stable state k (in the (A, B) plane) is on it
+
+
+def stable_states(scene: Scene) -> list:
+    """The slow flow's stable steady states at the scene, by increasing amplitude."""
+    model = av.averaged(scene)
+    return [s for s in av.steady_states(model.flow(), model.r_max) if s.stable]
+
+
+def branch_of(A: float, B: float, stable: list) -> int:
+    """Index of the stable steady state (A_k, B_k) within BRANCH_MATCH r_k of (A, B), else -1. At the basins'
+    default point the stable states and the saddle are >= 0.18 apart, > 0.1 r_k for every k."""
+    for k, state in enumerate(stable):
+        if math.hypot(A - state.A, B - state.B) <= BRANCH_MATCH * state.r:
+            return k
+    return -1
+
+
 PREDICTION_TIME = 20.0  # slow-flow run length in units of 2/mu (the slow decay time): e^-20 of the transient left
 
 
-def predicted_attractor(scene: Scene) -> dict:
+def predicted_attractor(scene: Scene, stable: list) -> dict:
     """The averaged model's end state from (x_start, v_start): the slow flow (A, B) from the state whose
     reconstructed x, x' equal the initial state (slowflow.SlowFlowSolution, the model of fidelity 3), run
-    for PREDICTION_TIME slow decay times; its amplitude picks the stable steady state it went to."""
+    for PREDICTION_TIME slow decay times; the stable steady state it ends at (branch_of)."""
     from vibromodel.slowflow import SlowFlowSolution
 
     model = av.averaged(scene)
     t_end = PREDICTION_TIME * 2.0 / scene.mu
     solution = SlowFlowSolution(model, 0.0, scene.x_start, scene.v_start, 1e-8, t_end=t_end)
     A, B = (float(value) for value in solution.Z_end)
-    stable = [s for s in av.steady_states(model.flow(), model.r_max) if s.stable]
-    nearest = min(range(len(stable)), key=lambda k: math.hypot(stable[k].A - A, stable[k].B - B)) if stable else -1
-    return {"predicted_A": A, "predicted_B": B, "predicted_r": math.hypot(A, B), "predicted_branch": nearest}
+    return {"predicted_A": A, "predicted_B": B, "predicted_r": math.hypot(A, B), "predicted_branch": branch_of(A, B, stable)}

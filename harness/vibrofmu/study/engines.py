@@ -34,7 +34,9 @@ CONTACT_LOSS_X = -1.5  # 1 + 2x/3 = 0: the Hertzian contact opens (Eq. 3)
 class Outcome:
     """What one settled run gives (one Parquet row's outcome columns)."""
 
-    r: float = math.nan  # first-harmonic amplitude over the last window
+    r: float = math.nan  # first-harmonic amplitude |c| over the last window
+    A: float = math.nan  # c = A - iB: x - mean ~ A cos(omega t) + B sin(omega t) over the last window
+    B: float = math.nan
     mean: float = math.nan  # mean of x over the last window
     settled: bool = False
     periods: int = 0  # forcing periods simulated
@@ -50,6 +52,11 @@ class Outcome:
         return asdict(self)
 
 
+def _finish(outcome: Outcome, c: complex, mean: float, settled: bool, periods: int) -> None:
+    outcome.r, outcome.A, outcome.B = abs(c), c.real, -c.imag
+    outcome.mean, outcome.settled, outcome.periods = mean, settled, periods
+
+
 def _stopped(outcome: Outcome, message: str) -> Outcome:
     outcome.pull_in = "pull-in" in message
     outcome.failed = not outcome.pull_in
@@ -63,11 +70,24 @@ class CoreEngine:
     name = "core"
 
     def __init__(self):
-        from ..kernel import kernel_library
+        from pathlib import Path
 
-        self.library = kernel_library()
+        import vibromodel
+        from vibromodel.compiled import load_library
 
-    def settle(self, scene: Scene) -> Outcome:
+        from ..kernel import KERNEL_SOURCE, kernel_library
+
+        if KERNEL_SOURCE.exists():
+            self.library = kernel_library()
+        else:
+            # vibromodel came from a plant FMU's resources (a worker spawned by a process that had loaded the
+            # FMU inherits its sys.path): use the kernel compiled into that FMU, next to it
+            self.library, why = load_library([Path(vibromodel.__file__).resolve().parents[1]])
+            if self.library is None:
+                raise RuntimeError(f"no compiled kernel for the core engine: {why}")
+
+    def settle(self, scene: Scene, accept=None) -> Outcome:
+        """Run from the scene's start state until settled (sweep.settle_loop; accept(c) must hold too)."""
         from vibromodel.compiled import CompiledPlant
 
         started = time.perf_counter()
@@ -81,7 +101,7 @@ class CoreEngine:
                     outcome.contact_loss = True
                 return out.x
 
-            outcome.r, outcome.mean, outcome.settled, outcome.periods = settle_loop(step, scene)
+            _finish(outcome, *settle_loop(step, scene, accept))
             outcome.x_end, outcome.v_end = plant.output(0), plant.output(1)
         except (TerminalEvent, IntegrationError, ParameterError, ArithmeticError) as error:
             _stopped(outcome, f"{type(error).__name__}: {error}")
@@ -104,7 +124,8 @@ class FmuEngine:
             file.write(fmu_bytes)
         self.unzip_dir = extract(self.fmu_path, os.path.join(self.folder, "unzipped"))
 
-    def settle(self, scene: Scene) -> Outcome:
+    def settle(self, scene: Scene, accept=None) -> Outcome:
+        """Run from the scene's start state until settled (sweep.settle_loop; accept(c) must hold too)."""
         from fmpy.fmi1 import FMICallException
 
         from ..run import FmuInstance, _reason
@@ -127,7 +148,7 @@ class FmuEngine:
                     outcome.contact_loss = True
                 return fmu.getReal([x_ref])[0]
 
-            outcome.r, outcome.mean, outcome.settled, outcome.periods = settle_loop(step, scene)
+            _finish(outcome, *settle_loop(step, scene, accept))
             outcome.x_end, outcome.v_end = fmu.getReal([x_ref, v_ref])
         except FMICallException as error:
             _stopped(outcome, _reason(error, instance.log))

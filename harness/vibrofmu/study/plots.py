@@ -41,7 +41,7 @@ def monte_carlo(d: dict, result: dict, path: Path) -> Path:
         p, (lo, hi) = summary[key]["probability"], summary[key]["ci95_wilson"]
         labels.append(key.replace("_", " "))
         values.append(p)
-        errors.append([p - lo, hi - p])
+        errors.append([max(0.0, p - lo), max(0.0, hi - p)])
     axes[1].bar(labels, values, yerr=np.array(errors).T, capsize=8, color=["C2", "C3"])
     axes[1].set_ylabel("probability (95 % Wilson interval)")
     axes[1].set_ylim(0, max(0.05, max(hi for _, hi in (summary[k]["ci95_wilson"] for k in ("contact_loss", "pull_in"))) * 1.2))

@@ -25,7 +25,7 @@ from distributed.diagnostics.plugin import WorkerPlugin
 
 from .spec import Spec, SpecError
 
-CONNECT_TIMEOUT_S = 5.0  # --scheduler: give up connecting after this (the issue: fail within 10 s)
+CONNECT_TIMEOUT_S = 3.0  # --scheduler: give up connecting after this (the whole command must fail within 10 s)
 OVERHEAD_PROBE_TASKS = 200
 MAX_OVERHEAD = 0.05  # scheduling cost per task / work per task
 BATCHES_PER_WORKER = 4
@@ -83,6 +83,8 @@ def connect(scheduler: str | None, workers: int | None):
                             f"({type(error).__name__})") from None
         except ValueError as error:
             raise SpecError(f"--scheduler {scheduler!r}: {error}") from None
+        except Exception as error:  # something answered that does not speak Dask's protocol
+            raise SpecError(f"--scheduler {scheduler}: not a Dask scheduler ({type(error).__name__})") from None
         try:
             client.wait_for_workers(1, timeout=CONNECT_TIMEOUT_S)
         except TimeoutError:
