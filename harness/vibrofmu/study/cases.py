@@ -92,6 +92,7 @@ def run_case(spec: Spec, engine, case: dict) -> list[dict]:
     stopped = ""
     for point, omega in enumerate(case["omegas"]):
         scene = scene.with_values(omega=omega)
+        start = scene  # this point's start state (the previous point's end state)
         if stopped:
             from .engines import Outcome
 
@@ -102,7 +103,7 @@ def run_case(spec: Spec, engine, case: dict) -> list[dict]:
                 stopped = f"the sweep stopped at omega = {omega:.8g}: {outcome.message}"
             else:
                 scene = scene.with_values(x_start=outcome.x_end, v_start=outcome.v_end)  # continuation
-        row = _row(case, point, scene.with_values(omega=omega), engine, outcome)
+        row = _row(case, point, start, engine, outcome)
         row.update(direction=case["direction"], Delta_index=case["Delta_index"],
                    omega_index=point if case["direction"] == "up" else len(case["omegas"]) - 1 - point)
         rows.append(row)
