@@ -109,10 +109,10 @@ def monte_carlo(spec: Spec, d: dict) -> dict:
 
 # --- basins ------------------------------------------------------------------------------------------
 
-def stable_manifold(scene, model, bound: float, samples: int = 40000) -> list[np.ndarray]:
+def stable_manifold(scene, model, bound: float, samples: int = 40000, with_times: bool = False) -> list:
     """The saddle's stable manifold: both branches traced backwards in slow time from the saddle along the
     stable eigenvector, until |(A, B)| exceeds `bound` or 40 slow decay times (2/mu) pass; each branch as
-    an array of (A, B) rows."""
+    an array of (A, B) rows (with_times: (backward times, that array))."""
     from scipy.integrate import solve_ivp
 
     flow = model.flow()
@@ -137,7 +137,7 @@ def stable_manifold(scene, model, bound: float, samples: int = 40000) -> list[np
         sol = solve_ivp(backwards, (0.0, 40 * 2.0 / scene.mu), start, method="DOP853", rtol=1e-10, atol=1e-13,
                         dense_output=True, events=leave)
         t = np.linspace(0.0, sol.t[-1], samples)
-        branches.append(sol.sol(t).T)
+        branches.append((t, sol.sol(t).T) if with_times else sol.sol(t).T)
     return branches
 
 
