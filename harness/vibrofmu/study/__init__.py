@@ -79,8 +79,16 @@ def _run(args) -> int:
         plugin = FmuFile(fmu_digest, data)
 
     started = time.perf_counter()
-    client, cluster = connect(args.scheduler, args.workers)
+    try:
+        client, cluster = connect(args.scheduler, args.workers)
+    except KeyboardInterrupt:
+        print("interrupted while starting the cluster: nothing computed", file=sys.stderr)
+        return 130
     interrupted, run = False, {}
+    try:
+        workers = len(client.scheduler_info(n_workers=-1)["workers"])
+    except Exception:  # noqa: BLE001 - only for the summary
+        workers = None
     progress = Progress(len(cases), resumed, args.kind)
     try:
         if plugin is not None:
@@ -102,7 +110,7 @@ def _run(args) -> int:
     done = len(store.load_cases())
     summary = {"kind": spec.kind, "engine": spec.engine, "cases": done, "cases_in_study": len(cases),
                "rows": rows, "computed_this_run": done - resumed, "resumed_from_disk": resumed,
-               "workers": run.get("workers"), "wall_s": wall, "interrupted": interrupted,
+               "workers": run.get("workers", workers), "wall_s": wall, "interrupted": interrupted,
                "scheduler": args.scheduler or "LocalCluster", "spec": spec.as_dict(), "run": run}
     if run:
         summary["projection_64_workers"] = analysis.projection(run, 64)
