@@ -2,7 +2,8 @@
 numbers, and the throughput projection.
 
 - response-map: bistable where the slow flow has two stable steady states (vibromodel.averaging); the runs
-  are bistable where the up and down sweeps settle on different branches (sweep.hysteresis_jumps' rule).
+  are bistable where the up and down sweeps settle on different branches (sweep.hysteresis_jumps' rule,
+  with BRANCHES_APART).
   Points nearer a slow-flow fold than stability.sweep_tolerance (one omega step + the ghost margin of the
   longest wait) are not compared. The cusp: the smallest Delta with two folds, by bisection (slow flow), and
   the first Delta row with a bistable point (runs).
@@ -21,10 +22,14 @@ import numpy as np
 from vibromodel import averaging as av
 
 from ..stability import sweep_tolerance
-from ..sweep import HYSTERESIS_THRESHOLD, SETTLE_TOLERANCE, Sweep, SweepPoint, hysteresis_jumps
+from ..sweep import SETTLE_TOLERANCE, Sweep, SweepPoint, hysteresis_jumps
 from .spec import Spec
 
 Z95 = 1.959963984540054  # two-sided 95 % normal quantile
+# response map: up and down amplitudes farther apart than this are on different branches. Each settled
+# amplitude is within SETTLE_TOLERANCE of its steady state, so two runs at one state differ by up to twice
+# that; 2.5 times leaves a margin (sweep.HYSTERESIS_THRESHOLD, 5 %, is below 2 x 3 %)
+BRANCHES_APART = 2.5 * SETTLE_TOLERANCE
 BASIN_MARGIN = 0.03  # basins: compared only farther than this from the predicted boundary in (x0, v0/omega)
 
 
@@ -235,7 +240,7 @@ def response_map(spec: Spec, d: dict) -> dict:
         r[direction][j, i] = d["r"][k] if ok else np.nan
         settled[direction][j, i] = bool(d["settled"][k]) and ok
     both = settled["up"] & settled["down"]
-    apart = np.abs(r["up"] - r["down"]) > HYSTERESIS_THRESHOLD * np.fmax(r["up"], r["down"])
+    apart = np.abs(r["up"] - r["down"]) > BRANCHES_APART * np.fmax(r["up"], r["down"])
     measured = both & apart
     step = float(omegas[1] - omegas[0]) if n_w > 1 else math.nan
     folds = slow_flow_folds(scene, deltas)
@@ -252,7 +257,7 @@ def response_map(spec: Spec, d: dict) -> dict:
         down = Sweep("down", [SweepPoint(float(w), float(r["down"][j, i]), 0.0, bool(settled["down"][j, i]), 0, (0, 0))
                               for i, w in list(enumerate(omegas))[::-1]])
         jumps.append({"Delta": float(delta), "slow_flow_folds": [f.omega for f in folds[j]],
-                      "run_jumps": [jump["omega"] for jump in hysteresis_jumps(up, down)]})
+                      "run_jumps": [jump["omega"] for jump in hysteresis_jumps(up, down, BRANCHES_APART)]})
     compared = ~near & both
     agree = compared & (measured == predicted)
     cusp = slow_flow_cusp(scene, float(deltas[0]), float(deltas[-1])) if n_d > 1 else None
