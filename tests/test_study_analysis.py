@@ -81,16 +81,23 @@ def test_wilson_interval():
 
 
 @pytest.mark.parametrize("c_s, c_w, remaining, workers", [(0.004, 0.02, 10000, 2), (0.004, 1.0, 100, 2),
-                                                          (0.01, 0.001, 10**6, 64)])
+                                                          (0.01, 0.001, 10**6, 64), (0.003, 0.1, 10**6, 64)])
 def test_batch_size_keeps_scheduling_under_5_percent(c_s, c_w, remaining, workers):
+    def fine(b):  # a worker's overhead <= 5 %, and the scheduler's task rate keeps every worker busy
+        return c_s / (b * c_w) <= MAX_OVERHEAD and b / c_s >= workers / c_w
+
     b = batch_size(c_s, c_w, remaining, workers)
-    assert c_s / (b * c_w) <= MAX_OVERHEAD
-    assert b == 1 or c_s / ((b - 1) * c_w) > MAX_OVERHEAD  # the smallest such batch
+    assert fine(b)
+    assert b == 1 or not fine(b - 1)  # the smallest such batch
 
 
 def test_projection_is_bounded_by_workers_and_scheduler():
     run = {"case_cost_s_mean": 0.1, "scheduler_s_per_task": 0.002, "batch_size": 1}
-    p = projection(run, 64)["at_this_batch_size"]
+    projected = projection(run, 64)
+    p = projected["at_this_batch_size"]
     assert p["worker_bound"] == pytest.approx(64 / 0.102)
     assert p["scheduler_bound"] == pytest.approx(500.0)
-    assert p["cases_per_s"] == pytest.approx(500.0)  # the scheduler is the bottleneck here
+    assert p["cases_per_s"] == pytest.approx(500.0)  # b = 1: the scheduler is the bottleneck
+    q = projected["at_the_batch_size_for_these_workers"]
+    assert q["batch_size"] == 2  # 64 workers x 0.002 s / 0.1 s = 1.28 -> 2
+    assert q["cases_per_s"] == pytest.approx(64 * 2 / (2 * 0.1 + 0.002))  # now the workers bound it

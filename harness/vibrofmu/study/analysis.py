@@ -50,9 +50,11 @@ def projection(run: dict, workers: int) -> dict:
     c_w, c_s = run.get("case_cost_s_mean", math.nan), run.get("scheduler_s_per_task", math.nan)
     if not (c_w > 0 and c_s > 0):
         return {}
-    b_needed = max(1, math.ceil(c_s / (0.05 * c_w)))
+    from .scheduling import needed_batch
+
+    b_needed = needed_batch(c_s, c_w, workers)
     out = {"workers": workers, "case_cost_s": c_w, "scheduler_s_per_task": c_s}
-    for label, b in (("at_this_batch_size", run["batch_size"]), ("at_batch_size_for_5_percent", b_needed)):
+    for label, b in (("at_this_batch_size", run["batch_size"]), ("at_the_batch_size_for_these_workers", b_needed)):
         worker_bound, scheduler_bound = workers * b / (b * c_w + c_s), b / c_s
         out[label] = {"batch_size": b, "cases_per_s": min(worker_bound, scheduler_bound),
                       "worker_bound": worker_bound, "scheduler_bound": scheduler_bound}

@@ -8,8 +8,9 @@ they arrive.
   needed.
 - Batches: the scheduler's cost per task c_s is measured first (OVERHEAD_PROBE_TASKS empty tasks); one
   case per worker then runs alone (the pilot: it warms the workers and measures the cost per case c_w);
-  the rest go in batches of b = ceil(c_s / (MAX_OVERHEAD c_w)) cases, so that c_s / (b c_w) <= 5 %, but
-  small enough that every worker gets at least BATCHES_PER_WORKER batches (balance at the end).
+  the rest go in batches of b cases, the smallest b with c_s / (b c_w) <= 5 % and b / c_s >= W / c_w (the
+  scheduler keeps W workers busy), but small enough that every worker gets at least BATCHES_PER_WORKER
+  batches (balance at the end).
 - Worker loss: Dask re-runs the tasks of a lost worker on the others (its Nanny restarts it); a batch's
   rows are written once, when its result reaches the client, and Store.write drops cases already on disk.
 """
@@ -106,10 +107,17 @@ def scheduler_cost(client, n: int = OVERHEAD_PROBE_TASKS) -> float:
     return (time.perf_counter() - started) / n
 
 
+def needed_batch(c_s: float, c_w: float, workers: int) -> int:
+    """Smallest b with c_s / (b c_w) <= MAX_OVERHEAD (a worker's share) and b / c_s >= workers / c_w (the one
+    scheduler, handing out a task per c_s, keeps every worker busy)."""
+    if not c_w > 0:
+        return 1
+    return max(1, math.ceil(c_s / (MAX_OVERHEAD * c_w)), math.ceil(workers * c_s / c_w))
+
+
 def batch_size(c_s: float, c_w: float, remaining: int, workers: int) -> int:
-    needed = math.ceil(c_s / (MAX_OVERHEAD * c_w)) if c_w > 0 else 1
     balance = max(1, remaining // (BATCHES_PER_WORKER * workers))
-    return max(1, min(needed, balance))
+    return max(1, min(needed_batch(c_s, c_w, workers), balance))
 
 
 class Progress:
