@@ -127,13 +127,13 @@ def test_ctrl_c_leaves_a_readable_parquet_file(tmp_path):
     out = tmp_path / "out"
     process = subprocess.Popen([str(BIN / "vibrofmu"), "study", "monte-carlo", "--engine", "core", "--workers", "1",
                                 "--out", str(out), "--set", "mu=0.01", "--set", "samples=200"],
-                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
     try:
         deadline = time.monotonic() + 120
         while not (out / "parts").exists() or not list((out / "parts").glob("*.parquet")):
             assert process.poll() is None and time.monotonic() < deadline, process.stderr.read() if process.poll() is not None else "timeout"
             time.sleep(0.05)
-        process.send_signal(signal.SIGINT)
+        os.killpg(process.pid, signal.SIGINT)  # as Ctrl-C in a terminal: the command and its worker processes
         _, err = process.communicate(timeout=120)
     finally:
         if process.poll() is None:

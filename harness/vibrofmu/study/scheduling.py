@@ -19,6 +19,7 @@ from __future__ import annotations
 import logging
 import math
 import os
+import signal
 import time
 
 from distributed import as_completed
@@ -93,8 +94,14 @@ def connect(scheduler: str | None, workers: int | None):
             raise SpecError(f"the Dask scheduler at {scheduler} has no workers") from None
         return client, None
     n = workers or os.cpu_count() or 1
-    cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
-                           dashboard_address=None, silence_logs=logging.CRITICAL)
+    # Ctrl-C in a terminal reaches the whole process group: the worker processes ignore SIGINT (a disposition
+    # they inherit, and their nannies' restarted workers too) and the client shuts them down itself
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
+                               dashboard_address=None, silence_logs=logging.CRITICAL)
+    finally:
+        signal.signal(signal.SIGINT, previous)
     return Client(cluster), cluster
 
 
