@@ -98,16 +98,14 @@ class SweepStopped(RuntimeError):
     """The FMU refused a call during a sweep; the message carries its log message."""
 
 
-def settle_loop(step, scene: Scene, accept=None, rate: float | None = None,
-                tolerance: float = SETTLE_TOLERANCE) -> tuple[complex, float, bool, int]:
+def settle_loop(step, scene: Scene, accept=None, rate: float | None = None) -> tuple[complex, float, bool, int]:
     """The settling loop of the module docstring on any stepper: step(t, h) advances one communication step
     from t and returns x at t + h (it may raise to stop). Returns (c, mean, settled, periods).
 
     accept(c), if given, must also hold to stop: near a saddle of the slow flow c creeps as slowly as at a
     settled focus (its unstable eigenvalue is small), and a caller that knows where the attractors are can
     refuse to stop there. rate: the slowest decay rate of the transient, -Re lambda (default mu/2, a focus);
-    a caller that knows a slower one (a stable node near a fold) passes it, and the bound stays true.
-    tolerance: the bound on the remaining transient relative to |c| (default SETTLE_TOLERANCE)."""
+    a caller that knows a slower one (a stable node near a fold) passes it, and the bound stays true."""
     T = 2 * math.pi / scene.omega
     h = T / SAMPLES_PER_PERIOD
     decay = 1.0 - math.exp(-(scene.mu / 2 if rate is None else rate) * WINDOW_PERIODS * T)
@@ -119,7 +117,7 @@ def settle_loop(step, scene: Scene, accept=None, rate: float | None = None,
             n += 1
         periods += WINDOW_PERIODS
         c, mean = first_harmonic(np.roll(x, 1))  # x[k] is at (k + 1) h: roll so that index = phase
-        settled = abs(c - c_previous) <= tolerance * abs(c) * decay and (accept is None or accept(c))
+        settled = abs(c - c_previous) <= SETTLE_TOLERANCE * abs(c) * decay and (accept is None or accept(c))
         if settled or periods >= MAX_PERIODS:
             return c, mean, settled, periods
         c_previous = c

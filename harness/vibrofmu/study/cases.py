@@ -99,7 +99,7 @@ def run_case(spec: Spec, engine, case: dict) -> list[dict]:
 
             outcome = Outcome(failed=True, message=f"not run: {stopped}")
         else:
-            outcome = engine.settle(scene, rate=settling_rate(scene), tolerance=RESPONSE_MAP_TOLERANCE)
+            outcome = engine.settle(scene, rate=settling_rate(scene))
             if outcome.pull_in or outcome.failed:
                 stopped = f"the sweep stopped at omega = {omega:.8g}: {outcome.message}"
             else:
@@ -127,12 +127,6 @@ def branch_of(A: float, B: float, stable: list) -> int:
         if math.hypot(A - state.A, B - state.B) <= BRANCH_MATCH * state.r:
             return k
     return -1
-
-
-# response map: the settling bound (sweep.settle_loop) is 1 %, not 3 %: up and down sweeps stop on opposite
-# sides of a steady state, and with 3 % they differed by up to 6 % (AC off) and 9 % (AC on: Omega = 2 near
-# 2 omega adds a slow beat) below the cusp, where there is one state; with 1 %, by <= 5.8 % (Delta = 0.0004)
-RESPONSE_MAP_TOLERANCE = 0.01
 
 
 def settling_rate(scene: Scene) -> float:

@@ -23,7 +23,7 @@ from vibromodel.integrate import IntegrationError, TerminalEvent
 from vibromodel.parameters import ParameterError, Scene
 from vibromodel.plant import Settings
 
-from ..sweep import SETTLE_TOLERANCE, settle_loop
+from ..sweep import settle_loop
 
 ENGINES = ("fmu", "core")
 SETTINGS = Settings()  # fidelity 0, adaptive DOP853, rtol 1e-8: the FMU's defaults
@@ -86,8 +86,8 @@ class CoreEngine:
             if self.library is None:
                 raise RuntimeError(f"no compiled kernel for the core engine: {why}")
 
-    def settle(self, scene: Scene, accept=None, rate: float | None = None, tolerance: float = SETTLE_TOLERANCE) -> Outcome:
-        """Run from the scene's start state until settled (sweep.settle_loop with accept, rate, tolerance)."""
+    def settle(self, scene: Scene, accept=None, rate: float | None = None) -> Outcome:
+        """Run from the scene's start state until settled (sweep.settle_loop with accept and rate)."""
         from vibromodel.compiled import CompiledPlant
 
         started = time.perf_counter()
@@ -101,7 +101,7 @@ class CoreEngine:
                     outcome.contact_loss = True
                 return out.x
 
-            _finish(outcome, *settle_loop(step, scene, accept, rate, tolerance))
+            _finish(outcome, *settle_loop(step, scene, accept, rate))
             outcome.x_end, outcome.v_end = plant.output(0), plant.output(1)
         except (TerminalEvent, IntegrationError, ParameterError, ArithmeticError) as error:
             _stopped(outcome, f"{type(error).__name__}: {error}")
@@ -124,8 +124,8 @@ class FmuEngine:
             file.write(fmu_bytes)
         self.unzip_dir = extract(self.fmu_path, os.path.join(self.folder, "unzipped"))
 
-    def settle(self, scene: Scene, accept=None, rate: float | None = None, tolerance: float = SETTLE_TOLERANCE) -> Outcome:
-        """Run from the scene's start state until settled (sweep.settle_loop with accept, rate, tolerance)."""
+    def settle(self, scene: Scene, accept=None, rate: float | None = None) -> Outcome:
+        """Run from the scene's start state until settled (sweep.settle_loop with accept and rate)."""
         from fmpy.fmi1 import FMICallException
 
         from ..run import FmuInstance, _reason
@@ -148,7 +148,7 @@ class FmuEngine:
                     outcome.contact_loss = True
                 return fmu.getReal([x_ref])[0]
 
-            _finish(outcome, *settle_loop(step, scene, accept, rate, tolerance))
+            _finish(outcome, *settle_loop(step, scene, accept, rate))
             outcome.x_end, outcome.v_end = fmu.getReal([x_ref, v_ref])
         except FMICallException as error:
             _stopped(outcome, _reason(error, instance.log))
