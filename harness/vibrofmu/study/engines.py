@@ -75,9 +75,9 @@ class CoreEngine:
         import vibromodel
         from vibromodel.compiled import load_library
 
-        from ..kernel import KERNEL_SOURCE, kernel_library
+        from ..kernel import kernel_library, kernel_sources
 
-        if KERNEL_SOURCE.exists():
+        if kernel_sources():
             self.library = kernel_library()
         else:
             # vibromodel came from a plant FMU's resources (a worker spawned by a process that had loaded the
