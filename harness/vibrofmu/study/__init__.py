@@ -51,7 +51,7 @@ def _run(args) -> int:
     from ..build import PLANT_FMU, build_plant
     from . import analysis, plots
     from .cases import make_cases
-    from .scheduling import FmuFile, Progress, connect, execute
+    from .scheduling import FmuFile, Progress, connect, execute, stop_on_sigint
     from .spec import SpecError, build_spec
     from .storage import Store
 
@@ -93,7 +93,8 @@ def _run(args) -> int:
     try:
         if plugin is not None:
             client.register_plugin(plugin)
-        run = execute(client, spec, cases, store, fmu_digest, progress)
+        with stop_on_sigint():
+            run = execute(client, spec, cases, store, fmu_digest, progress)
     except KeyboardInterrupt:
         interrupted = True
     finally:

@@ -16,10 +16,12 @@ they arrive.
 """
 from __future__ import annotations
 
+import contextlib
 import logging
 import math
 import os
 import signal
+import threading
 import time
 
 from distributed import as_completed
@@ -45,6 +47,26 @@ class FmuFile(WorkerPlugin):
 
     def setup(self, worker):
         _FMU_BYTES[self.digest] = self.data
+
+
+STOP = threading.Event()
+
+
+@contextlib.contextmanager
+def stop_on_sigint():
+    """The first Ctrl-C sets STOP (execute stops at the next finished batch: no signal lands inside Dask's
+    own code, where it could be taken for a failed task); a second one interrupts at once."""
+    def handler(signum, frame):
+        if STOP.is_set():
+            raise KeyboardInterrupt
+        STOP.set()
+
+    STOP.clear()
+    previous = signal.signal(signal.SIGINT, handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 def noop(i):
@@ -155,6 +177,9 @@ def execute(client, spec: Spec, cases: list[dict], store, fmu_digest: str | None
 
     def collect(futures):
         for future in as_completed(futures):
+            if STOP.is_set():  # Ctrl-C (stop_on_sigint): stop after the batch in hand, keep what is written
+                client.cancel(futures)
+                raise KeyboardInterrupt
             try:
                 rows = future.result()
             except Exception as error:  # a batch that failed (e.g. its worker died too often): not written
