@@ -15,6 +15,7 @@ from vibromodel.parameters import Scene
 from vibromodel.plant import DEFAULT_EXPERIMENT
 
 from .kernel import compile_kernel
+from .pythonenv import pack_python_env
 from .refresult import pack_reference
 from .shim import install_status_shim
 
@@ -40,6 +41,7 @@ def build_fmu(slave: Path, out_dir: Path = BUILD_DIR, extra_resources: tuple[Pat
                                     canGetAndSetFMUstate=True, canSerializeFMUstate=True))
     status = next(v for v in read_model_description(str(fmu)).modelVariables if v.name == "fmi_status")
     install_status_shim(fmu, status.valueReference)
+    pack_python_env(fmu)  # the Python the FMU finds in a C host (resources/python_env.txt)
     pack_reference(fmu)
     return fmu
 
