@@ -74,4 +74,13 @@ def build_closed_loop(out_dir: Path = BUILD_DIR) -> Path:
 
 
 def build_all(out_dir: Path = BUILD_DIR) -> list[Path]:
-    return [build(out_dir) for build in (build_plant, build_controller, build_closed_loop)]
+    """The pythonfmu FMUs in out_dir and their native twins in out_dir/native (vibrofmu.native)."""
+    fmus = [build(out_dir) for build in (build_plant, build_controller, build_closed_loop)]
+    return fmus + build_natives(fmus, Path(out_dir) / "native")
+
+
+def build_natives(fmus: list[Path], out_dir: Path) -> list[Path]:
+    """The native FMU of each pythonfmu FMU that has a native model (fmu_src/native/<id>/)."""
+    from .native import NATIVE_SRC, build_native
+
+    return [build_native(fmu, out_dir) for fmu in fmus if (NATIVE_SRC / Path(fmu).stem / "model.c").is_file()]
