@@ -95,6 +95,17 @@ def compile_host(out_dir: Path) -> Path:
     return host
 
 
+def compile_windows_host(out_dir: Path) -> Path:
+    """The same host for Windows (mingw-w64), to run win64 binaries under wine."""
+    host = Path(out_dir) / "fmi2_host.exe"
+    cmd = ["x86_64-w64-mingw32-gcc", "-O2", "-Wall", "-Wextra", "-D__USE_MINGW_ANSI_STDIO=1", f"-I{FMU_SRC}",
+           "-o", str(host), str(HOST_SOURCE)]
+    proc = subprocess.run(cmd, capture_output=True, text=True)
+    if proc.returncode != 0:
+        raise RuntimeError(f"compiling the Windows C host failed ({' '.join(cmd)}):\n{proc.stderr}")
+    return host
+
+
 def run_host(host: Path, unzip_dir: Path, outputs: list[str], start: float, stop: float, step: float,
              parameters: dict[str, float] | None = None, env: dict[str, str] | None = None,
              wrapper: list[str] | None = None, timeout: float = 600) -> HostRun:

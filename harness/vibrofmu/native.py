@@ -232,3 +232,20 @@ def build_native(pythonfmu_fmu: Path, out_dir: Path, win64: bool | None = None, 
 
         pack_reference(fmu)
     return fmu
+
+
+def series_probe_library(out_dir: Path):
+    """series.c alone as a shared library (ctypes), for the test that holds it to vibromodel.forces."""
+    import ctypes
+
+    out = Path(out_dir) / "series.so"
+    cmd = [*LINUX_COMMAND[:-1], "-o", str(out), str(NATIVE_SRC / "series.c"), "-lm"]  # symbols visible
+    proc = subprocess.run(cmd, capture_output=True, text=True)
+    if proc.returncode != 0:
+        raise RuntimeError(f"compiling series.c failed ({' '.join(cmd)}):\n{proc.stderr}")
+    library = ctypes.CDLL(str(out))
+    d = ctypes.c_double
+    library.vibro_series.restype = None
+    library.vibro_series.argtypes = [ctypes.c_int, d, d, d, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p,
+                                     ctypes.c_void_p]
+    return library

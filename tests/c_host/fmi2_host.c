@@ -8,6 +8,8 @@
  *   fmi2ExitInitializationMode, fmi2DoStep loop with fmi2GetReal of the output
  *   value references after each step, fmi2Terminate, fmi2FreeInstance, dlclose.
  *
+ * The same file compiles for Windows (x86_64-w64-mingw32-gcc, LoadLibrary instead of dlopen).
+ *
  * Usage: fmi2_host LIBRARY RESOURCE_URI GUID START STOP STEP VR[,VR...] [VR=VALUE ...]
  *
  * stdout: CSV, header "time,<vr>,...", one row at START and one after every
@@ -15,20 +17,42 @@
  * Communication points are computed as FMPy's simulate_fmu does
  * (START + n*STEP, the last one clipped to STOP), so both hosts make the same calls.
  *
+ * With FMI2_HOST_LIST_LIBRARIES set (Linux), the host lists the files mapped into
+ * its process (/proc/self/maps) on stderr before it exits, one "fmi2_host: mapped
+ * PATH" line each: the tests check that a native FMU brings no Python along.
+ *
  * Exit code: 0 success; 1 usage or loading error; 2 an FMI call returned
  * fmi2Error or fmi2Fatal (named on stderr).  After fmi2Error the instance is
  * still freed (fmi2Terminate is not allowed in the error state); after
  * fmi2Fatal nothing more is called, as the standard requires.
  */
 
-#include <dlfcn.h>
 #include <math.h>
 #include <stdarg.h>
+#include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
 #include "fmi2_types.h"  /* fmu_src/: the FMI 2.0 types, shared with the status shim */
+
+/* Loading a library: dlopen, or on Windows (cross-compiled with mingw-w64, run under wine) LoadLibrary. */
+#ifdef _WIN32
+#include <windows.h>
+static void *dlopen(const char *path, int flags) { (void)flags; return (void *)LoadLibraryA(path); }
+static void *dlsym(void *lib, const char *name) { return (void *)(intptr_t)GetProcAddress((HMODULE)lib, name); }
+static int dlclose(void *lib) { return !FreeLibrary((HMODULE)lib); }
+static const char *dlerror(void)
+{
+    static char text[64];
+    snprintf(text, sizeof text, "Windows error %lu", (unsigned long)GetLastError());
+    return text;
+}
+#define RTLD_NOW 0
+#define RTLD_LOCAL 0
+#else
+#include <dlfcn.h>
+#endif
 
 typedef struct {
     fmi2Component (*Instantiate)(fmi2String, fmi2Type, fmi2String, fmi2String,
@@ -175,6 +199,25 @@ static fmi2Status simulate(const Api *api, fmi2Component c, const Experiment *e)
     return fmi2OK;
 }
 
+/* The files mapped into this process (FMI2_HOST_LIST_LIBRARIES), each once. */
+static void list_libraries(void)
+{
+#ifndef _WIN32
+    FILE *maps = fopen("/proc/self/maps", "r");
+    char line[4096], last[4096] = "";
+    if (maps == NULL) return;
+    while (fgets(line, sizeof line, maps) != NULL) {
+        char *path = strchr(line, '/');
+        if (path == NULL) continue;
+        path[strcspn(path, "\n")] = '\0';
+        if (strcmp(path, last) == 0) continue;
+        fprintf(stderr, "fmi2_host: mapped %s\n", path);
+        snprintf(last, sizeof last, "%s", path);
+    }
+    fclose(maps);
+#endif
+}
+
 int main(int argc, char **argv)
 {
     Experiment e;
@@ -200,6 +243,7 @@ int main(int argc, char **argv)
 
     fmi2Status st = simulate(&api, c, &e);
     fflush(stdout);
+    if (getenv("FMI2_HOST_LIST_LIBRARIES") != NULL) list_libraries();
     if (st != fmi2Fatal) api.FreeInstance(c);
     dlclose(lib);
     return st == fmi2OK ? 0 : 2;
