@@ -22,7 +22,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 from fmpy import extract, read_model_description, simulate_fmu
-from fmpy.fmi2 import FMU2Slave
 from fmpy.validation import validate_fmu
 
 from vibrofmu.doctor import compile_host, compile_windows_host, run_host

@@ -21,6 +21,11 @@
  * its process (/proc/self/maps) on stderr before it exits, one "fmi2_host: mapped
  * PATH" line each: the tests check that a native FMU brings no Python along.
  *
+ * With FMI2_HOST_TIMING set, the host reports on stderr the wall time of loading the
+ * library + fmi2Instantiate + initialization, and of the doStep + fmi2GetReal loop
+ * per output row ("fmi2_host: timing instantiate_s=... per_output_s=... rows=...");
+ * with FMI2_HOST_QUIET set it prints no CSV rows (so that printing is not timed).
+ *
  * Exit code: 0 success; 1 usage or loading error; 2 an FMI call returned
  * fmi2Error or fmi2Fatal (named on stderr).  After fmi2Error the instance is
  * still freed (fmi2Terminate is not allowed in the error state); after
@@ -33,6 +38,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <time.h>
 
 #include "fmi2_types.h"  /* fmu_src/: the FMI 2.0 types, shared with the status shim */
 
@@ -54,6 +60,24 @@ static const char *dlerror(void)
 #include <dlfcn.h>
 #endif
 
+static double now(void)
+{
+#ifdef _WIN32
+    LARGE_INTEGER count, frequency;
+    QueryPerformanceCounter(&count);
+    QueryPerformanceFrequency(&frequency);
+    return (double)count.QuadPart / (double)frequency.QuadPart;
+#else
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+#endif
+}
+
+static int quiet = 0;
+static double t_loaded, t_initialised, t_done;
+static long rows_done = 0;
+
 typedef struct {
     fmi2Component (*Instantiate)(fmi2String, fmi2Type, fmi2String, fmi2String,
                                  const fmi2CallbackFunctions *, fmi2Boolean, fmi2Boolean);
@@ -68,6 +92,8 @@ typedef struct {
 } Api;
 
 #define MAX_VRS 64
+
+
 
 static const char *const STATUS_NAMES[] = {"fmi2OK", "fmi2Warning", "fmi2Discard",
                                            "fmi2Error", "fmi2Fatal", "fmi2Pending"};
@@ -153,6 +179,8 @@ static int failed(const char *call, fmi2Status st, double t)
 
 static void print_row(double t, const fmi2Real *values, size_t n)
 {
+    rows_done++;
+    if (quiet) return;
     printf("%.17g", t);
     for (size_t i = 0; i < n; i++) printf(",%.17g", values[i]);
     putchar('\n');
@@ -181,6 +209,7 @@ static fmi2Status simulate(const Api *api, fmi2Component c, const Experiment *e)
         && failed("fmi2SetReal", st = api->SetReal(c, e->param_vr, e->nparams, e->param_value), t))
         return st;
     if (failed("fmi2ExitInitializationMode", st = api->ExitInitializationMode(c), t)) return st;
+    t_initialised = now();
 
     printf("time");
     for (size_t i = 0; i < e->nout; i++) printf(",%u", e->out[i]);
@@ -195,6 +224,7 @@ static fmi2Status simulate(const Api *api, fmi2Component c, const Experiment *e)
         if (failed("fmi2GetReal", st = api->GetReal(c, e->out, e->nout, values), t)) return st;
         print_row(t, values, e->nout);
     }
+    t_done = now();
     if (failed("fmi2Terminate", st = api->Terminate(c), t)) return st;
     return fmi2OK;
 }
@@ -232,6 +262,8 @@ int main(int argc, char **argv)
         if (!parse_param(argv[8 + e.nparams], &e.param_vr[e.nparams], &e.param_value[e.nparams]))
             return die("expected VR=VALUE, got", argv[8 + e.nparams]);
 
+    quiet = getenv("FMI2_HOST_QUIET") != NULL;
+    t_loaded = now();
     void *lib = dlopen(argv[1], RTLD_NOW | RTLD_LOCAL);
     if (lib == NULL) return die("cannot load the FMU binary", dlerror());
     Api api;
@@ -244,6 +276,9 @@ int main(int argc, char **argv)
     fmi2Status st = simulate(&api, c, &e);
     fflush(stdout);
     if (getenv("FMI2_HOST_LIST_LIBRARIES") != NULL) list_libraries();
+    if (getenv("FMI2_HOST_TIMING") != NULL && st == fmi2OK)
+        fprintf(stderr, "fmi2_host: timing instantiate_s=%.9g per_output_s=%.9g rows=%ld\n", t_initialised - t_loaded,
+                (t_done - t_initialised) / (double)(rows_done > 1 ? rows_done - 1 : 1), rows_done);
     if (st != fmi2Fatal) api.FreeInstance(c);
     dlclose(lib);
     return st == fmi2OK ? 0 : 2;
