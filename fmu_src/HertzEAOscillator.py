@@ -17,6 +17,7 @@ import fast_path
 from slave_support import STATUS_OK, StatusSlave
 from vibromodel.analytic import OafmSettings
 from vibromodel.compiled import CompiledPlant, load_library
+from vibromodel.compiled_open_loop import CompiledOpenLoopPlant
 from vibromodel.parameters import Scene, scene_names
 from vibromodel.plant import DEFAULT_EXPERIMENT, Settings, make_plant
 
@@ -115,7 +116,7 @@ class HertzEAOscillator(StatusSlave):
     def model(self, model):
         """A new model: a compiled one takes over the outputs and input and is handed to the shim."""
         self._model = model
-        self._kernel = model if isinstance(model, CompiledPlant) else None
+        self._kernel = model if isinstance(model, (CompiledPlant, CompiledOpenLoopPlant)) else None
         if self._kernel is not None:
             for name in (*OUTPUTS, "in_contact", "U"):
                 setattr(self, name, self._values[name])  # into the kernel's memory

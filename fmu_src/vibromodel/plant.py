@@ -250,6 +250,17 @@ def make_plant(scene: Scene, settings: Settings, t0: float = 0.0, stop_time: flo
     from .compiled import CompiledPlant, supports  # the compiled plant builds on this module
 
     compiled, reason = library
+    if settings.kernel == Kernel.COMPILED and settings.fidelity in (Fidelity.AVERAGED, Fidelity.ANALYTIC):
+        plant = Plant(scene, settings, t0, stop_time, cache_dirs)  # the set-up (table, fit) stays in Python
+        if compiled is None:
+            plant.notes.append(f"pure-Python evaluation: the compiled kernel is not available ({reason})")
+            return plant
+        from .compiled_open_loop import CompiledOpenLoopPlant
+
+        wrapped, why = CompiledOpenLoopPlant.make(plant, compiled)
+        plant.notes.append(f"per-output evaluation on the {why}" if wrapped is not None else
+                           f"pure-Python evaluation: {why}")
+        return wrapped if wrapped is not None else plant
     wanted = settings.kernel == Kernel.COMPILED and supports(settings)
     if wanted and compiled is not None:
         plant = CompiledPlant(scene, settings, compiled, t0)

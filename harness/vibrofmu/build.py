@@ -64,8 +64,9 @@ def build_plant(out_dir: Path = BUILD_DIR) -> Path:
 
 
 def build_controller(out_dir: Path = BUILD_DIR) -> Path:
-    """The controller FMU (no physics of its own beyond the regressor: nothing to pack)."""
-    return build_fmu(CONTROLLER_SLAVE, out_dir)
+    """The controller FMU with the compiled kernel (fmu_src/core/controller.c is in it)."""
+    with tempfile.TemporaryDirectory() as tmp:
+        return build_fmu(CONTROLLER_SLAVE, out_dir, extra_resources=(compile_kernel(Path(tmp) / LIBRARY_NAME),))
 
 
 def build_closed_loop(out_dir: Path = BUILD_DIR) -> Path:

@@ -19,6 +19,12 @@ from vibromodel import compiled
 FMU_SRC = Path(vibromodel.__file__).resolve().parents[1]
 KERNEL_SOURCE = FMU_SRC / "vibrokernel.c"
 KERNEL_HEADERS = (FMU_SRC / "vibrokernel.h", FMU_SRC / "vibrokernel_tableau.h")
+# fidelities 3 and 4 at run time (compiled_open_loop.py), linked into the same library
+OPEN_LOOP_SOURCES = tuple(FMU_SRC / "core" / f"{name}.c" for name in ("slowflow_eval", "oafm_eval", "openloop_plant"))
+OPEN_LOOP_HEADERS = tuple(path.with_suffix(".h") for path in OPEN_LOOP_SOURCES)
+# The controller and the closed loop (fmu_src/core/), compiled into the same library.
+LOOP_SOURCES = (FMU_SRC / "core" / "controller.c", FMU_SRC / "core" / "closedloop.c")
+LOOP_HEADERS = (FMU_SRC / "core" / "controller.h", FMU_SRC / "core" / "closedloop.h")
 TABLEAU_HEADER = KERNEL_HEADERS[1]
 # Bit-identity with the Python integrator needs IEEE double arithmetic as written: no FMA contraction, no
 # -ffast-math; math errno stays on (the kernel reads pow's errno as CPython's float_pow does).
@@ -28,7 +34,7 @@ GCC_COMMAND = ("gcc", "-std=c11", "-O2", "-ffp-contract=off", "-fPIC", "-shared"
 def compile_kernel(out_path: Path) -> Path:
     """Compile vibrokernel.c into the shared library out_path; raises RuntimeError with gcc's output on failure."""
     out_path = Path(out_path)
-    cmd = [*GCC_COMMAND, "-o", str(out_path), str(KERNEL_SOURCE), "-lm"]
+    cmd = [*GCC_COMMAND, "-o", str(out_path), str(KERNEL_SOURCE), *map(str, OPEN_LOOP_SOURCES + LOOP_SOURCES), "-lm"]
     proc = subprocess.run(cmd, capture_output=True, text=True)
     if proc.returncode != 0:
         raise RuntimeError(f"compiling the kernel failed ({' '.join(cmd)}):\n{proc.stderr}")
@@ -43,7 +49,8 @@ def cache_dir() -> Path:
 def sources_digest() -> str:
     """Hash of the kernel's sources and compiler command: the cached library's key."""
     digest = hashlib.sha256(" ".join(GCC_COMMAND).encode())
-    for path in (KERNEL_SOURCE, *KERNEL_HEADERS):
+    for path in (KERNEL_SOURCE, *KERNEL_HEADERS, *OPEN_LOOP_SOURCES, *OPEN_LOOP_HEADERS, *LOOP_SOURCES,
+                 *LOOP_HEADERS):
         digest.update(path.read_bytes())
     return digest.hexdigest()[:16]
 

@@ -1,0 +1,4 @@
+/*
+ * closedloop.c -- the closed loop of closedloop.h.
+ */
+#include "closedloop.h"

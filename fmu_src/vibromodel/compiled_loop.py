@@ -1,0 +1,214 @@
+"""The controller on the compiled kernel (fmu_src/core/controller.c): ctypes front end.
+
+CompiledEstimator has control.HeldInputEstimator's interface and gives the same bits (controller.c ports
+control.py operation for operation, with control._dot's summation order). Its whole state is one ctypes
+structure without pointers (VcController), so a snapshot is the structure's bytes, and the FMU's C fast path
+(fast_path.py) can step it and read its outputs directly. The controller FMU's inputs and outputs live in that
+structure too (`value`, `set_value`, `variable_address`).
+
+Packed inside the FMU: imports nothing beyond vibromodel, numpy and the standard library.
+"""
+from __future__ import annotations
+
+import ctypes
+
+import numpy as np
+
+from .control import ESTIMATE_NAMES, Controller, Gains, validate_estimates, validate_law
+from .parameters import ParameterError, Scene, validate
+from .plant import TIME_TOLERANCE
+
+VC_OK, VC_BAD_STEP, VC_BAD_INPUT, VC_BAD_TIME, VC_RAISED = 0, 1, 2, 4, 7
+N = 9
+CONTROLLER_INPUTS = ("x", "v", "x_ref", "v_ref", "a_ref")
+CONTROLLER_OUTPUTS = ("U", "e1", "e2", "V", *ESTIMATE_NAMES)
+
+_double, _int = ctypes.c_double, ctypes.c_int64
+
+
+class VcRegressor(ctypes.Structure):
+    _fields_ = [(name, _double) for name in ("w_delta", "delta_sign", "w_beta", "w_gamma")]
+
+
+class VcController(ctypes.Structure):
+    """controller.h's VcController, field for field (checked against the library by _check_layout)."""
+
+    _fields_ = [
+        ("g3", _double * 6), ("phi", VcRegressor), ("phi_update", VcRegressor), ("theta", _double * N),
+        ("l1", _double), ("l2", _double), ("Lambda", _double * N), ("adaptation", _double * N),
+        ("c", _double), ("k_damping", _double), ("promised_e1", _double), ("true_delta", _double),
+        ("law", _int), ("time_tolerance", _double), ("t", _double), ("theta_hat", _double * N),
+        ("in", _double * len(CONTROLLER_INPUTS)), ("out", _double * len(CONTROLLER_OUTPUTS)), ("enabled", _int),
+    ]
+
+
+def _check_layout(library, function, structure) -> str | None:
+    """None if the library's structure has this module's size and field offsets, else what differs."""
+    fields = structure._fields_
+    offsets = (ctypes.c_size_t * len(fields))()
+    size = function(offsets, len(fields))
+    if size != ctypes.sizeof(structure):
+        return f"{structure.__name__}: size {size} in the library, {ctypes.sizeof(structure)} here"
+    for (name, _), offset in zip(fields, offsets):
+        if getattr(structure, name).offset != offset:
+            return f"{structure.__name__}.{name} is at offset {offset} in the library, here elsewhere"
+    return None
+
+
+def declare(library) -> str | None:
+    """Declare the controller's functions on the kernel library (vibromodel.compiled.load_library); None if the
+    library has them with this module's layout, else why not."""
+    address, d, status = ctypes.c_void_p, _double, ctypes.c_int
+    doubles = ctypes.POINTER(_double)
+    signatures = {
+        "vc_layout": (ctypes.c_size_t, [ctypes.POINTER(ctypes.c_size_t), ctypes.c_size_t]),
+        "vc_advance": (status, [address, d, d, d, d, doubles]),
+        "vc_publish": (status, [address]),
+        "vc_do_step": (status, [address, d, d]),
+    }
+    try:
+        for name, (restype, argtypes) in signatures.items():
+            function = getattr(library, name)
+            function.restype, function.argtypes = restype, argtypes
+    except AttributeError as error:
+        return f"the kernel has no controller: {error}"
+    return _check_layout(library, library.vc_layout, VcController)
+
+
+def _regressor(regressor) -> VcRegressor:
+    return VcRegressor(regressor.w_delta, regressor.delta_sign, regressor.w_beta, regressor.w_gamma)
+
+
+def fill_controller(structure: VcController, controller: Controller, scene: Scene) -> None:
+    """The constants of a control.Controller into a VcController (computed once, by control.py)."""
+    structure.g3 = (_double * 6)(*controller.phi.g3)
+    structure.phi, structure.phi_update = _regressor(controller.phi), _regressor(controller.phi_update)
+    structure.theta = (_double * N)(*controller.theta)
+    structure.l1, structure.l2 = controller.l1, controller.l2
+    structure.Lambda = (_double * N)(*controller.Lambda)
+    structure.adaptation = (_double * N)(*controller.adaptation)
+    structure.c, structure.k_damping = controller.c, controller.gains.k_damping
+    structure.promised_e1 = controller.promised_e1
+    structure.true_delta = scene.Delta
+    structure.law = int(controller.law)
+    structure.time_tolerance = TIME_TOLERANCE
+
+
+def raise_from(code: int) -> None:
+    """The Python exception for a kernel code where Python would raise: math.cos/sin of an infinity."""
+    if code == VC_RAISED:
+        raise ValueError("math domain error")
+    if code != VC_OK:
+        raise RuntimeError(f"the compiled controller returned code {code} (a kernel bug)")
+
+
+class CompiledEstimator:
+    """control.HeldInputEstimator on the kernel `library` (declared by `declare`), plus the controller FMU's
+    inputs and outputs. Raises ParameterError for bad arguments."""
+
+    def __init__(self, scene: Scene, gains: Gains, law: int, estimates: tuple[float, ...], library,
+                 t0: float = 0.0):
+        validate(scene)
+        validate_law(law)
+        validate_estimates(estimates)
+        self.controller = Controller(scene, gains, law)
+        self._library = library
+        self._c = VcController()
+        self.address = ctypes.addressof(self._c)
+        fill_controller(self._c, self.controller, scene)
+        self._c.t = t0
+        self._c.theta_hat = (_double * N)(*estimates)
+        self._c.out[4:] = list(estimates)
+        self._c.enabled = 1
+        self.notes, self.warnings = [], []
+
+    @property
+    def t(self) -> float:
+        return self._c.t
+
+    @property
+    def theta_hat(self) -> np.ndarray:
+        return np.array(self._c.theta_hat[:])
+
+    def advance(self, t: float, h: float, x: float, v: float, ref) -> None:
+        """HeldInputEstimator.advance."""
+        raise_from(self._library.vc_advance(self.address, t, h, x, v, (_double * 3)(*ref)))
+
+    def publish(self) -> None:
+        """The FMU's outputs U, e1, e2, V, estimates from the inputs at t (written only when all finite)."""
+        raise_from(self._library.vc_publish(self.address))
+
+    # -- the FMU's variables in the structure, and what the C fast path needs ------------------------------
+    @staticmethod
+    def _slot(name: str) -> tuple[str, int]:
+        if name in CONTROLLER_INPUTS:
+            return "in", CONTROLLER_INPUTS.index(name)
+        return "out", CONTROLLER_OUTPUTS.index(name)
+
+    def value(self, name: str) -> float:
+        field, index = self._slot(name)
+        return getattr(self._c, field)[index]
+
+    def set_value(self, name: str, value: float) -> None:
+        field, index = self._slot(name)
+        getattr(self._c, field)[index] = value
+
+    def variable_address(self, name: str) -> int:
+        field, index = self._slot(name)
+        return self.address + getattr(VcController, field).offset + index * ctypes.sizeof(_double)
+
+    @property
+    def enabled_address(self) -> int:
+        return self.address + VcController.enabled.offset
+
+    @property
+    def step_function(self) -> int:
+        """Address of vc_do_step(VcController *, t, h)."""
+        return ctypes.cast(self._library.vc_do_step, ctypes.c_void_p).value
+
+    @property
+    def inputs_function(self) -> int:
+        """Address of vc_publish(VcController *): the outputs after the inputs changed (fmi2SetReal in C)."""
+        return ctypes.cast(self._library.vc_publish, ctypes.c_void_p).value
+
+    @property
+    def fast_path_enabled(self) -> bool:
+        return bool(self._c.enabled)
+
+    @fast_path_enabled.setter
+    def fast_path_enabled(self, value: bool) -> None:
+        self._c.enabled = bool(value)
+
+    # -- snapshots -----------------------------------------------------------------------------------------
+    def snapshot(self) -> dict:
+        return {"kernel": ctypes.string_at(self.address, ctypes.sizeof(VcController)).hex()}
+
+    def restore(self, snapshot: dict) -> None:
+        """ValueError for anything but a snapshot of a compiled controller with the same parameters."""
+        restore_bytes(self.address, VcController, VcController.t.offset, snapshot)
+
+
+def restore_bytes(address: int, structure, constants: int, snapshot: dict) -> None:
+    """memmove a snapshot's bytes over a structure whose first `constants` bytes (the parameters) must match."""
+    try:
+        data = bytes.fromhex(snapshot["kernel"]) if set(snapshot) == {"kernel"} else b""
+    except (TypeError, ValueError):
+        data = b""
+    if len(data) != ctypes.sizeof(structure):
+        raise ValueError(f"not a snapshot of a compiled {structure.__name__}")
+    if data[:constants] != ctypes.string_at(address, constants):
+        raise ValueError("the snapshot is of a compiled model with other parameters or settings")
+    ctypes.memmove(address, data, len(data))
+
+
+def make_estimator(scene: Scene, gains: Gains, law: int, estimates, t0: float, kernel: int, library):
+    """CompiledEstimator when kernel == 0 and the library has the controller, else HeldInputEstimator."""
+    from .control import HeldInputEstimator
+
+    if kernel not in (0, 1):
+        raise ParameterError("kernel", kernel, "must be 0 (compiled) or 1 (pure Python)")
+    if kernel == 0 and library is not None and declare(library) is None:
+        return CompiledEstimator(scene, gains, law, estimates, library, t0)
+    return HeldInputEstimator(scene, gains, law, estimates, t0)
+
+
