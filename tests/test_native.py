@@ -156,7 +156,12 @@ def test_what_needs_python_is_refused_naming_the_pythonfmu_fmu(values, name, nat
     assert "pythonfmu FMU HertzEAOscillator.fmu" in errors[0]
 
 
-def _protocol(fmu, unzipped):
+PLANT_PROTOCOL = dict(input_name="U", start_a={}, start_b={"Delta": 1.2, "mu": 0.05, "R": 5.0}, fixed="mu")
+CONTROLLER_PROTOCOL = dict(input_name="x", start_a={"x": 0.03, "x_ref": 0.04},
+                           start_b={"law": 1, "x": -0.02, "v": 0.01}, fixed="lambda1")
+
+
+def _protocol(fmu, unzipped, input_name, start_a, start_b, fixed):
     """Set-after-initialisation refusal, FMU state get/set/serialize, reset, two instances: every value read
     and every message, for comparing the two FMUs."""
     log = FmuLog()
@@ -164,7 +169,7 @@ def _protocol(fmu, unzipped):
     a = FmuInstance(fmu, "a", log, unzip_dir=unzipped)
     b = FmuInstance(fmu, "b", log, unzip_dir=unzipped)
     vr = {name: var.valueReference for name, var in a.variables.items()}
-    for instance, values in ((a, {}), (b, {"Delta": 1.2, "mu": 0.05, "R": 5.0})):
+    for instance, values in ((a, start_a), (b, start_b)):
         instance.fmu.setupExperiment(startTime=0.0, stopTime=10.0)
         instance.fmu.enterInitializationMode()
         instance.set(values)
@@ -179,13 +184,15 @@ def _protocol(fmu, unzipped):
     blob = a.fmu.serializeFMUstate(state)
     ahead = []
     for i in range(10):
-        a.fmu.setReal([vr["U"]], [0.01 * i])
+        a.fmu.setReal([vr[input_name]], [0.01 * i])
+        ahead.append(a.read_outputs())
         a.fmu.doStep(t + 0.1 * i, 0.1)
         ahead.append(a.read_outputs())
     a.fmu.setFMUstate(state)  # back in time: the same steps give the same outputs
     again = []
     for i in range(10):
-        a.fmu.setReal([vr["U"]], [0.01 * i])
+        a.fmu.setReal([vr[input_name]], [0.01 * i])
+        again.append(a.read_outputs())
         a.fmu.doStep(t + 0.1 * i, 0.1)
         again.append(a.read_outputs())
     restored = a.fmu.deSerializeFMUstate(blob)
@@ -195,7 +202,7 @@ def _protocol(fmu, unzipped):
     a.fmu.freeFMUstate(state)
     a.fmu.freeFMUstate(restored)
     try:  # a fixed parameter after initialisation: fmi2Error, the instance in the error state
-        a.fmu.setReal([vr["mu"]], [0.5])
+        a.fmu.setReal([vr[fixed]], [0.5])
         trace.append("set accepted")
     except Exception as error:  # FMICallException
         trace.append(("refused", getattr(error, "status", None)))
@@ -206,6 +213,7 @@ def _protocol(fmu, unzipped):
     a.fmu.reset()  # as freshly instantiated: initialise and step again
     a.fmu.setupExperiment(startTime=0.0, stopTime=10.0)
     a.fmu.enterInitializationMode()
+    a.set(start_a)
     a.fmu.exitInitializationMode()
     a.fmu.doStep(0.0, 0.1)
     trace.append(("after reset", a.read_outputs(), trace[0][0]))
@@ -216,8 +224,8 @@ def _protocol(fmu, unzipped):
 
 def test_state_reset_and_instances_as_the_pythonfmu_fmu(plant_fmu, plant_unzipped, native_plant_fmu,
                                                         native_unpacked):
-    python = _protocol(plant_fmu, plant_unzipped)
-    native = _protocol(native_plant_fmu, str(native_unpacked))
+    python = _protocol(plant_fmu, plant_unzipped, **PLANT_PROTOCOL)
+    native = _protocol(native_plant_fmu, str(native_unpacked), **PLANT_PROTOCOL)
     trace, ahead, again, messages = native
     assert ahead == again  # setFMUstate returns to the saved moment
     assert trace[-1][1] == trace[-1][2]  # reset: the first step repeats
@@ -316,3 +324,98 @@ def test_win64_dll_under_wine_agrees_with_linux64(c_host, native_unpacked, tmp_p
     np.testing.assert_array_equal(rows[:, 0], linux.time)
     for j, name in enumerate(outputs):
         assert np.max(np.abs(rows[:, j + 1] - linux.outputs[name])) <= 1e-12, name
+
+
+# ---- the native controller FMU ---------------------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def native_controller_fmu(controller_fmu, tmp_path_factory):
+    return build_native(controller_fmu, tmp_path_factory.mktemp("native_controller"))
+
+
+def test_controller_same_interface(controller_fmu, native_controller_fmu):
+    assert _variables(native_controller_fmu)[0] == _variables(controller_fmu)[0]
+    assert validate_fmu(str(native_controller_fmu)) == []
+
+
+CONTROLLER_INPUTS = {"x": 0.03, "v": 0.01, "x_ref": 0.04}
+# Every law and kernel, and every check of make_estimator / CompiledEstimator in its order.
+CONTROLLER_CASES = [
+    {}, {"law": 1}, {"law": 2}, {"kernel": 1}, {"R": 2.0, "omega": 0.5},
+    {"kernel": 7}, {"R": -1.0}, {"mu": math.nan}, {"omega": -1.0}, {"R": 0.02},  # x_start = 0.04 beyond pull-in
+    {"law": 5}, {"mu_hat_start": math.inf}, {"lambda3": 0.0}, {"lambda1": math.nan}, {"k_damping": -1.0},
+    {"R": 1e70},  # R^5 overflows: out of the series' range
+    {"law": 5, "R": -1.0},  # the scene is checked first
+]
+
+
+@pytest.mark.parametrize("values", CONTROLLER_CASES, ids=[str(v) for v in CONTROLLER_CASES])
+def test_controller_parity(values, controller_fmu, native_controller_fmu):
+    start = {**CONTROLLER_INPUTS, **values}
+    python = run_fmu(controller_fmu, start, 20.0, 0.1)
+    native = run_fmu(native_controller_fmu, start, 20.0, 0.1)
+    assert (native.completed, native.status) == (python.completed, python.status)
+    assert _problems(native) == _problems(python)
+    np.testing.assert_array_equal(native.time, python.time)
+    for name in python.outputs:
+        np.testing.assert_array_equal(native.outputs[name], python.outputs[name], err_msg=name)
+    assert native.after_failure == python.after_failure
+
+
+def _closed_by_hand(fmu, unzipped, steps=200):
+    """The controller driven by inputs that change every step (a sine as the plant, a cosine as the
+    reference), then a non-finite input: every output after every set and step, and the messages."""
+    instance = FmuInstance(fmu, "c", unzip_dir=unzipped)
+    vr = {name: var.valueReference for name, var in instance.variables.items()}
+    instance.fmu.setupExperiment(startTime=0.0, stopTime=100.0)
+    instance.fmu.enterInitializationMode()
+    instance.fmu.exitInitializationMode()
+    rows, statuses = [], []
+    for i in range(steps):
+        t = 0.1 * i
+        instance.fmu.setReal([vr["x"], vr["v"], vr["x_ref"]], [0.04 * math.sin(t), 0.04 * math.cos(t), 0.03])
+        rows.append(instance.read_outputs())
+        instance.fmu.doStep(t, 0.1)
+        rows.append(instance.read_outputs())
+    for call in (lambda: instance.fmu.setReal([vr["x"]], [math.inf]), lambda: instance.fmu.doStep(0.1 * steps, 0.1)):
+        try:
+            call()
+            statuses.append(0)
+        except Exception as error:
+            statuses.append(getattr(error, "status", None))
+    rows.append(instance.read_outputs())
+    instance.close()
+    return rows, statuses, [m for m in instance.log.messages if not m.startswith("[ok]")]
+
+
+def test_controller_with_changing_inputs_as_the_pythonfmu_fmu(controller_fmu, controller_unzipped,
+                                                            native_controller_fmu, tmp_path):
+    unzipped = extract(str(native_controller_fmu), unzipdir=str(tmp_path / "n"))
+    native = _closed_by_hand(native_controller_fmu, unzipped)
+    python = _closed_by_hand(controller_fmu, controller_unzipped)
+    assert native == python
+    rows, statuses, messages = native
+    assert rows[0] != rows[-2]  # the estimates moved
+    assert FMI2_ERROR in statuses and any("input must be a finite number" in m for m in messages)
+
+
+def test_controller_state_reset_and_instances(controller_fmu, controller_unzipped, native_controller_fmu, tmp_path):
+    unzipped = extract(str(native_controller_fmu), unzipdir=str(tmp_path / "n"))
+    python = _protocol(controller_fmu, controller_unzipped, **CONTROLLER_PROTOCOL)
+    native = _protocol(native_controller_fmu, unzipped, **CONTROLLER_PROTOCOL)
+    trace, ahead, again, messages = native
+    assert ahead == again and trace[-1][1] == trace[-1][2]
+    assert native == python
+
+
+def test_controller_c_host_without_python(c_host, native_controller_fmu, controller_fmu, tmp_path):
+    unzipped = Path(extract(str(native_controller_fmu), unzipdir=str(tmp_path / "n")))
+    outputs = ["U", "e1", "e2", "V", "mu_hat", "gamma_hat"]
+    native = run_host(c_host, unzipped, outputs, 0.0, 200.0, 0.1, parameters=CONTROLLER_INPUTS,
+                      env={"FMI2_HOST_LIST_LIBRARIES": "1"})
+    assert native.returncode == 0, native.stderr
+    assert not [line for line in native.stderr.splitlines() if "python" in line.lower()]
+    python_dir = Path(extract(str(controller_fmu), unzipdir=str(tmp_path / "p")))
+    python = run_host(c_host, python_dir, outputs, 0.0, 200.0, 0.1, parameters=CONTROLLER_INPUTS)
+    for name in outputs:
+        np.testing.assert_array_equal(native.outputs[name], python.outputs[name], err_msg=name)

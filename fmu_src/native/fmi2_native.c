@@ -304,6 +304,7 @@ static fmi2Status set_values(Instance *I, const fmi2ValueReference vr[], size_t 
         }
         if (refusal == NULL) {
             I->s.value[vr[i]] = value[i];
+            if (VARIABLES[vr[i]].causality == C_INPUT) model_input_set(I, &I->s, vr[i]);
             continue;
         }
         native_error(I, "parameter %s = %s: %s", name, text[i], refusal);

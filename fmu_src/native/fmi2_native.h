@@ -65,6 +65,8 @@ void model_instantiate(State *s);
 /* fmi2ExitInitializationMode: validate, build the model, publish the first outputs; report failures with
    native_halt (the instance then refuses doStep). */
 void model_initialise(Instance *inst, State *s);
+/* After fmi2SetXXX set input vr (its new value is in s->value[vr]). */
+void model_input_set(Instance *inst, State *s, fmi2ValueReference vr);
 /* fmi2DoStep from t over h (s->halted is 0); failures through native_error / native_halt. */
 void model_do_step(Instance *inst, State *s, double t, double h);
 

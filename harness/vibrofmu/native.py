@@ -28,12 +28,14 @@ import vibromodel
 
 FMU_SRC = Path(vibromodel.__file__).resolve().parents[1]
 NATIVE_SRC = FMU_SRC / "native"
-COMMON_SOURCES = (NATIVE_SRC / "fmi2_native.c", NATIVE_SRC / "pytext.c")
-COMMON_HEADERS = (NATIVE_SRC / "fmi2_native.h", NATIVE_SRC / "pytext.h", FMU_SRC / "fmi2_types.h")
+COMMON_SOURCES = (NATIVE_SRC / "fmi2_native.c", NATIVE_SRC / "pytext.c", NATIVE_SRC / "scene_checks.c",
+                  NATIVE_SRC / "series.c")
+COMMON_HEADERS = (NATIVE_SRC / "fmi2_native.h", NATIVE_SRC / "pytext.h", NATIVE_SRC / "scene_checks.h",
+                  NATIVE_SRC / "series.h", FMU_SRC / "fmi2_types.h")
 # what each model needs beyond its folder's model.c and config.h
 MODEL_FILES = {
-    "HertzEAOscillator": (FMU_SRC / "vibrokernel.c", FMU_SRC / "vibrokernel.h", FMU_SRC / "vibrokernel_tableau.h",
-                          NATIVE_SRC / "series.c", NATIVE_SRC / "series.h"),
+    "HertzEAOscillator": (FMU_SRC / "vibrokernel.c", FMU_SRC / "vibrokernel.h", FMU_SRC / "vibrokernel_tableau.h"),
+    "AdaptiveLyapunovController": (FMU_SRC / "core" / "controller.c", FMU_SRC / "core" / "controller.h"),
 }
 # IEEE double arithmetic as written (the kernel's bit identity with Python): no FMA contraction, no fast-math.
 C_FLAGS = ("-std=c11", "-O2", "-ffp-contract=off", "-Wall", "-Wextra")
@@ -129,9 +131,30 @@ def rules_header() -> str:
     lines += [f"#define RULE_{name} {_c_double(value)}" for name, value in constants.items()]
     lines += [f"#define RULE_OAFM_MAX_ORDER {max_order}"]
     lines += [f"#define RULE_{name} {_c_string(text)}" for name, text in texts.items()]
-    lines += ["/* the scene's parameters in vibromodel.parameters.scene_names() order (the finiteness check's) */",
-              "#define SCENE_VRS {" + ", ".join(f"VR_{name}" for name in scene_names()) + "}", "", "#endif", ""]
+    defaults = Scene()
+    lines += ["/* the scene's parameters in vibromodel.parameters.scene_names() order (the finiteness check's), and",
+              " * the defaults of those a model has no variable for */",
+              f"#define SCENE_SIZE {len(scene_names())}",
+              "#define SCENE_NAMES {" + ", ".join(_c_string(name) for name in scene_names()) + "}",
+              "#define SCENE_DEFAULTS {" + ", ".join(_c_double(getattr(defaults, n)) for n in scene_names()) + "}",
+              "#define SCENE_VRS {" + ", ".join(f"VR_{name}" for name in scene_names()) + "}", ""]
+    lines += [f"#define RULE_{name} {_c_string(text)}" for name, text in control_texts().items()]
+    lines += ["", "#endif", ""]
     return "\n".join(lines)
+
+
+def control_texts() -> dict[str, str]:
+    """The controller's fixed parameter texts (vibromodel.control), when it has them."""
+    try:
+        from vibromodel import control
+        from vibromodel.control import Gains
+    except ImportError:
+        return {}
+    return {
+        "LAW": _reason(control.validate_law, 99),
+        "GAIN": _reason(Gains(lambdas=(-1.0,) * 11).validate),
+        "ESTIMATE": _reason(control.validate_estimates, (math.nan,) * 9),
+    }
 
 
 def _accepts(check) -> bool:

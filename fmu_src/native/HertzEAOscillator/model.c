@@ -15,6 +15,7 @@
 #include "fmi2_native.h"
 #include "pytext.h"
 #include "rules.h"
+#include "scene_checks.h"
 #include "series.h"
 
 #define PYTHONFMU_ALTERNATIVE "use the pythonfmu FMU HertzEAOscillator.fmu (build/HertzEAOscillator.fmu), which runs it in Python"
@@ -22,6 +23,9 @@
 static const fmi2ValueReference OUTPUT_VRS[5] = {VR_x, VR_v, VR_a, VR_F_contact, VR_F_electrostatic};
 
 void model_instantiate(State *s) { memset(&s->model, 0, sizeof s->model); }
+
+/* U is read by the next doStep (the plant holds it over the step). */
+void model_input_set(Instance *inst, State *s, fmi2ValueReference vr) { (void)inst; (void)s; (void)vr; }
 
 /* ---- parameter checks (vibromodel.parameters.validate, plant.Settings.validate, OafmSettings.validate) ---- */
 
@@ -36,42 +40,14 @@ static void halt_parameter(Instance *inst, const char *name, double value, int i
 
 static int scene_valid(Instance *inst, const State *s)
 {
-    static const fmi2ValueReference scene[] = SCENE_VRS;
-    for (size_t i = 0; i < sizeof scene / sizeof *scene; i++)
-        if (!isfinite(s->value[scene[i]])) {
-            halt_parameter(inst, VARIABLES[scene[i]].name, s->value[scene[i]], 0, RULE_FINITE);
-            return 0;
-        }
-    const double R = s->value[VR_R];
-    if (R <= 0) { halt_parameter(inst, "R", R, 0, RULE_R_POSITIVE); return 0; }
-    static const fmi2ValueReference nonnegative[] = {VR_mu, VR_alpha, VR_gamma};
-    for (size_t i = 0; i < 3; i++)
-        if (s->value[nonnegative[i]] < 0) {
-            halt_parameter(inst, VARIABLES[nonnegative[i]].name, s->value[nonnegative[i]], 0, RULE_NONNEGATIVE);
-            return 0;
-        }
-    static const fmi2ValueReference frequencies[] = {VR_omega, VR_Omega};
-    for (size_t i = 0; i < 2; i++) {
-        double f = s->value[frequencies[i]];
-        if (!(0.0 <= f && f <= RULE_MAX_FREQUENCY)) {
-            halt_parameter(inst, VARIABLES[frequencies[i]].name, f, 0, RULE_FREQUENCY);
-            return 0;
-        }
-    }
-    const double x0 = s->value[VR_x_start], u = 2.0 * x0 / (3.0 * R), upper = 1.0 - u, lower = 1.0 + u;
+    static const fmi2ValueReference vrs[] = SCENE_VRS;
+    double scene[SCENE_SIZE];
     char reason[256];
-    if (upper <= RULE_PULL_IN_GAP) { /* parameters.electrode_gaps */
-        snprintf(reason, sizeof reason, "at or beyond pull-in x = 3R/2 = %g (gap 1-2x/(3R) = %.3g)", 1.5 * R, upper);
-        halt_parameter(inst, "x_start", x0, 0, reason);
-        return 0;
-    }
-    if (lower <= RULE_PULL_IN_GAP) {
-        snprintf(reason, sizeof reason, "at or beyond the lower electrode x = -3R/2 = %g (gap 1+2x/(3R) = %.3g)",
-                 -1.5 * R, lower);
-        halt_parameter(inst, "x_start", x0, 0, reason);
-        return 0;
-    }
-    return 1;
+    for (int i = 0; i < SCENE_SIZE; i++) scene[i] = s->value[vrs[i]];
+    int bad = vibro_scene_check(scene, reason, sizeof reason);
+    if (bad < 0) return 1;
+    halt_parameter(inst, VARIABLES[vrs[bad]].name, scene[bad], 0, reason);
+    return 0;
 }
 
 static int settings_valid(Instance *inst, const State *s, double rtol)
