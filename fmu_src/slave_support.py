@@ -17,7 +17,7 @@ from pythonfmu.enums import Fmi2Initial, Fmi2Status
 from vibromodel import snapshot
 from vibromodel.control import ERRATA_INITIAL_ESTIMATES, ESTIMATE_NAMES, GAIN_NAMES, Gains, Law
 from vibromodel.integrate import IntegrationError
-from vibromodel.parameters import ParameterError, scene_names
+from vibromodel.parameters import ParameterError, check_parameters, scene_names
 
 STATUS_OK, STATUS_ERROR = 0, 3
 # FMI 2.0 co-simulation states the slave tracks (the error state is the status shim's and `halted`'s).
@@ -138,6 +138,7 @@ class StatusSlave(Fmi2Slave):
         """exitInitializationMode: run start() (builds the model, publishes the outputs); errors -> fmi2Error."""
         self.initialised = True
         try:
+            check_parameters(self._parameter_values())  # every range up front, the parameter named
             start()
             self.halted = None
         except ParameterError as error:
@@ -179,6 +180,14 @@ class StatusSlave(Fmi2Slave):
                 return self._step_allowed(current_time, step_size) and step(self, current_time, step_size)
             do_step._checked = True
             cls.do_step = do_step
+
+    def _parameter_values(self) -> dict:
+        """name -> value of every parameter, rtol being the experiment's tolerance when setupExperiment gave one."""
+        values = {var.name: getattr(self, var.local_name) for var in self.vars.values()
+                  if var.causality == Fmi2Causality.parameter}
+        if self.experiment_tolerance is not None and "rtol" in values:
+            values["rtol"] = self.experiment_tolerance
+        return values
 
     def _step_allowed(self, t, h) -> bool:
         """fmi2DoStep only in step mode (not before initialisation, not after fmi2Terminate), and not beyond the
