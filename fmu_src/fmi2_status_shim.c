@@ -107,6 +107,7 @@
 
 #define _GNU_SOURCE
 #include <dlfcn.h>
+#include <math.h>
 #include <pthread.h>
 #include <stddef.h>
 #include <stdint.h>
@@ -255,6 +256,9 @@ typedef struct {
     size_t ncat;                    /* ... and categories (0 = all) */
     char **cat;
     FastPath fast;                  /* step == NULL: none attached */
+    int error_logged;               /* the inner library logged an error during the current call */
+    int stop_defined;               /* fmi2SetupExperiment's stop time (the fast path steps only before it) */
+    double stop_time;
     unsigned long long fast_steps;  /* doSteps done by the fast path (vibro_fast_path_steps) */
 } Shim;
 
@@ -428,7 +432,8 @@ static void log_to(const fmi2CallbackFunctions *cb, fmi2String instanceName, fmi
 static void forward_log(fmi2ComponentEnvironment env, fmi2String instanceName, fmi2Status status,
                         fmi2String category, fmi2String message, ...)
 {
-    const Shim *s = (const Shim *)env;
+    Shim *s = (Shim *)env;
+    if (status >= fmi2Error) s->error_logged = 1;
     if (status >= fmi2Warning || category_enabled(s, category))
         log_to(&s->cb, instanceName, status, category, message);
 }
@@ -468,6 +473,61 @@ static fmi2Status settle(Shim *s, fmi2Status st, int may_clear_error)
     else if (st == fmi2Error) s->state = SHIM_ERROR;
     else if (may_clear_error) s->state = SHIM_OK;
     return st;
+}
+
+/* ---- state machine and outputs (issue 15) ----
+   The slave (slave_support.StatusSlave) keeps the FMI 2.0 state and refuses calls made in the wrong one by
+   logging an error.  Getters are not followed by settle(): an error the slave logged during one (an unknown
+   value reference, a wrong type, a getter before initialisation) makes it fmi2Error here.  No Real is ever
+   returned non-finite with fmi2OK: such a value gives fmi2Error naming it. */
+static fmi2Status checked_getter(Shim *s, fmi2Status st)
+{
+    if (st <= fmi2Warning && s->error_logged) {
+        st = fmi2Error;
+        if (s->state != SHIM_FATAL) s->state = SHIM_ERROR;
+    }
+    s->error_logged = 0;
+    return st;
+}
+
+static fmi2Status finite_reals(Shim *s, fmi2Status st, const fmi2ValueReference vr[], size_t nvr,
+                               const fmi2Real value[])
+{
+    if (st > fmi2Warning) return st;
+    for (size_t i = 0; i < nvr; i++) {
+        if (isfinite(value[i])) continue;
+        char msg[200];
+        snprintf(msg, sizeof msg, "fmi2GetReal: variable with valueReference %u is %g (not finite): refused",
+                 (unsigned)vr[i], value[i]);
+        shim_log(s, fmi2Error, msg);
+        s->state = SHIM_ERROR;
+        return fmi2Error;
+    }
+    return st;
+}
+
+/* After a fast-path step: every output it publishes is finite, or fmi2Error naming the first that is not. */
+static fmi2Status fast_outputs_checked(Shim *s, fmi2Real t)
+{
+    for (size_t i = 0; i < s->fast.n_real; i++) {
+        if (isfinite(*s->fast.real[i])) continue;
+        char msg[240];
+        snprintf(msg, sizeof msg, "simulation stopped: output with valueReference %u is %g (not finite) after "
+                 "the step from tau = %.17g; the parameters are beyond the model's numerical range",
+                 (unsigned)s->fast.real_vr[i], *s->fast.real[i], t);
+        shim_log(s, fmi2Error, msg);
+        s->state = SHIM_ERROR;
+        return fmi2Error;
+    }
+    return fmi2OK;
+}
+
+/* The fast path steps only up to the declared stop time (with slave_support.STOP_TIME_TOLERANCE, relative:
+   hosts compute the last point as start + n h); a step beyond goes to the slave, which refuses it. */
+static int before_stop(const Shim *s, fmi2Real t, fmi2Real h)
+{
+    double scale = s->stop_time < 0 ? -s->stop_time : s->stop_time;
+    return !s->stop_defined || t + h <= s->stop_time + 1e-9 * (scale > 1.0 ? scale : 1.0);
 }
 
 /* Guards.  S: the shim pointer; NULL components give fmi2Error. */
@@ -544,7 +604,12 @@ EXPORT fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean tolDef, fmi2R
                                       fmi2Boolean stopDef, fmi2Real tStop)
 {
     SHIM(c); ONLY_IN_OK("fmi2SetupExperiment");
-    return settle(S, inner.SetupExperiment(S->inner, tolDef, tol, tStart, stopDef, tStop), 0);
+    fmi2Status st = settle(S, inner.SetupExperiment(S->inner, tolDef, tol, tStart, stopDef, tStop), 0);
+    if (st <= fmi2Warning) {
+        S->stop_defined = stopDef != 0;
+        S->stop_time = tStop;
+    }
+    return st;
 }
 
 EXPORT fmi2Status fmi2EnterInitializationMode(fmi2Component c)
@@ -562,13 +627,14 @@ EXPORT fmi2Status fmi2ExitInitializationMode(fmi2Component c)
 EXPORT fmi2Status fmi2Terminate(fmi2Component c)
 {
     SHIM(c); ONLY_IN_OK("fmi2Terminate");
-    return note(S, inner.Terminate(S->inner));
+    return settle(S, inner.Terminate(S->inner), 0);
 }
 
 EXPORT fmi2Status fmi2Reset(fmi2Component c)
 {
     SHIM(c); ALLOW_IN_ERROR();
     detach(S);
+    S->stop_defined = 0;
     return settle(S, forward_from(S, inner.Reset, S->inner), 1);
 }
 
@@ -578,18 +644,25 @@ EXPORT fmi2Status fmi2Reset(fmi2Component c)
     {                                                                                           \
         SHIM(c); ALLOW_IN_ERROR();                                                              \
         FAST;                                                                                   \
-        return note(S, inner.Get##Name(S->inner, vr, nvr, value));                              \
+        S->error_logged = 0;                                                                    \
+        return CHECK(checked_getter(S, note(S, inner.Get##Name(S->inner, vr, nvr, value))));    \
     }
+#define CHECK(st) (st)
 #define FAST
 GETTER(Integer, fmi2Integer)
 GETTER(String, fmi2String)
 #undef FAST
-#define FAST if (fast_get_real(S, vr, nvr, value)) return fmi2OK
+#undef CHECK
+#define CHECK(st) finite_reals(S, (st), vr, nvr, value)
+#define FAST if (fast_get_real(S, vr, nvr, value)) return finite_reals(S, fmi2OK, vr, nvr, value)
 GETTER(Real, fmi2Real)
 #undef FAST
+#undef CHECK
+#define CHECK(st) (st)
 #define FAST if (fast_get_boolean(S, vr, nvr, value)) return fmi2OK
 GETTER(Boolean, fmi2Boolean)
 #undef FAST
+#undef CHECK
 
 #define SETTER(Name, T)                                                                         \
     EXPORT fmi2Status fmi2Set##Name(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const T value[]) \
@@ -676,9 +749,9 @@ EXPORT fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueR
 EXPORT fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean noSetPrior)
 {
     SHIM(c); ONLY_IN_OK("fmi2DoStep");
-    if (fast_enabled(S) && S->fast.step(S->fast.model, t, h) == 0) {
+    if (fast_enabled(S) && before_stop(S, t, h) && S->fast.step(S->fast.model, t, h) == 0) {
         S->fast_steps++;
-        return fmi2OK;
+        return fast_outputs_checked(S, t);
     }
     return settle(S, inner.DoStep(S->inner, t, h, noSetPrior), 0);
 }

@@ -13,7 +13,7 @@ from . import forces
 from .analytic import OafmSettings, cached_solve, covering
 from .integrate import RK4_DRIVE_ERROR, RK4_DRIVE_THETA, Dop853, IntegrationError, Rk4, rk4_drive_gains
 from .models import Fidelity, make_model
-from .parameters import ParameterError, Scene, clamp_tolerance, validate, validate_max_step, validate_tolerance
+from .parameters import ParameterError, Scene, check_parameters, clamp_tolerance, validate, validate_max_step, validate_tolerance
 from .snapshot import plain_attributes, restore_attributes
 
 DEFAULT_EXPERIMENT = (0.0, 200.0, 0.1)  # start, stop, communication step of the FMU's DefaultExperiment
@@ -68,6 +68,7 @@ def checked_settings(scene: Scene, settings: Settings) -> tuple[Settings, list[s
     loop) calls this one function.
     """
     settings.validate()
+    check_parameters({**scene.as_dict(), "fidelity": int(settings.fidelity)})  # the fidelity's own ranges
     rtol, warning = clamp_tolerance(settings.rtol)
     warnings = [] if warning is None else [warning]
     if settings.solver == Solver.RK4 and settings.fidelity in INTEGRATED_FIDELITIES:
