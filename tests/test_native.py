@@ -259,11 +259,75 @@ def test_c_host_in_an_empty_environment_without_python(c_host, native_unpacked, 
         np.testing.assert_array_equal(native.outputs[name], python.outputs[name], err_msg=name)
 
 
-def test_c_host_sees_the_parameter_error(c_host, native_unpacked):
+def test_c_host_sees_the_parameter_error(c_host, native_unpacked, plant_fmu, tmp_path):
     host = run_host(c_host, native_unpacked, ["x"], 0.0, 1.0, 0.1, parameters={"R": -1.0})
     assert host.returncode == 2
     assert f"fmi2ExitInitializationMode returned fmi2Error ({FMI2_ERROR})" in host.stderr
-    assert "[fmi2Error] c_host (logStatusError): parameter R = -1.0: electrode gap ratio must be > 0" in host.stderr
+    logged = [line for line in host.stderr.splitlines() if line.startswith("[fmi2Error]")]
+    assert len(logged) == 1 and "parameter R = -1.0: " in logged[0]
+    unpacked = Path(extract(str(plant_fmu), unzipdir=str(tmp_path / "py")))
+    python = run_host(c_host, unpacked, ["x"], 0.0, 1.0, 0.1, parameters={"R": -1.0})
+    assert [line for line in python.stderr.splitlines() if line.startswith("[fmi2Error]")] == logged
+
+
+def _calls_out_of_order(fmu, unzipped):
+    """The FMI 2.0 state machine: every call made where the standard does not allow it, and a step beyond the
+    stop time; the status of each call and the messages."""
+    def attempt(call):
+        try:
+            result = call()
+            return ("ok", result if isinstance(result, (int, float, list)) else None)
+        except Exception as error:
+            return ("failed", getattr(error, "status", None))
+
+    log = FmuLog()
+    trace = []
+    scenarios = [
+        lambda f, vr: [f.getReal([vr["x"]])],                   # a getter before initialization
+        lambda f, vr: [f.doStep(0.0, 0.1)],                     # doStep before initialization
+        lambda f, vr: [f.exitInitializationMode()],             # exit without enter
+        lambda f, vr: [f.getInteger([vr["fmi_status"]])],       # the status flag: always readable
+        lambda f, vr: [f.getReal([9999])],                      # unknown value reference
+        lambda f, vr: [f.getInteger([vr["x"]])],                # wrong type
+        lambda f, vr: [f.setReal([vr["x"]], [0.5])],            # an output
+    ]
+    for k, scenario in enumerate(scenarios):
+        instance = FmuInstance(fmu, f"s{k}", log, unzip_dir=unzipped)
+        vr = {name: var.valueReference for name, var in instance.variables.items()}
+        if k >= 3:
+            instance.fmu.setupExperiment(startTime=0.0, stopTime=1.0)
+            instance.fmu.enterInitializationMode()
+        trace.append(attempt(lambda: scenario(instance.fmu, vr)))
+        instance.close()
+    instance = FmuInstance(fmu, "run", log, unzip_dir=unzipped)
+    instance.fmu.setupExperiment(startTime=0.0, stopTime=0.25)
+    instance.fmu.enterInitializationMode()
+    instance.fmu.exitInitializationMode()
+    trace += [attempt(lambda: instance.fmu.setupExperiment(startTime=0.0)),  # the error state from here on
+              attempt(lambda: instance.fmu.reset())]
+    instance.fmu.setupExperiment(startTime=0.0, stopTime=0.25)
+    instance.fmu.enterInitializationMode()
+    instance.fmu.exitInitializationMode()
+    trace += [attempt(lambda: instance.fmu.doStep(0.0, 0.1)), attempt(lambda: instance.fmu.doStep(0.1, 0.1)),
+              attempt(lambda: instance.fmu.doStep(0.2, 0.1)),  # beyond the stop time 0.25
+              attempt(lambda: instance.fmu.reset())]
+    instance.fmu.setupExperiment(startTime=0.0)
+    instance.fmu.enterInitializationMode()
+    instance.fmu.exitInitializationMode()
+    trace += [attempt(lambda: instance.fmu.doStep(0.0, 0.1)), attempt(lambda: instance.fmu.terminate()),
+              attempt(lambda: instance.fmu.doStep(0.1, 0.1)), attempt(lambda: instance.fmu.reset()),
+              attempt(lambda: instance.fmu.terminate())]
+    instance.close()
+    return trace, [(m, name) for m, name in zip(log.messages, log.instances) if not m.startswith("[ok]")]
+
+
+def test_state_machine_as_the_pythonfmu_fmu(plant_fmu, plant_unzipped, native_plant_fmu, native_unpacked):
+    native = _calls_out_of_order(native_plant_fmu, str(native_unpacked))
+    python = _calls_out_of_order(plant_fmu, plant_unzipped)
+    trace, messages = native
+    assert trace[:3] == [("failed", FMI2_ERROR)] * 3 and trace[3][0] == "ok"
+    assert ("failed", FMI2_ERROR) in trace[9:]  # the step beyond the stop time
+    assert native == python
 
 
 def test_series_equal_vibromodel_forces_bit_for_bit(tmp_path):

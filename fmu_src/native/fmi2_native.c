@@ -13,6 +13,7 @@
 #include <string.h>
 
 #include "pytext.h"
+#include "rules.h"
 
 #ifdef _WIN32
 #define EXPORT __declspec(dllexport)
@@ -20,6 +21,7 @@
 #define EXPORT __attribute__((visibility("default")))
 #endif
 
+#define STOP_TIME_TOLERANCE 1e-9 /* slave_support.STOP_TIME_TOLERANCE */
 #define FLAG_OK 0
 #define FLAG_ERROR 3
 
@@ -92,7 +94,68 @@ void native_halt(Instance *inst, const char *format, ...)
 int native_logging_on(const Instance *inst) { return inst->logging_on; }
 State *native_state(Instance *inst) { return &inst->s; }
 
-/* ---- state machine (as the status shim does it) ---- */
+/* ---- the FMI 2.0 state machine (slave_support.StatusSlave: phase; the status shim: the error state) ---- */
+
+static const char *const PHASE_NAMES[] = {"instantiated", "initialization mode", "step mode", "terminated"};
+
+/* StatusSlave._allowed: call allowed in phase `allowed`, else an error naming both. */
+static int allowed(Instance *inst, const char *call, int64_t phase)
+{
+    if (inst->s.phase == phase) return 1;
+    native_error(inst, "%s is not allowed in the %s state (FMI 2.0 allows it in: %s)", call,
+                 PHASE_NAMES[inst->s.phase], PHASE_NAMES[phase]);
+    return 0;
+}
+
+/* The current value of variable vr as Python prints it (repr). */
+static void value_text(const State *s, fmi2ValueReference vr, char *out, size_t size)
+{
+    const VariableInfo *v = &VARIABLES[vr];
+    if (v->type == T_REAL) py_repr(s->value[vr], out, size);
+    else if (v->type == T_INTEGER) snprintf(out, size, "%d", (int)s->value[vr]);
+    else snprintf(out, size, "%s", s->value[vr] != 0.0 ? "True" : "False");
+}
+
+/* StatusSlave._initialise's first step, parameters.check_parameters: the first parameter (in the table's
+   order) out of its range halts the instance, naming it.  rtol is the experiment's tolerance when
+   fmi2SetupExperiment gave one (StatusSlave._parameter_values). */
+static int parameter_index(const char *name)
+{
+    for (size_t i = 0; i < N_VARIABLES; i++)
+        if (VARIABLES[i].causality == C_PARAMETER && strcmp(VARIABLES[i].name, name) == 0) return (int)i;
+    return -1;
+}
+
+static int check_parameters(Instance *inst)
+{
+    for (size_t r = 0; r < N_RULES; r++) {
+        const VibroRule *rule = &RULES[r];
+        int vr = parameter_index(rule->name);
+        if (vr < 0) continue;
+        if (rule->when != NULL) {
+            int other = parameter_index(rule->when);
+            int applies = 0;
+            for (int k = 0; other >= 0 && k < rule->n_when; k++)
+                if (inst->s.value[other] == rule->when_values[k]) applies = 1;
+            if (!applies) continue;
+        }
+        double number = inst->s.value[vr];
+        int tolerance = strcmp(rule->name, "rtol") == 0 && inst->s.has_tolerance;
+        if (tolerance) number = inst->s.tolerance;
+        if (rule->has_automatic && number == rule->automatic) continue;
+        int ok = isfinite(number) && (!rule->integer || number == trunc(number));
+        ok = ok && (rule->low_inclusive ? number >= rule->low : number > rule->low);
+        ok = ok && (rule->high_inclusive ? number <= rule->high : number < rule->high);
+        if (ok) continue;
+        char text[64];
+        if (tolerance) py_repr(number, text, sizeof text);
+        else value_text(&inst->s, (fmi2ValueReference)vr, text, sizeof text);
+        native_halt(inst, "parameter %s = %s: %s", rule->name, text, rule->text);
+        return 0;
+    }
+    return 1;
+}
+
 
 static fmi2Status settle(Instance *inst, int may_clear_error)
 {
@@ -118,6 +181,7 @@ static void reset_state(State *s)
     memset(s, 0, sizeof *s);
     for (size_t i = 0; i < N_VARIABLES; i++) s->value[i] = VARIABLES[i].start;
     s->value[VR_fmi_status] = FLAG_OK;
+    s->phase = PHASE_INSTANTIATED;
     s->halted = 1;
     snprintf(s->halt_message, sizeof s->halt_message, "the FMU has not been initialised");
     model_instantiate(s);
@@ -171,6 +235,7 @@ EXPORT fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean tolDef, fmi2R
                                       fmi2Boolean stopDef, fmi2Real tStop)
 {
     INST(c); ONLY_IN_OK("fmi2SetupExperiment");
+    if (!allowed(I, "fmi2SetupExperiment", PHASE_INSTANTIATED)) return settle(I, 0);
     I->s.start_time = tStart;
     I->s.has_stop = stopDef != 0;
     I->s.stop_time = stopDef ? tStop : 0.0;
@@ -182,23 +247,34 @@ EXPORT fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean tolDef, fmi2R
 EXPORT fmi2Status fmi2EnterInitializationMode(fmi2Component c)
 {
     INST(c); ONLY_IN_OK("fmi2EnterInitializationMode");
+    if (allowed(I, "fmi2EnterInitializationMode", PHASE_INSTANTIATED)) I->s.phase = PHASE_INITIALIZATION_MODE;
     return settle(I, 0);
 }
 
 EXPORT fmi2Status fmi2ExitInitializationMode(fmi2Component c)
 {
     INST(c); ONLY_IN_OK("fmi2ExitInitializationMode");
+    if (!allowed(I, "fmi2ExitInitializationMode", PHASE_INITIALIZATION_MODE)) return settle(I, 0);
+    I->s.phase = PHASE_STEP_MODE;
     I->s.initialised = 1;
-    I->s.halted = 0;
-    I->s.halt_message[0] = '\0';
-    model_initialise(I, &I->s);
+    if (check_parameters(I)) { /* StatusSlave._initialise: the table, then the model */
+        I->s.halted = 0;
+        I->s.halt_message[0] = '\0';
+        model_initialise(I, &I->s);
+    }
     return settle(I, 0);
 }
 
 EXPORT fmi2Status fmi2Terminate(fmi2Component c)
 {
     INST(c); ONLY_IN_OK("fmi2Terminate");
-    return fmi2OK;
+    if (allowed(I, "fmi2Terminate", PHASE_STEP_MODE)) {
+        I->s.phase = PHASE_TERMINATED;
+        I->s.halted = 1;
+        snprintf(I->s.halt_message, sizeof I->s.halt_message,
+                 "fmi2Terminate was called (FMI 2.0: only fmi2Reset or fmi2FreeInstance may follow)");
+    }
+    return settle(I, 0);
 }
 
 EXPORT fmi2Status fmi2Reset(fmi2Component c)
@@ -210,54 +286,87 @@ EXPORT fmi2Status fmi2Reset(fmi2Component c)
 
 static const char *const TYPE_NAMES[] = {"Real", "Integer", "Boolean"};
 
-/* pythonfmu's text for a variable of another type: "Variable with valueReference=N is not of type T!" */
-static int check_get(Instance *I, const fmi2ValueReference vr[], size_t nvr, VarType type, const char *fn)
+/* StatusSlave._get_values: an unknown value reference, a wrong type, or any variable but fmi_status before
+   fmi2EnterInitializationMode is an error (logged; that value reads as 0); then the call returns fmi2Error and
+   the instance is in the error state (the status shim's checked_getter). */
+static fmi2Status get_values(Instance *I, const fmi2ValueReference vr[], size_t nvr, const char *type,
+                             int type_index, const char *call, double out[])
 {
+    int failed = 0;
     for (size_t i = 0; i < nvr; i++) {
+        out[i] = 0.0;
         if (vr[i] >= N_VARIABLES) {
-            native_log(I, fmi2Error, "%s: no variable with valueReference %u", fn, vr[i]);
-            return 0;
+            native_error(I, "%s: no variable has valueReference %u", call, vr[i]);
+        } else if (type_index < 0 || (int)VARIABLES[vr[i]].type != type_index) {
+            native_error(I, "%s: variable %s (valueReference %u) is a %s, not a %s", call, VARIABLES[vr[i]].name,
+                         vr[i], TYPE_NAMES[VARIABLES[vr[i]].type], type);
+        } else if (I->s.phase == PHASE_INSTANTIATED && vr[i] != VR_fmi_status) {
+            native_error(I, "%s of %s is not allowed in the instantiated state (FMI 2.0 allows it from "
+                         "fmi2EnterInitializationMode on)", call, VARIABLES[vr[i]].name);
+        } else {
+            out[i] = I->s.value[vr[i]];
+            continue;
         }
-        if (VARIABLES[vr[i]].type != type) {
-            native_log(I, fmi2Error, "%s: Variable with valueReference=%u is not of type %s!", fn, vr[i],
-                       TYPE_NAMES[type]);
-            return 0;
-        }
+        failed = 1;
     }
-    return 1;
-}
-
-EXPORT fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Real value[])
-{
-    INST(c);
-    if (!check_get(I, vr, nvr, T_REAL, "fmi2GetReal")) return fmi2Error;
-    for (size_t i = 0; i < nvr; i++) value[i] = I->s.value[vr[i]];
+    if (failed) {
+        I->mode = MODE_ERROR;
+        return fmi2Error;
+    }
     return fmi2OK;
 }
 
-EXPORT fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Integer value[])
+#define MAX_GET 64
+#define GETTER(Name, T, TYPE, CONVERT, CHECK)                                                             \
+    EXPORT fmi2Status fmi2Get##Name(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, T value[])  \
+    {                                                                                                     \
+        INST(c);                                                                                          \
+        fmi2Status worst = fmi2OK;                                                                        \
+        for (size_t done = 0; done < nvr; done += MAX_GET) {                                              \
+            size_t n = nvr - done < MAX_GET ? nvr - done : MAX_GET;                                       \
+            double values[MAX_GET];                                                                       \
+            fmi2Status st = get_values(I, vr + done, n, #Name, TYPE, "fmi2Get" #Name, values);            \
+            for (size_t i = 0; i < n; i++) value[done + i] = CONVERT(values[i]);                          \
+            if (st > worst) worst = st;                                                                   \
+        }                                                                                                 \
+        return CHECK(worst);                                                                              \
+    }
+#define AS_REAL(v) (v)
+#define AS_INTEGER(v) ((fmi2Integer)(v))
+#define AS_BOOLEAN(v) ((v) != 0.0)
+#define NO_CHECK(st) (st)
+#define FINITE_CHECK(st) finite_reals(I, (st), vr, nvr, value)
+
+/* The status shim's finite_reals: no Real is returned non-finite with fmi2OK. */
+static fmi2Status finite_reals(Instance *I, fmi2Status st, const fmi2ValueReference vr[], size_t nvr,
+                               const fmi2Real value[])
 {
-    INST(c);
-    if (!check_get(I, vr, nvr, T_INTEGER, "fmi2GetInteger")) return fmi2Error;
-    for (size_t i = 0; i < nvr; i++) value[i] = (fmi2Integer)I->s.value[vr[i]];
-    return fmi2OK;
+    if (st > fmi2Warning) return st;
+    for (size_t i = 0; i < nvr; i++) {
+        if (isfinite(value[i])) continue;
+        native_log(I, fmi2Error, "fmi2GetReal: variable with valueReference %u is %g (not finite): refused",
+                   (unsigned)vr[i], value[i]);
+        I->mode = MODE_ERROR;
+        return fmi2Error;
+    }
+    return st;
 }
 
-EXPORT fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Boolean value[])
-{
-    INST(c);
-    if (!check_get(I, vr, nvr, T_BOOLEAN, "fmi2GetBoolean")) return fmi2Error;
-    for (size_t i = 0; i < nvr; i++) value[i] = I->s.value[vr[i]] != 0.0;
-    return fmi2OK;
-}
+GETTER(Real, fmi2Real, T_REAL, AS_REAL, FINITE_CHECK)
+GETTER(Integer, fmi2Integer, T_INTEGER, AS_INTEGER, NO_CHECK)
+GETTER(Boolean, fmi2Boolean, T_BOOLEAN, AS_BOOLEAN, NO_CHECK)
 
 EXPORT fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2String value[])
 {
     INST(c);
-    (void)value;
-    if (nvr == 0) return fmi2OK;
-    native_log(I, fmi2Error, "fmi2GetString: no String variable with valueReference %u", vr[0]);
-    return fmi2Error;
+    fmi2Status worst = fmi2OK;
+    for (size_t i = 0; i < nvr; i++) {
+        double ignored;
+        value[i] = "";
+        fmi2Status st = get_values(I, vr + i, 1, "String", -1, "fmi2GetString", &ignored);
+        if (st > worst) worst = st;
+    }
+    return worst;
 }
 
 /* StatusSlave._set_refusal: why FMI 2.0 forbids setting variable vr now, or NULL. */
@@ -265,6 +374,7 @@ static const char *set_refusal(Instance *I, fmi2ValueReference vr, char *buf, si
 {
     const VariableInfo *v = &VARIABLES[vr];
     static const char *const CAUSALITY[] = {"parameter", "input", "output", "local"};
+    if (I->s.phase == PHASE_TERMINATED) return "no variable may be set in the terminated state (FMI 2.0)";
     if (v->causality == C_INPUT) return NULL;
     if (v->causality == C_PARAMETER && strcmp(v->variability, "tunable") == 0) return NULL;
     if (!v->settable_start) {
@@ -273,13 +383,14 @@ static const char *set_refusal(Instance *I, fmi2ValueReference vr, char *buf, si
     }
     if (I->s.initialised) {
         char current[64];
-        if (v->type == T_REAL) py_repr(I->s.value[vr], current, sizeof current);
-        else if (v->type == T_INTEGER) snprintf(current, sizeof current, "%d", (int)I->s.value[vr]);
-        else snprintf(current, sizeof current, "%s", I->s.value[vr] != 0.0 ? "True" : "False");
+        value_text(&I->s, vr, current, sizeof current);
         snprintf(buf, size, "a %s %s cannot be set after fmi2ExitInitializationMode (FMI 2.0: only inputs and "
                  "tunable parameters); it keeps %s", v->variability, CAUSALITY[v->causality], current);
         return buf;
     }
+    if (v->causality == C_OUTPUT) /* its start value is the model's initial output */
+        return "an output is computed by the FMU from its parameters (x_start, v_start, ...); setting it would be "
+               "ignored, so it is refused";
     return NULL;
 }
 
@@ -359,6 +470,25 @@ EXPORT fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolea
 {
     INST(c); ONLY_IN_OK("fmi2DoStep");
     (void)noSetPrior;
+    /* StatusSlave._step_allowed: step mode only, and not beyond the declared stop time */
+    if (I->s.phase == PHASE_TERMINATED) {
+        native_error(I, "doStep refused: %s", I->s.halt_message);
+        return settle(I, 0);
+    }
+    if (!allowed(I, "fmi2DoStep", PHASE_STEP_MODE)) return settle(I, 0);
+    if (I->s.has_stop) {
+        const double stop = I->s.stop_time, end = stop + STOP_TIME_TOLERANCE * fmax(1.0, fabs(stop));
+        if (isfinite(t) && isfinite(h) && t <= end && end < t + h) {
+            char a[64], b[64], e[64], f[64];
+            py_repr(h, a, sizeof a);
+            py_repr(t, b, sizeof b);
+            py_repr(t + h, e, sizeof e);
+            py_repr(stop, f, sizeof f);
+            native_error(I, "parameter communicationStepSize = %s: the step from tau = %s would end at tau = %s, "
+                         "beyond the stop time %s declared in fmi2SetupExperiment", a, b, e, f);
+            return settle(I, 0);
+        }
+    }
     if (I->s.halted) {
         native_error(I, "doStep refused: %s", I->s.halt_message);
         return settle(I, 0);

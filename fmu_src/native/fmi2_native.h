@@ -38,8 +38,12 @@ typedef struct {
 #define HALT_MESSAGE 640
 
 /* Everything that decides an instance's future: plain data (the FMU state). */
+/* FMI 2.0 co-simulation states (slave_support.StatusSlave.phase); the error state is Instance.mode */
+enum { PHASE_INSTANTIATED, PHASE_INITIALIZATION_MODE, PHASE_STEP_MODE, PHASE_TERMINATED };
+
 typedef struct {
     double value[N_VARIABLES];   /* every FMI variable, by value reference (Integer/Boolean as exact doubles) */
+    int64_t phase;               /* PHASE_* */
     int64_t initialised;         /* fmi2ExitInitializationMode was called: only inputs may be set */
     int64_t halted;              /* doStep refuses, with halt_message */
     double start_time, stop_time, tolerance;
@@ -62,7 +66,8 @@ State *native_state(Instance *inst);
 /* ---- provided by each model (model.c) ---- */
 /* After the generic start values are in value[]: the model's own defaults. */
 void model_instantiate(State *s);
-/* fmi2ExitInitializationMode: validate, build the model, publish the first outputs; report failures with
+/* fmi2ExitInitializationMode, after every parameter passed the table of rules (rules.h): the model's own
+   checks, build the model, publish the first outputs; report failures with
    native_halt (the instance then refuses doStep). */
 void model_initialise(Instance *inst, State *s);
 /* After fmi2SetXXX set input vr (its new value is in s->value[vr]). */

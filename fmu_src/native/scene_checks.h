@@ -1,13 +1,11 @@
-/* scene_checks.h -- vibromodel.parameters.validate for the native FMUs (see scene_checks.c). */
+/* scene_checks.h -- the checks of vibromodel.parameters.validate beyond the table of rules (see scene_checks.c). */
 #ifndef SCENE_CHECKS_H
 #define SCENE_CHECKS_H
 
 #include <stddef.h>
 
-#include "rules.h"  /* SCENE_SIZE, SCENE_NAMES, the rules' constants and texts (generated) */
-
-/* scene[] in vibromodel.parameters.scene_names() order.  -1 when the scene is valid; else the index of the
-   first parameter that is not, with the ParameterError's reason in reason[]. */
-int vibro_scene_check(const double scene[SCENE_SIZE], char *reason, size_t size);
+/* x_start inside the electrodes (parameters.validate after check_parameters): 1 if it is; else 0 with the
+   ParameterError's reason for x_start in reason[]. */
+int vibro_gaps_check(double x_start, double R, char *reason, size_t size);
 
 #endif

@@ -11,7 +11,6 @@
 #include "fmi2_native.h"
 #include "pytext.h"
 #include "rules.h"
-#include "scene_checks.h"
 #include "series.h"
 
 static const fmi2ValueReference INPUT_VRS[VC_INPUTS] = {VR_x, VR_v, VR_x_ref, VR_v_ref, VR_a_ref};
@@ -27,14 +26,6 @@ static const fmi2ValueReference GAIN_VRS[11] = {VR_lambda1, VR_lambda2, VR_lambd
 
 void model_instantiate(State *s) { memset(&s->model, 0, sizeof s->model); }
 
-static void halt_parameter(Instance *inst, const char *name, double value, int integer, const char *reason)
-{
-    char text[64];
-    if (integer) snprintf(text, sizeof text, "%d", (int)value);
-    else py_repr(value, text, sizeof text);
-    native_halt(inst, "parameter %s = %s: %s", name, text, reason);
-}
-
 /* The outputs from the structure (its out[] holds them only when all were finite: StatusSlave._set_finite). */
 static void copy_outputs(State *s)
 {
@@ -44,44 +35,6 @@ static void copy_outputs(State *s)
 static void copy_inputs(State *s)
 {
     for (int i = 0; i < VC_INPUTS; i++) s->model.c.in[i] = s->value[INPUT_VRS[i]];
-}
-
-/* make_estimator + CompiledEstimator.__init__: the checks, in their order; 1 if all pass. */
-static int valid(Instance *inst, const State *s)
-{
-    const double kernel = s->value[VR_kernel];
-    if (kernel != 0 && kernel != 1) { halt_parameter(inst, "kernel", kernel, 1, RULE_KERNEL); return 0; }
-    /* the controller's Scene: the model parameters, x_start and v_start at their defaults */
-    const double defaults[SCENE_SIZE] = SCENE_DEFAULTS;
-    static const char *const names[SCENE_SIZE] = SCENE_NAMES;
-    double scene[SCENE_SIZE];
-    char reason[256];
-    for (int i = 0; i < SCENE_SIZE; i++) {
-        scene[i] = defaults[i];
-        for (size_t vr = 0; vr < N_VARIABLES; vr++)
-            if (VARIABLES[vr].causality == C_PARAMETER && strcmp(VARIABLES[vr].name, names[i]) == 0)
-                scene[i] = s->value[vr];
-    }
-    int bad = vibro_scene_check(scene, reason, sizeof reason);
-    if (bad >= 0) { halt_parameter(inst, names[bad], scene[bad], 0, reason); return 0; }
-    const double law = s->value[VR_law];
-    if (law != 0 && law != 1 && law != 2) { halt_parameter(inst, "law", law, 1, RULE_LAW); return 0; }
-    for (int i = 0; i < VC_N; i++) {
-        double v = s->value[ESTIMATE_START_VRS[i]];
-        if (!isfinite(v)) { halt_parameter(inst, VARIABLES[ESTIMATE_START_VRS[i]].name, v, 0, RULE_ESTIMATE); return 0; }
-    }
-    for (int i = 0; i < 11; i++) { /* Gains.validate */
-        double v = s->value[GAIN_VRS[i]];
-        if (!(isfinite(v) && v > 0.0)) { halt_parameter(inst, VARIABLES[GAIN_VRS[i]].name, v, 0, RULE_GAIN); return 0; }
-    }
-    const double k = s->value[VR_k_damping];
-    if (!(isfinite(k) && k > 0.0)) { halt_parameter(inst, "k_damping", k, 0, RULE_GAIN); return 0; }
-    const double R = s->value[VR_R]; /* control.Controller: the series of Eq. 5 raise ArithmeticError */
-    for (int p = 1; p <= 5; p++) {
-        double power = pow(R, p);
-        if (isinf(power) || power == 0.0) { halt_parameter(inst, "R", R, 0, RULE_R_OUT_OF_RANGE); return 0; }
-    }
-    return 1;
 }
 
 /* control.Controller's constants into the structure (compiled_loop.fill_controller). */
@@ -126,7 +79,8 @@ static void fill(State *s)
 
 void model_initialise(Instance *inst, State *s)
 {
-    if (!valid(inst, s)) return;
+    /* every check of make_estimator and control.Controller is a rule of the table, checked before (the scene's
+       electrode check has x_start = 0 here, the controller having no initial state) */
     fill(s);
     s->model.built = 1;
     if (vc_publish(&s->model.c) != VC_OK) {

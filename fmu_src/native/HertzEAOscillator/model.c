@@ -38,45 +38,22 @@ static void halt_parameter(Instance *inst, const char *name, double value, int i
     native_halt(inst, "parameter %s = %s: %s", name, text, reason);
 }
 
-static int scene_valid(Instance *inst, const State *s)
+/* After the table of rules (checked before this model starts, fmi2_native.c): the checks vibromodel makes in
+   code, in its order (parameters.validate's electrode gaps, OafmSettings.validate's tau_star < oafm_tau_end). */
+static int valid(Instance *inst, const State *s)
 {
-    static const fmi2ValueReference vrs[] = SCENE_VRS;
-    double scene[SCENE_SIZE];
     char reason[256];
-    for (int i = 0; i < SCENE_SIZE; i++) scene[i] = s->value[vrs[i]];
-    int bad = vibro_scene_check(scene, reason, sizeof reason);
-    if (bad < 0) return 1;
-    halt_parameter(inst, VARIABLES[vrs[bad]].name, scene[bad], 0, reason);
-    return 0;
-}
-
-static int settings_valid(Instance *inst, const State *s, double rtol)
-{
-    const double fidelity = s->value[VR_fidelity];
-    if (!(fidelity >= 0 && fidelity <= 4)) { halt_parameter(inst, "fidelity", fidelity, 1, RULE_FIDELITY); return 0; }
-    if (fidelity == 4) {
-        const double order = s->value[VR_oafm_order], tau_star = s->value[VR_tau_star],
-                     tau_end = s->value[VR_oafm_tau_end];
-        if (!(order >= 1 && order <= RULE_OAFM_MAX_ORDER)) {
-            halt_parameter(inst, "oafm_order", order, 1, RULE_OAFM_ORDER);
-            return 0;
-        }
-        if (!(isfinite(tau_star) && tau_star >= 0.0)) { halt_parameter(inst, "tau_star", tau_star, 0, RULE_OAFM_TIME); return 0; }
-        if (!(isfinite(tau_end) && tau_end >= 0.0)) { halt_parameter(inst, "oafm_tau_end", tau_end, 0, RULE_OAFM_TIME); return 0; }
+    if (!vibro_gaps_check(s->value[VR_x_start], s->value[VR_R], reason, sizeof reason)) {
+        halt_parameter(inst, "x_start", s->value[VR_x_start], 0, reason);
+        return 0;
+    }
+    if (s->value[VR_fidelity] == 4) {
+        const double tau_star = s->value[VR_tau_star], tau_end = s->value[VR_oafm_tau_end];
         if (tau_end != 0.0 && tau_star != 0.0 && tau_end <= tau_star) {
-            char reason[96];
             snprintf(reason, sizeof reason, "must exceed tau_star = %g", tau_star);
             halt_parameter(inst, "oafm_tau_end", tau_end, 0, reason);
             return 0;
         }
-    }
-    const double solver = s->value[VR_solver], kernel = s->value[VR_kernel], max_step = s->value[VR_max_step];
-    if (solver != 0 && solver != 1) { halt_parameter(inst, "solver", solver, 1, RULE_SOLVER); return 0; }
-    if (kernel != 0 && kernel != 1) { halt_parameter(inst, "kernel", kernel, 1, RULE_KERNEL); return 0; }
-    if (!(isfinite(rtol) && rtol > 0)) { halt_parameter(inst, "rtol", rtol, 0, RULE_RTOL); return 0; }
-    if (max_step != 0.0 && !(isfinite(max_step) && max_step > 0)) {
-        halt_parameter(inst, "max_step", max_step, 0, RULE_MAX_STEP);
-        return 0;
     }
     return 1;
 }
@@ -114,7 +91,7 @@ static void publish(State *s)
 void model_initialise(Instance *inst, State *s)
 {
     const double rtol_requested = s->has_tolerance ? s->tolerance : s->value[VR_rtol];
-    if (!scene_valid(inst, s) || !settings_valid(inst, s, rtol_requested)) return;
+    if (!valid(inst, s)) return;
     const int fidelity = (int)s->value[VR_fidelity], solver = (int)s->value[VR_solver];
     if (fidelity == 3 || fidelity == 4) {
         halt_parameter(inst, "fidelity", fidelity, 1, fidelity == 3
@@ -150,15 +127,7 @@ void model_initialise(Instance *inst, State *s)
         p->polynomial = 0;
         p->electrostatics = alpha != 0.0 || p->ac;
     } else {
-        /* models.PolynomialModel: the series of Eq. 5 raise ArithmeticError where a power R^k overflows or
-           vanishes (Python's ** raises OverflowError, a division by 0 ZeroDivisionError) */
-        for (int k = 1; k <= 5; k++) {
-            double power = pow(R, k);
-            if (isinf(power) || power == 0.0) {
-                halt_parameter(inst, "R", R, 0, RULE_R_OUT_OF_RANGE);
-                return;
-            }
-        }
+        /* (models.PolynomialModel's "R out of range" cannot happen: the rules keep R in [1e-6, 1e6]) */
         p->polynomial = 1;
         p->electrostatics = p->ac;
         vibro_series(fidelity == 2, alpha, gamma, R, p->poly, p->g1, p->g2, p->g3);
