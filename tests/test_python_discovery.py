@@ -149,3 +149,11 @@ def test_doctor_env_file_refuses_a_python_without_scipy(tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("error: ") and "scipy" in err[0]
     assert not out.exists()
+
+
+@pytest.mark.parametrize("name", ["plant", "controller", "closed_loop"])
+def test_validate_fmu_is_silent(name, request):
+    """FMPy's validation of the pythonfmu FMUs (with the recorded environment in resources/)."""
+    from fmpy.validation import validate_fmu
+
+    assert validate_fmu(str(request.getfixturevalue(f"{name}_fmu"))) == []
