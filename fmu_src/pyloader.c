@@ -24,8 +24,9 @@
  *      standard library and the recorded folders (no user or system site-packages that the build did not
  *      use).  It is started like the shim did before (Py_InitializeEx(0): the host's signal handlers are
  *      left alone) and the GIL is released.
- *   3. Each recorded module is imported (under the GIL) and its version compared with the recorded one
- *      (major.minor); Python's own version too.
+ *   3. Each recorded module is imported (under the GIL) and, in the Python the FMU started, its version
+ *      compared with the recorded one (major.minor); Python's own version in either case (pythonfmu's
+ *      library is built for one).
  * Anything missing gives one line naming it and `vibrofmu doctor` (the shim logs it and fmi2Instantiate
  * returns NULL), never a Python traceback.
  *
@@ -212,8 +213,13 @@ static int check_modules(const PyApi *api, const PyEnv *env, int host, char *mes
             if (value) api->DecRef(value);
             if (tb) api->DecRef(tb);
             api->ErrClear();
-            say(message, size, "vibrofmu: %s is missing, or broken: %s cannot import %s (%s)" HINT, item, where,
-                item, why[0] ? why : "no reason given");
+            if (host) /* the host's own Python: the environment file does not apply */
+                say(message, size, "vibrofmu: %s is missing, or broken: %s cannot import %s (%s); install it into "
+                    "the Python that runs the host (pip install %s), see `vibrofmu doctor`", item, where, item,
+                    why[0] ? why : "no reason given", item);
+            else
+                say(message, size, "vibrofmu: %s is missing, or broken: %s cannot import %s (%s)" HINT, item, where,
+                    item, why[0] ? why : "no reason given");
             return 1;
         }
         PyObject *v = api->GetAttrString(module, "__version__");
@@ -221,7 +227,8 @@ static int check_modules(const PyApi *api, const PyEnv *env, int host, char *mes
         text_of(api, v, found, sizeof found);
         if (v) api->DecRef(v);
         api->DecRef(module);
-        if (wanted != NULL && found[0] && !same_minor(found, wanted)) {
+        /* a Python host brings its own modules: their versions are the host's business */
+        if (!host && wanted != NULL && found[0] && !same_minor(found, wanted)) {
             say(message, size, "vibrofmu: version mismatch: %s has %s %s, this FMU was built with %s %s" HINT,
                 where, item, found, item, wanted);
             return 1;

@@ -157,3 +157,33 @@ def test_validate_fmu_is_silent(name, request):
     from fmpy.validation import validate_fmu
 
     assert validate_fmu(str(request.getfixturevalue(f"{name}_fmu"))) == []
+
+
+def test_python_host_without_scipy_one_line_names_scipy(plant_fmu, tmp_path):
+    """A Python host (FMPy) whose environment has fmpy and numpy but no scipy: fmi2Instantiate fails with one
+    log line naming scipy (it used to be "[ctor] findClass AttributeError(...)" from inside pythonfmu)."""
+    import subprocess
+
+    import fmpy
+
+    site = _numpy_only_site(tmp_path)
+    home = Path(fmpy.__file__).parents[1]
+    for entry in home.iterdir():  # fmpy and what it imports
+        if entry.name in ("fmpy", "lxml", "attr", "attrs", "msgpack", "jinja2", "markupsafe"):
+            (site / entry.name).symlink_to(entry)
+    script = ("import sys; sys.path.insert(0, sys.argv[1])\n"
+              "from fmpy import simulate_fmu\n"
+              "import importlib.util; assert importlib.util.find_spec('scipy') is None\n"
+              "lines = []\n"
+              "try:\n"
+              "    simulate_fmu(sys.argv[2], stop_time=1.0, logger=lambda *a: lines.append(a[4].decode()))\n"
+              "except Exception as error:\n"
+              "    print('failed:', error)\n"
+              "print(*lines, sep='\\n')\n")
+    proc = subprocess.run([sys.executable, "-S", "-c", script, str(site), str(plant_fmu)], capture_output=True,
+                          text=True, timeout=120)
+    out = proc.stdout.splitlines()
+    assert proc.returncode == 0, proc.stderr
+    assert out[0] == "failed: Failed to instantiate model", out
+    assert len(out) == 2 and "scipy is missing" in out[1] and "No module named 'scipy'" in out[1], out
+    assert "Traceback" not in proc.stdout + proc.stderr and "findClass" not in proc.stdout
