@@ -93,18 +93,43 @@ void vc_errors(const VcController *c, double x, double v, const double *ref, dou
     *e2 = v - ref[1] + c->c * *e1;
 }
 
-/* Controller.control: U = -phi^T theta^ + x~'' - c e2 (- k e2 damped; true Delta in theta^ paper-literal) */
-int vc_control(const VcController *c, double t, double x, double v, const double *ref, const double *theta_hat,
-               double *U)
+/* Controller.control from the regressor phi and e2 */
+static double control(const VcController *c, const double *phi, double e2, const double *ref, const double *theta_hat)
 {
-    double e1, e2, phi[VC_N], th[VC_N];
-    vc_errors(c, x, v, ref, &e1, &e2);
-    if (regressor(c, &c->phi, t, x, v, phi)) return VC_RAISED;
+    double th[VC_N];
     memcpy(th, theta_hat, sizeof th);
     if (c->law == 2) th[DELTA] = c->true_delta;
     double u = -dot(phi, th) + ref[2] - c->c * e2;
     if (c->law == 1) u -= c->k_damping * e2;
-    *U = u;
+    return u;
+}
+
+/* Controller.control: U = -phi^T theta^ + x~'' - c e2 (- k e2 damped; true Delta in theta^ paper-literal) */
+int vc_control(const VcController *c, double t, double x, double v, const double *ref, const double *theta_hat,
+               double *U)
+{
+    double e1, e2, phi[VC_N];
+    vc_errors(c, x, v, ref, &e1, &e2);
+    if (regressor(c, &c->phi, t, x, v, phi)) return VC_RAISED;
+    *U = control(c, phi, e2, ref, theta_hat);
+    return VC_OK;
+}
+
+/* vc_control and vc_rates together: the same values, with the regressor evaluated once where both laws use the
+   same one (all but paper-literal) */
+int vc_control_rates(const VcController *c, double t, double x, double v, const double *ref, const double *theta_hat,
+                     double *U, double *rates)
+{
+    double e1, e2, phi[VC_N], phi_update[VC_N];
+    vc_errors(c, x, v, ref, &e1, &e2);
+    if (regressor(c, &c->phi, t, x, v, phi)) return VC_RAISED;
+    *U = control(c, phi, e2, ref, theta_hat);
+    const double *update = phi;
+    if (c->law == 2) {
+        if (regressor(c, &c->phi_update, t, x, v, phi_update)) return VC_RAISED;
+        update = phi_update;
+    }
+    for (int i = 0; i < VC_N; i++) rates[i] = c->adaptation[i] * update[i] * e2;
     return VC_OK;
 }
 

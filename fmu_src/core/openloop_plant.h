@@ -14,7 +14,7 @@
 
 #include <stdint.h>
 
-#include "../vibrokernel.h"
+#include "plant.h"
 #include "oafm_eval.h"
 #include "slowflow_eval.h"
 

@@ -33,7 +33,7 @@ class Solver(IntEnum):
 
 
 class Kernel(IntEnum):
-    COMPILED = 0  # vibromodel.compiled (C) where it applies: fidelities 0-2 with the adaptive solver
+    COMPILED = 0  # vibromodel.compiled (C) where it applies: fidelities 0-2 with either solver
     PYTHON = 1
 
 
@@ -243,6 +243,9 @@ class Plant:
                        F_electrostatic=f_electrostatic, in_contact=forces.contact_indentation(x) > 0.0)
 
 
+_SOLVER_NAMES = {Solver.ADAPTIVE: "DOP853", Solver.RK4: "RK4"}
+
+
 def make_plant(scene: Scene, settings: Settings, t0: float = 0.0, stop_time: float | None = None,
                cache_dirs: tuple = (), library: tuple = (None, "no library given")):
     """The plant of `settings`: on the compiled kernel (vibromodel.compiled.CompiledPlant) where it applies,
@@ -265,11 +268,12 @@ def make_plant(scene: Scene, settings: Settings, t0: float = 0.0, stop_time: flo
     wanted = settings.kernel == Kernel.COMPILED and supports(settings)
     if wanted and compiled is not None:
         plant = CompiledPlant(scene, settings, compiled, t0)
-        plant.notes.append(f"DOP853 on the {reason}")
+        plant.notes.append(f"{_SOLVER_NAMES[settings.solver]} on the {reason}")
         return plant
     plant = Plant(scene, settings, t0, stop_time, cache_dirs)
     if wanted:
-        plant.notes.append(f"pure-Python DOP853: the compiled kernel is not available ({reason})")
+        plant.notes.append(f"pure-Python {_SOLVER_NAMES[settings.solver]}: the compiled kernel is not available "
+                           f"({reason})")
     return plant
 
 
