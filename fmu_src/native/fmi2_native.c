@@ -111,7 +111,7 @@ static int allowed(Instance *inst, const char *call, int64_t phase)
 static void value_text(const State *s, fmi2ValueReference vr, char *out, size_t size)
 {
     const VariableInfo *v = &VARIABLES[vr];
-    if (v->type == T_REAL) py_repr(s->value[vr], out, size);
+    if (v->type == T_REAL) native_repr(s->value[vr], out, size);
     else if (v->type == T_INTEGER) snprintf(out, size, "%d", (int)s->value[vr]);
     else snprintf(out, size, "%s", s->value[vr] != 0.0 ? "True" : "False");
 }
@@ -148,7 +148,7 @@ static int check_parameters(Instance *inst)
         ok = ok && (rule->high_inclusive ? number <= rule->high : number < rule->high);
         if (ok) continue;
         char text[64];
-        if (tolerance) py_repr(number, text, sizeof text);
+        if (tolerance) native_repr(number, text, sizeof text);
         else value_text(&inst->s, (fmi2ValueReference)vr, text, sizeof text);
         native_halt(inst, "parameter %s = %s: %s", rule->name, text, rule->text);
         return 0;
@@ -444,7 +444,7 @@ static fmi2Status set_values(Instance *I, const fmi2ValueReference vr[], size_t 
         }                                                                                                 \
         return worst;                                                                                     \
     }
-#define FORMAT_REAL(v, out, size) py_repr(v, out, size)
+#define FORMAT_REAL(v, out, size) native_repr(v, out, size)
 #define FORMAT_INTEGER(v, out, size) snprintf(out, size, "%d", (int)(v))
 #define FORMAT_BOOLEAN(v, out, size) snprintf(out, size, "%s", (v) ? "True" : "False")
 SETTER(Real, fmi2Real, T_REAL, FORMAT_REAL)
@@ -480,10 +480,10 @@ EXPORT fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolea
         const double stop = I->s.stop_time, end = stop + STOP_TIME_TOLERANCE * fmax(1.0, fabs(stop));
         if (isfinite(t) && isfinite(h) && t <= end && end < t + h) {
             char a[64], b[64], e[64], f[64];
-            py_repr(h, a, sizeof a);
-            py_repr(t, b, sizeof b);
-            py_repr(t + h, e, sizeof e);
-            py_repr(stop, f, sizeof f);
+            native_repr(h, a, sizeof a);
+            native_repr(t, b, sizeof b);
+            native_repr(t + h, e, sizeof e);
+            native_repr(stop, f, sizeof f);
             native_error(I, "parameter communicationStepSize = %s: the step from tau = %s would end at tau = %s, "
                          "beyond the stop time %s declared in fmi2SetupExperiment", a, b, e, f);
             return settle(I, 0);

@@ -3,7 +3,7 @@
  *
  * Written once (fmi2_native.c) for every native FMU, in the spirit of the Reference-FMUs: each model has a
  * folder with config.h (its ModelData: every FMI variable's value plus the model's own plain-data state) and
- * model.c (the hooks below).  variables.h, generated at build time from the pythonfmu FMU's
+ * native_model.c (the hooks below).  variables.h, generated at build time from the pythonfmu FMU's
  * modelDescription.xml (harness/vibrofmu/native.py), lists the variables with the same value references,
  * causalities and start values, so the native FMU has the pythonfmu FMU's interface.
  *
@@ -63,7 +63,7 @@ void native_halt(Instance *inst, const char *format, ...);
 int native_logging_on(const Instance *inst);
 State *native_state(Instance *inst);
 
-/* ---- provided by each model (model.c) ---- */
+/* ---- provided by each model (native_model.c) ---- */
 /* After the generic start values are in value[]: the model's own defaults. */
 void model_instantiate(State *s);
 /* fmi2ExitInitializationMode, after every parameter passed the table of rules (rules.h): the model's own

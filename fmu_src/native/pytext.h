@@ -7,8 +7,8 @@
 
 #include <stddef.h>
 
-/* repr(x) of a Python float: shortest round-trip digits, "1e-05", "0.0001", "2.0", "inf", "nan". */
-void py_repr(double x, char *out, size_t size);
+/* repr(x) of a Python float ("1e-05", "0.0001", "2.0", "inf", "nan"): core/pyfloat.c's py_repr into out. */
+void native_repr(double x, char *out, size_t size);
 /* repr of the exception a kernel message "<Type>: <text>" stands for: "Type('text')";
    "OverflowError: 34 Numerical result out of range" -> "OverflowError(34, 'Numerical result out of range')". */
 void py_exception_repr(const char *message, char *out, size_t size);

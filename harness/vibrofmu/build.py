@@ -87,4 +87,4 @@ def build_natives(fmus: list[Path], out_dir: Path) -> list[Path]:
     """The native FMU of each pythonfmu FMU that has a native model (fmu_src/native/<id>/)."""
     from .native import NATIVE_SRC, build_native
 
-    return [build_native(fmu, out_dir) for fmu in fmus if (NATIVE_SRC / Path(fmu).stem / "model.c").is_file()]
+    return [build_native(fmu, out_dir) for fmu in fmus if (NATIVE_SRC / Path(fmu).stem / "native_model.c").is_file()]

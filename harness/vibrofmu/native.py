@@ -29,12 +29,14 @@ import vibromodel
 FMU_SRC = Path(vibromodel.__file__).resolve().parents[1]
 NATIVE_SRC = FMU_SRC / "native"
 COMMON_SOURCES = (NATIVE_SRC / "fmi2_native.c", NATIVE_SRC / "pytext.c", NATIVE_SRC / "scene_checks.c",
-                  NATIVE_SRC / "series.c")
+                  NATIVE_SRC / "series.c", FMU_SRC / "core" / "pyfloat.c")
 COMMON_HEADERS = (NATIVE_SRC / "fmi2_native.h", NATIVE_SRC / "pytext.h", NATIVE_SRC / "scene_checks.h",
-                  NATIVE_SRC / "series.h", FMU_SRC / "fmi2_types.h")
-# what each model needs beyond its folder's model.c and config.h
+                  NATIVE_SRC / "series.h", FMU_SRC / "core" / "pyfloat.h", FMU_SRC / "fmi2_types.h")
+# what each model needs beyond its folder's native_model.c and config.h
 MODEL_FILES = {
-    "HertzEAOscillator": (FMU_SRC / "vibrokernel.c", FMU_SRC / "vibrokernel.h", FMU_SRC / "vibrokernel_tableau.h"),
+    "HertzEAOscillator": tuple(FMU_SRC / "core" / name for name in (
+        "plant.c", "plant.h", "model.c", "model.h", "dop853.c", "dop853.h", "dop853_tableau.h", "rk4.c", "rk4.h",
+        "roots.c", "roots.h")),
     "AdaptiveLyapunovController": (FMU_SRC / "core" / "controller.c", FMU_SRC / "core" / "controller.h"),
 }
 # IEEE double arithmetic as written (the kernel's bit identity with Python): no FMA contraction, no fast-math.
@@ -97,7 +99,8 @@ def rules_header() -> str:
     constants = {
         "PULL_IN_GAP": parameters.PULL_IN_GAP, "MIN_RTOL": parameters.MIN_RTOL,
         "MAX_STEPS_PER_DOSTEP": float(plant.MAX_STEPS_PER_DOSTEP), "TIME_TOLERANCE": plant.TIME_TOLERANCE,
-        "ATOL_PER_RTOL": integrate.ATOL_PER_RTOL,
+        "ATOL_PER_RTOL": integrate.ATOL_PER_RTOL, "RK4_DEFAULT_STEP": plant.RK4_DEFAULT_STEP,
+        "RK4_DRIVE_THETA": integrate.RK4_DRIVE_THETA, "RK4_DRIVE_ERROR": integrate.RK4_DRIVE_ERROR,
     }
     texts = {
         "STEP_SIZE": _reason(plant.check_step, 0.0, 0.0, 0.0, 0.0, math.inf),
@@ -148,7 +151,7 @@ def _reason(check, *args) -> str:
 def model_sources(model_id: str) -> list[Path]:
     """Every hand-written file of the model's native FMU (C sources and headers)."""
     folder = NATIVE_SRC / model_id
-    return [*COMMON_SOURCES, *COMMON_HEADERS, folder / "model.c", folder / "config.h", *MODEL_FILES[model_id]]
+    return [*COMMON_SOURCES, *COMMON_HEADERS, folder / "native_model.c", folder / "config.h", *MODEL_FILES[model_id]]
 
 
 def write_sources(model_id: str, model_description: bytes, out: Path) -> list[str]:

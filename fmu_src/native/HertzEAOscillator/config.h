@@ -2,7 +2,7 @@
 #ifndef HERTZEA_OSCILLATOR_CONFIG_H
 #define HERTZEA_OSCILLATOR_CONFIG_H
 
-#include "vibrokernel.h"
+#include "plant.h"  /* fmu_src/core: the compiled plant */
 
 #define MODEL_IDENTIFIER "HertzEAOscillator"
 #define STATE_FORMAT "HertzEAOscillator native state 1"

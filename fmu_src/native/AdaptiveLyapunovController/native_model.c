@@ -98,7 +98,7 @@ void model_input_set(Instance *inst, State *s, fmi2ValueReference vr)
     if (s->halted) return;
     if (vc_publish(&s->model.c) != VC_OK) {
         char value[64];
-        py_repr(s->value[vr], value, sizeof value);
+        native_repr(s->value[vr], value, sizeof value);
         native_halt(inst, "input %s = %s: ValueError('math domain error')", VARIABLES[vr].name, value);
         return;
     }
@@ -110,26 +110,26 @@ void model_do_step(Instance *inst, State *s, double t, double h)
     VcController *c = &s->model.c;
     char a[64], b[64];
     if (!(isfinite(h) && h > 0.0)) {
-        py_repr(h, a, sizeof a);
+        native_repr(h, a, sizeof a);
         native_error(inst, "doStep refused: parameter communicationStepSize = %s: %s", a, RULE_STEP_SIZE);
         return;
     }
     if (!(isfinite(t) && fabs(t - c->t) <= RULE_TIME_TOLERANCE * fmax(1.0, fabs(t)))) {
-        py_repr(t, a, sizeof a);
-        py_repr(c->t, b, sizeof b);
+        native_repr(t, a, sizeof a);
+        native_repr(c->t, b, sizeof b);
         native_error(inst, "doStep refused: parameter currentCommunicationPoint = %s: the controller is at tau = %s",
                      a, b);
         return;
     }
     for (int i = 0; i < VC_INPUTS; i++)
         if (!isfinite(c->in[i])) {
-            py_repr(c->in[i], a, sizeof a);
+            native_repr(c->in[i], a, sizeof a);
             native_error(inst, "doStep refused: parameter %s = %s: %s", VARIABLES[INPUT_VRS[i]].name, a, RULE_INPUT);
             return;
         }
     /* HeldInputEstimator.advance, then _publish (vc_do_step does both, the way the fast path runs it) */
     if (vc_advance(c, t, h, c->in[0], c->in[1], c->in + 2) != VC_OK || vc_publish(c) != VC_OK) {
-        py_repr(t, a, sizeof a);
+        native_repr(t, a, sizeof a);
         native_halt(inst, "doStep failed at tau = %s: ValueError('math domain error')", a);
         return;
     }
