@@ -111,7 +111,7 @@ PARITY_CASES = [
     ({"rtol": 1e-20}, 2.0),
     ({"solver": 1}, 20.0), ({"solver": 1, "fidelity": 1}, 5.0), ({"solver": 1, "kernel": 1}, 2.0),
     ({"solver": 1, "max_step": 0.05, "Omega": 30.0}, 2.0),  # RK4 does not resolve the drive: a warning
-    ({"solver": 1, "max_step": 0.9}, 5.0),  # beyond RK4's stability region
+    ({"solver": 1, "max_step": 4.0, "interval": 4.0}, 20.0),  # steps of 4: beyond RK4's stability region
     ({"solver": 1, "x_start": 0.29, "R": 0.2}, 5.0),  # pull-in located on RK4's interpolant
     ({"max_step": 1e-9}, 1.0),  # a doStep of 0.1 needs more than 1e6 steps: refused
     ({"R": -1.0}, 1.0), ({"mu": math.nan}, 1.0), ({"v_start": math.inf}, 1.0), ({"gamma": -1.0}, 1.0),
@@ -131,8 +131,10 @@ def _problems(result):
 
 @pytest.mark.parametrize("values,stop", PARITY_CASES, ids=[str(v) for v, _ in PARITY_CASES])
 def test_parity_with_the_pythonfmu_fmu(values, stop, plant_fmu, native_plant_fmu):
-    python = run_fmu(plant_fmu, values, stop, 0.1)
-    native = run_fmu(native_plant_fmu, values, stop, 0.1)
+    values = dict(values)
+    interval = values.pop("interval", 0.1)  # the communication step (also RK4's longest step)
+    python = run_fmu(plant_fmu, values, stop, interval)
+    native = run_fmu(native_plant_fmu, values, stop, interval)
     assert (native.completed, native.status) == (python.completed, python.status)
     assert _problems(native) == _problems(python)
     np.testing.assert_array_equal(native.time, python.time)
@@ -148,6 +150,10 @@ def test_the_cases_cover_events_and_errors(plant_fmu):
     pulled = run_fmu(plant_fmu, {"x_start": 0.29, "R": 0.2}, 5.0, 0.1)
     assert pulled.status == FMI2_ERROR and "pull-in" in pulled.stop_reason
     assert any("below" in m for m in _problems(run_fmu(plant_fmu, {"rtol": 1e-20}, 2.0, 0.1)))
+    unstable = run_fmu(plant_fmu, {"solver": 1, "max_step": 4.0}, 20.0, 4.0)
+    assert unstable.status == FMI2_ERROR and "RK4 unstable" in unstable.stop_reason
+    drive = run_fmu(plant_fmu, {"solver": 1, "max_step": 0.05, "Omega": 30.0}, 2.0, 0.1)
+    assert any("does not resolve the AC drive" in m for m in _problems(drive))
 
 
 @pytest.mark.parametrize("values,name", [({"fidelity": 3}, "fidelity"), ({"fidelity": 4}, "fidelity")])
