@@ -375,26 +375,40 @@ def test_fmpy_builds_the_sources(native_plant_fmu, tmp_path):
     np.testing.assert_array_equal(rebuilt["x"], original["x"])
 
 
-@pytest.mark.skipif(shutil.which("wine") is None or shutil.which("x86_64-w64-mingw32-gcc") is None,
-                    reason="needs wine and mingw-w64")
+WINE = pytest.mark.skipif(shutil.which("wine") is None or shutil.which("x86_64-w64-mingw32-gcc") is None,
+                          reason="needs wine and mingw-w64")
+
+
+def _wine_and_linux(c_host, unpacked, outputs, parameters, tmp_path):
+    """The default experiment of an unpacked native FMU through its win64 DLL (the C host cross-compiled for
+    Windows, under wine) and through its linux64 library: (Windows rows, linux64 HostRun)."""
+    md = read_model_description(str(unpacked))
+    model_id = md.coSimulation.modelIdentifier
+    host = compile_windows_host(tmp_path)
+    dll = Path(unpacked) / "binaries" / "win64" / f"{model_id}.dll"
+    prefix = Path(os.environ.get("WINEPREFIX") or Path(tempfile.gettempdir()) / "vibrofmu-wineprefix")
+    env = {**os.environ, "WINEPREFIX": str(prefix), "WINEDEBUG": "-all"}
+    vr = {v.name: v.valueReference for v in md.modelVariables}
+    proc = subprocess.run(["wine", str(host), "Z:" + str(dll).replace("/", "\\"), "file:///unused", "guid",
+                           "0.0", "200.0", "0.1", ",".join(str(vr[n]) for n in outputs),
+                           *(f"{vr[n]}={value!r}" for n, value in parameters.items())],
+                          capture_output=True, text=True, env=env, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    rows = np.array([[float(x) for x in line.split(",")] for line in proc.stdout.splitlines()[1:]])
+    linux = run_host(c_host, Path(unpacked), outputs, 0.0, 200.0, 0.1, parameters=parameters)
+    assert linux.returncode == 0, linux.stderr
+    assert rows.shape == (2001, len(outputs) + 1)
+    np.testing.assert_array_equal(rows[:, 0], linux.time)
+    return rows, linux
+
+
+@WINE
 def test_win64_dll_under_wine_agrees_with_linux64(c_host, native_unpacked, tmp_path):
     """The default experiment through the win64 DLL (a Windows host under wine) against linux64. Windows'
     libm (sin, cos, pow, sqrt of mingw-w64's runtime) need not round as glibc's does: the last bits of a
     step can differ and propagate through the adaptive steps. 1e-12 is issue 14's bound; measured ~2e-14."""
-    host = compile_windows_host(tmp_path)
-    dll = native_unpacked / "binaries" / "win64" / "HertzEAOscillator.dll"
-    prefix = Path(os.environ.get("WINEPREFIX") or Path(tempfile.gettempdir()) / "vibrofmu-wineprefix")
-    env = {**os.environ, "WINEPREFIX": str(prefix), "WINEDEBUG": "-all"}
     outputs = ["x", "v", "a", "F_contact", "F_electrostatic"]
-    vr = {v.name: v.valueReference for v in read_model_description(str(native_unpacked)).modelVariables}
-    proc = subprocess.run(["wine", str(host), "Z:" + str(dll).replace("/", "\\"), "file:///unused", "guid",
-                           "0.0", "200.0", "0.1", ",".join(str(vr[n]) for n in outputs)],
-                          capture_output=True, text=True, env=env, timeout=300)
-    assert proc.returncode == 0, proc.stderr
-    rows = np.array([[float(x) for x in line.split(",")] for line in proc.stdout.splitlines()[1:]])
-    linux = run_host(c_host, native_unpacked, outputs, 0.0, 200.0, 0.1)
-    assert rows.shape == (2001, len(outputs) + 1)
-    np.testing.assert_array_equal(rows[:, 0], linux.time)
+    rows, linux = _wine_and_linux(c_host, native_unpacked, outputs, {}, tmp_path)
     for j, name in enumerate(outputs):
         assert np.max(np.abs(rows[:, j + 1] - linux.outputs[name])) <= 1e-12, name
 
@@ -492,3 +506,14 @@ def test_controller_c_host_without_python(c_host, native_controller_fmu, control
     python = run_host(c_host, python_dir, outputs, 0.0, 200.0, 0.1, parameters=CONTROLLER_INPUTS)
     for name in outputs:
         np.testing.assert_array_equal(native.outputs[name], python.outputs[name], err_msg=name)
+
+
+@WINE
+def test_controller_win64_dll_under_wine_agrees_with_linux64(c_host, native_controller_fmu, tmp_path):
+    """As the plant's: the controller's sin/cos (regressor and its exact integral) come from Windows' libm;
+    its estimates integrate their last-bit differences over 2000 steps. Same 1e-12 bound."""
+    unzipped = Path(extract(str(native_controller_fmu), unzipdir=str(tmp_path / "n")))
+    outputs = ["U", "e1", "e2", "V", "mu_hat", "gamma_hat"]
+    rows, linux = _wine_and_linux(c_host, unzipped, outputs, CONTROLLER_INPUTS, tmp_path)
+    for j, name in enumerate(outputs):
+        assert np.max(np.abs(rows[:, j + 1] - linux.outputs[name])) <= 1e-12, name
