@@ -84,7 +84,12 @@ def build_all(out_dir: Path = BUILD_DIR) -> list[Path]:
 
 
 def build_natives(fmus: list[Path], out_dir: Path) -> list[Path]:
-    """The native FMU of each pythonfmu FMU that has a native model (fmu_src/native/<id>/)."""
-    from .native import NATIVE_SRC, build_native
+    """The native FMU of each pythonfmu FMU that has a native model (fmu_src/native/<id>/); none without gcc."""
+    import shutil
+
+    from .native import LINUX_COMMAND, NATIVE_SRC, build_native
+
+    if shutil.which(LINUX_COMMAND[0]) is None:
+        return []
 
     return [build_native(fmu, out_dir) for fmu in fmus if (NATIVE_SRC / Path(fmu).stem / "native_model.c").is_file()]

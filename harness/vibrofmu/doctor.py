@@ -154,4 +154,14 @@ def check(fmu: Path, work_dir: Path) -> tuple[dict[str, str], CheckResult]:
         return env, CheckResult(False, f"the C host failed with exit code {run.returncode}: "
                                        f"{run.stderr.strip() or 'no message'}")
     reference = simulate_fmu(str(fmu), start_time=start, stop_time=stop, output_interval=step, output=outputs)
-    return env, _compare(run, reference, outputs)
+    result = _compare(run, reference, outputs)
+    return env, CheckResult(result.ok, f"{result.message}; {python_summary(unzip_dir / 'resources')}")
+
+
+def python_summary(resources: Path) -> str:
+    """What the unpacked FMU needs of Python, in a few words."""
+    recorded = recorded_environment(resources)
+    if recorded is None:
+        return "no Python recorded (a native FMU needs none)"
+    return (f"its Python (resources/{ENV_FILE}): {recorded['python_version']} at {recorded['home']}, "
+            f"{recorded['modules'] or 'no modules'}")
