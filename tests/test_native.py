@@ -517,3 +517,19 @@ def test_controller_win64_dll_under_wine_agrees_with_linux64(c_host, native_cont
     rows, linux = _wine_and_linux(c_host, unzipped, outputs, CONTROLLER_INPUTS, tmp_path)
     for j, name in enumerate(outputs):
         assert np.max(np.abs(rows[:, j + 1] - linux.outputs[name])) <= 1e-12, name
+
+
+@pytest.mark.skipif(shutil.which("valgrind") is None, reason="valgrind is not installed")
+@pytest.mark.parametrize("which", ["plant", "controller"])
+def test_no_invalid_memory_access(which, c_host, native_unpacked, native_controller_fmu, tmp_path):
+    """The native FMUs in the C host under valgrind: a run, and a run refused at initialisation."""
+    if which == "plant":
+        unzipped, output, good, bad = native_unpacked, "x", {}, {"R": -1.0}
+    else:
+        unzipped = Path(extract(str(native_controller_fmu), unzipdir=str(tmp_path / "n")))
+        output, good, bad = "U", CONTROLLER_INPUTS, {**CONTROLLER_INPUTS, "lambda1": 0.0}
+    wrapper = ["valgrind", "--error-exitcode=99", "-q"]
+    for parameters, code in ((good, 0), (bad, 2)):
+        host = run_host(c_host, unzipped, [output], 0.0, 5.0, 0.1, parameters=parameters, wrapper=wrapper)
+        assert host.returncode == code, host.stderr
+        assert "Invalid read" not in host.stderr and "Invalid write" not in host.stderr
