@@ -69,8 +69,8 @@ class HertzEAOscillator(StatusSlave):
                         "4 OAFM analytic")
         self._solver_parameters(settings)
         self._parameter(Integer, "kernel", int(settings.kernel),
-                        "0 compiled C kernel (fidelities 0-2, both solvers; pure Python where it does not apply "
-                        "or is missing), 1 pure Python")
+                        "0 compiled C kernel (fidelities 0-2 with both solvers; 3 and 4: their per-output evaluation; "
+                        "pure Python where it is missing), 1 pure Python")
         self._parameter(Integer, "oafm_order", oafm.order, "fidelity 4: order of the harmonic OAFM basis")
         self._parameter(Real, "tau_star", oafm.tau_star, "fidelity 4: end of the transient domain; 0 = automatic")
         self._parameter(Real, "oafm_tau_end", oafm.tau_end,

@@ -3,9 +3,10 @@
 The shim then runs fmi2DoStep on the model's C step function (the plant's vk_do_step, the controller's
 vc_do_step, the closed loop's vl_do_step) and answers fmi2GetReal/fmi2GetBoolean of the outputs from the
 model's memory, without calling Python. Any model will do that gives a step function int step(void *model,
-double t, double h), its address, the address of its int64 "enabled" flag and those of its outputs. It accepts the plant only during a call it forwarded
-to this slave (exitInitializationMode, setFMUstate); outside one (no shim, a Python host driving the slave
-object directly) attaching does nothing and every call takes the Python path.
+double t, double h), its address, the address of its int64 "enabled" flag and those of its outputs (and, for
+inputs set in C, a function int inputs_set(void *model) and the inputs' addresses). The shim accepts a model only
+during a call it forwarded to this slave (exitInitializationMode, setFMUstate); outside one (no shim, a Python
+host driving the slave object directly) attaching does nothing and every call takes the Python path.
 """
 from __future__ import annotations
 

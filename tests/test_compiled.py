@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from vibrofmu import kernel
-from vibromodel import compiled, plant as plant_module
+from vibromodel import compiled, plant as plant_module, settings as settings_module
 from vibromodel.compiled import CompiledPlant, load_library
 from vibromodel.integrate import IntegrationError, TerminalEvent
 from vibromodel.models import make_model
@@ -190,7 +190,8 @@ def test_the_grazing_contact_that_halted_brentq_completes_identically(library):
 
 
 def test_step_budget_failure_is_the_pythons(library, monkeypatch):
-    monkeypatch.setattr(plant_module, "MAX_STEPS_PER_DOSTEP", 40)
+    monkeypatch.setattr(plant_module, "MAX_STEPS_PER_DOSTEP", 40)  # what Plant gives Dop853
+    monkeypatch.setattr(settings_module, "MAX_STEPS_PER_DOSTEP", 40)  # what CompiledPlant gives the core
     python = assert_same_traces(Scene(), Settings(), [(0.1, 0.0), (50.0, 0.0), (50.0, 0.0)], library)
     error = python[1][0]
     assert error[0] is IntegrationError and "40 steps reached only tau" in error[1]

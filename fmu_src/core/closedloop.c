@@ -17,27 +17,30 @@
 static int loop_rhs(void *context, double t, const double *y, double *f)
 {
     const VlLoop *l = context;
-    double ref[3], U;
+    double ref[3], U, time[3];
     int fault = FAULT_NONE;
     oe_state(&l->reference, t, ref);
-    if (vc_control_rates(&l->controller, t, y[0], y[1], ref, y + 2, &U, f + 2))
+    if (vc_control_rates(&l->controller, t, y[0], y[1], ref, y + 2, &U, f + 2, time))
         return FAULT_MATH_DOMAIN;  /* math.cos/sin of an infinity */
+    /* the model's drive terms have the same time functions as the control regressor (the same products of the
+       same frequencies and t): evaluated once */
+    VmDrive drive = {time[0], time[1], time[2]};
     f[0] = y[1];
-    f[1] = vm_accel(&l->model, t, y[0], y[1], U, &fault);
+    f[1] = vm_accel_driven(&l->model, t, &drive, y[0], y[1], U, &fault);
     return fault;
 }
 
 int vl_outputs_at(const VlLoop *l, double t, const double *y, double *out)
 {
     const VcController *c = &l->controller;
-    double ref[3], U, e1, e2, rates[VC_N];
+    double ref[3], U, e1, e2, rates[VC_N], time[3];
     int fault = FAULT_NONE;
     oe_state(&l->reference, t, ref);
-    if (vc_control(c, t, y[0], y[1], ref, y + 2, &U)) return FAULT_MATH_DOMAIN;
+    if (vc_control_rates(c, t, y[0], y[1], ref, y + 2, &U, rates, time)) return FAULT_MATH_DOMAIN;
     vc_errors(c, y[0], y[1], ref, &e1, &e2);
-    double a = vm_accel(&l->model, t, y[0], y[1], U, &fault);
+    VmDrive drive = {time[0], time[1], time[2]};  /* as in loop_rhs */
+    double a = vm_accel_driven(&l->model, t, &drive, y[0], y[1], U, &fault);
     if (fault) return fault;
-    if (vc_rates(c, t, y[0], y[1], ref, rates)) return FAULT_MATH_DOMAIN;
     out[0] = y[0];
     out[1] = y[1];
     out[2] = ref[0];

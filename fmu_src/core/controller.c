@@ -48,12 +48,18 @@ static int trig_integral(int sine, double nu, double t, double h, double *value)
     return VC_OK;
 }
 
-/* Regressor.__call__ */
-static int regressor(const VcController *c, const VcRegressor *r, double t, double x1, double x2, double *phi)
+/* Regressor.__call__; time != NULL: its time functions cos(w_delta t), sin(w_beta t), cos(w_gamma t) too */
+static int regressor(const VcController *c, const VcRegressor *r, double t, double x1, double x2, double *phi,
+                     double *time)
 {
     double G3 = horner6(c->g3, x1), x1_2 = x1 * x1, cd, sb, cg;
     if (trig(0, r->w_delta * t, &cd) || trig(1, r->w_beta * t, &sb) || trig(0, r->w_gamma * t, &cg))
         return VC_RAISED;
+    if (time != NULL) {
+        time[0] = cd;
+        time[1] = sb;
+        time[2] = cg;
+    }
     phi[0] = -x2;
     phi[1] = -x1;
     phi[2] = -x1_2;
@@ -110,7 +116,7 @@ int vc_control(const VcController *c, double t, double x, double v, const double
 {
     double e1, e2, phi[VC_N];
     vc_errors(c, x, v, ref, &e1, &e2);
-    if (regressor(c, &c->phi, t, x, v, phi)) return VC_RAISED;
+    if (regressor(c, &c->phi, t, x, v, phi, NULL)) return VC_RAISED;
     *U = control(c, phi, e2, ref, theta_hat);
     return VC_OK;
 }
@@ -118,15 +124,15 @@ int vc_control(const VcController *c, double t, double x, double v, const double
 /* vc_control and vc_rates together: the same values, with the regressor evaluated once where both laws use the
    same one (all but paper-literal) */
 int vc_control_rates(const VcController *c, double t, double x, double v, const double *ref, const double *theta_hat,
-                     double *U, double *rates)
+                     double *U, double *rates, double *time)
 {
     double e1, e2, phi[VC_N], phi_update[VC_N];
     vc_errors(c, x, v, ref, &e1, &e2);
-    if (regressor(c, &c->phi, t, x, v, phi)) return VC_RAISED;
+    if (regressor(c, &c->phi, t, x, v, phi, time)) return VC_RAISED;
     *U = control(c, phi, e2, ref, theta_hat);
     const double *update = phi;
     if (c->law == 2) {
-        if (regressor(c, &c->phi_update, t, x, v, phi_update)) return VC_RAISED;
+        if (regressor(c, &c->phi_update, t, x, v, phi_update, NULL)) return VC_RAISED;
         update = phi_update;
     }
     for (int i = 0; i < VC_N; i++) rates[i] = c->adaptation[i] * update[i] * e2;
@@ -138,7 +144,7 @@ int vc_rates(const VcController *c, double t, double x, double v, const double *
 {
     double e1, e2, phi[VC_N];
     vc_errors(c, x, v, ref, &e1, &e2);
-    if (regressor(c, &c->phi_update, t, x, v, phi)) return VC_RAISED;
+    if (regressor(c, &c->phi_update, t, x, v, phi, NULL)) return VC_RAISED;
     for (int i = 0; i < VC_N; i++) rates[i] = c->adaptation[i] * phi[i] * e2;
     return VC_OK;
 }

@@ -24,9 +24,9 @@
 #define EVENT_MAX_DEPTH DOP_EVENT_MAX_DEPTH
 #define EVENT_SCREEN 2.0
 
-/* The stages of one step: k[0..n-1] */
+/* The stages of one step: k[component][stage], stages 0..n-1 */
 typedef struct {
-    double k[DOP_STAGES][DOP_MAX_DIM];
+    double k[DOP_MAX_DIM][DOP_STAGES];
     int n;
 } Stages;
 
@@ -51,11 +51,11 @@ static int raise_fault(const Dop853 *s, DopReport *r, int fault)
     return report(s, r, DOP_RAISED, s->t, s->y, "%s", text);
 }
 
-/* integrate._dot for component i of the stages: sum over the first m of c[j] * k[j][i], left to right from 0 */
-static double dot(const double *c, int m, const double (*k)[DOP_MAX_DIM], int i)
+/* integrate._dot over the first m stages of one component: sum of c[j] * k[j], left to right from 0 */
+static double dot(const double *c, int m, const double *k)
 {
     double sum = 0.0;
-    for (int j = 0; j < m; j++) sum += c[j] * k[j][i];
+    for (int j = 0; j < m; j++) sum += c[j] * k[j];
     return sum;
 }
 
@@ -87,23 +87,32 @@ static int counted(Dop853 *s, DopRhs rhs, void *ctx, double t, const double *y, 
 
 /* Dop853._run_stages for rows first..last of DOP_A (row st has st coefficients, node DOP_C[st]) or, with
  * first = DOP_N_STAGES, the FSAL stage (row DOP_B, node 1); a stage is appended once its derivative is in. */
-static int run_stages(const Dop853 *s, DopRhs rhs, void *ctx, double t, const double *y, double h, int first,
-                      int last, Stages *k, double *y_last)
+static inline __attribute__((always_inline)) int stages_of(DopRhs rhs, void *ctx, double t, const double *y,
+                                                           double h, int first, int last, Stages *k, double *y_last,
+                                                           int n)
 {
-    double ys[DOP_MAX_DIM];
-    int n = (int)s->n;
+    double ys[DOP_MAX_DIM], f[DOP_MAX_DIM];
     for (int st = first; st <= last; st++) {
         const double *row = st == DOP_N_STAGES ? DOP_B : DOP_A[st];
         double c = st == DOP_N_STAGES ? 1.0 : DOP_C[st];
         double ts = t + c * h;
         int m = st < k->n ? st : k->n;
-        for (int i = 0; i < n; i++) ys[i] = y[i] + h * dot(row, m, (const double (*)[DOP_MAX_DIM])k->k, i);
-        int fault = rhs(ctx, ts, ys, k->k[k->n]);
+        for (int i = 0; i < n; i++) ys[i] = y[i] + h * dot(row, m, k->k[i]);
+        int fault = rhs(ctx, ts, ys, f);
         if (fault) return fault;
+        for (int i = 0; i < n; i++) k->k[i][k->n] = f[i];
         k->n += 1;
         memcpy(y_last, ys, sizeof(double) * (size_t)n);
     }
     return FAULT_NONE;
+}
+
+/* stages_of with the dimension a constant where it is the plant's (2): the compiler unrolls the component loops */
+static int run_stages(const Dop853 *s, DopRhs rhs, void *ctx, double t, const double *y, double h, int first,
+                      int last, Stages *k, double *y_last)
+{
+    if (s->n == 2) return stages_of(rhs, ctx, t, y, h, first, last, k, y_last, 2);
+    return stages_of(rhs, ctx, t, y, h, first, last, k, y_last, (int)s->n);
 }
 
 /* Dop853._trial: one step of size h from (t, y) with derivative s->f. Stages into k, new state into y_new;
@@ -114,7 +123,7 @@ static int trial(Dop853 *s, DopRhs rhs, void *ctx, double t, const double *y, do
 {
     int n = (int)s->n, fault = FAULT_NONE;
     double scale[DOP_MAX_DIM];
-    memcpy(k->k[0], s->f, sizeof(double) * (size_t)n);
+    for (int i = 0; i < n; i++) k->k[i][0] = s->f[i];
     k->n = 1;
     if (run_stages(s, rhs, ctx, t, y, h, 1, DOP_N_STAGES, k, y_new) != FAULT_NONE) {
         s->nfev += k->n;  /* Python: self.nfev += len(stages[1]) */
@@ -124,15 +133,14 @@ static int trial(Dop853 *s, DopRhs rhs, void *ctx, double t, const double *y, do
     }
     s->nfev += DOP_N_STAGES;
     for (int i = 0; i < n; i++) scale[i] = s->atol + s->rtol * py_max(fabs(y[i]), fabs(y_new[i]));
-    const double (*kk)[DOP_MAX_DIM] = (const double (*)[DOP_MAX_DIM])k->k;
     double e5 = 0.0, e3 = 0.0;
     for (int i = 0; i < n; i++) {
-        double term = py_pow(dot(DOP_E5, DOP_N_STAGES + 1, kk, i) / scale[i], 2.0, &fault);
+        double term = py_pow(dot(DOP_E5, DOP_N_STAGES + 1, k->k[i]) / scale[i], 2.0, &fault);
         if (fault) return fault;
         e5 += term;
     }
     for (int i = 0; i < n; i++) {
-        double term = py_pow(dot(DOP_E3, DOP_N_STAGES + 1, kk, i) / scale[i], 2.0, &fault);
+        double term = py_pow(dot(DOP_E3, DOP_N_STAGES + 1, k->k[i]) / scale[i], 2.0, &fault);
         if (fault) return fault;
         e3 += term;
     }
@@ -155,12 +163,14 @@ static void accept(Dop853 *s, double t, const double *y, double h, const double 
     memcpy(s->y_old, y, bytes);
     memcpy(s->f_old, s->f, bytes);
     s->has_old = 1;
-    for (int j = 0; j < k->n; j++) memcpy(s->k[j], k->k[j], bytes);
+    for (int i = 0; i < s->n; i++) {
+        memcpy(s->k[i], k->k[i], sizeof(double) * (size_t)k->n);
+        s->f[i] = k->k[i][k->n - 1];
+    }
     s->n_stages = k->n;
     s->dense_ready = 0;
     s->t = t + h;
     memcpy(s->y, y_new, bytes);
-    memcpy(s->f, k->k[k->n - 1], bytes);
     s->n_steps += 1;
 }
 
@@ -172,17 +182,16 @@ static int build_dense(Dop853 *s, DopRhs rhs, void *ctx)
     int n = (int)s->n;
     double h = s->t - s->t_old, y_last[DOP_MAX_DIM];
     k.n = (int)s->n_stages;
-    for (int j = 0; j < k.n; j++) memcpy(k.k[j], s->k[j], sizeof(double) * (size_t)n);
+    for (int i = 0; i < n; i++) memcpy(k.k[i], s->k[i], sizeof(double) * (size_t)k.n);
     int fault = run_stages(s, rhs, ctx, s->t_old, s->y_old, h, DOP_N_STAGES + 1, DOP_STAGES - 1, &k, y_last);
     if (fault) return fault;
     s->nfev += DOP_STAGES - DOP_N_STAGES - 1;
-    const double (*kk)[DOP_MAX_DIM] = (const double (*)[DOP_MAX_DIM])k.k;
     for (int i = 0; i < n; i++) {
         double dy = s->y[i] - s->y_old[i];
-        s->dense[0][i] = dy;
-        s->dense[1][i] = h * s->f_old[i] - dy;
-        s->dense[2][i] = 2.0 * dy - h * (s->f[i] + s->f_old[i]);
-        for (int row = 0; row < 4; row++) s->dense[3 + row][i] = h * dot(DOP_D[row], k.n, kk, i);
+        s->dense[i][0] = dy;
+        s->dense[i][1] = h * s->f_old[i] - dy;
+        s->dense[i][2] = 2.0 * dy - h * (s->f[i] + s->f_old[i]);
+        for (int row = 0; row < 4; row++) s->dense[i][3 + row] = h * dot(DOP_D[row], k.n, k.k[i]);
     }
     s->dense_ready = 1;
     return FAULT_NONE;
@@ -193,7 +202,7 @@ static double evaluate(const Dop853 *s, int i, double f)
 {
     double y = 0.0;
     for (int j = DOP_DENSE - 1; j >= 0; j--) {
-        y += s->dense[j][i];
+        y += s->dense[i][j];
         y *= (DOP_DENSE - 1 - j) % 2 == 0 ? f : 1.0 - f;
     }
     return y;
@@ -240,7 +249,7 @@ int dop_restart(Dop853 *s, DopRhs rhs, void *ctx, double t, const double *y, Dop
 static int initial_step(Dop853 *s, DopRhs rhs, void *ctx, double *h)
 {
     int n = (int)s->n, fault;
-    double scale[DOP_MAX_DIM], w[DOP_MAX_DIM] = {0.0}, y1[DOP_MAX_DIM], f1[DOP_MAX_DIM], t = s->t;
+    double scale[DOP_MAX_DIM], w[DOP_MAX_DIM] = {0.0}, y1[DOP_MAX_DIM] = {0.0}, f1[DOP_MAX_DIM] = {0.0}, t = s->t;
     double root_n = sqrt((double)n);
     for (int i = 0; i < n; i++) scale[i] = s->atol + fabs(s->y[i]) * s->rtol;
     for (int i = 0; i < n; i++) w[i] = s->y[i] / scale[i];
@@ -362,7 +371,11 @@ static int first_zero(Dop853 *s, DopRhs rhs, void *ctx, int i, int *found, doubl
         if (fault) return raise_fault(s, r, fault);
     }
     double G[DOP_DENSE];
-    for (int j = 0; j < DOP_DENSE; j++) G[j] = event_linear(s, i, s->dense[j]);
+    for (int j = 0; j < DOP_DENSE; j++) {
+        double column[DOP_MAX_DIM];
+        for (int m = 0; m < s->n; m++) column[m] = s->dense[m][j];
+        G[j] = event_linear(s, i, column);
+    }
     Piece stack[EVENT_MAX_DEPTH + 2];
     int top = 0;
     stack[0].s_a = 0.0;

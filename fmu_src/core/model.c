@@ -5,6 +5,7 @@
 #include "model.h"
 
 #include <math.h>
+#include <stddef.h>
 
 #include "pyfloat.h"
 
@@ -18,8 +19,24 @@ double vm_hertz(double x)
     return s > 0.0 ? s * sqrt(s) : 0.0;
 }
 
+/* The drive's time functions: given (drive != NULL) or computed here */
+static double sin_Omega_t(const VkModel *m, double t, const VmDrive *drive, int *fault)
+{
+    return drive ? drive->sin_Omega_t : py_sin(m->Omega * t, fault);
+}
+
+static double cos_2Omega_t(const VkModel *m, double t, const VmDrive *drive, int *fault)
+{
+    return drive ? drive->cos_2Omega_t : py_cos(2.0 * m->Omega * t, fault);
+}
+
+static double cos_omega_t(const VkModel *m, double t, const VmDrive *drive, int *fault)
+{
+    return drive ? drive->cos_omega_t : py_cos(m->omega * t, fault);
+}
+
 /* Eq. 3: alpha [(1 - u)^-2 - (1 + u)^-2] + (beta sin Omega t + gamma (1 - cos 2 Omega t)) (1 - u)^-2, u = 2x/(3R) */
-double vm_electrostatic(const VkModel *m, double t, double x, int *fault)
+static double electrostatic(const VkModel *m, double t, const VmDrive *drive, double x, int *fault)
 {
     double u = 2.0 * x / (3.0 * m->R);
     double f3 = py_div(1.0, (1.0 - u) * (1.0 - u), fault);
@@ -27,11 +44,16 @@ double vm_electrostatic(const VkModel *m, double t, double x, int *fault)
     double force = m->alpha * (f3 - py_div(1.0, (1.0 + u) * (1.0 + u), fault));
     if (*fault) return 0.0;
     if (m->ac) {
-        double s = py_sin(m->Omega * t, fault);
-        double c = py_cos(2.0 * m->Omega * t, fault);
+        double s = sin_Omega_t(m, t, drive, fault);
+        double c = cos_2Omega_t(m, t, drive, fault);
         force += (m->beta * s + m->gamma * (1.0 - c)) * f3;
     }
     return force;
+}
+
+double vm_electrostatic(const VkModel *m, double t, double x, int *fault)
+{
+    return electrostatic(m, t, NULL, x, fault);
 }
 
 /* sum c_k x^k for the six coefficients of a series (5) (forces.horner) */
@@ -43,36 +65,42 @@ static double horner(const double *c, double x)
 }
 
 /* Eq. 3 with U: x'' = 1 + Delta cos(omega t) + F_em(t, x) - H(x) - mu x' + U (ExactModel accel) */
-static double exact_accel(const VkModel *m, double t, double x, double v, double U, int *fault)
+static double exact_accel(const VkModel *m, double t, const VmDrive *drive, double x, double v, double U, int *fault)
 {
     double a = 1.0 + U - m->mu * v;
     a -= vm_hertz(x);
-    if (m->load_forcing) a += m->Delta * py_cos(m->omega * t, fault);
+    if (m->load_forcing) a += m->Delta * cos_omega_t(m, t, drive, fault);
     if (*fault) return a;
-    if (m->electrostatics) a += vm_electrostatic(m, t, x, fault);
+    if (m->electrostatics) a += electrostatic(m, t, drive, x, fault);
     return a;
 }
 
 /* Eq. 7 with U (PolynomialModel accel) */
-static double polynomial_accel(const VkModel *m, double t, double x, double v, double U, int *fault)
+static double polynomial_accel(const VkModel *m, double t, const VmDrive *drive, double x, double v, double U,
+                               int *fault)
 {
     const double *c = m->poly, *g3 = m->g3;
     double acc = U - m->mu * v - (c[0] + x * (c[1] + x * (c[2] + x * (c[3] + x * (c[4] + x * c[5])))));
-    if (m->load_forcing) acc += m->Delta * py_cos(m->omega * t, fault);
+    if (m->load_forcing) acc += m->Delta * cos_omega_t(m, t, drive, fault);
     if (*fault) return acc;
     if (m->ac) {
         double G3 = g3[0] + x * (g3[1] + x * (g3[2] + x * (g3[3] + x * (g3[4] + x * g3[5]))));
-        double s = py_sin(m->Omega * t, fault);
-        double c2 = py_cos(2.0 * m->Omega * t, fault);
+        double s = sin_Omega_t(m, t, drive, fault);
+        double c2 = cos_2Omega_t(m, t, drive, fault);
         acc += (m->beta * s - m->gamma * c2) * G3;
     }
     return acc;
 }
 
-double vm_accel(const VkModel *m, double t, double x, double v, double U, int *fault)
+double vm_accel_driven(const VkModel *m, double t, const VmDrive *drive, double x, double v, double U, int *fault)
 {
     *fault = FAULT_NONE;
-    return m->polynomial ? polynomial_accel(m, t, x, v, U, fault) : exact_accel(m, t, x, v, U, fault);
+    return m->polynomial ? polynomial_accel(m, t, drive, x, v, U, fault) : exact_accel(m, t, drive, x, v, U, fault);
+}
+
+double vm_accel(const VkModel *m, double t, double x, double v, double U, int *fault)
+{
+    return vm_accel_driven(m, t, NULL, x, v, U, fault);
 }
 
 int vm_forces(const VkModel *m, double t, double x, double *f_contact, double *f_electrostatic)

@@ -28,6 +28,13 @@ double vm_hertz(double x);
 double vm_electrostatic(const VkModel *m, double t, double x, int *fault);
 /* x'' of the model at input U (ExactModel / PolynomialModel accel); *fault as pyfloat.h */
 double vm_accel(const VkModel *m, double t, double x, double v, double U, int *fault);
+/* The time functions of the drive terms at t: cos(omega t), sin(Omega t), cos(2 Omega t), as the model computes
+   them (the controller's regressor has the same three: the closed loop evaluates them once per stage) */
+typedef struct {
+    double cos_omega_t, sin_Omega_t, cos_2Omega_t;
+} VmDrive;
+/* vm_accel with the drive's time functions given (drive == NULL: computed, as vm_accel) */
+double vm_accel_driven(const VkModel *m, double t, const VmDrive *drive, double x, double v, double U, int *fault);
 /* (F_contact, F_electrostatic) as they enter the model's equation (model.forces); returns a fault */
 int vm_forces(const VkModel *m, double t, double x, double *f_contact, double *f_electrostatic);
 

@@ -4,14 +4,15 @@
  *
  * One step from the communication point t over h: the checks (h finite and > 0, U = 0, t the plant's time),
  * then (x, x', x'') at t + h from slowflow_eval or oafm_eval, then the outputs x, v, a and the exact model's
- * F_contact, F_electrostatic (vibrokernel's vk_outputs_at, the one C home of Eq. 3's forces) at the time
- * Plant.do_step takes them.  Whatever the C code does not do itself -- a refused step, a time beyond the slow
+ * F_contact, F_electrostatic (plant.c's vk_outputs_at on core/model.c, the one C home of Eq. 3's forces), all
+ * at the new communication point t + h.  Whatever the C code does not do itself -- a refused step, a time beyond the slow
  * flow's table, a non-finite output -- returns a nonzero code and changes nothing: the FMU then takes the
  * Python path (vibromodel.compiled_open_loop), which raises the matching error or extends the table.
  */
 #ifndef OPENLOOP_PLANT_H
 #define OPENLOOP_PLANT_H
 
+#include <stddef.h>
 #include <stdint.h>
 
 #include "plant.h"
@@ -35,6 +36,9 @@ typedef struct {
 int ol_state(const OlPlant *p, double tau, double *xva);
 /* Plant.do_step(t, h, U_input): 0 (outputs written, plant_t = t + h) or a nonzero code, nothing changed. */
 int ol_do_step(OlPlant *p, double t, double h);
+/* The compiled floor of fidelities 3 and 4: n do_steps of dt from plant_t, x after each into x_out; stops at the
+   first nonzero code and returns it; *done = the steps done. */
+int ol_run(OlPlant *p, double dt, size_t n, double *x_out, size_t *done);
 /* sizeof(OlPlant), sizeof(OePiece), offsetof(OlPlant, slowflow), offsetof(OlPlant, oafm) into sizes[0..3]. */
 void ol_layout(int64_t *sizes);
 

@@ -215,12 +215,9 @@ int vk_do_step(VkPlant *p, double t, double h)
     if (p->error) return (int)p->error;
     int code = check_step(p, t, h);
     if (code) return code;
-    /* Python evaluates outputs_at's first argument, self.t, before advance moves it: the outputs' forces
-       are taken at the step's start time (see plant.Plant.do_step) */
-    double t_start = p->plant_t;
     code = vk_plant_advance(p, t + h, xva);
     if (code) return code;
-    return vk_outputs_at(p, t_start, xva[0], xva[1], &xva[2]);
+    return vk_outputs_at(p, p->plant_t, xva[0], xva[1], &xva[2]);  /* every output at the new point t + h */
 }
 
 int vk_run(VkPlant *p, double dt, size_t n, double *x_out)

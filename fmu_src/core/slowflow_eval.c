@@ -34,11 +34,12 @@ int sf_state(const SfTable *T, double t, double *xva)
 {
     if (!(t <= T->t_end)) return 1;
     double u = (t - T->t0) / T->spacing;
-    double last = (double)(T->n_cells - 1);
-    double fi = trunc(u) < last ? trunc(u) : last;  /* min(int(u), n - 1) */
+    double last = (double)(T->first + T->n_cells - 1);
+    double fi = trunc(u) < last ? trunc(u) : last;  /* min(int(u), first + n - 1) */
     int64_t i = (int64_t)fi;
     double s = u - fi;
-    const double *k = T->cells + 8 * i;
+    if (i < T->first) return 1;
+    const double *k = T->cells + 8 * (i - T->first);
     double a0 = k[0], a1 = k[1], a2 = k[2], a3 = k[3], b0 = k[4], b1 = k[5], b2 = k[6], b3 = k[7];
     double g = 1.0 / T->spacing;
     reconstruct(T, t, a0 + s * (a1 + s * (a2 + s * a3)), b0 + s * (b1 + s * (b2 + s * b3)),

@@ -21,12 +21,14 @@ typedef struct {
     double omega, x_e, harmonic, mean_shift;
     double Omega, psi_sin, psi_cos;
     int64_t ac;                  /* psi present (beta or gamma != 0) */
-    int64_t n_cells;             /* cells[8 i .. 8 i + 7] = a0..a3, b0..b3 of cell i */
+    int64_t first;               /* cells dropped from the table's front (a bounded table, slowflow.WINDOW) */
+    int64_t n_cells;             /* cells[8 (i - first) .. + 7] = a0..a3, b0..b3 of cell i */
     double t_end;                /* end of the table: later times need the table extended (Python) */
     const double *cells;
 } SfTable;
 
-/* (x, x', x'') at t into xva[0..2]; returns 0, or 1 when t is beyond the table's end (nothing written). */
+/* (x, x', x'') at t into xva[0..2]; returns 0, or 1 when t is beyond the table's end or before its first cell
+   (nothing written). */
 int sf_state(const SfTable *table, double t, double *xva);
 
 #endif

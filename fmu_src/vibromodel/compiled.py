@@ -16,11 +16,12 @@ from pathlib import Path
 
 import numpy as np
 
-from . import plant
+from . import settings as plant
+from .fidelities import entry
 from .integrate import ATOL_PER_RTOL, IntegrationError, TerminalEvent
-from .models import Fidelity, make_model, pull_in_slope
+from .models import pull_in_slope
 from .parameters import PULL_IN_GAP, validate
-from .plant import Outputs, Settings, Solver, check_step, checked_settings
+from .settings import Outputs, Settings, Solver, check_step, checked_settings
 
 LIBRARY_NAME = "vibrokernel.so"
 
@@ -56,7 +57,7 @@ class Dop853State(ctypes.Structure):
         *_ints("n", "n_events"), *_doubles("rtol", "atol", "max_step", "step_budget"),
         ("events", DopEvent * DOP_MAX_EVENTS),
         *_doubles("t", "h"), ("y", _vector), ("f", _vector), ("t_old", _double), ("y_old", _vector), ("f_old", _vector),
-        ("k", _vector * DOP_STAGES), ("dense", _vector * DOP_DENSE), ("stop_t", _double), ("stop_y", _vector),
+        ("k", (_double * DOP_STAGES) * DOP_MAX_DIM), ("dense", (_double * DOP_DENSE) * DOP_MAX_DIM), ("stop_t", _double), ("stop_y", _vector),
         *_ints("has_old", "n_stages", "dense_ready", "stopped"), ("side", _int * DOP_MAX_EVENTS),
         *_ints("nfev", "n_steps"),
     ]
@@ -153,17 +154,16 @@ def load_library(directories) -> tuple[ctypes.CDLL | None, str]:
 
 
 def supports(settings: Settings) -> bool:
-    """CompiledPlant runs fidelities 0, 1, 2 with either solver."""
-    return settings.fidelity in (Fidelity.EXACT, Fidelity.POLYNOMIAL, Fidelity.POLYNOMIAL_PAPER) \
-        and settings.solver in (Solver.ADAPTIVE, Solver.RK4)
+    """CompiledPlant runs the fidelities with a compiled model (fidelities registry) with either solver."""
+    return entry(settings.fidelity).compiled_model is not None and settings.solver in (Solver.ADAPTIVE, Solver.RK4)
 
 
-def _model_fields(scene, model) -> dict:
+def _model_fields(scene, model, polynomial: int) -> dict:
     """The model's constants and switches (models.ExactModel / PolynomialModel: the terms they evaluate)."""
     fields = {name: getattr(scene, name) for name in ("mu", "Delta", "omega", "alpha", "beta", "gamma", "Omega", "R")}
     ac = scene.beta != 0.0 or scene.gamma != 0.0
     fields.update(pull_in_c=pull_in_slope(scene.R), pull_in_gap=PULL_IN_GAP, load_forcing=scene.Delta != 0.0, ac=ac)
-    if model.fidelity == Fidelity.EXACT:
+    if not polynomial:
         fields.update(polynomial=0, electrostatics=scene.alpha != 0.0 or ac)
     else:
         fields.update(polynomial=1, electrostatics=ac, poly=model.a, g1=model.g1, g2=model.g2, g3=model.g3)
@@ -184,14 +184,15 @@ class CompiledPlant:
         settings, self.warnings = checked_settings(scene, settings)  # what Plant runs with (rtol clamped)
         if not supports(settings):
             raise ValueError(f"the compiled plant runs fidelities 0, 1, 2, not fidelity {settings.fidelity}")
-        model = make_model(scene, settings.fidelity)
+        level = entry(settings.fidelity)
+        model = level.model(scene)
         self.scene, self.settings, self.notes = scene, settings, []
         self._library = library
         self._plant = VkPlant()
         self._address = ctypes.addressof(self._plant)
         max_step = settings.max_step or math.inf  # as Plant gives Dop853
         model_struct = self._plant.model
-        for name, value in _model_fields(scene, model).items():
+        for name, value in _model_fields(scene, model, level.compiled_model).items():
             setattr(model_struct, name, value if isinstance(value, (int, float)) else (_double * 6)(*value))
         dop, rk4 = self._plant.dop, self._plant.rk4
         dop.rtol, dop.atol, dop.max_step = settings.rtol, settings.rtol * ATOL_PER_RTOL, max_step

@@ -510,8 +510,9 @@ RK4_DRIVE_THETA = _rk4_drive_theta()  # 1.696...
 
 def _hermite_event(event, t, x, v, h, x_new, v_new):
     """(t, x, v) of the first point where a terminal event is reached (g <= 0) on the cubic Hermite interpolant of a
-    fixed step from (x, v) to (x_new, v_new), or None. Excursions that begin and end inside the step are found as in
-    Dop853._first_zero: the cubic's Bernstein coefficients (its control points) bound g on a piece.
+    fixed step from (x, v) to (x_new, v_new), or None. For an affine event (all the models' events) excursions that
+    begin and end inside the step are found as in Dop853._first_zero: the cubic's Bernstein coefficients (its
+    control points) bound g on a piece; for another one only a sign change at the step's end is seen.
 
     RK4 has no dense output; this cubic is accurate to O(h^4) on a resolved step. Without it a terminal event
     would be reported at the step's end, which near pull-in can lie beyond the electrode (x > 3R/2)."""
@@ -524,11 +525,17 @@ def _hermite_event(event, t, x, v, h, x_new, v_new):
     g = event.g
     if not g(x) > 0.0:  # already on the event at the step's start
         return t, x, v
+    from scipy.optimize import brentq  # lazily, as in Dop853._locate
+
+    if event.affine is None:  # no bound on g: only a sign change at the step's end is seen
+        if g(x_new) > 0.0:
+            return None
+        s = brentq(lambda s: g(state(s)[0]), 0.0, 1.0, xtol=1e-15, rtol=1e-15)
+        return (t + s * h, *state(s))
     c0, cx = event.affine
     b = [c0 + cx * x, c0 + cx * (x + h * v / 3.0), c0 + cx * (x_new - h * v_new / 3.0), c0 + cx * x_new]
     if min(b) > 0.0:
         return None
-    from scipy.optimize import brentq  # lazily, as in Dop853._locate
 
     stack = [(0.0, 1.0, 0, b)]
     while stack:

@@ -79,13 +79,11 @@ class ExactModel:
         alpha, beta, gamma, Omega, R = s.alpha, s.beta, s.gamma, s.Omega, s.R
         load_forcing = Delta != 0.0
         electrostatics = alpha != 0.0 or beta != 0.0 or gamma != 0.0
-        sqrt, cos, electrostatic = math.sqrt, math.cos, forces.electrostatic
+        cos, electrostatic, hertz = math.cos, forces.electrostatic, forces.hertz
 
         def accel(t, x, v, U):
-            s3 = 1.0 + 2.0 * x / 3.0
             a = 1.0 + U - mu * v
-            if s3 > 0.0:
-                a -= s3 * sqrt(s3)  # Hertz contact, zero without contact
+            a -= hertz(x)  # Hertz contact, zero without contact
             if load_forcing:
                 a += Delta * cos(omega * t)
             if electrostatics:
@@ -146,8 +144,8 @@ class PolynomialModel:
 
 
 def make_model(scene: Scene, fidelity: int):
-    """The plant model of a fidelity level: 0, 1, 2; 3 and 4 get Eq. 3 (for the forces at their x)."""
-    fidelity = Fidelity(fidelity)
-    if fidelity in (Fidelity.EXACT, Fidelity.AVERAGED, Fidelity.ANALYTIC):
-        return ExactModel(scene)
-    return PolynomialModel(scene, printed=fidelity is Fidelity.POLYNOMIAL_PAPER)
+    """The plant model of a fidelity level (fidelities.REGISTRY): 0, 1, 2 step it; 3 and 4 use Eq. 3's forces at
+    their x."""
+    from .fidelities import entry  # the registry builds on this module
+
+    return entry(fidelity).model(scene)
