@@ -62,7 +62,8 @@ class AdaptiveLyapunovController(fast_path.CompiledModelSlave, StatusSlave):
 
     def _make_model(self):
         """The estimator of the current parameters and experiment; raises ParameterError for bad ones."""
-        scene = Scene(**{name: float(getattr(self, name)) for name in MODEL_PARAMETERS})
+        # no initial state here: x_start = 0 keeps the scene's check on the electrodes about R alone
+        scene = Scene(**{name: float(getattr(self, name)) for name in MODEL_PARAMETERS}, x_start=0.0, v_start=0.0)
         law, gains, estimates = self._controller_settings()
         library, _ = load_library((Path(self.resources),) if self.resources else ())
         return make_estimator(scene, gains, law, estimates, float(self.start_time), int(self.kernel), library)

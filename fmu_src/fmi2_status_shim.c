@@ -3,8 +3,9 @@
  * 0.7.0 library, giving Python slaves a way to return fmi2Error.
  *
  * Layout inside the FMU (done by harness/vibrofmu/shim.py):
- *   binaries/linux64/<id>.so            this shim
+ *   binaries/linux64/<id>.so            this shim (with pyloader.c)
  *   binaries/linux64/<id>_pythonfmu.so  pythonfmu's original library
+ *   resources/python_env.txt            the Python it needs (pythonenv.py)
  *
  * The inner library is found next to the shim's own file (dladdr), so it
  * works wherever the host extracted the FMU.  Its name is derived from the
@@ -83,7 +84,9 @@
  * finished its work.  RTLD_NODELETE would not help: it only keeps dlclose
  * from unmapping the library; _dl_fini still runs onLibraryUnload last.
  * So, when it loads the inner library, the shim
- *   1. initializes the interpreter itself if the host has not, then releases
+ *   1. (before) initializes the interpreter itself if the host has not
+ *      (pyloader.c: it also loads libpython and points Python at the
+ *      environment recorded at build time), then releases
  *      the GIL (Py_InitializeEx(0): unlike pythonfmu's Py_Initialize() it
  *      leaves the host's signal handling alone -- no SIGINT turned into a
  *      KeyboardInterrupt of whatever Python code runs next, no SIGPIPE
@@ -104,6 +107,7 @@
 
 #define _GNU_SOURCE
 #include <dlfcn.h>
+#include <math.h>
 #include <pthread.h>
 #include <stddef.h>
 #include <stdint.h>
@@ -119,6 +123,7 @@
 #define FLAG_ERROR 3
 
 #include "fmi2_types.h"  /* minimal FMI 2.0 type definitions */
+#include "pyloader.h"    /* finding Python */
 
 #define EXPORT __attribute__((visibility("default")))
 
@@ -167,26 +172,6 @@ static void *inner_handle = NULL;
 static char load_error[8192] = "";
 static pthread_once_t load_once = PTHREAD_ONCE_INIT;
 
-/* Step 1 of "Process exit" above.  libpython is already in the process (the
-   inner library needs its symbols to load), so its functions are looked up.
-   The program name is pythonfmu's, so that Python finds its installation the
-   same way as when pythonfmu initializes it. */
-static void adopt_python_interpreter(void)
-{
-    int (*is_initialized)(void);
-    void (*set_program_name)(const wchar_t *);
-    void (*initialize_ex)(int);
-    void *(*save_thread)(void);
-    *(void **)(&is_initialized) = dlsym(RTLD_DEFAULT, "Py_IsInitialized");
-    *(void **)(&set_program_name) = dlsym(RTLD_DEFAULT, "Py_SetProgramName");
-    *(void **)(&initialize_ex) = dlsym(RTLD_DEFAULT, "Py_InitializeEx");
-    *(void **)(&save_thread) = dlsym(RTLD_DEFAULT, "PyEval_SaveThread");
-    if (is_initialized == NULL || initialize_ex == NULL || save_thread == NULL || is_initialized()) return;
-    if (set_program_name != NULL) set_program_name(L"./PythonFMU");
-    initialize_ex(0);
-    save_thread();
-}
-
 /* A static function: its address cannot be interposed by another library. */
 static void anchor(void) {}
 
@@ -205,6 +190,8 @@ static void load_inner(void)
         snprintf(load_error, sizeof load_error, "path of the inner library is too long");
         return;
     }
+    /* libpython loaded, the interpreter started (step 1 of "Process exit"), the modules there (pyloader.c) */
+    if (vibro_python_prepare(own, load_error, sizeof load_error) != 0) return;
     void *h = dlopen(path, RTLD_NOW | RTLD_LOCAL | RTLD_DEEPBIND);
     if (h == NULL) {
         snprintf(load_error, sizeof load_error, "cannot load inner library: %s", dlerror());
@@ -232,7 +219,6 @@ static void load_inner(void)
     RESOLVE(GetStatus); RESOLVE(GetRealStatus); RESOLVE(GetIntegerStatus);
     RESOLVE(GetBooleanStatus); RESOLVE(GetStringStatus);
 #undef RESOLVE
-    adopt_python_interpreter();
     void (*release_py_state)(void);
     *(void **)(&release_py_state) = dlsym(h, "finalizePythonInterpreter");
     if (release_py_state != NULL) atexit(release_py_state);
@@ -270,6 +256,9 @@ typedef struct {
     size_t ncat;                    /* ... and categories (0 = all) */
     char **cat;
     FastPath fast;                  /* step == NULL: none attached */
+    int error_logged;               /* the inner library logged an error during the current call */
+    int stop_defined;               /* fmi2SetupExperiment's stop time (the fast path steps only before it) */
+    double stop_time;
     unsigned long long fast_steps;  /* doSteps done by the fast path (vibro_fast_path_steps) */
 } Shim;
 
@@ -443,7 +432,8 @@ static void log_to(const fmi2CallbackFunctions *cb, fmi2String instanceName, fmi
 static void forward_log(fmi2ComponentEnvironment env, fmi2String instanceName, fmi2Status status,
                         fmi2String category, fmi2String message, ...)
 {
-    const Shim *s = (const Shim *)env;
+    Shim *s = (Shim *)env;
+    if (status >= fmi2Error) s->error_logged = 1;
     if (status >= fmi2Warning || category_enabled(s, category))
         log_to(&s->cb, instanceName, status, category, message);
 }
@@ -483,6 +473,61 @@ static fmi2Status settle(Shim *s, fmi2Status st, int may_clear_error)
     else if (st == fmi2Error) s->state = SHIM_ERROR;
     else if (may_clear_error) s->state = SHIM_OK;
     return st;
+}
+
+/* ---- state machine and outputs (issue 15) ----
+   The slave (slave_support.StatusSlave) keeps the FMI 2.0 state and refuses calls made in the wrong one by
+   logging an error.  Getters are not followed by settle(): an error the slave logged during one (an unknown
+   value reference, a wrong type, a getter before initialisation) makes it fmi2Error here.  No Real is ever
+   returned non-finite with fmi2OK: such a value gives fmi2Error naming it. */
+static fmi2Status checked_getter(Shim *s, fmi2Status st)
+{
+    if (st <= fmi2Warning && s->error_logged) {
+        st = fmi2Error;
+        if (s->state != SHIM_FATAL) s->state = SHIM_ERROR;
+    }
+    s->error_logged = 0;
+    return st;
+}
+
+static fmi2Status finite_reals(Shim *s, fmi2Status st, const fmi2ValueReference vr[], size_t nvr,
+                               const fmi2Real value[])
+{
+    if (st > fmi2Warning) return st;
+    for (size_t i = 0; i < nvr; i++) {
+        if (isfinite(value[i])) continue;
+        char msg[200];
+        snprintf(msg, sizeof msg, "fmi2GetReal: variable with valueReference %u is %g (not finite): refused",
+                 (unsigned)vr[i], value[i]);
+        shim_log(s, fmi2Error, msg);
+        s->state = SHIM_ERROR;
+        return fmi2Error;
+    }
+    return st;
+}
+
+/* After a fast-path step: every output it publishes is finite, or fmi2Error naming the first that is not. */
+static fmi2Status fast_outputs_checked(Shim *s, fmi2Real t)
+{
+    for (size_t i = 0; i < s->fast.n_real; i++) {
+        if (isfinite(*s->fast.real[i])) continue;
+        char msg[240];
+        snprintf(msg, sizeof msg, "simulation stopped: output with valueReference %u is %g (not finite) after "
+                 "the step from tau = %.17g; the parameters are beyond the model's numerical range",
+                 (unsigned)s->fast.real_vr[i], *s->fast.real[i], t);
+        shim_log(s, fmi2Error, msg);
+        s->state = SHIM_ERROR;
+        return fmi2Error;
+    }
+    return fmi2OK;
+}
+
+/* The fast path steps only up to the declared stop time (with slave_support.STOP_TIME_TOLERANCE, relative:
+   hosts compute the last point as start + n h); a step beyond goes to the slave, which refuses it. */
+static int before_stop(const Shim *s, fmi2Real t, fmi2Real h)
+{
+    double scale = s->stop_time < 0 ? -s->stop_time : s->stop_time;
+    return !s->stop_defined || t + h <= s->stop_time + 1e-9 * (scale > 1.0 ? scale : 1.0);
 }
 
 /* Guards.  S: the shim pointer; NULL components give fmi2Error. */
@@ -559,7 +604,12 @@ EXPORT fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean tolDef, fmi2R
                                       fmi2Boolean stopDef, fmi2Real tStop)
 {
     SHIM(c); ONLY_IN_OK("fmi2SetupExperiment");
-    return settle(S, inner.SetupExperiment(S->inner, tolDef, tol, tStart, stopDef, tStop), 0);
+    fmi2Status st = settle(S, inner.SetupExperiment(S->inner, tolDef, tol, tStart, stopDef, tStop), 0);
+    if (st <= fmi2Warning) {
+        S->stop_defined = stopDef != 0;
+        S->stop_time = tStop;
+    }
+    return st;
 }
 
 EXPORT fmi2Status fmi2EnterInitializationMode(fmi2Component c)
@@ -577,13 +627,14 @@ EXPORT fmi2Status fmi2ExitInitializationMode(fmi2Component c)
 EXPORT fmi2Status fmi2Terminate(fmi2Component c)
 {
     SHIM(c); ONLY_IN_OK("fmi2Terminate");
-    return note(S, inner.Terminate(S->inner));
+    return settle(S, inner.Terminate(S->inner), 0);
 }
 
 EXPORT fmi2Status fmi2Reset(fmi2Component c)
 {
     SHIM(c); ALLOW_IN_ERROR();
     detach(S);
+    S->stop_defined = 0;
     return settle(S, forward_from(S, inner.Reset, S->inner), 1);
 }
 
@@ -593,18 +644,25 @@ EXPORT fmi2Status fmi2Reset(fmi2Component c)
     {                                                                                           \
         SHIM(c); ALLOW_IN_ERROR();                                                              \
         FAST;                                                                                   \
-        return note(S, inner.Get##Name(S->inner, vr, nvr, value));                              \
+        S->error_logged = 0;                                                                    \
+        return CHECK(checked_getter(S, note(S, inner.Get##Name(S->inner, vr, nvr, value))));    \
     }
+#define CHECK(st) (st)
 #define FAST
 GETTER(Integer, fmi2Integer)
 GETTER(String, fmi2String)
 #undef FAST
-#define FAST if (fast_get_real(S, vr, nvr, value)) return fmi2OK
+#undef CHECK
+#define CHECK(st) finite_reals(S, (st), vr, nvr, value)
+#define FAST if (fast_get_real(S, vr, nvr, value)) return finite_reals(S, fmi2OK, vr, nvr, value)
 GETTER(Real, fmi2Real)
 #undef FAST
+#undef CHECK
+#define CHECK(st) (st)
 #define FAST if (fast_get_boolean(S, vr, nvr, value)) return fmi2OK
 GETTER(Boolean, fmi2Boolean)
 #undef FAST
+#undef CHECK
 
 #define SETTER(Name, T)                                                                         \
     EXPORT fmi2Status fmi2Set##Name(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const T value[]) \
@@ -691,9 +749,9 @@ EXPORT fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueR
 EXPORT fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean noSetPrior)
 {
     SHIM(c); ONLY_IN_OK("fmi2DoStep");
-    if (fast_enabled(S) && S->fast.step(S->fast.model, t, h) == 0) {
+    if (fast_enabled(S) && before_stop(S, t, h) && S->fast.step(S->fast.model, t, h) == 0) {
         S->fast_steps++;
-        return fmi2OK;
+        return fast_outputs_checked(S, t);
     }
     return settle(S, inner.DoStep(S->inner, t, h, noSetPrior), 0);
 }

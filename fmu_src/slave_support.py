@@ -7,21 +7,32 @@ No physics here. No Python exception may leave a callback (pythonfmu turns it in
 instance): errors are logged with the parameter and value, `fmi_status` is set to 3 and the shim returns
 fmi2Error to the host.
 """
+import functools
 import math
 from pathlib import Path
 
-from pythonfmu import Fmi2Causality, Fmi2Slave, Fmi2Variability, Integer, Real
+from pythonfmu import Boolean, Fmi2Causality, Fmi2Slave, Fmi2Variability, Integer, Real, String
 from pythonfmu.enums import Fmi2Initial, Fmi2Status
 
 from vibromodel import snapshot
 from vibromodel.control import ERRATA_INITIAL_ESTIMATES, ESTIMATE_NAMES, GAIN_NAMES, Gains, Law
 from vibromodel.integrate import IntegrationError
-from vibromodel.parameters import ParameterError, scene_names
+from vibromodel.parameters import ParameterError, check_parameters, scene_names
 
 STATUS_OK, STATUS_ERROR = 0, 3
-RUN_FIELDS = ("halted", "initialised", "start_time", "stop_time", "experiment_tolerance")  # in the FMU state
+# FMI 2.0 co-simulation states the slave tracks (the error state is the status shim's and `halted`'s).
+INSTANTIATED, INITIALIZATION_MODE, STEP_MODE, TERMINATED = ("instantiated", "initialization mode", "step mode",
+                                                            "terminated")
+RUN_FIELDS = ("phase", "halted", "initialised", "start_time", "stop_time", "experiment_tolerance")  # in the FMU state
+# A doStep may end this far (relative) past the declared stop time: hosts compute the last communication point
+# as start + n*h, which can land an ulp or so beyond the stop time (the plant's time-matching tolerance).
+STOP_TIME_TOLERANCE = 1e-9
 # The scene's parameters without the plant's initial state (the controller's view of the plant).
 MODEL_PARAMETERS = tuple(name for name in scene_names() if name not in ("x_start", "v_start"))
+
+
+class NonFiniteOutput(ArithmeticError):
+    """A model produced a non-finite output (never published)."""
 
 
 class StatusSlave(Fmi2Slave):
@@ -43,10 +54,12 @@ class StatusSlave(Fmi2Slave):
         self.register_variable(Integer("fmi_status", causality=Fmi2Causality.local,
                                        variability=Fmi2Variability.discrete,
                                        description="0 ok, 3 error (read by the status shim)"))
+        self.phase = INSTANTIATED  # FMI 2.0 state (state machine of the co-simulation interface)
         self.halted = "the FMU has not been initialised"  # why doStep refuses, or None
         self.initialised = False  # exitInitializationMode was called: only inputs may be set
         self.start_time, self.stop_time, self.experiment_tolerance = 0.0, None, None
         self.model = None  # built by _make_model() at exitInitializationMode
+        self._published = {}  # the outputs last published (all finite)
 
     def _parameter(self, kind, name, value, description=None):
         """A fixed parameter with its start value."""
@@ -68,10 +81,18 @@ class StatusSlave(Fmi2Slave):
                                         description=description))
 
     def _set_finite(self, values: dict) -> None:
-        """Publish outputs only when all are finite: an FMU never shows NaN with fmi2OK."""
-        if all(math.isfinite(value) for value in values.values()):
-            for name, value in values.items():
+        """Publish outputs only when all are finite: an FMU never shows NaN with fmi2OK. A non-finite one raises
+        NonFiniteOutput naming it (the caller's doStep or initialisation fails with fmi2Error); the outputs then
+        keep their last finite values (written back: on the compiled plant the kernel wrote them already)."""
+        bad = next((name for name, value in values.items() if not math.isfinite(value)), None)
+        if bad is not None:
+            for name, value in self._published.items():
                 setattr(self, name, value)
+            raise NonFiniteOutput(f"output {bad} = {values[bad]!r} is not finite; the parameters are beyond "
+                                  "the model's numerical range")
+        for name, value in values.items():
+            setattr(self, name, value)
+        self._published = dict(values)
 
     def _error(self, message):
         self.fmi_status = STATUS_ERROR
@@ -81,9 +102,33 @@ class StatusSlave(Fmi2Slave):
         self.halted = message
         self._error(message)
 
+    # -- the FMI 2.0 state machine (co-simulation): each call only in the states the standard allows --------
+    def _allowed(self, call, *phases) -> bool:
+        """True if `call` is allowed in the current state; otherwise log an error naming both and say False."""
+        if self.phase in phases:
+            return True
+        self._error(f"{call} is not allowed in the {self.phase} state (FMI 2.0 allows it in: "
+                    f"{', '.join(phases)})")
+        return False
+
     def setup_experiment(self, start_time, stop_time=None, tolerance=None):
+        if not self._allowed("fmi2SetupExperiment", INSTANTIATED):
+            return
         self.start_time, self.stop_time = start_time, stop_time
         self.experiment_tolerance = tolerance
+
+    def enter_initialization_mode(self):
+        if self._allowed("fmi2EnterInitializationMode", INSTANTIATED):
+            self.phase = INITIALIZATION_MODE
+
+    def terminate(self):
+        if self._allowed("fmi2Terminate", STEP_MODE):
+            self.phase = TERMINATED
+            self.halted = "fmi2Terminate was called (FMI 2.0: only fmi2Reset or fmi2FreeInstance may follow)"
+            self._enable_fast_path()
+
+    def _enable_fast_path(self):
+        """A slave with a C fast path (re)decides here whether the shim may use it (after every state change)."""
 
     def _cache_dirs(self):
         """OAFM solutions packed at build time (resources/oafm_cache)."""
@@ -93,6 +138,7 @@ class StatusSlave(Fmi2Slave):
         """exitInitializationMode: run start() (builds the model, publishes the outputs); errors -> fmi2Error."""
         self.initialised = True
         try:
+            check_parameters(self._parameter_values())  # every range up front, the parameter named
             start()
             self.halted = None
         except ParameterError as error:
@@ -124,7 +170,45 @@ class StatusSlave(Fmi2Slave):
             self._halt(f"doStep failed at tau = {current_time!r}: {error!r}")
         return False
 
+    def __init_subclass__(cls, **kwargs):
+        """Every slave's do_step runs behind _step_allowed (state machine, stop time) first."""
+        super().__init_subclass__(**kwargs)
+        step = cls.__dict__.get("do_step")
+        if step is not None and not getattr(step, "_checked", False):
+            @functools.wraps(step)
+            def do_step(self, current_time, step_size):
+                return self._step_allowed(current_time, step_size) and step(self, current_time, step_size)
+            do_step._checked = True
+            cls.do_step = do_step
+
+    def _parameter_values(self) -> dict:
+        """name -> value of every parameter, rtol being the experiment's tolerance when setupExperiment gave one."""
+        values = {var.name: getattr(self, var.local_name) for var in self.vars.values()
+                  if var.causality == Fmi2Causality.parameter}
+        if self.experiment_tolerance is not None and "rtol" in values:
+            values["rtol"] = self.experiment_tolerance
+        return values
+
+    def _step_allowed(self, t, h) -> bool:
+        """fmi2DoStep only in step mode (not before initialisation, not after fmi2Terminate), and not beyond the
+        stop time declared in fmi2SetupExperiment; otherwise fmi2Error naming the call and the state."""
+        if self.phase == TERMINATED:
+            self._error(f"doStep refused: {self.halted}")
+            return False
+        if not self._allowed("fmi2DoStep", STEP_MODE):
+            return False
+        stop = self.stop_time
+        end = None if stop is None else stop + STOP_TIME_TOLERANCE * max(1.0, abs(stop))
+        # a t beyond the stop is a wrong currentCommunicationPoint: the model's own check names it
+        if end is not None and math.isfinite(t) and math.isfinite(h) and t <= end < t + h:
+            self._error(f"{ParameterError('communicationStepSize', h, f'the step from tau = {t!r} would end at tau = {t + h!r}, beyond the stop time {stop!r} declared in fmi2SetupExperiment')}")
+            return False
+        return True
+
     def exit_initialization_mode(self):
+        if not self._allowed("fmi2ExitInitializationMode", INITIALIZATION_MODE):
+            return
+        self.phase = STEP_MODE
         self._initialise(self._start)
 
     def _start(self):
@@ -186,6 +270,48 @@ class StatusSlave(Fmi2Slave):
         except Exception as error:
             return {"format": f"unreadable ({error!r})"}
 
+    # -- getting variables: unknown value references and wrong types give fmi2Error, never an exception -------
+    def get_real(self, vrs):
+        return self._get_values(vrs, Real, "fmi2GetReal", 0.0, float)
+
+    def get_integer(self, vrs):
+        return self._get_values(vrs, Integer, "fmi2GetInteger", 0, int)
+
+    def get_boolean(self, vrs):
+        return self._get_values(vrs, Boolean, "fmi2GetBoolean", False, bool)
+
+    def get_string(self, vrs):
+        return self._get_values(vrs, String, "fmi2GetString", "", str)
+
+    def to_xml(self, *args, **kwargs):
+        """The model description: pythonfmu's builder reads the start values through the getters."""
+        phase, self.phase = self.phase, INITIALIZATION_MODE
+        try:
+            return super().to_xml(*args, **kwargs)
+        finally:
+            self.phase = phase
+
+    def _get_values(self, vrs, kind, call, placeholder, convert):
+        """The values of vrs; a refused one reads `placeholder` and the call ends in fmi2Error (the status shim
+        turns an error logged during a getter into fmi2Error). pythonfmu would turn the KeyError or TypeError of
+        its own getters into fmi2Fatal. The status flag itself is read by the shim in every state."""
+        values = []
+        for vr in vrs:
+            var = self.vars.get(vr)
+            if var is None:
+                refusal = f"{call}: no variable has valueReference {vr}"
+            elif not isinstance(var, kind):
+                refusal = f"{call}: variable {var.name} (valueReference {vr}) is a {type(var).__name__}, not a {kind.__name__}"
+            elif self.phase == INSTANTIATED and var.name != "fmi_status":
+                refusal = (f"{call} of {var.name} is not allowed in the {INSTANTIATED} state (FMI 2.0 allows it from "
+                           f"fmi2EnterInitializationMode on)")
+            else:
+                values.append(convert(var.getter()))
+                continue
+            self._error(refusal)
+            values.append(placeholder)
+        return values
+
     # -- setting variables: FMI 2.0 rules, refusals logged and flagged (never raised) -----------------
     def set_real(self, vrs, values):
         self._set_values(Fmi2Slave.set_real, vrs, values)
@@ -214,6 +340,8 @@ class StatusSlave(Fmi2Slave):
 
     def _set_refusal(self, var):
         """Why FMI 2.0 forbids setting var now, or None (fmi2SetXXX in the co-simulation state machine)."""
+        if self.phase == TERMINATED:
+            return "no variable may be set in the terminated state (FMI 2.0)"
         if var.causality == Fmi2Causality.input:
             return None
         if var.causality == Fmi2Causality.parameter and var.variability == Fmi2Variability.tunable:
@@ -226,6 +354,9 @@ class StatusSlave(Fmi2Slave):
             kind = f"{(var.variability or Fmi2Variability.continuous).name} {var.causality.name}"
             return (f"a {kind} cannot be set after fmi2ExitInitializationMode (FMI 2.0: only inputs and "
                     f"tunable parameters); it keeps {getattr(self, var.local_name)!r}")
+        if var.causality == Fmi2Causality.output:  # its start value is the model's initial output
+            return ("an output is computed by the FMU from its parameters (x_start, v_start, ...); setting it "
+                    "would be ignored, so it is refused")
         return None
 
     # -- the controller's parameters and outputs (AdaptiveLyapunovController, HertzEAClosedLoop) ----------

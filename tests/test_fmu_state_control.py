@@ -134,6 +134,7 @@ def test_reset_returns_to_start_values_and_reruns_identically(fmu):
         starts = {v.name: v.start for v in read_model_description(instance.unzip_dir).modelVariables}
         first = run(instance, steps)
         instance.fmu.reset()
+        instance.fmu.enterInitializationMode()  # FMI 2.0: no getters in the instantiated state
         lambda2, mu_hat = instance.fmu.getReal(instance.value_references(["lambda2", "mu_hat"]))
         (law,) = instance.fmu.getInteger(instance.value_references(["law"]))
         assert (lambda2, mu_hat, law) == (float(starts["lambda2"]), float(starts["mu_hat_start"]), int(starts["law"]))

@@ -55,6 +55,7 @@ def test_reset_returns_to_start_values_and_reruns_identically(plant_fmu, start_p
 
         first = rerun()
         instance.fmu.reset()
+        instance.fmu.enterInitializationMode()  # FMI 2.0: no getters in the instantiated state
         mu, R = instance.fmu.getReal(instance.value_references(["mu", "R"]))
         (solver,) = instance.fmu.getInteger(instance.value_references(["solver"]))
         assert (mu, R, solver) == (float(starts["mu"]), float(starts["R"]), int(starts["solver"]))

@@ -72,22 +72,153 @@ def electrode_gaps(x: float, R: float) -> tuple[float, float]:
     return 1.0 - u, 1.0 + u
 
 
+MIN_RTOL = 100.0 * sys.float_info.epsilon  # below it the error control only sees rounding (scipy's floor too)
+
+
+# -- valid ranges: one table of rules, as data ---------------------------------------------------------------
+# Every parameter of the three FMUs has a rule: a finite number (a whole number for `integer` rules) in
+# [low, high] (ends open where not inclusive), or exactly `automatic` where that value means "choose for me".
+# `when` restricts a rule to some values of another parameter (e.g. fidelity 3 and 4 only). check_parameters
+# applies the table in its order, so the first parameter out of range is the one named; rules_as_records exports
+# it as plain records, from which the native FMUs' C checks are generated. Rules between parameters (x_start
+# inside the electrodes 3R/2, tau_star < oafm_tau_end, a1 > 0 for fidelity 4) stay in code: validate() and the
+# models check them after the table.
+
+# A rate or an amplitude (relative to the natural frequency 1 and the static load 1) beyond MAX_SCALE needs more
+# than ~1e4 integration steps per unit of time, the same limit as the forcing frequencies (MAX_FREQUENCY), and
+# beyond it products of parameters overflow (issue 15: alpha = 1e308 gave a = inf, gamma = 1.797e308 a = NaN).
+MAX_SCALE = 1e4
+# Eq. 3's electrostatic terms carry 1/R^2 and the series of Eq. 7 powers of R up to R^5: outside [R_MIN, R_MAX]
+# they under- or overflow (R^5 at 1e-6 is 1e-30 and at 1e6 is 1e30, still far inside double range).
+R_MIN, R_MAX = 1e-6, 1e6
+MAX_RTOL = 0.1  # above it the error control accepts O(1) relative errors: no significant digit is left
+MAX_STEP_LIMIT = 1e3  # no time scale of the models is that long; an RK4 step that long is unstable (limit ~2.8)
+# fidelity 4's fit: memory and set-up time grow in proportion to its span (issue 15: 1e4 took 19 s and 635 MB)
+MAX_FIT_SPAN = 1e4
+# fidelities 3 and 4 are built per forcing period 2 pi/omega: below 1e-3 a period exceeds any run they can afford
+# (issue 15: omega = 5e-324 took 150 s to initialise, omega = 0 divided by zero in the slow flow)
+MIN_AVERAGED_FREQUENCY = 1e-3
+# the update law multiplies by the inverse Lyapunov weights (Eq. 76-81): below 1e-6 the estimate rates are 1e6
+# times the errors and overflow (issue 15: lambda3 = 5e-324); above 1e6 the estimates are frozen below rounding
+GAIN_MIN, GAIN_MAX = 1e-6, 1e6
+# initial estimates of theta: its true entries are products of scene parameters bounded by MAX_SCALE and R;
+# 1e12 keeps the Lyapunov function sum(theta~^2/lambda) <= 1e30 and the control force inside double range
+MAX_ESTIMATE = 1e12
+
+
+@dataclass(frozen=True)
+class Rule:
+    """A parameter's valid range (see the table above)."""
+
+    name: str
+    low: float
+    high: float
+    low_inclusive: bool = True
+    high_inclusive: bool = True
+    reason: str = ""
+    integer: bool = False
+    automatic: float | None = None  # a value outside [low, high] that means "automatic"
+    when: tuple | None = None  # (other parameter, allowed values): the rule applies only then
+
+    def describe(self) -> str:
+        left, right = "[" if self.low_inclusive else "(", "]" if self.high_inclusive else ")"
+        kind = "a whole number" if self.integer else "a finite number"
+        auto = "" if self.automatic is None else f" or {self.automatic:g} (automatic)"
+        return f"must be {kind} in {left}{self.low:g}, {self.high:g}{right}{auto}"
+
+    def applies(self, values: dict) -> bool:
+        return self.when is None or values.get(self.when[0]) in self.when[1]
+
+    def refusal(self, value) -> str | None:
+        """Why value breaks the rule (with the reason), or None."""
+        try:
+            number = float(value)
+        except (TypeError, ValueError):
+            return f"{self.describe()}; {self.reason}"
+        if self.automatic is not None and number == self.automatic:
+            return None
+        ok = math.isfinite(number) and (not self.integer or number == int(number))
+        ok = ok and (number >= self.low if self.low_inclusive else number > self.low)
+        ok = ok and (number <= self.high if self.high_inclusive else number < self.high)
+        return None if ok else f"{self.describe()}; {self.reason}"
+
+
+_AMPLITUDE = (f"an amplitude beyond {MAX_SCALE:g} times the static load drives accelerations the integrators cannot "
+              "follow and overflows the polynomial model")
+_RATE = f"a rate beyond {MAX_SCALE:g} times the natural frequency needs more than that many steps per unit time"
+_FREQUENCY = (f"forcing frequency: the integrators resolve every forcing period, beyond {MAX_FREQUENCY:g} a doStep "
+              "would take forever")
+_AVERAGED = (f"fidelities 3 and 4 are built per forcing period: below {MIN_AVERAGED_FREQUENCY:g} a period is longer "
+             "than any run they can afford (0 divides by zero)")
+_GAIN = (f"Lyapunov weight: the update law divides by it, below {GAIN_MIN:g} the estimate rates overflow, above "
+         f"{GAIN_MAX:g} the estimates stop moving")
+
+RULES: tuple[Rule, ...] = (
+    # the plant's settings first: they decide which other rules apply
+    Rule("fidelity", 0, 4, reason="0 exact, 1 and 2 polynomial, 3 averaged, 4 analytic", integer=True),
+    Rule("solver", 0, 1, reason="0 adaptive DOP853, 1 fixed-step RK4", integer=True),
+    Rule("kernel", 0, 1, reason="0 compiled, 1 pure Python", integer=True),
+    Rule("rtol", 0.0, MAX_RTOL, low_inclusive=False,
+         reason=f"relative tolerance: above {MAX_RTOL:g} no significant digit is left (below {MIN_RTOL:.3g} it is "
+                "raised to that floor with a warning)"),
+    Rule("max_step", 0.0, MAX_STEP_LIMIT, low_inclusive=False, automatic=0.0,
+         reason=f"step ceiling: no time scale of the models exceeds {MAX_STEP_LIMIT:g}, and an RK4 step that long "
+                "is unstable"),
+    # the scene (Eq. 3)
+    Rule("mu", 0.0, MAX_SCALE, reason=f"damping: {_RATE}"),
+    Rule("Delta", -MAX_SCALE, MAX_SCALE, reason=f"load modulation: {_AMPLITUDE}"),
+    Rule("omega", 0.0, MAX_FREQUENCY, reason=_FREQUENCY),
+    Rule("Omega", 0.0, MAX_FREQUENCY, reason=_FREQUENCY),
+    Rule("omega", MIN_AVERAGED_FREQUENCY, MAX_FREQUENCY, reason=_AVERAGED, when=("fidelity", (3, 4))),
+    Rule("Omega", MIN_AVERAGED_FREQUENCY, MAX_FREQUENCY, reason=_AVERAGED, when=("fidelity", (3, 4))),
+    Rule("alpha", 0.0, MAX_SCALE, reason=f"DC electrostatic load: {_AMPLITUDE}"),
+    Rule("beta", -MAX_SCALE, MAX_SCALE, reason=f"DC x AC electrostatic load: {_AMPLITUDE}"),
+    Rule("gamma", 0.0, MAX_SCALE, reason=f"AC electrostatic load: {_AMPLITUDE}"),
+    Rule("R", R_MIN, R_MAX, reason="electrode gap ratio: the electrostatic terms carry 1/R^2 and Eq. 7's series "
+                                   f"powers of R up to R^5, which under- or overflow outside [{R_MIN:g}, {R_MAX:g}]"),
+    Rule("x_start", -1.5 * R_MAX, 1.5 * R_MAX, reason="initial x: inside the electrodes at -3R/2 and 3R/2"),
+    Rule("v_start", -MAX_SCALE, MAX_SCALE, reason=f"initial speed: {_RATE}"),
+    # fidelity 4 (OAFM)
+    Rule("oafm_order", 1, 8, reason="order of the harmonic OAFM basis", integer=True),
+    Rule("tau_star", 0.0, MAX_FIT_SPAN, low_inclusive=False, automatic=0.0,
+         reason=f"end of the transient domain, inside the fit (at most {MAX_FIT_SPAN:g})"),
+    Rule("oafm_tau_end", 0.0, MAX_FIT_SPAN, low_inclusive=False, automatic=0.0,
+         reason=f"end of the fit: its memory and set-up time grow with its span (1e4: 19 s, 635 MB)"),
+    # the controller (ERRATA §3.5) and the closed loop's reference
+    Rule("law", 0, 2, reason="0 paper-corrected, 1 damped, 2 paper-literal", integer=True),
+    *(Rule(f"lambda{i}", GAIN_MIN, GAIN_MAX, reason=_GAIN) for i in range(1, 12)),
+    Rule("k_damping", GAIN_MIN, GAIN_MAX, reason="the damped law's e2 gain, bounded as the Lyapunov weights"),
+    *(Rule(f"{name}_hat_start", -MAX_ESTIMATE, MAX_ESTIMATE,
+           reason=f"initial estimate: beyond {MAX_ESTIMATE:g} the Lyapunov function overflows")
+      for name in ("mu", "a1", "a2", "a3", "a4", "a5", "Delta", "beta", "gamma")),  # control.THETA_NAMES
+    Rule("reference", 0, 2, reason="0 OAFM, 1 ERRATA §3.5 harmonic, 2 harmonic + tones", integer=True),
+    Rule("x_ref_start", -1.5 * R_MAX, 1.5 * R_MAX, reason="the reference's initial x: inside the electrodes"),
+    Rule("v_ref_start", -MAX_SCALE, MAX_SCALE, reason=f"the reference's initial speed: {_RATE}"),
+)
+
+
+def check_parameters(values: dict) -> None:
+    """Raise ParameterError for the first of `values` (name -> value) that breaks its rule, in the table's order.
+    Names without a rule are left alone (an FMU's parameters all have one: tests/test_robust_ranges.py)."""
+    for rule in RULES:
+        if rule.name in values and rule.applies(values):
+            reason = rule.refusal(values[rule.name])
+            if reason is not None:
+                raise ParameterError(rule.name, values[rule.name], reason)
+
+
+def rules_as_records() -> list[dict]:
+    """The table as plain records (name, low, high, low_inclusive, high_inclusive, integer, automatic, when,
+    reason), in checking order, for generating the same checks elsewhere (the native FMUs' C)."""
+    return [asdict(rule) | {"when": None if rule.when is None else {"name": rule.when[0],
+                                                                     "values": list(rule.when[1])}}
+            for rule in RULES]
+
+
 def validate(scene: Scene) -> None:
-    """Raise ParameterError for the first parameter that makes no sense."""
-    for name in scene_names():
-        value = getattr(scene, name)
-        if not math.isfinite(value):
-            raise ParameterError(name, value, "must be a finite number")
-    if scene.R <= 0:
-        raise ParameterError("R", scene.R, "electrode gap ratio must be > 0")
-    for name in ("mu", "alpha", "gamma"):
-        if getattr(scene, name) < 0:
-            raise ParameterError(name, getattr(scene, name), "must be >= 0")
-    for name in ("omega", "Omega"):
-        if not 0.0 <= getattr(scene, name) <= MAX_FREQUENCY:
-            raise ParameterError(name, getattr(scene, name),
-                                 f"forcing frequency must be in [0, {MAX_FREQUENCY:g}] (the integrators resolve "
-                                 "every forcing period: faster forcing would make a doStep take forever)")
+    """Raise ParameterError for the first parameter that makes no sense: the rules of the table, then x_start
+    against the electrodes."""
+    check_parameters(scene.as_dict())
     upper, lower = electrode_gaps(scene.x_start, scene.R)
     if upper <= PULL_IN_GAP:
         raise ParameterError(
@@ -99,13 +230,12 @@ def validate(scene: Scene) -> None:
             f"at or beyond the lower electrode x = -3R/2 = {-1.5 * scene.R:g} (gap 1+2x/(3R) = {lower:.3g})")
 
 
-MIN_RTOL = 100.0 * sys.float_info.epsilon  # below it the error control only sees rounding (scipy's floor too)
 
 
 def validate_tolerance(rtol: float) -> None:
-    """NaN, inf and rtol <= 0 are errors; a tolerance below MIN_RTOL is not (clamp_tolerance raises it)."""
-    if not (math.isfinite(rtol) and rtol > 0):
-        raise ParameterError("rtol", rtol, "must be a finite number > 0")
+    """NaN, inf, rtol <= 0 and rtol > MAX_RTOL are errors; a tolerance below MIN_RTOL is not (clamp_tolerance
+    raises it)."""
+    check_parameters({"rtol": rtol})
 
 
 def clamp_tolerance(rtol: float) -> tuple[float, str | None]:
@@ -123,8 +253,7 @@ def clamp_tolerance(rtol: float) -> tuple[float, str | None]:
 
 
 def validate_max_step(max_step: float) -> None:
-    if not (math.isfinite(max_step) and max_step > 0):
-        raise ParameterError("max_step", max_step, "must be a finite number > 0")
+    check_parameters({"max_step": max_step})
 
 
 def consistency_warning(scene: Scene) -> str | None:

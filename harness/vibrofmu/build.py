@@ -15,6 +15,7 @@ from vibromodel.parameters import Scene
 from vibromodel.plant import DEFAULT_EXPERIMENT
 
 from .kernel import compile_kernel
+from .pythonenv import pack_python_env
 from .refresult import pack_reference
 from .shim import install_status_shim
 
@@ -40,6 +41,7 @@ def build_fmu(slave: Path, out_dir: Path = BUILD_DIR, extra_resources: tuple[Pat
                                     canGetAndSetFMUstate=True, canSerializeFMUstate=True))
     status = next(v for v in read_model_description(str(fmu)).modelVariables if v.name == "fmi_status")
     install_status_shim(fmu, status.valueReference)
+    pack_python_env(fmu)  # the Python the FMU finds in a C host (resources/python_env.txt)
     pack_reference(fmu)
     return fmu
 
@@ -76,4 +78,18 @@ def build_closed_loop(out_dir: Path = BUILD_DIR) -> Path:
 
 
 def build_all(out_dir: Path = BUILD_DIR) -> list[Path]:
-    return [build(out_dir) for build in (build_plant, build_controller, build_closed_loop)]
+    """The pythonfmu FMUs in out_dir and their native twins in out_dir/native (vibrofmu.native)."""
+    fmus = [build(out_dir) for build in (build_plant, build_controller, build_closed_loop)]
+    return fmus + build_natives(fmus, Path(out_dir) / "native")
+
+
+def build_natives(fmus: list[Path], out_dir: Path) -> list[Path]:
+    """The native FMU of each pythonfmu FMU that has a native model (fmu_src/native/<id>/); none without gcc."""
+    import shutil
+
+    from .native import LINUX_COMMAND, NATIVE_SRC, build_native
+
+    if shutil.which(LINUX_COMMAND[0]) is None:
+        return []
+
+    return [build_native(fmu, out_dir) for fmu in fmus if (NATIVE_SRC / Path(fmu).stem / "native_model.c").is_file()]

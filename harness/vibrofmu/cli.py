@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import shlex
 import sys
 import tempfile
 from pathlib import Path
@@ -242,6 +243,18 @@ def cmd_bench(args) -> int:
 
 
 def cmd_doctor(args) -> int:
+    if args.env_file:
+        try:
+            record = doctor.write_env_file(Path(args.env_file), args.python, Path(args.fmu) if args.fmu else None)
+        except (RuntimeError, OSError) as error:
+            print(f"error: {error}", file=sys.stderr)
+            return 2
+        print(f"wrote {args.env_file} (Python {record['python_version']} at {record['home']}); a C host uses it with")
+        print(f"export {doctor.ENV_VARIABLE}={shlex.quote(str(Path(args.env_file).resolve()))}")
+        return 0
+    if not args.fmu:
+        print("error: give an FMU to check, or --env-file FILE", file=sys.stderr)
+        return 2
     with tempfile.TemporaryDirectory() as work_dir:
         env, result = doctor.check(Path(args.fmu), Path(work_dir))
     print(doctor.export_lines(env))
@@ -326,8 +339,11 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", default="out/demo")
     p.set_defaults(func=cmd_demo)
 
-    p = sub.add_parser("doctor", help="print the environment a C host needs for FMU, and check it with a C host")
-    p.add_argument("fmu")
+    p = sub.add_parser("doctor", help="check that a C host started with an empty environment runs FMU as FMPy does; "
+                                      "--env-file: write the Python environment file for another Python")
+    p.add_argument("fmu", nargs="?")
+    p.add_argument("--env-file", help="write the file VIBROFMU_PYTHON_ENV names (the Python a pythonfmu FMU uses)")
+    p.add_argument("--python", help="with --env-file: the Python to describe (default: this one)")
     p.set_defaults(func=cmd_doctor)
     from . import container, report, ssp  # light modules: heavy imports happen inside their commands
     ssp.add_parser(sub); container.add_parser(sub); report.add_parser(sub)
