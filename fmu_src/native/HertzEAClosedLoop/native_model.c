@@ -1,0 +1,209 @@
+/*
+ * model.c -- the native closed-loop FMU: HertzEAClosedLoop.py's slave logic (closedloop.ClosedLoop's set-up,
+ * compiled_loop.CompiledClosedLoop, StatusSlave) on the compiled closed loop fmu_src/core/closedloop.c, with the
+ * same checks, in the same order, and the same messages (rules.h, generated from vibromodel at build time).
+ *
+ * The reference x~ needs set-up code that only Python has (vibromodel.tracking.make_reference and
+ * compiled_open_loop.OafmProgram).  The build runs it for the FMU's default parameters and packs the result as
+ * constant tables (reference.h), each with the values of every parameter it depends on; a run whose parameters
+ * differ from every packed reference is refused with fmi2Error naming the parameter and the pythonfmu FMU.
+ */
+#include <math.h>
+#include <stdio.h>
+#include <string.h>
+
+#include "controller_setup.h"
+#include "fmi2_native.h"
+#include "plant_setup.h"
+#include "pytext.h"
+#include "reference.h"
+#include "rules.h"
+#include "scene_checks.h"
+
+#define PYTHONFMU_ALTERNATIVE "use the pythonfmu FMU HertzEAClosedLoop.fmu (build/HertzEAClosedLoop.fmu), which sets it up in Python"
+
+static const fmi2ValueReference OUTPUT_VRS[VL_OUTPUTS] = {
+    VR_x, VR_v, VR_x_ref, VR_U, VR_e1, VR_e2, VR_V, VR_V_rate, VR_V_rate_promised, VR_mu_hat, VR_a1_hat,
+    VR_a2_hat, VR_a3_hat, VR_a4_hat, VR_a5_hat, VR_Delta_hat, VR_beta_hat, VR_gamma_hat};
+static const fmi2ValueReference ESTIMATE_START_VRS[VC_N] = {
+    VR_mu_hat_start, VR_a1_hat_start, VR_a2_hat_start, VR_a3_hat_start, VR_a4_hat_start, VR_a5_hat_start,
+    VR_Delta_hat_start, VR_beta_hat_start, VR_gamma_hat_start};
+
+void model_instantiate(State *s) { memset(&s->model, 0, sizeof s->model); }
+
+void model_input_set(Instance *inst, State *s, fmi2ValueReference vr) { (void)inst; (void)s; (void)vr; }
+
+static void halt_parameter(Instance *inst, const char *name, double value, int integer, const char *reason)
+{
+    char text[64];
+    if (integer) snprintf(text, sizeof text, "%d", (int)value);
+    else native_repr(value, text, sizeof text);
+    native_halt(inst, "parameter %s = %s: %s", name, text, reason);
+}
+
+/* The loop's reference from the packed table (its pointers are this library's constants). */
+static void point_reference(State *s)
+{
+    const PackedReference *r = &PACKED_REFERENCES[s->model.reference];
+    s->model.loop.reference.n_pieces = r->n_pieces;
+    s->model.loop.reference.pieces = r->pieces;
+}
+
+/* The packed reference of the current parameters (its index), or -1 after refusing with the parameter that
+   differs from the packed reference of the same kind (or `reference` when its kind is not packed). */
+static int find_reference(Instance *inst, const State *s)
+{
+    const PackedReference *same_kind = NULL;
+    for (int i = 0; i < N_PACKED_REFERENCES; i++) {
+        const PackedReference *r = &PACKED_REFERENCES[i];
+        if (s->value[VR_reference] != r->kind) continue;
+        same_kind = r;
+        int match = s->start_time == r->start_time;
+        for (int j = 0; j < r->n_depends && match; j++) match = s->value[r->depends[j]] == r->values[j];
+        if (match) return i;
+    }
+    char reason[512];
+    if (same_kind == NULL) {
+        snprintf(reason, sizeof reason, "the native FMU carries no set-up of this reference (it needs Python); %s",
+                 PYTHONFMU_ALTERNATIVE);
+        halt_parameter(inst, "reference", s->value[VR_reference], 1, reason);
+        return -1;
+    }
+    char packed[64];
+    if (s->start_time != same_kind->start_time) {
+        native_repr(same_kind->start_time, packed, sizeof packed);
+        snprintf(reason, sizeof reason, "the native FMU carries the reference set up for start time %s only (another "
+                 "needs Python); %s", packed, PYTHONFMU_ALTERNATIVE);
+        halt_parameter(inst, "startTime", s->start_time, 0, reason);
+        return -1;
+    }
+    for (int j = 0; j < same_kind->n_depends; j++) {
+        const fmi2ValueReference vr = same_kind->depends[j];
+        if (s->value[vr] == same_kind->values[j]) continue;
+        native_repr(same_kind->values[j], packed, sizeof packed);
+        snprintf(reason, sizeof reason, "the native FMU carries the reference set up for %s = %s only (another value "
+                 "needs Python); %s", VARIABLES[vr].name, packed, PYTHONFMU_ALTERNATIVE);
+        halt_parameter(inst, VARIABLES[vr].name, s->value[vr], VARIABLES[vr].type != T_REAL, reason);
+        return -1;
+    }
+    return -1;
+}
+
+static void publish(State *s)
+{
+    for (int i = 0; i < VL_OUTPUTS; i++) s->value[OUTPUT_VRS[i]] = s->model.loop.out[i];
+}
+
+/* The pending error as the Python slave reports it (CompiledClosedLoop._raise_pending, StatusSlave). */
+static void report_pending(Instance *inst, State *s, const char *what_failed)
+{
+    VlLoop *l = &s->model.loop;
+    char message[VL_MESSAGE + 64], what[VL_MESSAGE + 64];
+    const int code = (int)l->error;
+    snprintf(message, sizeof message, "%s", l->message);
+    l->error = 0;
+    l->error_t = l->error_x = l->error_v = 0.0;
+    memset(l->message, 0, sizeof l->message);
+    if (code == VL_TERMINAL || code == VL_FAILED) {
+        native_halt(inst, "simulation stopped: %s", message);
+        return;
+    }
+    py_exception_repr(message, what, sizeof what);
+    native_halt(inst, "%s: %s", what_failed, what);
+}
+
+void model_initialise(Instance *inst, State *s)
+{
+    const double rtol_requested = s->has_tolerance ? s->tolerance : s->value[VR_rtol];
+    char reason[256];
+    /* ClosedLoop.__init__: validate(scene) (the table, then the electrode gaps), checked_settings, loop.validate
+       (the table), the plant's fidelity, the model, the controller, the reference, the integrator */
+    if (!vibro_gaps_check(s->value[VR_x_start], s->value[VR_R], reason, sizeof reason)) {
+        halt_parameter(inst, "x_start", s->value[VR_x_start], 0, reason);
+        return;
+    }
+    const int fidelity = (int)s->value[VR_fidelity], solver = (int)s->value[VR_solver];
+    double rtol = rtol_requested;
+    const int clamped = rtol < RULE_MIN_RTOL; /* parameters.clamp_tolerance */
+    if (clamped) rtol = RULE_MIN_RTOL;
+    VlLoop *l = &s->model.loop;
+    memset(l, 0, sizeof *l);
+    const double max_step = s->value[VR_max_step];
+    if (clamped) {
+        char requested[64];
+        native_repr(rtol_requested, requested, sizeof requested);
+        native_log(inst, fmi2Warning, "parameter rtol = %s is below %.3g (100 machine epsilons: the error "
+                   "control would see only rounding): using rtol = %.3g", requested, RULE_MIN_RTOL, RULE_MIN_RTOL);
+    }
+    if (solver == 1) native_rk4_drive_warnings(inst, s, max_step != 0.0 ? max_step : RULE_RK4_DEFAULT_STEP);
+    if (fidelity != 0 && fidelity != 1 && fidelity != 2) {
+        halt_parameter(inst, "fidelity", fidelity, 1, "the closed loop's plant must be 0, 1 or 2");
+        return;
+    }
+    const int reference = find_reference(inst, s);
+    if (reference < 0) return;
+    native_plant_model(&l->model, s, fidelity);
+    native_controller_constants(&l->controller, s);
+    l->solver = solver;
+    l->time_tolerance = RULE_TIME_TOLERANCE;
+    l->dop.rtol = rtol;
+    l->dop.atol = rtol * RULE_ATOL_PER_RTOL;
+    l->dop.max_step = max_step != 0.0 ? max_step : INFINITY;
+    l->dop.step_budget = INFINITY;
+    l->rk4.max_step = max_step != 0.0 ? max_step : RULE_RK4_DEFAULT_STEP;
+    l->enabled = 1;
+    s->model.reference = reference;
+    point_reference(s);
+    s->model.built = 1;
+    double y0[VL_DIM] = {s->value[VR_x_start], s->value[VR_v_start]};
+    for (int i = 0; i < VC_N; i++) y0[2 + i] = s->value[ESTIMATE_START_VRS[i]];
+    native_log(inst, fmi2OK, "%s; compiled closed loop on the native FMU (no Python)", PACKED_REFERENCES[reference].note);
+    if (vl_init(l, s->start_time, y0) != VL_OK) {
+        report_pending(inst, s, "initialisation failed");
+        return;
+    }
+    for (int i = 0; i < VL_OUTPUTS; i++)
+        if (!isfinite(l->out[i])) {
+            char value[64];
+            native_repr(l->out[i], value, sizeof value);
+            native_halt(inst, "initialisation failed: NonFiniteOutput('output %s = %s is not finite; the parameters "
+                        "are beyond the model's numerical range')", VARIABLES[OUTPUT_VRS[i]].name, value);
+            return;
+        }
+    publish(s);
+}
+
+void model_do_step(Instance *inst, State *s, double t, double h)
+{
+    VlLoop *l = &s->model.loop;
+    point_reference(s);
+    char a[64], b[64];
+    const int code = vl_do_step(l, t, h);
+    if (code == VL_OK) {
+        for (int i = 0; i < VL_OUTPUTS; i++)
+            if (!isfinite(l->out[i])) {
+                native_error(inst, "simulation stopped: output with valueReference %u is %g (not finite) after the "
+                             "step from tau = %.17g; the parameters are beyond the model's numerical range",
+                             (unsigned)OUTPUT_VRS[i], l->out[i], t);
+                return;
+            }
+        publish(s);
+        return;
+    }
+    if (code == VL_BAD_STEP) {
+        native_repr(h, a, sizeof a);
+        native_error(inst, "doStep refused: parameter communicationStepSize = %s: %s", a, RULE_STEP_SIZE);
+        return;
+    }
+    if (code == VL_BAD_TIME) {
+        native_repr(t, a, sizeof a);
+        native_repr(l->t, b, sizeof b);
+        native_error(inst, "doStep refused: parameter currentCommunicationPoint = %s: the closed loop is at tau = %s",
+                     a, b);
+        return;
+    }
+    native_repr(t, a, sizeof a);
+    char what[96];
+    snprintf(what, sizeof what, "doStep failed at tau = %s", a);
+    report_pending(inst, s, what);
+}

@@ -1,0 +1,12 @@
+/* controller_setup.h -- control.Controller's constants from an FMU's parameters (compiled_loop.fill_controller),
+   shared by the native controller and the native closed loop (both have the controller's parameters). */
+#ifndef CONTROLLER_SETUP_H
+#define CONTROLLER_SETUP_H
+
+#include "fmi2_native.h"
+
+/* Zero *c, then its constants from the parameters in s->value (and t = start time, theta^ = the initial
+   estimates, enabled = 1 for the controller FMU's own use). */
+void native_controller_constants(VcController *c, const State *s);
+
+#endif

@@ -1,0 +1,72 @@
+/* plant_setup.c -- see plant_setup.h. */
+#include <math.h>
+#include <stdio.h>
+
+#include "plant_setup.h"
+#include "rules.h"
+#include "series.h"
+
+void native_plant_model(VkModel *m, const State *s, int fidelity)
+{
+    const double Delta = s->value[VR_Delta], alpha = s->value[VR_alpha], beta = s->value[VR_beta],
+                 gamma = s->value[VR_gamma], R = s->value[VR_R];
+    m->mu = s->value[VR_mu]; m->Delta = Delta; m->omega = s->value[VR_omega]; m->alpha = alpha; m->beta = beta;
+    m->gamma = gamma; m->Omega = s->value[VR_Omega]; m->R = R;
+    m->pull_in_c = 2.0 / (3.0 * R); /* models.pull_in_slope */
+    m->pull_in_gap = RULE_PULL_IN_GAP;
+    m->load_forcing = Delta != 0.0;
+    m->ac = beta != 0.0 || gamma != 0.0;
+    if (fidelity == 0) {
+        m->polynomial = 0;
+        m->electrostatics = alpha != 0.0 || m->ac;
+    } else { /* (models.PolynomialModel's "R out of range" cannot happen: the rules keep R in [1e-6, 1e6]) */
+        m->polynomial = 1;
+        m->electrostatics = m->ac;
+        vibro_series(fidelity == 2, alpha, gamma, R, m->poly, m->g1, m->g2, m->g3);
+    }
+}
+
+/* integrate.rk4_drive_gains(theta)[0]: G_x, RK4's ripple of x under a drive e^(i nu t) over the true one
+   (theta = nu h) -- the formula of vibromodel/integrate.py, here only for the warning's number. */
+static double rk4_gain_x(double theta)
+{
+    const double phi = 0.5 * theta, s = sin(phi);
+    if (theta == 0.0) return 1.0;
+    if (fabs(s) < 1e-300) return INFINITY;
+    return theta * theta * (1.0 + 2.0 * cos(phi)) / (12.0 * s * s);
+}
+
+/* plant.rk4_drive_warnings: the forcing terms RK4 steps of max_step do not resolve, logged as fmi2Warning. */
+void native_rk4_drive_warnings(Instance *inst, const State *s, double max_step)
+{
+    const double Omega = s->value[VR_Omega], omega = s->value[VR_omega];
+    typedef struct { const char *what, *name; double value, nu; const char *term; } Drive;
+    Drive drives[2];
+    int n = 0;
+    if (s->value[VR_gamma] != 0.0) {
+        Drive d = {"AC drive", "Omega", Omega, 2.0 * Omega, "gamma cos(2 Omega tau)"};
+        drives[n++] = d;
+    } else if (s->value[VR_beta] != 0.0) {
+        Drive d = {"AC drive", "Omega", Omega, Omega, "beta sin(Omega tau)"};
+        drives[n++] = d;
+    }
+    if (s->value[VR_Delta] != 0.0) {
+        Drive d = {"load forcing", "omega", omega, omega, "Delta cos(omega tau)"};
+        drives[n++] = d;
+    }
+    for (int i = 0; i < n; i++) {
+        const double theta = drives[i].nu * max_step;
+        if (theta <= RULE_RK4_DRIVE_THETA * (1.0 + 1e-12)) continue;
+        const double error = fabs(rk4_gain_x(theta) - 1.0);
+        char wrong[96];
+        if (error <= 10.0) snprintf(wrong, sizeof wrong, "by %.0f%%", 100.0 * error);
+        else snprintf(wrong, sizeof wrong, "by more than 1000%% (near 2 pi k rad per step, a resonance)");
+        native_log(inst, fmi2Warning, "RK4 max_step = %g does not resolve the %s at %s = %g: its term %s turns by "
+                   "%.3g rad per step (more than %.3g, i.e. fewer than %.2g steps per period), so RK4 gets the ripple "
+                   "it drives in x wrong %s; the largest step that resolves it (ripple within %.0f%%) is max_step = "
+                   "%.3g", max_step, drives[i].what, drives[i].name, drives[i].value, drives[i].term, theta,
+                   RULE_RK4_DRIVE_THETA, 2.0 * 3.141592653589793 /* math.pi */ / RULE_RK4_DRIVE_THETA, wrong, 100.0 * RULE_RK4_DRIVE_ERROR,
+                   RULE_RK4_DRIVE_THETA / drives[i].nu);
+    }
+}
+
