@@ -193,14 +193,16 @@ def _protocol(fmu, unzipped, input_name, start_a, start_b, fixed):
     blob = a.fmu.serializeFMUstate(state)
     ahead = []
     for i in range(10):
-        a.fmu.setReal([vr[input_name]], [0.01 * i])
+        if input_name is not None:  # (the closed loop has no input)
+            a.fmu.setReal([vr[input_name]], [0.01 * i])
         ahead.append(a.read_outputs())
         a.fmu.doStep(t + 0.1 * i, 0.1)
         ahead.append(a.read_outputs())
     a.fmu.setFMUstate(state)  # back in time: the same steps give the same outputs
     again = []
     for i in range(10):
-        a.fmu.setReal([vr[input_name]], [0.01 * i])
+        if input_name is not None:  # (the closed loop has no input)
+            a.fmu.setReal([vr[input_name]], [0.01 * i])
         again.append(a.read_outputs())
         a.fmu.doStep(t + 0.1 * i, 0.1)
         again.append(a.read_outputs())
@@ -533,3 +535,108 @@ def test_no_invalid_memory_access(which, c_host, native_unpacked, native_control
         host = run_host(c_host, unzipped, [output], 0.0, 5.0, 0.1, parameters=parameters, wrapper=wrapper)
         assert host.returncode == code, host.stderr
         assert "Invalid read" not in host.stderr and "Invalid write" not in host.stderr
+
+
+# ---- the closed loop (fmu_src/native/HertzEAClosedLoop/): the reference packed at build time ----------------
+
+@pytest.fixture(scope="module")
+def native_closed_loop_fmu(closed_loop_fmu, tmp_path_factory):
+    return build_native(closed_loop_fmu, tmp_path_factory.mktemp("native_closed_loop"))
+
+
+def test_closed_loop_same_interface_and_validate_is_silent(closed_loop_fmu, native_closed_loop_fmu):
+    assert _variables(native_closed_loop_fmu)[0] == _variables(closed_loop_fmu)[0]
+    assert validate_fmu(str(native_closed_loop_fmu)) == []
+    with zipfile.ZipFile(native_closed_loop_fmu) as z:
+        names = set(z.namelist())
+    assert {"binaries/linux64/HertzEAClosedLoop.so", "sources/reference.h", "sources/closedloop.c",
+            "sources/buildDescription.xml"} <= names
+    if shutil.which("x86_64-w64-mingw32-gcc"):
+        assert "binaries/win64/HertzEAClosedLoop.dll" in names
+
+
+def test_closed_loop_default_experiment_equals_the_pythonfmu_fmu_bit_for_bit(closed_loop_fmu, native_closed_loop_fmu):
+    """Both FMUs step the same compiled loop (closedloop.c) with the same constants; the reference's tables are
+    the Python set-up's doubles written as exact hexadecimal literals, so every output must be equal to the bit."""
+    md = read_model_description(str(closed_loop_fmu))
+    outputs = [v.name for v in md.modelVariables if v.causality == "output"]
+    experiment = md.defaultExperiment
+    run = dict(start_time=float(experiment.startTime), stop_time=float(experiment.stopTime),
+               output_interval=float(experiment.stepSize), output=outputs)
+    python = simulate_fmu(str(closed_loop_fmu), **run)
+    native = simulate_fmu(str(native_closed_loop_fmu), **run)
+    assert len(native) == 2001
+    for name in ("time", *outputs):
+        np.testing.assert_array_equal(native[name], python[name], err_msg=name)
+    assert np.ptp(native["x_ref"]) > 0.01 and np.ptp(native["mu_hat"]) > 0.0
+
+
+# Parameters that do not enter the packed reference (plant, solver, controller), and every kind of check: the
+# same outputs, status and messages as the pythonfmu FMU.
+CLOSED_LOOP_CASES = [
+    {}, {"fidelity": 1}, {"fidelity": 2}, {"solver": 1}, {"solver": 1, "max_step": 0.05, "Omega": 30.0},
+    {"x_start": 0.02, "v_start": -0.01}, {"beta": 0.1, "Omega": 1.3}, {"law": 1}, {"law": 2},
+    {"lambda1": 2.0, "lambda5": 0.5, "k_damping": 3.0}, {"mu_hat_start": 0.05, "gamma_hat_start": 0.01},
+    {"reference": 2}, {"rtol": 1e-20}, {"rtol": 1e-10},
+    {"R": -1.0}, {"mu": math.nan}, {"x_start": 1.6}, {"fidelity": 3}, {"fidelity": 7}, {"solver": 5},
+    {"law": 5}, {"lambda3": 0.0}, {"mu_hat_start": math.inf}, {"reference": 7}, {"max_step": -1.0},
+]
+
+
+@pytest.mark.parametrize("values", CLOSED_LOOP_CASES, ids=[str(v) for v in CLOSED_LOOP_CASES])
+def test_closed_loop_parity(values, closed_loop_fmu, native_closed_loop_fmu):
+    python = run_fmu(closed_loop_fmu, values, 10.0, 0.1)
+    native = run_fmu(native_closed_loop_fmu, values, 10.0, 0.1)
+    assert (native.completed, native.status) == (python.completed, python.status)
+    assert _problems(native) == _problems(python)
+    np.testing.assert_array_equal(native.time, python.time)
+    for name in python.outputs:
+        np.testing.assert_array_equal(native.outputs[name], python.outputs[name], err_msg=name)
+    assert native.after_failure == python.after_failure
+
+
+@pytest.mark.parametrize("values,name", [
+    ({"Delta": 0.001}, "Delta"), ({"alpha": 0.002}, "alpha"), ({"x_ref_start": 0.05}, "x_ref_start"),
+    ({"v_ref_start": 0.01}, "v_ref_start"), ({"reference": 0}, "reference")])
+def test_closed_loop_refuses_another_reference_naming_the_pythonfmu_fmu(values, name, closed_loop_fmu,
+                                                                        native_closed_loop_fmu):
+    native = run_fmu(native_closed_loop_fmu, values, 1.0, 0.1)
+    assert native.status == FMI2_ERROR and not native.completed
+    errors = [m for m in native.log if m.startswith("[error]") and "parameter" in m]  # (run_fmu's later
+    assert len(errors) == 1, native.log                                               # fmi2Terminate is refused)
+    assert f"parameter {name} = " in errors[0] and "build/HertzEAClosedLoop.fmu" in errors[0], errors[0]
+    if name != "reference":  # the pythonfmu FMU does run it (so the refusal is the native FMU's limit only)
+        python = run_fmu(closed_loop_fmu, values, 1.0, 0.1)
+        assert python.completed and not _problems(python)
+
+
+CLOSED_LOOP_PROTOCOL = dict(input_name=None, start_a={}, start_b={"law": 1, "x_start": 0.02},
+                            fixed="lambda1")
+
+
+def test_closed_loop_state_reset_and_instances(closed_loop_fmu, closed_loop_unzipped, native_closed_loop_fmu,
+                                               tmp_path):
+    unzipped = extract(str(native_closed_loop_fmu), unzipdir=str(tmp_path / "n"))
+    native = _protocol(native_closed_loop_fmu, unzipped, **CLOSED_LOOP_PROTOCOL)
+    trace, ahead, again, messages = native
+    assert ahead == again and trace[-1][1] == trace[-1][2]
+    assert any(isinstance(row, tuple) and row[0] == "deserialized" for row in trace)
+    python = _protocol(closed_loop_fmu, closed_loop_unzipped, **CLOSED_LOOP_PROTOCOL)
+    assert native == python
+
+
+def test_closed_loop_c_host_without_python(c_host, native_closed_loop_fmu, closed_loop_fmu, tmp_path):
+    unzipped = Path(extract(str(native_closed_loop_fmu), unzipdir=str(tmp_path / "n")))
+    outputs = ["x", "x_ref", "U", "V", "mu_hat", "gamma_hat"]
+    native = run_host(c_host, unzipped, outputs, 0.0, 200.0, 0.1, env={"FMI2_HOST_LIST_LIBRARIES": "1"})
+    assert native.returncode == 0, native.stderr
+    mapped = [line for line in native.stderr.splitlines() if line.startswith("fmi2_host: mapped ")]
+    assert any("HertzEAClosedLoop.so" in line for line in mapped)
+    assert not [line for line in mapped if "python" in line.lower()], mapped
+    python_dir = Path(extract(str(closed_loop_fmu), unzipdir=str(tmp_path / "p")))
+    python = run_host(c_host, python_dir, outputs, 0.0, 200.0, 0.1)
+    assert python.returncode == 0, python.stderr
+    for name in outputs:
+        np.testing.assert_array_equal(native.outputs[name], python.outputs[name], err_msg=name)
+    refused = run_host(c_host, unzipped, ["x"], 0.0, 1.0, 0.1, parameters={"Delta": 0.001})
+    assert refused.returncode != 0 and "parameter Delta = 0.001" in refused.stderr, refused.stderr
