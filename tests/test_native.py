@@ -640,3 +640,26 @@ def test_closed_loop_c_host_without_python(c_host, native_closed_loop_fmu, close
         np.testing.assert_array_equal(native.outputs[name], python.outputs[name], err_msg=name)
     refused = run_host(c_host, unzipped, ["x"], 0.0, 1.0, 0.1, parameters={"Delta": 0.001})
     assert refused.returncode != 0 and "parameter Delta = 0.001" in refused.stderr, refused.stderr
+
+
+@WINE
+def test_closed_loop_win64_dll_under_wine_agrees_with_linux64(c_host, native_closed_loop_fmu, tmp_path):
+    """As the plant's: the loop's reference, regressor and drive call Windows' exp/sin/cos, whose last bits may
+    differ from glibc's; the loop integrates those differences over 2000 adaptive steps (DOP853's error control,
+    rtol 1e-8, keeps the perturbed and the unperturbed solutions within rounding of each other). Same 1e-12 bound."""
+    unzipped = Path(extract(str(native_closed_loop_fmu), unzipdir=str(tmp_path / "n")))
+    outputs = ["x", "x_ref", "U", "V", "mu_hat", "gamma_hat"]
+    rows, linux = _wine_and_linux(c_host, unzipped, outputs, {}, tmp_path)
+    for j, name in enumerate(outputs):
+        assert np.max(np.abs(rows[:, j + 1] - linux.outputs[name])) <= 1e-12, name
+
+
+@pytest.mark.skipif(shutil.which("valgrind") is None, reason="valgrind is not installed")
+def test_closed_loop_no_invalid_memory_access(c_host, native_closed_loop_fmu, tmp_path):
+    """The native closed loop in the C host under valgrind: a run, and a run refused for its reference."""
+    unzipped = Path(extract(str(native_closed_loop_fmu), unzipdir=str(tmp_path / "n")))
+    wrapper = ["valgrind", "--error-exitcode=99", "-q"]
+    for parameters, code in (({}, 0), ({"Delta": 0.001}, 2)):
+        host = run_host(c_host, unzipped, ["x"], 0.0, 5.0, 0.1, parameters=parameters, wrapper=wrapper)
+        assert host.returncode == code, host.stderr
+        assert "Invalid read" not in host.stderr and "Invalid write" not in host.stderr
