@@ -15,7 +15,7 @@ from pythonfmu import DefaultExperiment, Fmi2Causality, Real
 
 from slave_support import MODEL_PARAMETERS, StatusSlave
 from vibromodel.control import ESTIMATE_NAMES, HeldInputEstimator
-from vibromodel.parameters import ParameterError, Scene
+from vibromodel.parameters import ParameterError, Scene, check_parameters
 from vibromodel.plant import DEFAULT_EXPERIMENT, TIME_TOLERANCE
 
 INPUTS = ("x", "v", "x_ref", "v_ref", "a_ref")
@@ -53,6 +53,11 @@ class AdaptiveLyapunovController(StatusSlave):
         return HeldInputEstimator(scene, gains, law, estimates, float(self.start_time))
 
     def _set_input(self, name, value):
+        try:  # U, e1, e2 follow the inputs at once: a value out of range would make them overflow
+            check_parameters({name: value})
+        except ParameterError as error:
+            self._error(f"{error}")
+            return
         setattr(self, name, value)
         if self.halted is None:
             try:

@@ -59,7 +59,7 @@ def test_rules_export_as_plain_json_records_in_checking_order():
     records = json.loads(json.dumps(rules_as_records()))
     assert [r["name"] for r in records] == [rule.name for rule in RULES]
     assert set(records[0]) == {"name", "low", "high", "low_inclusive", "high_inclusive", "reason", "integer",
-                               "automatic", "when"}
+                               "automatic", "when", "causality"}
     averaged = [r for r in records if r["when"] is not None]
     assert averaged and all(r["when"] == {"name": "fidelity", "values": [3, 4]} for r in averaged)
 
@@ -127,3 +127,15 @@ def test_the_controller_at_its_smallest_weight_keeps_finite_outputs(start_contro
         for k in range(20):
             instance.fmu.doStep(currentCommunicationPoint=0.1 * k, communicationStepSize=0.1)
         assert all(map(math.isfinite, instance.read_outputs()))
+
+
+@pytest.mark.parametrize("name,value", [("x", -1e300), ("v", math.nan), ("a_ref", 1e9), ("x_ref", math.inf)])
+def test_the_controller_refuses_inputs_out_of_range_naming_them(start_controller, name, value):
+    """Found by the strengthened fuzzing: x = -1e300 made U overflow (the outputs are algebraic in the inputs)."""
+    with start_controller() as instance:
+        before = instance.read_outputs()
+        with pytest.raises(FMICallException) as failure:
+            instance.set({name: value})
+        assert failure.value.status == 3
+        assert f"parameter {name} = {value!r}: must be" in instance.log.errors()[-1]
+        assert instance.read_outputs() == before
