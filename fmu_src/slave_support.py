@@ -31,6 +31,10 @@ STOP_TIME_TOLERANCE = 1e-9
 MODEL_PARAMETERS = tuple(name for name in scene_names() if name not in ("x_start", "v_start"))
 
 
+def _finite_number(value) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+
+
 class NonFiniteOutput(ArithmeticError):
     """A model produced a non-finite output (never published)."""
 
@@ -60,6 +64,7 @@ class StatusSlave(Fmi2Slave):
         self.start_time, self.stop_time, self.experiment_tolerance = 0.0, None, None
         self.model = None  # built by _make_model() at exitInitializationMode
         self._published = {}  # the outputs last published (all finite)
+        self._built_with = None  # _fingerprint() of the parameters the model was built from
 
     def _parameter(self, kind, name, value, description=None):
         """A fixed parameter with its start value."""
@@ -139,6 +144,7 @@ class StatusSlave(Fmi2Slave):
         self.initialised = True
         try:
             check_parameters(self._parameter_values())  # every range up front, the parameter named
+            self._built_with = self._fingerprint()
             start()
             self.halted = None
         except ParameterError as error:
@@ -231,31 +237,88 @@ class StatusSlave(Fmi2Slave):
             "format": self.state_format,
             "variables": super()._get_fmu_state(),
             "run": {name: getattr(self, name) for name in RUN_FIELDS},
+            "built_with": self._built_with,
             "model": None if self.model is None else self.model.snapshot(),
         }
 
     def _set_fmu_state(self, state):
+        backup = self._get_fmu_state()
         try:
             self._restore(state)
-        except Exception as error:  # a foreign or damaged state: refuse, never raise
-            self._halt(f"fmi2SetFMUstate refused: not a state of this FMU ({error!r})")
+        except Exception as error:  # a foreign, damaged or forged state: refuse, never raise
+            try:
+                self._restore(backup)  # the instance stays as it was
+            except Exception as second:  # cannot happen for a state this instance made; be safe anyway
+                self._halt(f"fmi2SetFMUstate refused ({error}); the previous state could not be restored ({second!r})")
+                return
+            self._error(f"fmi2SetFMUstate refused: not a state of this FMU or a damaged one ({error})")
             return
         if self.fmi_status == STATUS_ERROR:
             self.log(f"restored a state saved after an error: {self.halted or 'a call had failed'}",
                      Fmi2Status.error)
 
+    def _fingerprint(self) -> dict:
+        """What a model is built from: every parameter and the experiment (start, stop, tolerance)."""
+        return {"parameters": self._parameter_values(),
+                "experiment": [self.start_time, self.stop_time, self.experiment_tolerance]}
+
     def _restore(self, state):
-        if state.get("format") != self.state_format:
-            raise ValueError(f"format {state.get('format')!r}, expected {self.state_format!r}")
-        variables = state["variables"]
+        """Check every field of `state`, then put it back; raises ValueError (nothing half-done before the model)."""
+        if not isinstance(state, dict) or state.get("format") != self.state_format:
+            found = state.get("format") if isinstance(state, dict) else type(state).__name__
+            raise ValueError(f"format {found!r}, expected {self.state_format!r}")
+        if set(state) != {"format", "variables", "run", "built_with", "model"}:
+            raise ValueError(f"fields {sorted(state)}")
+        variables, run = state["variables"], state["run"]
+        self._check_variables(variables)
+        self._check_run(run)
         for var in self.vars.values():  # not through the setters: a state may hold any value
             setattr(self, var.local_name, variables[var.name])
         for name in RUN_FIELDS:
-            setattr(self, name, state["run"][name])
+            setattr(self, name, run[name])
+        self._built_with = state["built_with"]
         self.model = None
         if state["model"] is not None:
+            # the state's parameters must be those its model was built with (a changed one is refused)
+            if state["built_with"] != self._fingerprint():
+                raise ValueError("its parameters or experiment differ from those its model was built with")
+            check_parameters(self._parameter_values())
             self.model = self._make_model()
             self.model.restore(state["model"])
+        self._published = {var.local_name: getattr(self, var.local_name) for var in self.vars.values()
+                           if var.causality == Fmi2Causality.output}
+
+    def _check_variables(self, variables):
+        """Every variable present with a value of its type; outputs and inputs finite."""
+        if not isinstance(variables, dict) or set(variables) != {var.name for var in self.vars.values()}:
+            raise ValueError("its variables are not this FMU's")
+        for var in self.vars.values():
+            value = variables[var.name]
+            kinds = {Real: (float, int), Integer: (int,), Boolean: (bool,), String: (str,)}[type(var)]
+            if not isinstance(value, kinds) or (isinstance(value, bool) and type(var) is not Boolean):
+                raise ValueError(f"variable {var.name} = {value!r} is not a {type(var).__name__}")
+            if type(var) is Real and var.causality != Fmi2Causality.parameter and not math.isfinite(value):
+                raise ValueError(f"variable {var.name} = {value!r} is not finite")
+        if variables["fmi_status"] not in (STATUS_OK, STATUS_ERROR):
+            raise ValueError(f"fmi_status = {variables['fmi_status']!r}")
+
+    @staticmethod
+    def _check_run(run):
+        if not isinstance(run, dict) or set(run) != set(RUN_FIELDS):
+            raise ValueError("its run fields are not this FMU's")
+        checks = {
+            "phase": lambda v: v in (INSTANTIATED, INITIALIZATION_MODE, STEP_MODE, TERMINATED),
+            "halted": lambda v: v is None or isinstance(v, str),
+            "initialised": lambda v: isinstance(v, bool),
+            "start_time": lambda v: _finite_number(v),
+            "stop_time": lambda v: v is None or _finite_number(v),
+            "experiment_tolerance": lambda v: v is None or _finite_number(v),
+        }
+        for name, check in checks.items():
+            if not check(run[name]):
+                raise ValueError(f"run field {name} = {run[name]!r}")
+        if run["initialised"] != (run["phase"] in (STEP_MODE, TERMINATED)):
+            raise ValueError(f"initialised = {run['initialised']!r} in the {run['phase']} state")
 
     @staticmethod
     def _fmu_state_to_bytes(state):
