@@ -264,6 +264,8 @@ class StatusSlave(Fmi2Slave):
 
     def _restore(self, state):
         """Check every field of `state`, then put it back; raises ValueError (nothing half-done before the model)."""
+        if isinstance(state, dict) and set(state) == {"unreadable"}:
+            raise ValueError(f"unreadable bytes: {state['unreadable']}")
         if not isinstance(state, dict) or state.get("format") != self.state_format:
             found = state.get("format") if isinstance(state, dict) else type(state).__name__
             raise ValueError(f"format {found!r}, expected {self.state_format!r}")
@@ -331,7 +333,7 @@ class StatusSlave(Fmi2Slave):
         try:
             return snapshot.from_bytes(data)
         except Exception as error:
-            return {"format": f"unreadable ({error!r})"}
+            return {"unreadable": f"{error}"}
 
     # -- getting variables: unknown value references and wrong types give fmi2Error, never an exception -------
     def get_real(self, vrs):

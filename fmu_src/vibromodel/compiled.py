@@ -63,6 +63,39 @@ class VkPlant(ctypes.Structure):
     ]
 
 
+# Valid values of VkPlant's integer fields (vibrokernel.h), checked by check_state by name: a restored state whose
+# counts or switches are out of range would index the stage arrays out of bounds (issue 15: n_stages = 20 with
+# dense_ready = 0 crashed the next doStep). A field added without an entry here is only checked to be a number.
+INT_FIELD_RANGES = {
+    "polynomial": (0, 1), "load_forcing": (0, 1), "electrostatics": (0, 1), "ac": (0, 1),
+    "has_old": (0, 1), "n_stages": (0, VK_STAGES), "dense_ready": (0, 1), "contact_side": (0, 1), "stopped": (0, 2),
+    "nfev": (0, 2**62), "n_steps": (0, 2**62), "in_contact": (0, 1), "enabled": (0, 1), "error": (VK_OK, VK_RAISED),
+}
+
+
+def check_state(data: bytes) -> None:
+    """Raise ValueError unless `data` could be a VkPlant the kernel left: every integer field in its range
+    (INT_FIELD_RANGES), every double of the integrator, plant and error finite (the constants before `t` are
+    compared with the current plant's by restore), the message NUL-terminated. Goes by the field list of VkPlant,
+    so fields added to the structure are covered without offsets written here."""
+    plant = VkPlant.from_buffer_copy(data)
+    constants = VkPlant.t.offset
+    for name, kind in VkPlant._fields_:
+        field = getattr(VkPlant, name)
+        value = getattr(plant, name)
+        if kind is _int:
+            low, high = INT_FIELD_RANGES.get(name, (-2**63, 2**63 - 1))
+            if not low <= value <= high:
+                raise ValueError(f"kernel field {name} = {value} outside [{low}, {high}]")
+        elif field.offset >= constants and kind is _double and not math.isfinite(value):
+            raise ValueError(f"kernel field {name} = {value!r} is not finite")
+        elif field.offset >= constants and getattr(kind, "_type_", None) is _double \
+                and not all(math.isfinite(item) for item in value):
+            raise ValueError(f"kernel field {name} holds a non-finite number")
+        elif kind is ctypes.c_char * VK_MESSAGE and b"\0" not in data[field.offset:field.offset + field.size]:
+            raise ValueError(f"kernel field {name} is not NUL-terminated")
+
+
 def _declare(library) -> None:
     """Argument and result types of the kernel's functions (the plant goes by address)."""
     address, d, status, doubles = ctypes.c_void_p, _double, ctypes.c_int, ctypes.POINTER(_double)
@@ -291,6 +324,7 @@ class CompiledPlant:
         constants = VkPlant.t.offset  # the model and settings precede the integrator
         if data[:constants] != ctypes.string_at(self._address, constants):
             raise ValueError("the snapshot is of a compiled plant with other parameters or settings")
+        check_state(data)
         ctypes.memmove(self._address, data, len(data))
 
     # -- errors -----------------------------------------------------------------------------------------------
