@@ -242,15 +242,18 @@ class StatusSlave(Fmi2Slave):
         }
 
     def _set_fmu_state(self, state):
-        backup = self._get_fmu_state()
+        self._backup = None  # taken by _restore just before it changes anything
         try:
             self._restore(state)
         except Exception as error:  # a foreign, damaged or forged state: refuse, never raise
             try:
-                self._restore(backup)  # the instance stays as it was
+                if self._backup is not None:
+                    self._restore(self._backup)  # the instance stays as it was
             except Exception as second:  # cannot happen for a state this instance made; be safe anyway
                 self._halt(f"fmi2SetFMUstate refused ({error}); the previous state could not be restored ({second!r})")
                 return
+            finally:
+                self._backup = None
             self._error(f"fmi2SetFMUstate refused: not a state of this FMU or a damaged one ({error})")
             return
         if self.fmi_status == STATUS_ERROR:
@@ -274,6 +277,8 @@ class StatusSlave(Fmi2Slave):
         variables, run = state["variables"], state["run"]
         self._check_variables(variables)
         self._check_run(run)
+        if getattr(self, "_backup", None) is None:
+            self._backup = self._get_fmu_state()
         for var in self.vars.values():  # not through the setters: a state may hold any value
             setattr(self, var.local_name, variables[var.name])
         for name in RUN_FIELDS:

@@ -14,6 +14,7 @@ from vibromodel.compiled import LIBRARY_NAME
 from vibromodel.parameters import Scene
 from vibromodel.plant import DEFAULT_EXPERIMENT
 
+from .entry import importable, pythonfmu_entry
 from .kernel import compile_kernel
 from .refresult import pack_reference
 from .shim import install_status_shim
@@ -34,10 +35,12 @@ def build_fmu(slave: Path, out_dir: Path = BUILD_DIR, extra_resources: tuple[Pat
     the status shim installed and the reference result packed. It declares state save/restore and serialization:
     the slaves save their whole state (slave_support.StatusSlave; pythonfmu alone saves registered variables only)."""
     out_dir.mkdir(parents=True, exist_ok=True)
-    project_files = [FMU_SRC / "vibromodel", FMU_SRC / "slave_support.py", FMU_SRC / "fast_path.py",
-                     *extra_resources]
-    fmu = Path(FmuBuilder.build_FMU(slave, dest=out_dir, project_files=project_files,
-                                    canGetAndSetFMUstate=True, canSerializeFMUstate=True))
+    with tempfile.TemporaryDirectory() as tmp, importable(FMU_SRC):  # an entry script in front (vibrofmu.entry)
+        entry, implementation = pythonfmu_entry(slave, Path(tmp))
+        project_files = [FMU_SRC / "vibromodel", FMU_SRC / "slave_support.py", FMU_SRC / "fast_path.py",
+                         implementation, *extra_resources]
+        fmu = Path(FmuBuilder.build_FMU(entry, dest=out_dir, project_files=project_files,
+                                        canGetAndSetFMUstate=True, canSerializeFMUstate=True))
     status = next(v for v in read_model_description(str(fmu)).modelVariables if v.name == "fmi_status")
     install_status_shim(fmu, status.valueReference)
     pack_reference(fmu)
