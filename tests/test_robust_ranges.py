@@ -139,3 +139,21 @@ def test_the_controller_refuses_inputs_out_of_range_naming_them(start_controller
         assert failure.value.status == 3
         assert f"parameter {name} = {value!r}: must be" in instance.log.errors()[-1]
         assert instance.read_outputs() == before
+
+
+def test_a_non_finite_output_fails_the_call_naming_it_and_keeps_the_last_finite_values(monkeypatch):
+    """Issue 15: slave_support skipped non-finite values silently (the controller then answered fmi2OK with frozen
+    outputs). Now publishing one raises NonFiniteOutput, an ArithmeticError: doStep turns it into fmi2Error with
+    "simulation stopped: ... tau = ..." (StatusSlave._guarded_step), initialisation into fmi2Error too."""
+    from vibrofmu.build import FMU_SRC
+
+    monkeypatch.syspath_prepend(str(FMU_SRC))
+    from AdaptiveLyapunovController import AdaptiveLyapunovController
+    from slave_support import NonFiniteOutput
+
+    slave = AdaptiveLyapunovController(instance_name="direct")
+    slave._set_finite({"U": 1.5, "e1": 0.25})
+    with pytest.raises(NonFiniteOutput, match=r"output e1 = nan is not finite"):
+        slave._set_finite({"U": 2.0, "e1": math.nan})
+    assert (slave.U, slave.e1) == (1.5, 0.25)
+    assert issubclass(NonFiniteOutput, ArithmeticError)
