@@ -182,3 +182,21 @@ def test_get_before_initialisation_is_refused(request, which):
         assert status(instance.fmu.getReal, instance.value_references([output])) == ERROR
         assert "instantiated state" in last_error(instance)
         assert_reset_runs(instance, values, output)
+
+
+@pytest.mark.parametrize("which", FMUS)
+@pytest.mark.parametrize("setter", ["setReal", "setInteger", "setBoolean"])
+@pytest.mark.parametrize("wrong", ["unknown", "type"])
+def test_set_with_unknown_reference_or_wrong_type_is_an_error_not_fatal(request, which, setter, wrong):
+    instance, values, output, _ = new(request, which)
+    with instance:
+        kind = {"setReal": "Real", "setInteger": "Integer", "setBoolean": "Boolean"}[setter]
+        if wrong == "unknown":
+            vr = max(v.valueReference for v in instance.variables.values()) + 1000
+        else:
+            vr = next(v.valueReference for v in instance.variables.values()
+                      if v.type not in (kind, "String") and v.causality == "parameter")
+        value = {"setReal": 1.0, "setInteger": 1, "setBoolean": True}[setter]
+        assert status(getattr(instance.fmu, setter), [vr], [value]) == ERROR
+        assert str(vr) in last_error(instance) or "not of type" in last_error(instance), last_error(instance)
+        assert_reset_runs(instance, values, output)
