@@ -8,6 +8,7 @@ instance): errors are logged with the parameter and value, `fmi_status` is set t
 fmi2Error to the host.
 """
 import functools
+import json
 import math
 from pathlib import Path
 
@@ -31,8 +32,13 @@ STOP_TIME_TOLERANCE = 1e-9
 MODEL_PARAMETERS = tuple(name for name in scene_names() if name not in ("x_start", "v_start"))
 
 
-def _finite_number(value) -> bool:
-    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+def _number(value) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+def _same(a, b) -> bool:
+    """Equal as plain data, NaN equal to NaN (a host may give a NaN stop time or tolerance)."""
+    return json.dumps(a, sort_keys=True) == json.dumps(b, sort_keys=True)
 
 
 class NonFiniteOutput(ArithmeticError):
@@ -207,7 +213,9 @@ class StatusSlave(Fmi2Slave):
         end = None if stop is None else stop + STOP_TIME_TOLERANCE * max(1.0, abs(stop))
         # a t beyond the stop is a wrong currentCommunicationPoint: the model's own check names it
         if end is not None and math.isfinite(t) and math.isfinite(h) and t <= end < t + h:
-            self._error(f"{ParameterError('communicationStepSize', h, f'the step from tau = {t!r} would end at tau = {t + h!r}, beyond the stop time {stop!r} declared in fmi2SetupExperiment')}")
+            reason = (f"the step from tau = {t!r} would end at tau = {t + h!r}, beyond the stop time {stop!r} "
+                      "declared in fmi2SetupExperiment")
+            self._error(f"{ParameterError('communicationStepSize', h, reason)}")
             return False
         return True
 
@@ -287,7 +295,7 @@ class StatusSlave(Fmi2Slave):
         self.model = None
         if state["model"] is not None:
             # the state's parameters must be those its model was built with (a changed one is refused)
-            if state["built_with"] != self._fingerprint():
+            if not _same(state["built_with"], self._fingerprint()):
                 raise ValueError("its parameters or experiment differ from those its model was built with")
             check_parameters(self._parameter_values())
             self.model = self._make_model()
@@ -317,9 +325,10 @@ class StatusSlave(Fmi2Slave):
             "phase": lambda v: v in (INSTANTIATED, INITIALIZATION_MODE, STEP_MODE, TERMINATED),
             "halted": lambda v: v is None or isinstance(v, str),
             "initialised": lambda v: isinstance(v, bool),
-            "start_time": lambda v: _finite_number(v),
-            "stop_time": lambda v: v is None or _finite_number(v),
-            "experiment_tolerance": lambda v: v is None or _finite_number(v),
+            # the host's experiment as given (checked when the model is built from it)
+            "start_time": lambda v: _number(v),
+            "stop_time": lambda v: v is None or _number(v),
+            "experiment_tolerance": lambda v: v is None or _number(v),
         }
         for name, check in checks.items():
             if not check(run[name]):

@@ -13,7 +13,8 @@ from . import forces
 from .analytic import OafmSettings, cached_solve, covering
 from .integrate import RK4_DRIVE_ERROR, RK4_DRIVE_THETA, Dop853, IntegrationError, Rk4, rk4_drive_gains
 from .models import Fidelity, make_model
-from .parameters import ParameterError, Scene, check_parameters, clamp_tolerance, validate, validate_max_step, validate_tolerance
+from .parameters import (ParameterError, Scene, check_parameters, clamp_tolerance, validate, validate_max_step,
+                         validate_tolerance)
 from .snapshot import plain_attributes, restore_attributes
 
 DEFAULT_EXPERIMENT = (0.0, 200.0, 0.1)  # start, stop, communication step of the FMU's DefaultExperiment
