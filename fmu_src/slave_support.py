@@ -304,7 +304,8 @@ class StatusSlave(Fmi2Slave):
                            if var.causality == Fmi2Causality.output}
 
     def _check_variables(self, variables):
-        """Every variable present with a value of its type; outputs and inputs finite."""
+        """Every variable present with a value of its type; outputs finite (inputs and parameters are the host's
+        values as given: doStep and initialisation check them)."""
         if not isinstance(variables, dict) or set(variables) != {var.name for var in self.vars.values()}:
             raise ValueError("its variables are not this FMU's")
         for var in self.vars.values():
@@ -312,7 +313,7 @@ class StatusSlave(Fmi2Slave):
             kinds = {Real: (float, int), Integer: (int,), Boolean: (bool,), String: (str,)}[type(var)]
             if not isinstance(value, kinds) or (isinstance(value, bool) and type(var) is not Boolean):
                 raise ValueError(f"variable {var.name} = {value!r} is not a {type(var).__name__}")
-            if type(var) is Real and var.causality != Fmi2Causality.parameter and not math.isfinite(value):
+            if type(var) is Real and var.causality == Fmi2Causality.output and not math.isfinite(value):
                 raise ValueError(f"variable {var.name} = {value!r} is not finite")
         if variables["fmi_status"] not in (STATUS_OK, STATUS_ERROR):
             raise ValueError(f"fmi_status = {variables['fmi_status']!r}")

@@ -72,11 +72,15 @@ INT_FIELD_RANGES = {
     "nfev": (0, 2**62), "n_steps": (0, 2**62), "in_contact": (0, 1), "enabled": (0, 1), "error": (VK_OK, VK_RAISED),
 }
 
+# Doubles that hold a host's value as given (checked when used: vk_do_step refuses a non-finite input)
+HOST_VALUE_FIELDS = {"U_input"}
+
 
 def check_state(data: bytes) -> None:
     """Raise ValueError unless `data` could be a VkPlant the kernel left: every integer field in its range
-    (INT_FIELD_RANGES), every double of the integrator, plant and error finite (the constants before `t` are
-    compared with the current plant's by restore), the message NUL-terminated. Goes by the field list of VkPlant,
+    (INT_FIELD_RANGES), every double of the integrator, plant and error finite but the host's input
+    (HOST_VALUE_FIELDS; the constants before `t` are compared with the current plant's by restore), the message
+    NUL-terminated. Goes by the field list of VkPlant,
     so fields added to the structure are covered without offsets written here."""
     plant = VkPlant.from_buffer_copy(data)
     constants = VkPlant.t.offset
@@ -87,7 +91,8 @@ def check_state(data: bytes) -> None:
             low, high = INT_FIELD_RANGES.get(name, (-2**63, 2**63 - 1))
             if not low <= value <= high:
                 raise ValueError(f"kernel field {name} = {value} outside [{low}, {high}]")
-        elif field.offset >= constants and kind is _double and not math.isfinite(value):
+        elif field.offset >= constants and kind is _double and not math.isfinite(value) \
+                and name not in HOST_VALUE_FIELDS:
             raise ValueError(f"kernel field {name} = {value!r} is not finite")
         elif field.offset >= constants and getattr(kind, "_type_", None) is _double \
                 and not all(math.isfinite(item) for item in value):
