@@ -65,13 +65,17 @@ def build_plant(out_dir: Path = BUILD_DIR) -> Path:
 
 
 def build_controller(out_dir: Path = BUILD_DIR) -> Path:
-    """The controller FMU (no physics of its own beyond the regressor: nothing to pack)."""
-    return build_fmu(CONTROLLER_SLAVE, out_dir)
+    """The controller FMU with the compiled kernel (fmu_src/core/controller.c is in it)."""
+    with tempfile.TemporaryDirectory() as tmp:
+        return build_fmu(CONTROLLER_SLAVE, out_dir, extra_resources=(compile_kernel(Path(tmp) / LIBRARY_NAME),))
 
 
 def build_closed_loop(out_dir: Path = BUILD_DIR) -> Path:
-    """The monolithic closed loop; its OAFM reference (x~(0) = 0.04, x~'(0) = 0: the paper example) is packed."""
-    return build_with_default_oafm(CLOSED_LOOP_SLAVE, Scene(), out_dir)
+    """The monolithic closed loop with the compiled kernel (fmu_src/core/closedloop.c is in it); its OAFM reference
+    (x~(0) = 0.04, x~'(0) = 0: the paper example) is packed."""
+    with tempfile.TemporaryDirectory() as tmp:
+        kernel = compile_kernel(Path(tmp) / LIBRARY_NAME)
+        return build_with_default_oafm(CLOSED_LOOP_SLAVE, Scene(), out_dir, extra_resources=(kernel,))
 
 
 def build_all(out_dir: Path = BUILD_DIR) -> list[Path]:

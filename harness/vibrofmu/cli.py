@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 import tempfile
 from pathlib import Path
@@ -199,6 +200,14 @@ def cmd_stability(args) -> int:
     print(f"slow flow vs shooting: max relative r error {errors['max_relative_r_error']:.2e} (omega "
           f"{errors['at_omega']:.6g}), max |exp(lambda T) - rho| {errors['max_multiplier_error']:.2e} (omega "
           f"{errors['at_omega_multiplier']:.6g})")
+    w, k1 = errors["at_omega_multiplier"], model.omega_e**2
+    if w == w and k1 > scene.mu**2 / 4:  # a number (the grid had orbits) and an underdamped linearisation
+        period = 2 * math.pi / w
+        phase = (w - math.sqrt(k1 - scene.mu**2 / 4) - (w * w - k1) / (2 * w)) * period
+        print(f"  (expected far from resonance: the slow flow turns at (omega^2 - k1)/(2 omega) instead of "
+              f"omega - sqrt(k1 - mu^2/4); the phase error per period gives |exp(lambda T) - rho| ~ "
+              f"exp(-mu T/2) 2|sin(dphi/2)| = {math.exp(-scene.mu * period / 2) * abs(2 * math.sin(phase / 2)):.2e} "
+              f"at omega {w:.6g}; see docs/numerics.md)")
     for row in summary["fold_frequencies"]["folds"]:
         print("fold: " + ", ".join(f"{k} {v:.8g}" for k, v in row.items() if not k.startswith("r_")))
     for direction, sweep in ((d, summary["fmu_sweeps"][d]) for d in ("up", "down") if "fmu_sweeps" in summary):
@@ -320,6 +329,8 @@ def make_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("doctor", help="print the environment a C host needs for FMU, and check it with a C host")
     p.add_argument("fmu")
     p.set_defaults(func=cmd_doctor)
+    from . import container, report, ssp  # light modules: heavy imports happen inside their commands
+    ssp.add_parser(sub); container.add_parser(sub); report.add_parser(sub)
     return parser
 
 
