@@ -16,7 +16,7 @@ import pytest
 from fmpy.fmi1 import FMICallException
 
 from vibromodel import snapshot
-from vibromodel.compiled import VK_STAGES, VkPlant
+from vibromodel.compiled import DOP_STAGES, VkPlant
 
 OK, ERROR, FATAL = 0, 3, 4
 STEP = 0.1
@@ -144,21 +144,31 @@ def test_a_state_with_both_parameter_copies_changed_is_refused_or_self_consisten
 
 
 def kernel_change(**fields):
+    """Set fields of the compiled plant's structure, by path ("dop.n_stages", "dop.y[0]", "message")."""
     def alter(state):
         plant = VkPlant.from_buffer_copy(bytes.fromhex(state["model"]["kernel"]))
-        for name, value in fields.items():
-            if name == "message":
+        for path, value in fields.items():
+            if path == "message":
                 ctypes.memset(ctypes.addressof(plant) + VkPlant.message.offset, ord("A"), VkPlant.message.size)
+                continue
+            *parents, last = path.split(".")
+            target = plant
+            for parent in parents:
+                target = getattr(target, parent)
+            if last.endswith("]"):
+                name, index = last[:-1].split("[")
+                getattr(target, name)[int(index)] = value
             else:
-                setattr(plant, name, value)
+                setattr(target, last, value)
         state["model"]["kernel"] = bytes(plant).hex()
     return alter
 
 
 @pytest.mark.parametrize("fields", [
-    {"n_stages": 20, "dense_ready": 0}, {"n_stages": -5, "dense_ready": 0}, {"n_stages": 10**8, "dense_ready": 0},
-    {"n_stages": VK_STAGES + 1}, {"dense_ready": 2}, {"in_contact": 7}, {"stopped": 3}, {"error": 99},
-    {"x": math.nan}, {"plant_t": math.inf}, {"message": None}, {"nfev": -1},
+    {"dop.n_stages": 20, "dop.dense_ready": 0}, {"dop.n_stages": -5, "dop.dense_ready": 0},
+    {"dop.n_stages": 10**8, "dop.dense_ready": 0}, {"dop.n_stages": DOP_STAGES + 1}, {"dop.dense_ready": 2},
+    {"in_contact": 7}, {"dop.stopped": 9}, {"dop.side[0]": 3}, {"error": 99}, {"dop.y[0]": math.nan},
+    {"dop.k[1][3]": math.inf}, {"plant_t": math.inf}, {"message": None}, {"dop.nfev": -1},
 ], ids=lambda fields: ",".join(fields))
 def test_forged_kernel_fields_out_of_range_are_refused(request, fields):
     """Issue 15: n_stages = 20, -5 or 1e8 with dense_ready = 0 passed setFMUstate, then doStep crashed (SIGSEGV)."""
