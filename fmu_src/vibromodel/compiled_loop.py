@@ -17,6 +17,7 @@ import numpy as np
 
 from .compiled import check_structure
 from .control import ESTIMATE_NAMES, Controller, Gains, validate_estimates, validate_law
+from .fidelities import entry
 from .parameters import ParameterError, Scene, validate
 from .plant import TIME_TOLERANCE
 
@@ -285,7 +286,8 @@ class CompiledClosedLoop:
         self._l = self._structure()
         self.address = ctypes.addressof(self._l)
         l, settings = self._l, python.settings
-        for name, value in _model_fields(python.scene, python.model).items():
+        polynomial = entry(settings.fidelity).compiled_model  # VkModel.polynomial of the plant's level
+        for name, value in _model_fields(python.scene, python.model, polynomial).items():
             setattr(l.model, name, value if isinstance(value, (int, float)) else (_double * 6)(*value))
         fill_controller(l.controller, python.controller, python.scene)
         l.solver, l.time_tolerance = int(settings.solver), TIME_TOLERANCE
