@@ -55,6 +55,14 @@ def test_each_rule_accepts_its_ends_and_refuses_just_beyond(rule):
         check_parameters({**context, rule.name: rule.automatic})
 
 
+def test_every_input_rule_contains_what_the_fast_path_sets_itself():
+    """The shim's fast path sets inputs in [-FAST_INPUT_LIMIT, FAST_INPUT_LIMIT] without the slave's check."""
+    from vibromodel.parameters import FAST_INPUT_LIMIT
+
+    inputs = [rule for rule in RULES if rule.causality == "input"]
+    assert inputs and all(rule.low <= -FAST_INPUT_LIMIT and FAST_INPUT_LIMIT <= rule.high for rule in inputs)
+
+
 def test_rules_export_as_plain_json_records_in_checking_order():
     records = json.loads(json.dumps(rules_as_records()))
     assert [r["name"] for r in records] == [rule.name for rule in RULES]

@@ -105,6 +105,9 @@ GAIN_MIN, GAIN_MAX = 1e-6, 1e6
 # 1e12 keeps the Lyapunov function sum(theta~^2/lambda) <= 1e30 and the control force inside double range
 MAX_ESTIMATE = 1e12
 MAX_INPUT_RATE = 1e8  # speeds and accelerations the controller accepts as inputs
+# The status shim's fast path sets inputs within [-1e6, 1e6] itself and hands any other value to the slave, which
+# applies the rule: every input rule must contain that interval (tests/test_robust_ranges.py checks it).
+FAST_INPUT_LIMIT = 1e6
 
 
 @dataclass(frozen=True)
