@@ -148,7 +148,7 @@ def parse_set(items: list[str]) -> dict[str, float]:
         try:
             values[name.strip()] = float(text)
         except ValueError:
-            raise UserError(f"--set {item}: {text!r} is not a number") from None
+            raise ParameterError(name.strip(), text, "not a number") from None
     Scene().with_values(**values)  # unknown names fail here (ParameterError)
     return values
 
@@ -254,9 +254,9 @@ def cmd_simulate(args) -> int:
     scene = Scene().with_values(**parse_set(args.set))
     settings = Settings(fidelity=FIDELITIES[args.fidelity], solver=SOLVERS[args.solver], rtol=args.rtol,
                         max_step=args.max_step)
+    check_inputs(scene, settings, args.stop_time, args.output_interval)  # bad values: ParameterError, now
     if args.output_interval > args.stop_time:
         raise UserError(f"--output-interval {args.output_interval:g} is longer than --stop-time {args.stop_time:g}")
-    check_inputs(scene, settings, args.stop_time, args.output_interval)  # bad values: ParameterError, now
     fmu = plant_fmu(args.fmu)
     out = out_folder(args.out)
     run, summary, _ = simulate(built_plant(fmu), scene, settings, args.stop_time, args.output_interval, out,
@@ -426,11 +426,12 @@ def simulate_options(p):
     p.add_argument("--fidelity", choices=list(FIDELITIES), default="exact", help="plant model")
     p.add_argument("--solver", choices=list(SOLVERS), default="adaptive",
                    help="adaptive DOP853 with contact events, or fixed-step RK4")
-    p.add_argument("--rtol", type=positive, default=1e-8, help="relative tolerance of the adaptive solver")
+    # rtol, stop time and output interval are checked with the scene (simulate.check_inputs: ParameterError)
+    p.add_argument("--rtol", type=float, default=1e-8, help="relative tolerance of the adaptive solver")
     p.add_argument("--max-step", type=non_negative, default=0.0, help="RK4 step / adaptive ceiling; 0 = automatic")
     p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", help=SET_HELP)
-    p.add_argument("--stop-time", type=positive, default=200.0, help="end of the run, tau")
-    p.add_argument("--output-interval", type=positive, default=0.1, help="communication step (doStep size)")
+    p.add_argument("--stop-time", type=float, default=200.0, help="end of the run, tau")
+    p.add_argument("--output-interval", type=float, default=0.1, help="communication step (doStep size)")
     p.add_argument("--compare", action="store_true", help="compare with the DOP853 rtol 1e-12 reference")
     p.add_argument("--fmu", default=None, help=FMU_HELP)
     p.add_argument("--out", required=True, help="output folder (result.csv, summary.json, x.png)")
@@ -530,13 +531,18 @@ def make_parser(commands=None) -> argparse.ArgumentParser:
         p.set_defaults(func=command)
         if commands is None or name in commands:
             options(p)
+    # Sub-commands of other modules hook in here, one call each (e.g. `study.add_parser(sub)`), with their
+    # heavy imports inside their command.
     return parser
 
 
 def main(argv=None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     command = next((arg for arg in argv if not arg.startswith("-")), None)
-    args = make_parser({command}).parse_args(argv)
+    try:
+        args = make_parser({command}).parse_args(argv)
+    except SystemExit as stop:  # --help (0) or a bad command line (2, one line printed by Parser.error)
+        return stop.code
     try:
         return args.func(args)
     except (UserError, ParameterError) as error:
