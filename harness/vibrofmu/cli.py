@@ -187,6 +187,9 @@ def cmd_closed_loop(args) -> int:
         raise UserError(f"--fmu-dir {fmu_dir} is not a folder")
     if args.mode == "cosim" and not Path(args.scene).is_file():
         raise UserError(f"no scene file at {args.scene}")
+    H, stop_time = args.H or 0.1, args.stop_time or 200.0  # monolithic; a cosim takes the scene's defaults
+    if args.mode == "monolithic" and H > stop_time:
+        raise UserError(f"--H {H:g} is longer than the stop time {stop_time:g}")
     out = out_folder(args.out)
     if not all((fmu_dir / name).exists() for name in (PLANT_NAME, CONTROLLER_NAME, CLOSED_LOOP_NAME)):
         print(f"building the FMUs into {fmu_dir} ...", file=sys.stderr)
@@ -196,9 +199,6 @@ def cmd_closed_loop(args) -> int:
     progress = progress_printer("closed-loop")
     if args.mode == "monolithic":
         values = {"law": int(law or Law.PAPER_CORRECTED), "reference": int(ReferenceKind[args.reference.upper()])}
-        H, stop_time = args.H or 0.1, args.stop_time or 200.0
-        if H > stop_time:
-            raise UserError(f"--H {H:g} is longer than the stop time {stop_time:g}")
         result = closed_loop.monolithic(checked_fmu(fmu_dir / CLOSED_LOOP_NAME, "HertzEAClosedLoop"), values, stop_time, H, progress)
         theta = closed_loop.true_values({})
         title = f"HertzEAClosedLoop: {(law or Law.PAPER_CORRECTED).label}, reference {args.reference}"
@@ -285,11 +285,12 @@ def cmd_demo(args) -> int:
 def cmd_oafm(args) -> int:
     from vibromodel.analytic import OafmSettings
     from vibromodel.oafm import Grid
-    from vibromodel.parameters import Scene
+    from vibromodel.parameters import Scene, validate
 
     from .oafm_study import run_oafm
 
     scene = Scene().with_values(**parse_set(args.set))
+    validate(scene)
     settings = OafmSettings(basis=args.basis, order=args.order, tau_star=args.tau_star, tau_end=args.tau_end,
                             grid=Grid(panel=args.panel, nodes=args.nodes))
     orders = range(1, args.study_max_order + 1) if args.study_max_order else ()
@@ -324,11 +325,14 @@ def failed(check: dict | None, label: str) -> bool:
 
 def cmd_stability(args) -> int:
     from vibromodel.averaging import averaged, steady_states
-    from vibromodel.parameters import Scene
+    from vibromodel.parameters import Scene, validate
 
     from .stability import default_range, stability_study, write_study
 
     scene = Scene().with_values(**parse_set(args.set))
+    validate(scene)
+    if scene.omega <= 0:
+        raise UserError(f"the stability study needs a forcing frequency omega > 0, got omega = {scene.omega:g}")
     model = averaged(scene)
     if args.omega_range:
         (lo, hi), n = args.omega_range[:2], args.omega_range[2]
@@ -449,7 +453,8 @@ def closed_loop_options(p):
                    help="control law (default: paper-corrected; cosim: the scene's)")
     p.add_argument("--reference", choices=[k.name.lower() for k in ReferenceKind], default="errata",
                    help="monolithic: reference trajectory")
-    p.add_argument("--scene", default=str(DEFAULT_SCENE), help="cosim: scene file (TOML or JSON)")
+    p.add_argument("--scene", default=str(DEFAULT_SCENE),
+                   help=f"cosim: scene file (TOML or JSON; default: the {DEFAULT_SCENE.name} shipped with vibrofmu)")
     p.add_argument("--stop-time", type=positive, default=None, help="end of the run (default: 200 monolithic, "
                                                                     "the scene's for cosim)")
     p.add_argument("--no-study", action="store_true", help="cosim: skip the H convergence study")
