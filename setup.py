@@ -11,7 +11,26 @@ setup.py rather than pyproject.toml because the package list must be discovered 
 sub-package such as vibrofmu.study is shipped too) and combined with these two explicit mappings, which
 pyproject's static configuration cannot express. vibrofmu/paths.py finds the files in both layouts.
 """
+import shutil
+from pathlib import Path
+
 from setuptools import find_packages, setup
+from setuptools.command.build_py import build_py
+
+# setuptools' scratch folder: not ./build, which holds the FMUs `vibrofmu build` writes in a checkout.
+BUILD_BASE = ".setuptools-build"
+
+
+class FreshBuildPy(build_py):
+    """build_py from an empty folder: a file deleted from the sources must not linger in the next wheel
+    (setuptools copies into build/lib and never removes what is already there)."""
+
+    def run(self):
+        scratch = Path(BUILD_BASE).resolve()
+        if Path(self.build_lib).resolve().is_relative_to(scratch):  # never a folder of someone else's
+            shutil.rmtree(self.build_lib, ignore_errors=True)
+        super().run()
+
 
 C_FILES = ["*.c", "*.h", "**/*.c", "**/*.h", "**/*.py", "**/*.txt", "**/*.def", "**/*.supp"]
 
@@ -21,4 +40,6 @@ setup(
                  "vibrofmu.fmu_src": "fmu_src", "vibrofmu.c_host": "tests/c_host"},
     package_data={"vibrofmu": ["scenes/*"], "vibrofmu.fmu_src": C_FILES, "vibrofmu.c_host": C_FILES},
     exclude_package_data={"vibrofmu.fmu_src": ["vibromodel/**"]},  # vibromodel is installed as a package
+    cmdclass={"build_py": FreshBuildPy},
+    options={"build": {"build_base": BUILD_BASE}},
 )
