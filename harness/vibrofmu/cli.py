@@ -199,7 +199,8 @@ def cmd_closed_loop(args) -> int:
     progress = progress_printer("closed-loop")
     if args.mode == "monolithic":
         values = {"law": int(law or Law.PAPER_CORRECTED), "reference": int(ReferenceKind[args.reference.upper()])}
-        result = closed_loop.monolithic(checked_fmu(fmu_dir / CLOSED_LOOP_NAME, "HertzEAClosedLoop"), values, stop_time, H, progress)
+        fmu = checked_fmu(fmu_dir / CLOSED_LOOP_NAME, "HertzEAClosedLoop")
+        result = closed_loop.monolithic(fmu, values, stop_time, H, progress)
         theta = closed_loop.true_values({})
         title = f"HertzEAClosedLoop: {(law or Law.PAPER_CORRECTED).label}, reference {args.reference}"
         summary = {"mode": "monolithic", "parameters": values, "H": H, "rtol": closed_loop.TOLERANCE,

@@ -84,7 +84,8 @@ def export_lines(env: dict[str, str]) -> str:
 
 def compile_host(out_dir: Path) -> Path:
     host = Path(out_dir) / "fmi2_host"
-    cmd = [*paths.c_compiler(), "-O2", "-Wall", "-Wextra", f"-I{FMU_SRC}", "-o", str(host), str(HOST_SOURCE), "-ldl", "-lm"]
+    cmd = [*paths.c_compiler(), "-O2", "-Wall", "-Wextra", f"-I{FMU_SRC}", "-o", str(host), str(HOST_SOURCE),
+           "-ldl", "-lm"]
     proc = subprocess.run(cmd, capture_output=True, text=True)
     if proc.returncode != 0:
         raise RuntimeError(f"compiling the C host failed ({' '.join(cmd)}):\n{proc.stderr}")
