@@ -87,9 +87,10 @@ def test_wheel_installs_and_builds_anywhere(tmp_path):
     demo = run([vibrofmu, "demo"], cwd=work)
     assert demo.returncode == 0, demo.stderr
     assert (work / "build" / names[0]).is_file() and (work / "out" / "demo" / "x.png").is_file()
-    # the demo's table: the FMU (rtol 1e-10) against the rtol 1e-12 reference; test_accuracy bounds this error
+    # the demo: the FMU (DOP853, rtol 1e-10) against the rtol 1e-12 reference, the bound of
+    # test_accuracy.test_adaptive_rtol_1e10_is_within_1e9_of_the_reference (the same run, installed elsewhere)
     error = float(demo.stdout.split("max |x_FMU - x_ref| on [0, 200] = ")[1].split()[0])
-    assert error < 1e-8
+    assert error <= 1e-9
     # the FMUs were built from the installed package, not from this checkout
     assert "/fmu_src/" not in built.stdout + built.stderr
     site = run([str(venv / "bin" / "python"), "-c", "import vibrofmu.paths as p; print(p.FMU_SRC)"])
