@@ -61,6 +61,30 @@ def test_build_without_a_c_compiler(tmp_path, plant_fmu):
     assert np.array_equal(python_only.outputs["x"], compiled.outputs["x"])
 
 
+def test_the_wheel_alone_builds_the_fmus(tmp_path):
+    """The wheel's files suffice: unpacked, and imported without this checkout (python -S: no .pth files, so
+    not the editable install; the dependencies from this venv's site-packages), `vibrofmu build` makes
+    the three FMUs from the files in the wheel (a file the build reads that the wheel lacks fails here)."""
+    built = subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", "-w", str(tmp_path / "dist"),
+                            str(REPOSITORY)], capture_output=True, text=True, timeout=600)
+    assert built.returncode == 0, built.stderr
+    site = tmp_path / "site"
+    with zipfile.ZipFile(next((tmp_path / "dist").glob("*.whl"))) as wheel:
+        wheel.extractall(site)
+    dependencies = [p for p in sys.path if p.endswith("site-packages")]
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(site), *dependencies])}
+    work = tmp_path / "work"
+    work.mkdir()
+    where = subprocess.run([sys.executable, "-S", "-c", "import vibrofmu.paths as p; print(p.FMU_SRC, p.C_HOST_DIR)"],
+                           cwd=work, env=env, capture_output=True, text=True, check=True)
+    assert all(Path(folder).is_relative_to(site) for folder in where.stdout.split())
+    proc = subprocess.run([sys.executable, "-S", "-m", "vibrofmu.cli", "build", "--out-dir", "X"], cwd=work, env=env,
+                          capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr
+    for name in ("HertzEAOscillator.fmu", "AdaptiveLyapunovController.fmu", "HertzEAClosedLoop.fmu"):
+        assert validate_fmu(str(work / "X" / name)) == []
+
+
 @pytest.mark.slow
 def test_wheel_installs_and_builds_anywhere(tmp_path):
     """`pip wheel .`, the wheel into a fresh venv, then from an unrelated folder `vibrofmu build --out-dir X`
