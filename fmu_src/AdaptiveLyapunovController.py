@@ -9,12 +9,22 @@ theta of the model parameters (a diagnostic; only paper-literal also reads the t
 No physics here; the FMI error handling and the FMU state are slave_support.StatusSlave's; the state's model
 part is the estimates and the controller's time (HeldInputEstimator.snapshot), the inputs held over a step
 are FMI variables, the controller is rebuilt from the parameters.
-"""
-import numpy as np
-from pythonfmu import DefaultExperiment, Fmi2Causality, Real
 
+On the compiled kernel (parameter kernel = 0; vibromodel.compiled_loop.CompiledEstimator on
+fmu_src/core/controller.c) the inputs, outputs and estimates live in the kernel's memory: the status shim's fast
+path (fast_path.py) runs doStep, sets the inputs (recomputing U, e1, e2, V) and answers the output getters there
+without Python.
+"""
+from pathlib import Path
+
+import numpy as np
+from pythonfmu import DefaultExperiment, Fmi2Causality, Integer, Real
+
+import fast_path
 from slave_support import MODEL_PARAMETERS, StatusSlave
-from vibromodel.control import ESTIMATE_NAMES, HeldInputEstimator
+from vibromodel.compiled import load_library
+from vibromodel.compiled_loop import CONTROLLER_INPUTS, CONTROLLER_OUTPUTS, make_estimator
+from vibromodel.control import ESTIMATE_NAMES
 from vibromodel.parameters import ParameterError, Scene
 from vibromodel.plant import DEFAULT_EXPERIMENT, TIME_TOLERANCE
 
@@ -22,11 +32,15 @@ INPUTS = ("x", "v", "x_ref", "v_ref", "a_ref")
 OUTPUTS = ("U", "e1", "e2", "V")
 
 
-class AdaptiveLyapunovController(StatusSlave):
+class AdaptiveLyapunovController(fast_path.CompiledModelSlave, StatusSlave):
     author = "vibrofmu"
     description = "Adaptive Lyapunov tracking controller of the Hertzian-contact oscillator (ERRATA §3.5)"
     default_experiment = DefaultExperiment(*DEFAULT_EXPERIMENT)
-    state_format = "AdaptiveLyapunovController state 1"
+    state_format = "AdaptiveLyapunovController state 2"
+    MEMORY = CONTROLLER_INPUTS + CONTROLLER_OUTPUTS
+    FAST_OUTPUTS = CONTROLLER_OUTPUTS
+    FAST_INPUTS = CONTROLLER_INPUTS
+    x, v, x_ref, v_ref, a_ref, U, e1, e2, V = (fast_path.memory_variable(name) for name in INPUTS + OUTPUTS)
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
@@ -34,6 +48,7 @@ class AdaptiveLyapunovController(StatusSlave):
         for name in MODEL_PARAMETERS:
             self._parameter(Real, name, getattr(scene, name), "plant model parameter (regressor, true theta for V)")
         self._controller_parameters()
+        self._parameter(Integer, "kernel", 0, "0 compiled C controller (pure Python if it is missing), 1 pure Python")
         for name in INPUTS:
             setattr(self, name, 0.0)
             self.register_variable(Real(name, causality=Fmi2Causality.input,
@@ -49,7 +64,8 @@ class AdaptiveLyapunovController(StatusSlave):
         """The estimator of the current parameters and experiment; raises ParameterError for bad ones."""
         scene = Scene(**{name: float(getattr(self, name)) for name in MODEL_PARAMETERS})
         law, gains, estimates = self._controller_settings()
-        return HeldInputEstimator(scene, gains, law, estimates, float(self.start_time))
+        library, _ = load_library((Path(self.resources),) if self.resources else ())
+        return make_estimator(scene, gains, law, estimates, float(self.start_time), int(self.kernel), library)
 
     def _set_input(self, name, value):
         setattr(self, name, value)
@@ -64,6 +80,9 @@ class AdaptiveLyapunovController(StatusSlave):
 
     def _publish(self):
         """U, e1, e2, V at the controller's time from the current inputs and estimates."""
+        if self._kernel is not None:
+            self._kernel.publish()
+            return
         model, x, v, ref = self.model, float(self.x), float(self.v), self._reference()
         c, theta_hat = model.controller, model.theta_hat
         e1, e2 = c.errors(x, v, ref)
@@ -85,3 +104,7 @@ class AdaptiveLyapunovController(StatusSlave):
                 raise ParameterError(name, getattr(self, name), "input must be a finite number")
         self.model.advance(t, h, float(self.x), float(self.v), self._reference())
         self._publish()
+
+
+for _name in ESTIMATE_NAMES:  # the estimates' outputs, in the kernel's memory like the others
+    setattr(AdaptiveLyapunovController, _name, fast_path.memory_variable(_name))

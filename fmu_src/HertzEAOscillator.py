@@ -17,6 +17,7 @@ import fast_path
 from slave_support import STATUS_OK, StatusSlave
 from vibromodel.analytic import OafmSettings
 from vibromodel.compiled import CompiledPlant, load_library
+from vibromodel.compiled_open_loop import CompiledOpenLoopPlant
 from vibromodel.parameters import Scene, scene_names
 from vibromodel.plant import DEFAULT_EXPERIMENT, Settings, make_plant
 
@@ -68,8 +69,8 @@ class HertzEAOscillator(StatusSlave):
                         "4 OAFM analytic")
         self._solver_parameters(settings)
         self._parameter(Integer, "kernel", int(settings.kernel),
-                        "0 compiled C kernel (fidelities 0-2, adaptive solver; pure Python where it does not apply "
-                        "or is missing), 1 pure Python")
+                        "0 compiled C kernel (fidelities 0-2 with both solvers; 3 and 4: their per-output evaluation; "
+                        "pure Python where it is missing), 1 pure Python")
         self._parameter(Integer, "oafm_order", oafm.order, "fidelity 4: order of the harmonic OAFM basis")
         self._parameter(Real, "tau_star", oafm.tau_star, "fidelity 4: end of the transient domain; 0 = automatic")
         self._parameter(Real, "oafm_tau_end", oafm.tau_end,
@@ -115,7 +116,7 @@ class HertzEAOscillator(StatusSlave):
     def model(self, model):
         """A new model: a compiled one takes over the outputs and input and is handed to the shim."""
         self._model = model
-        self._kernel = model if isinstance(model, CompiledPlant) else None
+        self._kernel = model if isinstance(model, (CompiledPlant, CompiledOpenLoopPlant)) else None
         if self._kernel is not None:
             for name in (*OUTPUTS, "in_contact", "U"):
                 setattr(self, name, self._values[name])  # into the kernel's memory

@@ -57,7 +57,10 @@
  *                anything else forwards the call to the slave, which reports
  *                the failure the model left pending (or re-checks the input);
  *   fmi2GetReal / fmi2GetBoolean of outputs in the table are read from the
- *                model; any other reference forwards the whole call.
+ *                model; any other reference forwards the whole call;
+ *   fmi2SetReal  of inputs given with vibro_fast_path_inputs (the controller)
+ *                writes them to the model and calls inputs_set(model) (0:
+ *                done); any other reference forwards the whole call.
  * The slave reads and writes the same memory for every other call, so the
  * two paths never disagree.  fmi2Reset, fmi2SetFMUstate and fmi2FreeInstance
  * detach first (the slave may free the model); the slave attaches again when
@@ -240,7 +243,7 @@ static void load_inner(void)
 
 typedef enum { SHIM_OK, SHIM_ERROR, SHIM_FATAL } ShimState;
 
-#define FAST_MAX 8
+#define FAST_MAX 32 /* most Real (and Boolean) outputs served; fast_path.FAST_MAX */
 
 typedef struct {
     int (*step)(void *model, double t, double h); /* 0: the step is done */
@@ -250,6 +253,11 @@ typedef struct {
     fmi2ValueReference real_vr[FAST_MAX], boolean_vr[FAST_MAX];
     double *real[FAST_MAX];
     int64_t *boolean[FAST_MAX];
+    /* Real inputs (vibro_fast_path_inputs): written to the model, then inputs_set(model); 0 means done */
+    int (*inputs_set)(void *model);
+    size_t n_input;
+    fmi2ValueReference input_vr[FAST_MAX];
+    double *input[FAST_MAX];
 } FastPath;
 
 typedef struct {
@@ -342,6 +350,33 @@ EXPORT int vibro_fast_path_attach(int (*step)(void *, double, double), void *mod
     s->fast.enabled = enabled;
     s->fast.step = step;
     return 1;
+}
+
+/* After vibro_fast_path_attach, in the same forwarded call: the model's Real inputs, set by fmi2SetReal in C while
+   the fast path is enabled (then inputs_set(model) recomputes what depends on them; nonzero: the call is forwarded
+   to the slave as well, which sets the same values and reports). Returns 1 if taken. */
+EXPORT int vibro_fast_path_inputs(int (*inputs_set)(void *), size_t n_input, const unsigned int *input_vr,
+                                  double *const *input)
+{
+    Shim *s = calling_shim;
+    if (s == NULL || s->fast.step == NULL || inputs_set == NULL || n_input > FAST_MAX) return 0;
+    for (size_t i = 0; i < n_input; i++) {
+        s->fast.input_vr[i] = input_vr[i];
+        s->fast.input[i] = input[i];
+    }
+    s->fast.n_input = n_input;
+    s->fast.inputs_set = inputs_set;
+    return 1;
+}
+
+/* Serve a whole fmi2SetReal call in C, or return 0 (forward it). */
+static int fast_set_real(Shim *s, const fmi2ValueReference vr[], size_t nvr, const fmi2Real value[])
+{
+    if (!fast_enabled(s) || s->fast.inputs_set == NULL) return 0;
+    for (size_t i = 0; i < nvr; i++)
+        if (fast_index(s->fast.input_vr, s->fast.n_input, vr[i]) < 0) return 0;
+    for (size_t i = 0; i < nvr; i++) *s->fast.input[fast_index(s->fast.input_vr, s->fast.n_input, vr[i])] = value[i];
+    return s->fast.inputs_set(s->fast.model) == 0;
 }
 
 static void noop_logger(fmi2ComponentEnvironment e, fmi2String i, fmi2Status s, fmi2String c, fmi2String m, ...)
@@ -575,12 +610,17 @@ GETTER(Boolean, fmi2Boolean)
     EXPORT fmi2Status fmi2Set##Name(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const T value[]) \
     {                                                                                           \
         SHIM(c); ONLY_IN_OK("fmi2Set" #Name);                                                   \
+        FAST;                                                                                   \
         return settle(S, inner.Set##Name(S->inner, vr, nvr, value), 0);                         \
     }
+#define FAST if (fast_set_real(S, vr, nvr, value)) return fmi2OK
 SETTER(Real, fmi2Real)
+#undef FAST
+#define FAST
 SETTER(Integer, fmi2Integer)
 SETTER(Boolean, fmi2Boolean)
 SETTER(String, fmi2String)
+#undef FAST
 
 EXPORT fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *state)
 {

@@ -13,6 +13,7 @@ import pytest
 
 import vibrofmu
 from vibrofmu import bench
+from vibrofmu import ladder as ladder_module
 from vibrofmu.cli import main
 from vibrofmu.reference import reference_solution
 from vibromodel.parameters import Scene
@@ -208,3 +209,41 @@ def test_full_plan_covers_the_issues_grid():
     for r in (10 ** -6.5, 10 ** -8.5, 10 ** -10.5):  # the target's search between decades
         assert ("fmu", 0.1, 0, 0, r, 0.0, 0, None) in keys and ("floor", 0.1, 0, 0, r, 0.0, None, None) in keys
         assert ("solve_ivp", 0.1, 0, 0, r, 0.0, None, "LSODA") in keys
+
+
+def test_ladder_has_every_rung_in_both_hosts_with_its_error_and_the_acceptance_ratios(quick):
+    """The C-host and FMPy ladder (ladder.py): well-formed, errors consistent with the models (no timings asserted)."""
+    summary, stdout, _, out = quick
+    ladder = summary["ladder"]
+    assert ladder["quick"] and ladder["stop_time"] == bench.LADDER_QUICK_STOP
+    assert [r["rung"] for r in ladder["rungs"]] == [name for name, _, _ in ladder_module.RUNGS]
+    columns = [("C host", 0.1), ("C host", 1.0), ("FMPy", 1.0)]
+    for rung in ladder["rungs"]:
+        assert [(c["host"], c["interval"]) for c in rung["columns"]] == columns
+        for c in rung["columns"]:
+            assert c["outputs"] == round(ladder["stop_time"] / c["interval"])
+            assert math.isfinite(c["cost_per_output_seconds"]) and c["cost_per_output_seconds"] > 0
+            assert len(c["loop_seconds_runs"]) == ladder["repeats"] == bench.LADDER_QUICK_REPEATS
+            assert c["cost_per_output_seconds"] == pytest.approx(min(c["loop_seconds_runs"]) / c["outputs"])
+            assert math.isfinite(c["linf_x"]) and c["linf_x"] >= 0
+    errors = {r["rung"]: max(c["linf_x"] for c in r["columns"]) for r in ladder["rungs"]}
+    # the rungs' accuracy (README): exact and polynomial at the default rtol 1e-8; RK4 h = 0.01 (order 4) well
+    # below; f4 ~3e-9 and f3 ~4e-4 are model errors; the closed loop against its own tighter run
+    assert errors["averaged f3"] > 1e-5 > max(errors["exact f0"], errors["polynomial f1"], errors["analytic f4"])
+    assert errors["RK4 h = 0.01"] < 1e-8 and errors["closed loop"] < 1e-6
+    # the same FMU in two hosts gives the same x: the errors agree between the C host and FMPy at interval 1
+    for rung in ladder["rungs"]:
+        by_column = {(c["host"], c["interval"]): c["linf_x"] for c in rung["columns"]}
+        assert by_column["C host", 1.0] == by_column["FMPy", 1.0], rung["rung"]
+    assert {(a["rung"], a["host"], a["interval"]) for a in ladder["acceptance"]} == {
+        (rung, host, interval) for rung in ladder_module.LIMITS for host, interval in (("C host", 0.1), ("FMPy", 1.0))}
+    for a in ladder["acceptance"]:
+        base = next(r for r in ladder["rungs"] if r["rung"] == ladder_module.BASE)
+        rung = next(r for r in ladder["rungs"] if r["rung"] == a["rung"])
+        cost = {(c["host"], c["interval"]): c["cost_per_output_seconds"] for c in rung["columns"]}
+        base_cost = {(c["host"], c["interval"]): c["cost_per_output_seconds"] for c in base["columns"]}
+        ratio = cost[a["host"], a["interval"]] / base_cost[a["host"], a["interval"]]
+        assert a["ratio"] == pytest.approx(ratio) and a["met"] == (ratio <= a["limit"])
+    assert "speed-accuracy ladder" in stdout and "averaged f3 / exact f0 (C host, interval 0.1)" in stdout
+    image = matplotlib.image.imread(out / "ladder.png")
+    assert image.ndim == 3 and image.shape[0] > 200 and image.shape[1] > 600

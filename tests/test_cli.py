@@ -8,18 +8,24 @@ from vibrofmu.cli import main
 
 
 def test_simulate_with_compare_writes_all_results(tmp_path, plant_fmu, capsys):
+    from vibrofmu import simulate
+
+    simulate._NOTED.clear()  # the note is printed once per process: forget earlier tests' runs
     out = tmp_path / "run"
     code = main(["simulate", "--fmu", str(plant_fmu), "--fidelity", "polynomial", "--solver", "rk4",
                  "--max-step", "0.05", "--set", "Delta=0.001", "--stop-time", "20", "--output-interval", "0.1",
                  "--compare", "--out", str(out)])
     assert code == 0
-    assert "warning: beta^2" in capsys.readouterr().err  # the paper's set violates beta^2 = 8 alpha gamma
+    err = capsys.readouterr().err
+    # the paper's set violates beta^2 = 8 alpha gamma: an explained note, not a warning
+    assert "note: beta^2" in err and "no pair of bias and AC voltages" in err and "warning: beta" not in err
     header = (out / "result.csv").read_text().splitlines()[0].split(",")
     assert header == ["time", "x", "v", "a", "F_contact", "F_electrostatic", "in_contact"]
     data = np.loadtxt(out / "result.csv", delimiter=",", skiprows=1)
     # the last time is the FMU's clock t + h = 19.9 + 0.1: within one rounding of 20
     assert data.shape == (201, 7) and data[-1, 0] == pytest.approx(20.0, rel=1e-15)
     summary = json.loads((out / "summary.json").read_text())
+    assert summary["notes"] and summary["notes"][0].startswith("beta^2")
     assert summary["parameters"]["Delta"] == 0.001
     assert summary["settings"]["fidelity"] == 1 and summary["settings"]["solver"] == 1
     assert summary["completed"] and summary["wall_time_s"] > 0
@@ -36,3 +42,12 @@ def test_simulate_reports_an_early_stop(tmp_path, plant_fmu, capsys):
     assert "stopped at tau = " in err and "pull-in" in err
     summary = json.loads((tmp_path / "pull" / "summary.json").read_text())
     assert not summary["completed"] and "pull-in" in summary["stop_reason"]
+
+
+def test_the_beta_note_is_printed_once_per_process(tmp_path, plant_fmu, capsys):
+    from vibrofmu import simulate
+
+    simulate._NOTED.clear()
+    for run in ("a", "b"):
+        assert main(["simulate", "--fmu", str(plant_fmu), "--stop-time", "1", "--out", str(tmp_path / run)]) == 0
+    assert capsys.readouterr().err.count("note: beta^2") == 1

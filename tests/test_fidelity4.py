@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 
 from vibromodel.analytic import OafmSettings, covering, solve
+from vibromodel.compiled_open_loop import OafmProgram, oafm_hints
 from vibromodel.parameters import Scene
 from vibrofmu.cli import main
 from vibrofmu.oafm_study import fmu_check
@@ -12,14 +13,21 @@ from vibrofmu.run import run_fmu
 
 
 def test_default_scene_uses_the_packed_fit_and_matches_the_harness(run_plant):
-    run = run_plant(200.0, 0.1, fidelity=4)
-    assert run.completed
-    assert "resources/oafm_cache" in run.log[0]  # no fit at initialisation for the default scene
     scene = Scene()
-    expected = solve(scene, covering(scene, OafmSettings(), 200.0))(run.time)
-    # same closed form, same C_i, same times (the FMU's clock t + h), same summation order: same bits
-    assert np.array_equal(run.outputs["x"], expected[0]) and np.array_equal(run.outputs["v"], expected[1])
-    assert np.array_equal(run.outputs["a"], expected[2])
+    solution = solve(scene, covering(scene, OafmSettings(), 200.0))
+    for kernel in (1, 0):
+        run = run_plant(200.0, 0.1, fidelity=4, kernel=kernel)
+        assert run.completed
+        assert "resources/oafm_cache" in run.log[0]  # no fit at initialisation for the default scene
+        expected = solution(run.time)
+        if kernel == 1:  # same closed form, same C_i, same times (the FMU's clock t + h), same summation: same bits
+            for name, values in zip(("x", "v", "a"), expected):
+                assert np.array_equal(run.outputs[name], values), name
+        else:  # the C evaluator's recurrences: within their derived bound (tests/test_rungs.py)
+            program = OafmProgram(solution, *oafm_hints(scene))
+            bound = np.array([program.error_bound(t) for t in run.time])
+            for name, values in zip(("x", "v", "a"), expected):
+                assert np.all(np.abs(run.outputs[name] - values) <= bound), name
 
 
 def test_other_scene_is_fitted_at_initialisation_and_covers_the_stop_time(run_plant):

@@ -25,6 +25,14 @@ FIT_SOURCES = ("analytic.py", "closedform.py", "oafm.py", "oafm_bases.py", "mode
 FREE_DECAY_SPAN = 20.0  # tau_end - tau* = FREE_DECAY_SPAN / mu: the free vibration decays by e^-10 ...
 MAX_STEADY_SPAN = 1000.0  # ... but at most this long (light damping: the fit would grow without bound)
 FORCED_FLOOR = 1e-3  # without forcing, tau* is where the free vibration has decayed to this fraction
+# The fit's memory and time grow with its span (grid points x unknowns: ~60 kB and ~2 ms per unit of tau on the
+# paper example; 1e4 took 19 s and 635 MB, 1e6 more than 20 GB): a longer span is refused up front. Beyond the fit
+# the last piece extrapolates the steady vibration (see the module docstring), so a long run sets oafm_tau_end.
+MAX_FIT_SPAN = 2000.0
+# A forcing frequency whose term turns by less than this many cycles over the fit cannot be told from a constant
+# by the fit's basis (harmonics nu and nu + omega become collinear): refused (omega or Omega = 5e-324 made the
+# fit's residual NaN and the least-squares loop run for minutes).
+MIN_TURNS = 1e-3
 
 
 @dataclass(frozen=True)
@@ -71,13 +79,35 @@ def _require_damping(scene: Scene, name: str) -> None:
         raise ParameterError(name, 0.0, f"automatic {name} needs damping mu > 0 (mu = {scene.mu:g}); give it")
 
 
-def covering(scene: Scene, settings: OafmSettings, span: float | None) -> OafmSettings:
+def covering(scene: Scene, settings: OafmSettings, span: float | None, strict: bool = False) -> OafmSettings:
     """Settings whose fit reaches at least `span` past the start (an FMU's stop time): no extrapolation
-    inside the experiment. Explicit tau_star / tau_end are kept; automatic ones are resolved to numbers."""
+    inside the experiment. Explicit tau_star / tau_end are kept; automatic ones are resolved to numbers.
+    A span beyond MAX_FIT_SPAN: strict (the plant at fidelity 4) raises ParameterError (stopTime); otherwise (a
+    reference) the fit stops at MAX_FIT_SPAN and the steady piece extrapolates beyond it."""
     if settings.tau_end:
         return settings
     tau_star, tau_end = domains(scene, settings)
+    if span is not None and span > max(tau_end, MAX_FIT_SPAN):
+        if not strict:
+            return dataclasses.replace(settings, tau_star=tau_star, tau_end=max(tau_end, MAX_FIT_SPAN))
+        raise ParameterError("stopTime", span, f"fidelity 4 fits its solution over the whole experiment, at most "
+                             f"tau = {MAX_FIT_SPAN:g} past the start (memory and set-up time grow with it); set "
+                             f"oafm_tau_end <= {MAX_FIT_SPAN:g} to fit that far and extrapolate the steady vibration "
+                             "beyond it, or use fidelity 0-3")
     return dataclasses.replace(settings, tau_star=tau_star, tau_end=max(tau_end, span or 0.0))
+
+
+def check_affordable(scene: Scene, tau_end: float) -> None:
+    """Raise ParameterError unless a fit to tau_end (from the start) is within MAX_FIT_SPAN and resolves the
+    forcing frequencies of the scene (MIN_TURNS cycles over the fit)."""
+    if tau_end > MAX_FIT_SPAN:
+        raise ParameterError("oafm_tau_end", tau_end, f"the OAFM fit covers at most tau = {MAX_FIT_SPAN:g} (memory "
+                             "and set-up time grow with it); beyond the fit the solution extrapolates its steady piece")
+    for name, value, used in (("omega", scene.omega, scene.Delta != 0.0),
+                              ("Omega", scene.Omega, scene.beta != 0.0 or scene.gamma != 0.0)):
+        if used and value * tau_end < 2.0 * math.pi * MIN_TURNS:
+            raise ParameterError(name, value, f"fidelity 4 needs its forcing to turn by at least {MIN_TURNS:g} cycles "
+                                 f"over the fit (tau = {tau_end:g}): {name} >= {2 * math.pi * MIN_TURNS / tau_end:.3g}")
 
 
 def domains(scene: Scene, settings: OafmSettings) -> tuple[float, float]:
@@ -110,6 +140,7 @@ def assemble(scene: Scene, settings: OafmSettings, t0: float, C: list) -> Analyt
 def _chain(scene: Scene, settings: OafmSettings, t0: float, make_piece) -> AnalyticSolution:
     """Domain after domain, each starting from the previous one's x~, x~' at its end."""
     tau_star, tau_end = domains(scene, settings)
+    check_affordable(scene, tau_end)
     pieces, x, v, start = [], scene.x_start, scene.v_start, t0
     for i, (make_basis, end) in enumerate(zip(FAMILIES[settings.basis], (t0 + tau_star, t0 + tau_end))):
         basis = make_basis(scene, start, x, v, settings.order)

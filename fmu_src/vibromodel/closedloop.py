@@ -27,7 +27,7 @@ from .tracking import ReferenceSettings, make_reference
 ERRATA_SCENE = Scene(x_start=0.06, v_start=0.01)
 PLANT_FIDELITIES = (Fidelity.EXACT, Fidelity.POLYNOMIAL, Fidelity.POLYNOMIAL_PAPER)
 # What a snapshot leaves out: built by the constructor (_stage is a cache of the last stage's control U).
-LOOP_REBUILT = ("model", "controller", "reference", "integrator", "_stage", "warnings")
+LOOP_REBUILT = ("scene", "settings", "loop", "model", "controller", "reference", "integrator", "_stage", "warnings")
 
 
 @dataclass(frozen=True)
@@ -54,6 +54,7 @@ class ClosedLoop:
         loop.validate()
         if settings.fidelity not in PLANT_FIDELITIES:
             raise ParameterError("fidelity", settings.fidelity, "the closed loop's plant must be 0, 1 or 2")
+        self.scene, self.settings, self.loop = scene, settings, loop
         self.model = make_model(scene, settings.fidelity)
         self.controller = Controller(scene, loop.gains, loop.law)
         self.reference, note = make_reference(scene, loop.reference, t0, stop_time, cache_dirs)
@@ -85,13 +86,17 @@ class ClosedLoop:
     def do_step(self, t: float, h: float) -> dict:
         """Advance from the communication point t to t + h. Raises ParameterError for a bad step,
         IntegrationError (TerminalEvent for pull-in) when the loop cannot be advanced."""
+        self.check_step(t, h)
+        self.integrator.advance(t + h)
+        self.t = t + h
+        return self.outputs()
+
+    def check_step(self, t: float, h: float) -> None:
+        """ParameterError for a step the loop refuses (what the compiled loop's do_step checks too)."""
         if not (math.isfinite(h) and h > 0.0):
             raise ParameterError("communicationStepSize", h, "must be a finite number > 0")
         if not (math.isfinite(t) and abs(t - self.t) <= TIME_TOLERANCE * max(1.0, abs(t))):
             raise ParameterError("currentCommunicationPoint", t, f"the closed loop is at tau = {self.t!r}")
-        self.integrator.advance(t + h)
-        self.t = t + h
-        return self.outputs()
 
     def snapshot(self) -> dict:
         """Everything that decides the loop's future beyond its constructor's arguments, as plain data."""

@@ -1,8 +1,8 @@
-"""The plant of fidelities 0, 1 and 2 with the adaptive solver on the compiled kernel (vibrokernel.c).
+"""The plant of fidelities 0, 1 and 2 with DOP853 or RK4 on the compiled core (fmu_src/core, vibrokernel.so).
 
-CompiledPlant has plant.Plant's interface and gives the same bits: the kernel ports integrate.Dop853, the
+CompiledPlant has plant.Plant's interface and gives the same bits: the core ports integrate.Dop853 and Rk4, the
 models and Plant.do_step operation for operation. Its whole state is one ctypes structure without pointers
-(VkPlant of vibrokernel.h), so a snapshot is the structure's bytes, and the FMU's C fast path can step it
+(VkPlant of core/plant.h), so a snapshot is the structure's bytes, and the FMU's C fast path can step it
 directly at `address`. Errors the kernel meets are left pending in the structure and raised here as the
 Python plant raises them (TerminalEvent, IntegrationError, or the plain exception Python lets escape).
 
@@ -16,24 +16,26 @@ from pathlib import Path
 
 import numpy as np
 
-from . import plant
+from . import settings as plant
+from .fidelities import entry
 from .integrate import ATOL_PER_RTOL, IntegrationError, TerminalEvent
-from .models import Fidelity, make_model, pull_in_slope
+from .models import pull_in_slope
 from .parameters import PULL_IN_GAP, validate
-from .plant import Outputs, Settings, Solver, check_step, checked_settings
+from .settings import Outputs, Settings, Solver, check_step, checked_settings
 
 LIBRARY_NAME = "vibrokernel.so"
 
-# vibrokernel.h: return codes and array sizes
+# core/plant.h: return codes; core/dop853.h: array sizes
 VK_OK, VK_BAD_STEP, VK_BAD_INPUT, VK_TOO_MANY_STEPS, VK_BAD_TIME, VK_TERMINAL, VK_FAILED, VK_RAISED = range(8)
 PRE_CHECK_CODES = {VK_BAD_STEP: "VK_BAD_STEP", VK_BAD_INPUT: "VK_BAD_INPUT", VK_TOO_MANY_STEPS: "VK_TOO_MANY_STEPS",
                    VK_BAD_TIME: "VK_BAD_TIME"}
-VK_STAGES, VK_DENSE, VK_MESSAGE = 16, 7, 480
+DOP_MAX_DIM, DOP_MAX_EVENTS, DOP_STAGES, DOP_DENSE, VK_MESSAGE = 16, 4, 16, 7, 480
 # VK_RAISED's message is "<type>: <text>", the exception's one argument, but for OverflowError "<errno> <strerror>",
 # its two (CPython's float_pow raises PyErr_SetFromErrno(OverflowError)).
 RAISED_TYPES = {kind.__name__: kind for kind in (ZeroDivisionError, ValueError, RuntimeError)}
 
 _double, _int = ctypes.c_double, ctypes.c_int64
+_vector = _double * DOP_MAX_DIM
 
 
 def _doubles(*names):
@@ -44,20 +46,45 @@ def _ints(*names):
     return [(name, _int) for name in names]
 
 
-class VkPlant(ctypes.Structure):
-    """vibrokernel.h's VkPlant, field for field (checked against the library by check_layout)."""
+class DopEvent(ctypes.Structure):
+    """core/dop853.h's DopEvent: g(y) = c0 + c . y"""
+    _fields_ = [("c0", _double), ("c", _vector), ("terminal", _int)]
 
+
+class Dop853State(ctypes.Structure):
+    """core/dop853.h's Dop853 (configuration, then state from `t` on)."""
+    _fields_ = [
+        *_ints("n", "n_events"), *_doubles("rtol", "atol", "max_step", "step_budget"),
+        ("events", DopEvent * DOP_MAX_EVENTS),
+        *_doubles("t", "h"), ("y", _vector), ("f", _vector), ("t_old", _double), ("y_old", _vector), ("f_old", _vector),
+        ("k", (_double * DOP_STAGES) * DOP_MAX_DIM), ("dense", (_double * DOP_DENSE) * DOP_MAX_DIM), ("stop_t", _double), ("stop_y", _vector),
+        *_ints("has_old", "n_stages", "dense_ready", "stopped"), ("side", _int * DOP_MAX_EVENTS),
+        *_ints("nfev", "n_steps"),
+    ]
+
+
+class Rk4State(ctypes.Structure):
+    """core/rk4.h's Rk4."""
+    _fields_ = [*_ints("n", "n_events"), ("max_step", _double), ("events", DopEvent * DOP_MAX_EVENTS),
+                ("t", _double), ("y", _vector), *_ints("nfev", "n_steps")]
+
+
+class VkModel(ctypes.Structure):
+    """core/model.h's VkModel."""
     _fields_ = [
         *_doubles("mu", "Delta", "omega", "alpha", "beta", "gamma", "Omega", "R"),
         ("poly", _double * 6), ("g1", _double * 6), ("g2", _double * 6), ("g3", _double * 6),
         *_doubles("pull_in_c", "pull_in_gap"),
         *_ints("polynomial", "load_forcing", "electrostatics", "ac"),
-        *_doubles("rtol", "atol", "max_step", "step_budget", "time_tolerance", "max_steps_per_dostep"),
-        *_doubles("t", "x", "v", "U", "a", "h", "t_old", "x_old", "v_old", "a_old"),
-        ("kx", _double * VK_STAGES), ("kv", _double * VK_STAGES),
-        ("fx", _double * VK_DENSE), ("fv", _double * VK_DENSE),
-        *_doubles("stop_t", "stop_x", "stop_v"),
-        *_ints("has_old", "n_stages", "dense_ready", "contact_side", "stopped", "nfev", "n_steps"),
+    ]
+
+
+class VkPlant(ctypes.Structure):
+    """core/plant.h's VkPlant, field for field (checked against the library by check_layout)."""
+
+    _fields_ = [
+        ("model", VkModel), *_doubles("time_tolerance", "max_steps_per_dostep"), ("solver", _int),
+        ("dop", Dop853State), ("rk4", Rk4State), ("U", _double),
         *_doubles("plant_t", "U_input"), ("out", _double * 5), *_ints("in_contact", "enabled", "error"),
         *_doubles("error_t", "error_x", "error_v"), ("message", ctypes.c_char * VK_MESSAGE),
     ]
@@ -68,6 +95,8 @@ def _declare(library) -> None:
     address, d, status, doubles = ctypes.c_void_p, _double, ctypes.c_int, ctypes.POINTER(_double)
     signatures = {
         "vk_layout": (ctypes.c_size_t, [ctypes.POINTER(ctypes.c_size_t), ctypes.c_size_t]),
+        "vk_sizes": (None, [ctypes.POINTER(ctypes.c_size_t)]),
+        "vk_init": (status, [address, d, d, d]),
         "vk_restart": (status, [address, d, d, d, d]),
         "vk_set_input": (status, [address, d, d]),
         "vk_advance": (status, [address, d]),
@@ -85,7 +114,8 @@ def _declare(library) -> None:
 
 
 def check_layout(library) -> str | None:
-    """None if the library's VkPlant has this module's size and field offsets, else what differs."""
+    """None if the library's VkPlant has this module's size and field offsets (and its solver structures theirs),
+    else what differs."""
     fields = VkPlant._fields_
     offsets = (ctypes.c_size_t * len(fields))()
     size = library.vk_layout(offsets, len(fields))
@@ -96,6 +126,12 @@ def check_layout(library) -> str | None:
     for (name, _), offset in zip(fields, offsets):
         if getattr(VkPlant, name).offset != offset:
             return f"VkPlant.{name} is at offset {offset} in the kernel, {getattr(VkPlant, name).offset} here"
+    sizes = (ctypes.c_size_t * 5)()
+    library.vk_sizes(sizes)
+    expected = (ctypes.sizeof(Dop853State), ctypes.sizeof(Rk4State), ctypes.sizeof(VkModel), Dop853State.t.offset,
+                Rk4State.t.offset)
+    if tuple(sizes) != expected:
+        return f"the solver structures' sizes are {tuple(sizes)} in the kernel, {expected} here"
     return None
 
 
@@ -118,46 +154,64 @@ def load_library(directories) -> tuple[ctypes.CDLL | None, str]:
 
 
 def supports(settings: Settings) -> bool:
-    """CompiledPlant runs fidelities 0, 1, 2 with the adaptive solver."""
-    return settings.fidelity in (Fidelity.EXACT, Fidelity.POLYNOMIAL, Fidelity.POLYNOMIAL_PAPER) \
-        and settings.solver == Solver.ADAPTIVE
+    """CompiledPlant runs the fidelities with a compiled model (fidelities registry) with either solver."""
+    return entry(settings.fidelity).compiled_model is not None and settings.solver in (Solver.ADAPTIVE, Solver.RK4)
 
 
-def _model_fields(scene, model) -> dict:
+def _model_fields(scene, model, polynomial: int) -> dict:
     """The model's constants and switches (models.ExactModel / PolynomialModel: the terms they evaluate)."""
     fields = {name: getattr(scene, name) for name in ("mu", "Delta", "omega", "alpha", "beta", "gamma", "Omega", "R")}
     ac = scene.beta != 0.0 or scene.gamma != 0.0
     fields.update(pull_in_c=pull_in_slope(scene.R), pull_in_gap=PULL_IN_GAP, load_forcing=scene.Delta != 0.0, ac=ac)
-    if model.fidelity == Fidelity.EXACT:
+    if not polynomial:
         fields.update(polynomial=0, electrostatics=scene.alpha != 0.0 or ac)
     else:
         fields.update(polynomial=1, electrostatics=ac, poly=model.a, g1=model.g1, g2=model.g2, g3=model.g3)
     return fields
 
 
+def _constant_ranges():
+    """Byte ranges of VkPlant that parameters and settings fix: model and settings, each solver's configuration."""
+    return ((0, VkPlant.dop.offset + Dop853State.t.offset),
+            (VkPlant.rk4.offset, VkPlant.rk4.offset + Rk4State.t.offset))
+
+
 class CompiledPlant:
-    """plant.Plant for fidelities 0, 1, 2 with the adaptive solver, on the kernel `library` (load_library)."""
+    """plant.Plant for fidelities 0, 1, 2 with either solver, on the kernel `library` (load_library)."""
 
     def __init__(self, scene, settings: Settings, library, t0: float = 0.0):
         validate(scene)
         settings, self.warnings = checked_settings(scene, settings)  # what Plant runs with (rtol clamped)
         if not supports(settings):
-            raise ValueError(f"the compiled plant runs fidelities 0, 1, 2 with the adaptive solver, not fidelity "
-                             f"{settings.fidelity} with solver {settings.solver}")
-        model = make_model(scene, settings.fidelity)
+            raise ValueError(f"the compiled plant runs fidelities 0, 1, 2, not fidelity {settings.fidelity}")
+        level = entry(settings.fidelity)
+        model = level.model(scene)
         self.scene, self.settings, self.notes = scene, settings, []
         self._library = library
         self._plant = VkPlant()
         self._address = ctypes.addressof(self._plant)
         max_step = settings.max_step or math.inf  # as Plant gives Dop853
-        for name, value in _model_fields(scene, model).items():
-            setattr(self._plant, name, value if isinstance(value, (int, float)) else (_double * 6)(*value))
-        for name, value in dict(rtol=settings.rtol, atol=settings.rtol * ATOL_PER_RTOL, max_step=max_step,
-                                step_budget=plant.MAX_STEPS_PER_DOSTEP, time_tolerance=plant.TIME_TOLERANCE,
-                                max_steps_per_dostep=plant.MAX_STEPS_PER_DOSTEP, plant_t=t0, U_input=0.0,
-                                enabled=1).items():
+        model_struct = self._plant.model
+        for name, value in _model_fields(scene, model, level.compiled_model).items():
+            setattr(model_struct, name, value if isinstance(value, (int, float)) else (_double * 6)(*value))
+        dop, rk4 = self._plant.dop, self._plant.rk4
+        dop.rtol, dop.atol, dop.max_step = settings.rtol, settings.rtol * ATOL_PER_RTOL, max_step
+        dop.step_budget = plant.MAX_STEPS_PER_DOSTEP
+        rk4.max_step = settings.max_step or plant.RK4_DEFAULT_STEP  # as Plant gives Rk4
+        self._plant.solver = int(settings.solver)
+        for name, value in dict(time_tolerance=plant.TIME_TOLERANCE, max_steps_per_dostep=plant.MAX_STEPS_PER_DOSTEP,
+                                plant_t=t0, U_input=0.0, enabled=1).items():
             setattr(self._plant, name, value)
-        self._check(library.vk_restart(self._address, t0, scene.x_start, scene.v_start, 0.0))
+        self._check(library.vk_init(self._address, t0, scene.x_start, scene.v_start))
+
+    @property
+    def _solver(self):
+        return self._plant.rk4 if self._plant.solver == Solver.RK4 else self._plant.dop
+
+    @property
+    def max_step(self) -> float:
+        """The solver's step ceiling (inf: none), as integrator.max_step."""
+        return self._solver.max_step
 
     # -- the plant's time, input, counters and address -------------------------------------------------------
     @property
@@ -170,11 +224,11 @@ class CompiledPlant:
 
     @property
     def nfev(self) -> int:
-        return self._plant.nfev
+        return self._solver.nfev
 
     @property
     def n_steps(self) -> int:
-        return self._plant.n_steps
+        return self._solver.n_steps
 
     # -- what the FMU slave and its C fast path (fast_path.py) read and write ---------------------------------
     @property
@@ -288,8 +342,8 @@ class CompiledPlant:
             data = b""
         if len(data) != ctypes.sizeof(VkPlant):
             raise ValueError("not a snapshot of a CompiledPlant")
-        constants = VkPlant.t.offset  # the model and settings precede the integrator
-        if data[:constants] != ctypes.string_at(self._address, constants):
+        current = ctypes.string_at(self._address, len(data))
+        if any(data[start:end] != current[start:end] for start, end in _constant_ranges()):
             raise ValueError("the snapshot is of a compiled plant with other parameters or settings")
         ctypes.memmove(self._address, data, len(data))
 
@@ -301,7 +355,7 @@ class CompiledPlant:
 
     def _refused(self, code: int, t: float, h: float, U: float) -> None:
         """A pre-check refused the step: raise Plant's ParameterError for it."""
-        check_step(self.t, t, h, U, self._plant.max_step)
+        check_step(self.t, t, h, U, self.max_step)
         raise RuntimeError(f"vibrokernel refused the step with {PRE_CHECK_CODES[code]}, but plant.check_step "
                            f"accepts it (a kernel bug)")
 

@@ -126,6 +126,15 @@ class Regressor:
                          h - G3 * _trig_integral(math.cos, self.w_gamma, t, h)])
 
 
+def _dot(a, b) -> float:
+    """sum a_i b_i left to right from 0.0: an explicit order, so that the compiled controller (fmu_src/core/
+    controller.c) gives the same bits (numpy's @ may use BLAS, and Python 3.12's sum() compensates)."""
+    total = 0.0
+    for p, q in zip(a, b):
+        total += float(p) * float(q)
+    return total
+
+
 def _trig_integral(trig, nu: float, t: float, h: float) -> float:
     """int_t^(t+h) trig(nu s) ds = h trig(nu (t + h/2)) sinc(nu h/2) for trig = cos, sin (exact; fine at nu -> 0)."""
     y = 0.5 * nu * h
@@ -143,6 +152,7 @@ class Controller:
         lambdas = np.array(gains.lambdas)
         self.l1, self.l2, self.Lambda = lambdas[0], lambdas[1], lambdas[2:]
         self.adaptation = self.l2 / self.Lambda  # lambda2 Lambda^-1
+        self.promised_e1 = float(-self.l1**1.5 / math.sqrt(self.l2))  # Eq. 85: V' = promised_e1 e1^2
         literal = self.law is Law.PAPER_LITERAL
         try:
             self.theta = true_theta(scene)
@@ -166,7 +176,7 @@ class Controller:
         if self.true_delta is not None:
             theta_hat = np.array(theta_hat)
             theta_hat[DELTA] = self.true_delta
-        U = -float(phi @ theta_hat) + ref[2] - self.c * e2
+        U = -_dot(phi, theta_hat) + ref[2] - self.c * e2
         if self.law is Law.DAMPED:
             U -= self.gains.k_damping * e2
         return U
@@ -185,7 +195,7 @@ class Controller:
     def lyapunov(self, e1: float, e2: float, theta_hat) -> float:
         """V of Eq. 76."""
         tilde = np.asarray(theta_hat) - self.theta
-        return 0.5 * (self.l1 * e1 * e1 + self.l2 * e2 * e2 + float(self.Lambda @ (tilde * tilde)))
+        return 0.5 * (self.l1 * e1 * e1 + self.l2 * e2 * e2 + _dot(self.Lambda, tilde * tilde))
 
     def lyapunov_rate(self, x: float, v: float, accel: float, ref, theta_hat, theta_hat_rate) -> float:
         """dV/dt by the chain rule along the trajectory: accel = x2' of the plant (with U),
@@ -194,14 +204,14 @@ class Controller:
         de1 = v - ref[1]
         de2 = accel - ref[2] + self.c * de1
         tilde = np.asarray(theta_hat) - self.theta
-        return self.l1 * e1 * de1 + self.l2 * e2 * de2 + float(self.Lambda @ (tilde * theta_hat_rate))
+        return self.l1 * e1 * de1 + self.l2 * e2 * de2 + _dot(self.Lambda, tilde * theta_hat_rate)
 
     def promised_rate(self, e1: float, e2: float) -> float:
         """The V' the law promises: Eq. 85 -lambda1^(3/2) lambda2^(-1/2) e1^2 (paper-corrected and, as claimed by
         the paper, paper-literal); -lambda1 c e1^2 - lambda2 k e2^2 for the damped law (ERRATA §3.5)."""
         if self.law is Law.DAMPED:
             return -self.l1 * self.c * e1 * e1 - self.l2 * self.gains.k_damping * e2 * e2
-        return -self.l1**1.5 / math.sqrt(self.l2) * e1 * e1
+        return self.promised_e1 * e1 * e1
 
 
 class HeldInputEstimator:

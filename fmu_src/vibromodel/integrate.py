@@ -75,16 +75,86 @@ SAFETY, MIN_FACTOR, MAX_FACTOR = 0.9, 0.2, 10.0
 ERROR_EXPONENT = -1.0 / 8.0  # error estimator of order 7
 ATOL_PER_RTOL = 1e-2  # atol = 1e-2 rtol: the response is O(1e-2), so rtol alone would be too loose
 
+# Event location (docs/events.md). The dense output of a step is a polynomial of degree 7 in the step
+# fraction s; an affine event function g of it is one too, and its 8 Bernstein coefficients on an interval
+# bound it there (convex hull). A step is searched by bisecting [0, 1] (left half first) until every piece
+# is either proved free of the event by its coefficients or its end is found on the event's far side.
+# Pieces shorter than 2^-EVENT_MAX_DEPTH of the step are not split further (a tangential touch).
+EVENT_MAX_DEPTH = 40
+# A step is searched only if g comes within EVENT_SCREEN * (|g(end) - g(start)| + h (|g'(start)| + |g'(end)|))
+# of 0 at one of its ends (or changes side): a step's motion of g stays within half that bound for a
+# parabolic arc, so the screen keeps a factor 4 on it (docs/events.md).
+EVENT_SCREEN = 2.0
+
+
+def _bernstein_matrix():
+    """M[j][k]: Bernstein coefficient k (degree 7) of the j-th term s^a (1-s)^b of the dense output
+    (scipy's Dop853DenseOutput: F0 s + F1 s(1-s) + F2 s^2(1-s) + F3 s^2(1-s)^2 + ... + F6 s^4(1-s)^3)."""
+    from fractions import Fraction
+    from math import comb
+
+    powers = ((1, 0), (1, 1), (2, 1), (2, 2), (3, 2), (3, 3), (4, 3))
+    rows = []
+    for a, b in powers:
+        row = [Fraction(0)] * 8
+        for m in range(8 - a - b):  # s^a (1-s)^b (s + 1 - s)^(7-a-b)
+            row[a + m] += Fraction(comb(7 - a - b, m), comb(7, a + m))
+        rows.append(tuple(float(value) for value in row))
+    return tuple(rows)
+
+
+BERNSTEIN = _bernstein_matrix()
+
 
 def _dot(coefficients, values):
-    return sum(c * k for c, k in zip(coefficients, values))
+    """sum(c * k) over the shorter of the two sequences, left to right from 0.0 (a specified order: CPython's
+    sum() of floats is compensated from 3.12 on, and the C twin must give the same bits)."""
+    total = 0.0
+    for c, k in zip(coefficients, values):
+        total += c * k
+    return total
+
+
+def _norm(values):
+    """math.hypot(*values): the same function as the C twin's py_hypot (CPython's vector_norm)."""
+    return math.hypot(*values)
+
+
+def _monotone(b):
+    """Whether Bernstein coefficients b rise or fall strictly (then so does their polynomial: its derivative's
+    coefficients are their differences)."""
+    rising = falling = True
+    for k in range(len(b) - 1):
+        rising = rising and b[k + 1] > b[k]
+        falling = falling and b[k + 1] < b[k]
+    return rising or falling
+
+
+def _split(b):
+    """de Casteljau at s = 1/2: the Bernstein coefficients of the left and right halves."""
+    b = list(b)
+    degree = len(b) - 1
+    left, right = [b[0]], [b[-1]]
+    for r in range(1, degree + 1):
+        for k in range(degree + 1 - r):
+            b[k] = 0.5 * (b[k] + b[k + 1])
+        left.append(b[0])
+        right.append(b[degree - r])
+    right.reverse()
+    return left, right
 
 
 class Dop853:
     """Adaptive DOP853 with dense output and event location; restartable between doSteps.
-    With `rates`, the input slot U carries extra first-order states (see the module docstring)."""
+    With `rates`, the input slot U carries extra first-order states (see the module docstring).
+
+    Events must be affine in x (Event.affine): their zeros are located on the dense output without losing
+    one (module comment at EVENT_MAX_DEPTH, docs/events.md)."""
 
     def __init__(self, accel, events, t0, x0, v0, U, rtol, max_step=math.inf, rates=None, step_budget=math.inf):
+        for event in events:
+            if event.affine is None:
+                raise ValueError(f"Dop853 locates affine events only; {event.name!r} has no affine form")
         self.accel, self.events, self.rates = accel, events, rates
         self.rtol, self.atol, self.max_step = rtol, rtol * ATOL_PER_RTOL, max_step
         self.step_budget = step_budget  # most steps one advance may take
@@ -178,10 +248,12 @@ class Dop853:
         e5 = (_dot(E5, kx) / sx) ** 2 + (_dot(E5, kv) / sv) ** 2
         e3 = (_dot(E3, kx) / sx) ** 2 + (_dot(E3, kv) / sv) ** 2
         n = 2
-        if self.rates is not None:
-            sU = self.atol + self.rtol * np.maximum(np.abs(self.U), np.abs(self.U_new))
-            e5 += float(np.sum((_dot(E5, kU) / sU) ** 2))
-            e3 += float(np.sum((_dot(E3, kU) / sU) ** 2))
+        if self.rates is not None:  # component by component, left to right (the C twin's order)
+            sU = (self.atol + self.rtol * np.maximum(np.abs(self.U), np.abs(self.U_new))).tolist()
+            for e, s in zip(_dot(E5, kU).tolist(), sU):
+                e5 += (e / s) ** 2
+            for e, s in zip(_dot(E3, kU).tolist(), sU):
+                e3 += (e / s) ** 2
             n += len(sU)
         if not math.isfinite(e5 + e3):
             return x, v, stages, math.inf
@@ -191,7 +263,8 @@ class Dop853:
 
     def _run_stages(self, t, x, v, U0, h, nodes, stages):
         """Append the stages of `nodes` ((row of A, c) pairs) from (t, x, v, U0) with step h to
-        stages = (kx, kv, kU); return the last stage's (x, v, U). kU is used only with extra states."""
+        stages = (kx, kv, kU); return the last stage's (x, v, U). kU is used only with extra states.
+        A stage is appended once all its derivatives are evaluated."""
         accel, rates = self.accel, self.rates
         kx, kv, kU = stages
         U = U0
@@ -201,9 +274,12 @@ class Dop853:
             vs = v + h * _dot(row, kv)
             if rates is not None:
                 U = U0 + h * _dot(row, kU)
-                kU.append(rates(ts, xs, vs, U))
+                dU = rates(ts, xs, vs, U)
+            a = accel(ts, xs, vs, U)
+            if rates is not None:
+                kU.append(dU)
             kx.append(vs)
-            kv.append(accel(ts, xs, vs, U))
+            kv.append(a)
         return xs, vs, U
 
     def _accept(self, t, x, v, h, x_new, v_new, stages):
@@ -217,54 +293,125 @@ class Dop853:
         self.n_steps += 1
 
     def _initial_step(self):
-        """Hairer's starting step (scipy's select_initial_step)."""
+        """Hairer's starting step (scipy's select_initial_step), over all components (x, v, extra states)."""
         t, x, v, a = self.t, self.x, self.v, self.a
-        sx, sv = self.atol + abs(x) * self.rtol, self.atol + abs(v) * self.rtol
-        d0 = math.hypot(x / sx, v / sv) / math.sqrt(2.0)
-        d1 = math.hypot(v / sx, a / sv) / math.sqrt(2.0)
+        y0, f0 = [x, v], [v, a]
+        if self.rates is not None:
+            y0 += self.U.tolist()
+            f0 += self.dU.tolist()
+        n = len(y0)
+        scale = [self.atol + abs(y) * self.rtol for y in y0]
+        d0 = _norm([y / s for y, s in zip(y0, scale)]) / math.sqrt(n)
+        d1 = _norm([f / s for f, s in zip(f0, scale)]) / math.sqrt(n)
         h0 = 1e-6 if d0 < 1e-5 or d1 < 1e-5 else 0.01 * d0 / d1
         h0 = min(h0, self.max_step)
-        a1 = self._f(t + h0, x + h0 * v, v + h0 * a)
-        d2 = math.hypot((h0 * a) / sx, (a1 - a) / sv) / math.sqrt(2.0) / h0
+        y1 = [y + h0 * f for y, f in zip(y0, f0)]
+        if self.rates is None:
+            f1 = [y1[1], self._f(t + h0, y1[0], y1[1])]
+        else:
+            U1 = np.array(y1[2:])
+            dU1 = self.rates(t + h0, y1[0], y1[1], U1)
+            self.nfev += 1
+            f1 = [y1[1], self.accel(t + h0, y1[0], y1[1], U1)] + dU1.tolist()
+        d2 = _norm([(g - f) / s for g, f, s in zip(f1, f0, scale)]) / math.sqrt(n) / h0
         h1 = max(1e-6, h0 * 1e-3) if max(d1, d2) <= 1e-15 else (0.01 / max(d1, d2)) ** (1.0 / 9.0)
         return min(100.0 * h0, h1, self.max_step)
 
     # -- events --------------------------------------------------------------------------------
     def _handle_events(self, t0, x0, v0):
-        """Find the earliest event in the last step; cut the step there (redo it with the exact
-        length, so no step straddles the event)."""
+        """Find the earliest zero of an event in the last step (zeros of excursions that begin and end inside
+        the step included); cut the step there (redo it with the exact length, so no step straddles the
+        event). A contact event's state then lies on its new side (moved there if the redone step ends a
+        rounding short), and the side flips; a terminal event stops the run."""
         earliest = None
         for event in self.events:
-            g_end = event.g(self.x)
-            crossed = g_end <= 0.0 if event.terminal else (g_end > 0.0) != self.contact_side[event.name]
-            if not crossed:
-                continue
-            t_event = self._locate(event)
-            if earliest is None or t_event < earliest[0]:
+            t_event = self._first_zero(event)
+            if t_event is not None and (earliest is None or t_event < earliest[0]):
                 earliest = (t_event, event)
         if earliest is None:
             return
         t_event, event = earliest
         h = t_event - t0
+        self.t, self.x, self.v, self.a = t0, x0, v0, self.a_old
+        self.U, self.dU = self.U_old, self.dU_old
         if h > 0.0:
-            self.t, self.x, self.v, self.a = t0, x0, v0, self.a_old
-            self.U, self.dU = self.U_old, self.dU_old
-            x_new, v_new, stages, _ = self._trial(t0, x0, v0, h)
+            x_new, v_new, stages, error = self._trial(t0, x0, v0, h)
+            if not math.isfinite(error):
+                raise IntegrationError(f"the step to the {event.name} event at tau = {t_event:.10g} from "
+                                       f"tau = {t0:.10g} failed (a stage left the model's domain)", t0, x0, v0)
             self._accept(t0, x0, v0, h, x_new, v_new, stages)
+        else:  # the event is at the step's start: the step is undone
+            self.t_old = None
+            self._dense = None
         if event.terminal:
             self.stop = (event.name, self.t, self.x, self.v)
-        else:
-            self.contact_side[event.name] = not self.contact_side[event.name]
+            return
+        side = not self.contact_side[event.name]
+        if (event.g(self.x) > 0.0) != side:
+            self._move_to_side(event, side)
+        self.contact_side[event.name] = side
 
-    def _locate(self, event):
-        """Root of g(x(t)) on the last step's dense output."""
+    def _move_to_side(self, event, side):
+        """Put x on the event's zero and then, ulp by ulp, on its side `side` (g > 0 or not); a new derivative.
+        The move is within the redone step's error (it ended within it of the located zero)."""
+        c0, cx = event.affine
+        x = -c0 / cx
+        direction = math.inf if (cx > 0.0) == side else -math.inf
+        for _ in range(8):
+            if (c0 + cx * x > 0.0) == side:
+                break
+            x = math.nextafter(x, direction)
+        self.x = x
+        if self.rates is not None:  # rates before accel (closedloop reuses the stage's control)
+            self.dU = self.rates(self.t, self.x, self.v, self.U)
+        self.a = self._f(self.t, self.x, self.v)
+        self._dense = None
+
+    def _first_zero(self, event):
+        """The earliest time in the last step where the event is reached on the dense output (terminal: g <= 0;
+        contact: g on the other side than contact_side), or None."""
+        c0, cx = event.affine
+        positive = True if event.terminal else self.contact_side[event.name]  # the side the step starts on
+
+        def beyond(g):
+            return (not g > 0.0) if positive else g > 0.0
+
+        g0, g1 = c0 + cx * self.x_old, c0 + cx * self.x
+        if beyond(g0):
+            return self.t_old
+        h = self.t - self.t_old
+        if not beyond(g1):
+            reach = EVENT_SCREEN * (abs(g1 - g0) + h * (abs(cx * self.v_old) + abs(cx * self.v)))
+            if abs(g0) > reach and abs(g1) > reach:
+                return None
+        _, (fx, _, _) = self._interpolant(self.t_old)
+        G = [0.0 + cx * f for f in fx]  # the dense output's coefficients of g - g0
+        b = [g0 + _dot(G, [row[k] for row in BERNSTEIN]) for k in range(8)]
+        stack = [(0.0, 1.0, 0, b)]
+        while stack:
+            s_a, s_b, depth, b = stack.pop()
+            if (min(b) > 0.0) if positive else not (max(b) > 0.0):
+                continue  # the hull of g on the piece is on the start side
+            t_b = self.t if s_b == 1.0 else self.t_old + s_b * h
+            resolved = depth >= EVENT_MAX_DEPTH
+            if beyond(c0 + cx * self.value_at(t_b)[0]) and (resolved or _monotone(b)):
+                t_a = self.t_old if s_a == 0.0 else self.t_old + s_a * h
+                if beyond(c0 + cx * self.value_at(t_a)[0]):  # a rounding of the hull's verdict on the piece before
+                    return t_a
+                return self._locate(event, t_a, t_b)  # one zero in the piece: g is monotone there
+            if not resolved:
+                left, right = _split(b)
+                middle = 0.5 * (s_a + s_b)
+                stack.append((middle, s_b, depth + 1, right))
+                stack.append((s_a, middle, depth + 1, left))
+        return None
+
+    def _locate(self, event, t_a, t_b):
+        """Zero of g(x(t)) on the dense output in [t_a, t_b], where g changes side."""
         from scipy.optimize import brentq  # lazily: only the pure-Python path needs it, and only at an event
 
         g = event.g
-        g_start = g(self.x_old)
-        if g_start == 0.0:
-            return self.t_old
-        return brentq(lambda tt: g(self.value_at(tt)[0]), self.t_old, self.t, xtol=1e-15, rtol=1e-15)
+        return brentq(lambda tt: g(self.value_at(tt)[0]), t_a, t_b, xtol=1e-15, rtol=1e-15)
 
     # -- dense output --------------------------------------------------------------------------
     def value_at(self, t):
@@ -361,8 +508,11 @@ def _rk4_drive_theta() -> float:
 RK4_DRIVE_THETA = _rk4_drive_theta()  # 1.696...
 
 
-def _hermite_event(g, t, x, v, h, x_new, v_new):
-    """(t, x, v) where g crosses 0 on the cubic Hermite interpolant of a fixed step from (x, v) to (x_new, v_new).
+def _hermite_event(event, t, x, v, h, x_new, v_new):
+    """(t, x, v) of the first point where a terminal event is reached (g <= 0) on the cubic Hermite interpolant of a
+    fixed step from (x, v) to (x_new, v_new), or None. For an affine event (all the models' events) excursions that
+    begin and end inside the step are found as in Dop853._first_zero: the cubic's Bernstein coefficients (its
+    control points) bound g on a piece; for another one only a sign change at the step's end is seen.
 
     RK4 has no dense output; this cubic is accurate to O(h^4) on a resolved step. Without it a terminal event
     would be reported at the step's end, which near pull-in can lie beyond the electrode (x > 3R/2)."""
@@ -372,12 +522,48 @@ def _hermite_event(g, t, x, v, h, x_new, v_new):
         vs = ((6 * s2 - 6 * s) * (x - x_new) / h + (3 * s2 - 4 * s + 1) * v + (3 * s2 - 2 * s) * v_new)
         return xs, vs
 
-    from scipy.optimize import brentq  # lazily, as in Dop853._locate
-
+    g = event.g
     if not g(x) > 0.0:  # already on the event at the step's start
         return t, x, v
-    s = brentq(lambda s: g(state(s)[0]), 0.0, 1.0, xtol=1e-15, rtol=1e-15)
-    return (t + s * h, *state(s))
+    from scipy.optimize import brentq  # lazily, as in Dop853._locate
+
+    if event.affine is None:  # no bound on g: only a sign change at the step's end is seen
+        if g(x_new) > 0.0:
+            return None
+        s = brentq(lambda s: g(state(s)[0]), 0.0, 1.0, xtol=1e-15, rtol=1e-15)
+        return (t + s * h, *state(s))
+    c0, cx = event.affine
+    b = [c0 + cx * x, c0 + cx * (x + h * v / 3.0), c0 + cx * (x_new - h * v_new / 3.0), c0 + cx * x_new]
+    if min(b) > 0.0:
+        return None
+
+    stack = [(0.0, 1.0, 0, b)]
+    while stack:
+        s_a, s_b, depth, b = stack.pop()
+        if min(b) > 0.0:
+            continue
+        resolved = depth >= EVENT_MAX_DEPTH
+        if not g(state(s_b)[0]) > 0.0 and (resolved or _monotone(b)):
+            if not g(state(s_a)[0]) > 0.0:
+                return (t + s_a * h, *state(s_a))
+            s = brentq(lambda s: g(state(s)[0]), s_a, s_b, xtol=1e-15, rtol=1e-15)
+            return (t + s * h, *state(s))
+        if not resolved:
+            left, right = _split(b)
+            middle = 0.5 * (s_a + s_b)
+            stack.append((middle, s_b, depth + 1, right))
+            stack.append((s_a, middle, depth + 1, left))
+    return None
+
+
+def _rk4_growth(zr, zi):
+    """|R(z)| of RK4's amplification R(z) = 1 + z (1 + z (1/2 + z (1/6 + z/24))), z = zr + i zi, in real
+    arithmetic (the C twin's order)."""
+    pr, pi = 1.0 / 6.0 + zr / 24.0, zi / 24.0
+    pr, pi = 0.5 + (zr * pr - zi * pi), zr * pi + zi * pr
+    pr, pi = 1.0 + (zr * pr - zi * pi), zr * pi + zi * pr
+    pr, pi = 1.0 + (zr * pr - zi * pi), zr * pi + zi * pr
+    return math.hypot(pr, pi)
 
 
 class Rk4:
@@ -421,15 +607,19 @@ class Rk4:
         except (ArithmeticError, ValueError):
             return
         self.nfev += 4
-        root = complex(c * c / 4.0 - k) ** 0.5
-        for lam in (-c / 2.0 + root, -c / 2.0 - root):
-            z = h * lam
-            growth = abs(1.0 + z + z * z / 2.0 + z**3 / 6.0 + z**4 / 24.0)
-            if lam.real <= 0.0 and growth > 1.0 + 1e-12:
+        disc, half = c * c / 4.0 - k, -c / 2.0
+        if disc >= 0.0:
+            root = math.sqrt(disc)
+            eigenvalues = ((half + root, 0.0), (half - root, 0.0))
+        else:  # a complex pair: the conjugate has the same |R|
+            eigenvalues = ((half, math.sqrt(-disc)),)
+        for re, im in eigenvalues:
+            zr, zi = h * re, h * im
+            if re <= 0.0 and _rk4_growth(zr, zi) > 1.0 + 1e-12:
+                size = math.hypot(re, im)
                 raise IntegrationError(
-                    f"RK4 unstable: step h = {h:.3g} at tau = {t:.10g} gives h*lambda = {z:.3g} outside the "
-                    f"stability region (|lambda| = {abs(lam):.3g}); reduce max_step below "
-                    f"{2.5 / abs(lam):.3g}", t, x, v)
+                    f"RK4 unstable: step h = {h:.3g} at tau = {t:.10g} gives h*lambda = {zr:.3g}{zi:+.3g}j outside the "
+                    f"stability region (|lambda| = {size:.3g}); reduce max_step below {2.5 / size:.3g}", t, x, v)
 
     def _step(self, h):
         f, rates, U, t, x, v = self.accel, self.rates, self.U, self.t, self.x, self.v
@@ -460,9 +650,11 @@ class Rk4:
                 f"RK4 unstable: the state became non-finite after tau = {t:.10g} with h = {h:.3g}; "
                 f"reduce max_step", t, x, v)
         for event in self.events:
-            if event.terminal and event.g(x_new) <= 0.0:
-                te, xe, ve = _hermite_event(event.g, t, x, v, h, x_new, v_new)
-                raise TerminalEvent(f"{event.name} at tau = {te:.10g}, x = {xe:.10g}", te, xe, ve)
+            if event.terminal:
+                hit = _hermite_event(event, t, x, v, h, x_new, v_new)
+                if hit is not None:
+                    te, xe, ve = hit
+                    raise TerminalEvent(f"{event.name} at tau = {te:.10g}, x = {xe:.10g}", te, xe, ve)
         self.x, self.v = x_new, v_new
         if rates is not None:
             self.U = U_new

@@ -30,11 +30,19 @@ class Event:
     """A zero of g(x) that an integrator must not step across blindly.
 
     terminal: the run stops there (pull-in); otherwise the step is cut there (contact kink).
+    affine: (c0, cx) when g(x) = c0 + cx x, evaluated so (affine_event): integrate.Dop853 needs it to bound g on
+    a step's dense output.
     """
 
     name: str
     g: Callable[[float], float]
     terminal: bool
+    affine: tuple[float, float] | None = None
+
+
+def affine_event(name: str, c0: float, cx: float, terminal: bool) -> Event:
+    """The event g(x) = c0 + cx x (the C solver's form, core/dop853.h)."""
+    return Event(name, lambda x: c0 + cx * x, terminal, (c0, cx))
 
 
 def pull_in_slope(R: float) -> float:
@@ -46,12 +54,13 @@ def pull_in_events(R: float) -> tuple[Event, Event]:
     """Gaps 1 -/+ 2x/(3R) reaching PULL_IN_GAP: the electrostatic force is singular at gap 0."""
     c = pull_in_slope(R)
     return (
-        Event(f"pull-in: upper gap 1 - 2x/(3R) below {PULL_IN_GAP:g}", lambda x: 1.0 - c * x - PULL_IN_GAP, True),
-        Event(f"pull-in: lower gap 1 + 2x/(3R) below {PULL_IN_GAP:g}", lambda x: 1.0 + c * x - PULL_IN_GAP, True),
+        affine_event(f"pull-in: upper gap 1 - 2x/(3R) below {PULL_IN_GAP:g}", 1.0 - PULL_IN_GAP, -c, True),
+        affine_event(f"pull-in: lower gap 1 + 2x/(3R) below {PULL_IN_GAP:g}", 1.0 - PULL_IN_GAP, c, True),
     )
 
 
-CONTACT_EVENT = Event("contact", forces.contact_indentation, False)
+# The contact indentation 1 + 2x/3 as an affine form: g = 1 + (2/3) x (within an ulp of forces.contact_indentation).
+CONTACT_EVENT = affine_event("contact", 1.0, 2.0 / 3.0, False)
 
 
 class ExactModel:
@@ -70,13 +79,11 @@ class ExactModel:
         alpha, beta, gamma, Omega, R = s.alpha, s.beta, s.gamma, s.Omega, s.R
         load_forcing = Delta != 0.0
         electrostatics = alpha != 0.0 or beta != 0.0 or gamma != 0.0
-        sqrt, cos, electrostatic = math.sqrt, math.cos, forces.electrostatic
+        cos, electrostatic, hertz = math.cos, forces.electrostatic, forces.hertz
 
         def accel(t, x, v, U):
-            s3 = 1.0 + 2.0 * x / 3.0
             a = 1.0 + U - mu * v
-            if s3 > 0.0:
-                a -= s3 * sqrt(s3)  # Hertz contact, zero without contact
+            a -= hertz(x)  # Hertz contact, zero without contact
             if load_forcing:
                 a += Delta * cos(omega * t)
             if electrostatics:
@@ -137,8 +144,8 @@ class PolynomialModel:
 
 
 def make_model(scene: Scene, fidelity: int):
-    """The plant model of a fidelity level: 0, 1, 2; 3 and 4 get Eq. 3 (for the forces at their x)."""
-    fidelity = Fidelity(fidelity)
-    if fidelity in (Fidelity.EXACT, Fidelity.AVERAGED, Fidelity.ANALYTIC):
-        return ExactModel(scene)
-    return PolynomialModel(scene, printed=fidelity is Fidelity.POLYNOMIAL_PAPER)
+    """The plant model of a fidelity level (fidelities.REGISTRY): 0, 1, 2 step it; 3 and 4 use Eq. 3's forces at
+    their x."""
+    from .fidelities import entry  # the registry builds on this module
+
+    return entry(fidelity).model(scene)

@@ -131,8 +131,10 @@ def consistency_warning(scene: Scene) -> str | None:
     """ERRATA §3.1: physically beta^2 = 8 alpha gamma; say so when a set violates it."""
     lhs, rhs = scene.beta**2, 8.0 * scene.alpha * scene.gamma
     if abs(lhs - rhs) > 1e-6 * max(lhs, rhs, 1e-300):
-        return (f"beta^2 = {lhs:.3g} but 8*alpha*gamma = {rhs:.3g}: no physical voltages give this set "
-                f"(ERRATA §3.1); running it anyway")
+        return (f"beta^2 = {lhs:.3g} but 8*alpha*gamma = {rhs:.3g}: no pair of bias and AC voltages gives this "
+                f"(alpha, beta, gamma), because alpha ~ V_b^2, beta ~ V_b V_ac and gamma ~ V_ac^2/4 share one "
+                f"factor; the equation of motion is still well defined and is solved as given (the paper's own "
+                f"example is such a set; see docs/model.md, 'Scaling')")
     return None
 
 

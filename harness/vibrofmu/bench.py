@@ -34,7 +34,7 @@ from vibromodel.parameters import ParameterError, Scene
 from vibromodel.compiled import CompiledPlant
 from vibromodel.plant import Kernel, Settings, Solver
 
-from . import export
+from . import export, ladder
 from .kernel import kernel_library
 from .reference import reference_solution
 from .run import FmuInstance, FmuLog, _reason
@@ -139,7 +139,7 @@ def make_plan(quick: bool, repeats: int | None = None) -> Plan:
             cases += [Case("fmu", interval, fidelity, Solver.ADAPTIVE, rtol, kernel=kernel)
                       for kernel in KERNELS for rtol in rtols[fidelity]]
             cases += [Case("fmu", interval, fidelity, Solver.RK4, max_step=h) for h in rk4_steps.get(fidelity, ())]
-        cases += [Case("fmu", interval, fidelity) for fidelity in APPROXIMATIONS]
+        cases += [Case("fmu", interval, fidelity, kernel=Kernel.COMPILED) for fidelity in APPROXIMATIONS]  # C evaluators
         cases += [Case("solve_ivp", interval, rtol=rtol, method=method) for method in SOLVE_IVP_METHODS
                   for rtol in near]
         cases += [Case("floor", interval, rtol=rtol) for rtol in near]
@@ -298,7 +298,9 @@ def run_fmu_case(ctx: Context, case: Case) -> dict:
            if case.solver == Solver.RK4 else ""),
         "work": direct["work"],
         "plant_direct": {"seconds": direct["seconds"], "errors": plant_errors,
-                         "identical_to_fmu": bool(np.array_equal(direct["x"], x))},
+                         "identical_to_fmu": bool(np.array_equal(direct["x"], x)),
+                         "max_abs_difference_x": float(np.max(np.abs(direct["x"] - x))) if direct["x"].shape == x.shape
+                         else None},
     }
 
 
@@ -519,8 +521,9 @@ def build_references(scene: Scene, stop_time: float, fidelities) -> tuple[dict, 
 
 def run_bench(fmu: Path, out_dir: Path, quick: bool = False, repeats: int | None = None,
               extreme_rows: Callable[[bool], list[dict]] | None = None,
-              progress: Callable[[str], None] | None = None) -> dict:
-    """Run every case, write out_dir/bench.json and out_dir/work_precision.png; return the JSON's content."""
+              progress: Callable[[str], None] | None = None, closed_loop_fmu: Path | None = None) -> dict:
+    """Run every case and the speed-accuracy ladder (ladder.py; the closed-loop FMU is built when not given), write
+    out_dir/bench.json, out_dir/work_precision.png and out_dir/ladder.png; return the JSON's content."""
     bench_started = time.perf_counter()
     say = progress or (lambda line: None)
     scene = Scene()
@@ -560,6 +563,8 @@ def run_bench(fmu: Path, out_dir: Path, quick: bool = False, repeats: int | None
                              "process, from an extracted copy (per case: instantiation_seconds); add "
                              "extract_seconds for the unpacking"}
     extremes = extreme_rows(quick) if extreme_rows is not None else []
+    say("speed-accuracy ladder (C host and FMPy) ...")
+    ladder_record = run_ladder_with_fmus(fmu, closed_loop_fmu, quick, say)
     summary = {
         "bench": {"quick": quick, "stop_time": plan.stop_time, "repeats": plan.repeats, "threshold": THRESHOLD,
                   "output_intervals": list(INTERVALS), "scene": scene.as_dict(), "fmu": str(fmu),
@@ -575,13 +580,31 @@ def run_bench(fmu: Path, out_dir: Path, quick: bool = False, repeats: int | None
         "instantiation": instantiation,
         "cases": records,
         "extremes": extremes,
+        "ladder": ladder_record,
     }
     summary["targets"] = targets(records, instantiation, plan)
     summary["machine"]["load_average_at_end"] = list(os.getloadavg()) if hasattr(os, "getloadavg") else None
     summary["bench"]["seconds"] = time.perf_counter() - bench_started
     export.write_json(out_dir / "bench.json", summary)
     plot_work_precision(out_dir / "work_precision.png", records, plan)
+    ladder.plot_ladder(out_dir / "ladder.png", ladder_record)
     return summary
+
+
+LADDER_QUICK_STOP, LADDER_QUICK_REPEATS = 50.0, 1  # --quick: a shorter ladder, one timed run per rung
+
+
+def run_ladder_with_fmus(fmu: Path, closed_loop_fmu: Path | None, quick: bool, say) -> dict:
+    """The ladder on tau in [0, 200] (issue 13), best of FULL_REPEATS; --quick: [0, 50], one run."""
+    stop, repeats = (LADDER_QUICK_STOP, LADDER_QUICK_REPEATS) if quick else (QUICK_STOP, FULL_REPEATS)
+    with tempfile.TemporaryDirectory(prefix="vibrofmu-bench-loop-") as tmp:
+        if closed_loop_fmu is None:
+            from .build import build_closed_loop
+
+            closed_loop_fmu = build_closed_loop(Path(tmp))
+        record = ladder.run_ladder(fmu, closed_loop_fmu, stop=stop, repeats=repeats, progress=say)
+    record["quick"] = quick
+    return record
 
 
 def progress_line(number: int, total: int, r: dict) -> str:
@@ -609,6 +632,8 @@ def summary_lines(summary: dict) -> list[str]:
         lines.append(f"  {text}: " + (f"{check['ratio']:.3g} (target <= {check['limit']:g}: "
                                       f"{'met' if check['met'] else 'NOT met'})" if check["ratio"] is not None
                                       else f"not measured: {check['reason']}"))
+    if summary.get("ladder"):
+        lines += ladder.ladder_lines(summary["ladder"])
     inst = t["instantiation"]
     warm = t["inputs"]["instantiation"]["warm_seconds"]
     lines.append("  instantiation (cold): " + ("not measured" if inst["seconds"] is None else

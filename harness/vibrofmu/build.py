@@ -1,5 +1,5 @@
 """Build the FMUs: pythonfmu packs the slave, slave_support, fast_path and the vibromodel package; the status shim
-goes on top; the plant also gets the compiled kernel (vibrokernel.so) in its resources; the reference result of
+goes on top; each FMU also gets the compiled kernel (vibrokernel.so) in its resources; the reference result of
 the default experiment goes into the documentation; finally every variable gets its description and unit
 (fmu_variables.annotate) and the file is made readable by all (0644).
 
@@ -80,18 +80,26 @@ def build_plant(out_dir: Path | None = None) -> Path:
     """The plant FMU with the compiled kernel (when there is a C compiler); fidelity 4 of its default scene
     starts without a fit."""
     with tempfile.TemporaryDirectory() as tmp:
-        kernel = () if compiled_parts() else (compile_kernel(Path(tmp) / LIBRARY_NAME),)
-        return build_with_default_oafm(PLANT_SLAVE, Scene(), out_dir, extra_resources=kernel)
+        return build_with_default_oafm(PLANT_SLAVE, Scene(), out_dir, extra_resources=_kernel(Path(tmp)))
 
 
 def build_controller(out_dir: Path | None = None) -> Path:
-    """The controller FMU (no physics of its own beyond the regressor: nothing to pack)."""
-    return build_fmu(CONTROLLER_SLAVE, out_dir)
+    """The controller FMU with the compiled kernel (fmu_src/core/controller.c is in it) when there is a C
+    compiler."""
+    with tempfile.TemporaryDirectory() as tmp:
+        return build_fmu(CONTROLLER_SLAVE, out_dir, extra_resources=_kernel(Path(tmp)))
 
 
 def build_closed_loop(out_dir: Path | None = None) -> Path:
-    """The monolithic closed loop; its OAFM reference (x~(0) = 0.04, x~'(0) = 0: the paper example) is packed."""
-    return build_with_default_oafm(CLOSED_LOOP_SLAVE, Scene(), out_dir)
+    """The monolithic closed loop with the compiled kernel (fmu_src/core/closedloop.c is in it) when there is a C
+    compiler; its OAFM reference (x~(0) = 0.04, x~'(0) = 0: the paper example) is packed."""
+    with tempfile.TemporaryDirectory() as tmp:
+        return build_with_default_oafm(CLOSED_LOOP_SLAVE, Scene(), out_dir, extra_resources=_kernel(Path(tmp)))
+
+
+def _kernel(folder: Path) -> tuple[Path, ...]:
+    """(the compiled kernel in folder,), or () without a C compiler."""
+    return () if compiled_parts() else (compile_kernel(folder / LIBRARY_NAME),)
 
 
 def build_all(out_dir: Path | None = None) -> list[Path]:

@@ -365,6 +365,14 @@ def cmd_stability(args) -> int:
     print(f"slow flow vs shooting: max relative r error {errors['max_relative_r_error']:.2e} (omega "
           f"{errors['at_omega']:.6g}), max |exp(lambda T) - rho| {errors['max_multiplier_error']:.2e} (omega "
           f"{errors['at_omega_multiplier']:.6g})")
+    w, k1 = errors["at_omega_multiplier"], model.omega_e**2
+    if w == w and k1 > scene.mu**2 / 4:  # a number (the grid had orbits) and an underdamped linearisation
+        period = 2 * math.pi / w
+        phase = (w - math.sqrt(k1 - scene.mu**2 / 4) - (w * w - k1) / (2 * w)) * period
+        print(f"  (expected far from resonance: the slow flow turns at (omega^2 - k1)/(2 omega) instead of "
+              f"omega - sqrt(k1 - mu^2/4); the phase error per period gives |exp(lambda T) - rho| ~ "
+              f"exp(-mu T/2) 2|sin(dphi/2)| = {math.exp(-scene.mu * period / 2) * abs(2 * math.sin(phase / 2)):.2e} "
+              f"at omega {w:.6g}; see docs/numerics.md)")
     for row in summary["fold_frequencies"]["folds"]:
         print("fold: " + ", ".join(f"{k} {v:.8g}" for k, v in row.items() if not k.startswith("r_")))
     for direction, sweep in ((d, summary["fmu_sweeps"][d]) for d in ("up", "down") if "fmu_sweeps" in summary):
@@ -539,6 +547,8 @@ def make_parser(commands=None) -> argparse.ArgumentParser:
             options(p)
     # Sub-commands of other modules hook in here, one call each (e.g. `study.add_parser(sub)`), with their
     # heavy imports inside their command.
+    from . import container, report, ssp  # light modules: heavy imports happen inside their commands
+    ssp.add_parser(sub); container.add_parser(sub); report.add_parser(sub)
     return parser
 
 

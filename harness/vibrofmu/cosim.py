@@ -10,6 +10,11 @@ up to date) and records every output. Then:
 - Jacobi: every FMU steps t_n -> t_n + H with those inputs;
 - Gauss-Seidel: the FMUs step one after another in the listed order, each first taking its inputs from the
   sources' newest outputs (already at t_n + H for the sources that stepped before it).
+- fmpy: FMPy's `fmpy.ssp.simulation.simulate_ssp` loop, reproduced call for call: setupExperiment without
+  tolerance or stop time, parameters before enterInitializationMode; every input starts at 0; each step every
+  FMU takes its inputs from the values the connections carried after the previous step (outputs read right
+  after each FMU's doStep, so an output with direct feedthrough, like the controller's U, is one step late),
+  and time advances by t += H while t < stop_time. Its rows are the values after each step, at t + H.
 Inputs are held constant over a step (zero-order hold), so the coupling error is O(H).
 A doStep that fails stops the run: the result keeps what was computed and says which FMU stopped and why,
 with its log message.
@@ -29,7 +34,7 @@ from fmpy.fmi1 import FMICallException
 
 from .run import FmuInstance, FmuLog, _reason
 
-ORDERINGS = ("gauss-seidel", "jacobi")
+ORDERINGS = ("gauss-seidel", "jacobi", "fmpy")
 SCENE_KEYS = {"stop_time", "step", "ordering", "tolerance", "connections", "fmu"}
 FMU_KEYS = {"name", "path", "parameters"}
 
@@ -83,9 +88,12 @@ class CosimResult:
 # ------------------------------------------------------------------------------------------- scene files
 
 def load_scene(path: Path | str, fmu_dir: Path) -> CosimScene:
-    """Read a TOML (.toml) or JSON scene. Relative FMU paths are resolved against the scene file's folder
+    """Read an SSP (.ssp, see ssp.py), TOML (.toml) or JSON scene. Relative FMU paths are resolved against the scene file's folder
     first, then against fmu_dir (the build folder)."""
     path = Path(path)
+    if path.suffix == ".ssp":
+        from .ssp import load_ssp
+        return load_ssp(path)
     try:
         text = path.read_text()
     except OSError as error:
@@ -274,6 +282,8 @@ class StepFailure(RuntimeError):
 
 def run_cosim(scene: CosimScene, progress=None) -> CosimResult:
     """Simulate the scene from 0 to stop_time with communication step scene.step."""
+    if scene.ordering == "fmpy":
+        return _run_fmpy_ordering(scene, progress)
     master = Master(scene)
     n_steps = int(round(scene.stop_time / scene.step))
     times, rows, stop_reason = [], [], None
@@ -292,6 +302,45 @@ def run_cosim(scene: CosimScene, progress=None) -> CosimResult:
                 progress(i + 1, n_steps)
     except StepFailure as failure:
         stop_reason = f"stopped at tau = {times[-1] if times else 0.0:g}: {failure}"
+    wall_time = time.perf_counter() - t0
+    log = {name: master.log.of(name) for name in master.instances}
+    columns = master.columns
+    master.close()
+    data = np.array(rows, dtype=float).reshape(len(rows), len(columns))
+    return CosimResult(time=np.array(times), outputs={c: data[:, j] for j, c in enumerate(columns)},
+                       completed=stop_reason is None, stop_reason=stop_reason, log=log, wall_time=wall_time)
+
+
+def _run_fmpy_ordering(scene: CosimScene, progress=None) -> CosimResult:
+    """The loop of FMPy 0.3.32's simulate_ssp (see the module's docstring), on the project's instances."""
+    master = Master(scene)
+    held = {(c.target, c.input): 0.0 for c in scene.connections}
+    times, rows, stop_reason = [], [], None
+    n_steps = int(math.ceil(scene.stop_time / scene.step))
+    t0 = time.perf_counter()
+    t = 0.0
+    try:
+        for spec in scene.fmus:
+            inst = master.instances[spec.name]
+            master._call(spec.name, lambda: inst.fmu.setupExperiment(startTime=0.0))
+            master._call(spec.name, lambda: inst.set(spec.parameters))
+            master._call(spec.name, inst.fmu.enterInitializationMode)
+            master._call(spec.name, inst.fmu.exitInitializationMode)
+        while t < scene.stop_time:
+            for name, inst in master.instances.items():
+                for c in master.inputs_of[name]:
+                    master._call(name, lambda: inst.set({c.input: held[(c.target, c.input)]}))
+                master._call(name, lambda: inst.fmu.doStep(currentCommunicationPoint=t, communicationStepSize=scene.step))
+            for c in scene.connections:
+                source = master.instances[c.source]
+                held[(c.target, c.input)] = source.fmu.getReal(source.value_references([c.output]))[0]
+            times.append(t + scene.step)
+            rows.append(master.read())
+            t += scene.step
+            if progress is not None:
+                progress(len(times), n_steps)
+    except StepFailure as failure:
+        stop_reason = f"stopped at tau = {t:g}: {failure}"
     wall_time = time.perf_counter() - t0
     log = {name: master.log.of(name) for name in master.instances}
     columns = master.columns

@@ -23,7 +23,7 @@ def run_demo(out_dir: Path, fmu: Path) -> int:
         print(f"error: {run.stop_reason}")
         return 1
     x_ref = reference(np.array(TABLE_TAUS))[0]
-    print(f"\nPaper example (ERRATA §4), exact Eq. 3, adaptive DOP853 rtol {DEMO_SETTINGS.rtol:g}, "
+    print(f"\nPaper example (Omega = 2), exact Eq. 3, adaptive DOP853 rtol {DEMO_SETTINGS.rtol:g}, "
           f"output interval 0.1")
     print(f"{'tau':>6}  {'x (FMU)':>18}  {'x (reference)':>18}  {'|difference|':>12}")
     for tau, xr in zip(TABLE_TAUS, x_ref):

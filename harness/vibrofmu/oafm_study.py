@@ -166,7 +166,7 @@ def run_oafm(scene: Scene, settings: OafmSettings, out_dir: Path, study_orders=r
     warning = consistency_warning(scene)
     summary = {
         "parameters": scene.as_dict(),
-        "warnings": [warning] if warning else [],
+        "notes": [warning] if warning else [],
         "basis": settings.basis, "order": settings.order if settings.basis == "harmonic" else None,
         "tau_star": tau_star, "tau_end": tau_end,
         "functional": "J(C) = (1/T) * integral over the domain of R^2, R = x~'' - accel(tau, x~, x~') of Eq. 3; "

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
+from vibromodel import fidelities
 from vibromodel.parameters import ParameterError, Scene, consistency_warning, validate
 from vibromodel.plant import Plant, Settings, checked_settings
 
@@ -15,7 +16,7 @@ from .compare import errors
 from .reference import REFERENCE_ATOL, REFERENCE_RTOL, Reference, reference_solution
 from .run import RunResult, run_fmu
 
-FIDELITIES = {"exact": 0, "polynomial": 1, "polynomial-paper": 2, "averaged": 3, "analytic": 4}
+FIDELITIES = fidelities.keys()  # command-line names -> levels (the registry)
 SOLVERS = {"adaptive": 0, "rk4": 1}
 
 
@@ -41,16 +42,23 @@ def start_values(scene: Scene, settings: Settings) -> dict:
             "oafm_tau_end": oafm.tau_end}
 
 
+_NOTED: set[str] = set()  # notes already printed in this process
+
+
 def check_inputs(scene: Scene, settings: Settings, stop_time: float, output_interval: float) -> list[str]:
     """Raise ParameterError for bad input (before anything runs); return warnings (the FMU logs the settings'
-    ones too: rtol clamped, an RK4 step that does not resolve the forcing)."""
+    ones too: rtol clamped, an RK4 step that does not resolve the forcing). A parameter set no voltages can
+    produce (beta^2 != 8 alpha gamma) is printed once as a note, not returned as a warning."""
     validate(scene)
     _, warnings = checked_settings(scene, settings)
     for name, value in (("stop-time", stop_time), ("output-interval", output_interval)):
         if not (np.isfinite(value) and value > 0):
             raise ParameterError(name, value, "must be a finite number > 0")
-    warning = consistency_warning(scene)
-    return ([warning] if warning else []) + warnings
+    note = consistency_warning(scene)
+    if note and note not in _NOTED:  # an explanation, not a problem: once per process, as a note
+        _NOTED.add(note)
+        print(f"note: {note}", file=sys.stderr)
+    return warnings
 
 
 def simulate(fmu: Path, scene: Scene, settings: Settings, stop_time: float, output_interval: float,
@@ -67,6 +75,7 @@ def simulate(fmu: Path, scene: Scene, settings: Settings, stop_time: float, outp
         "parameters": scene.as_dict(),
         "settings": {**dataclasses.asdict(settings), "stop_time": stop_time, "output_interval": output_interval},
         "warnings": warnings,
+        "notes": [note for note in [consistency_warning(scene)] if note],
         "completed": run.completed,
         "end_time": run.end_time,
         "stop_reason": run.stop_reason,

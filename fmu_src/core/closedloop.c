@@ -1,0 +1,142 @@
+/*
+ * closedloop.c -- the closed loop of closedloop.h: vibromodel/closedloop.py's ClosedLoop on the model of model.c,
+ * the controller of controller.c, the reference of oafm_eval.c and the solvers of dop853.c / rk4.c.
+ */
+#include "closedloop.h"
+
+#include <math.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <string.h>
+
+#include "plant.h"
+#include "pyfloat.h"
+
+/* ClosedLoop._rates then ClosedLoop._accel at one stage: f = (v, x'', theta^'), U computed once for both;
+   a fault (pyfloat.h) where Python raises. */
+static int loop_rhs(void *context, double t, const double *y, double *f)
+{
+    const VlLoop *l = context;
+    double ref[3], U, time[3];
+    int fault = FAULT_NONE;
+    oe_state(&l->reference, t, ref);
+    if (vc_control_rates(&l->controller, t, y[0], y[1], ref, y + 2, &U, f + 2, time))
+        return FAULT_MATH_DOMAIN;  /* math.cos/sin of an infinity */
+    /* the model's drive terms have the same time functions as the control regressor (the same products of the
+       same frequencies and t): evaluated once */
+    VmDrive drive = {time[0], time[1], time[2]};
+    f[0] = y[1];
+    f[1] = vm_accel_driven(&l->model, t, &drive, y[0], y[1], U, &fault);
+    return fault;
+}
+
+int vl_outputs_at(const VlLoop *l, double t, const double *y, double *out)
+{
+    const VcController *c = &l->controller;
+    double ref[3], U, e1, e2, rates[VC_N], time[3];
+    int fault = FAULT_NONE;
+    oe_state(&l->reference, t, ref);
+    if (vc_control_rates(c, t, y[0], y[1], ref, y + 2, &U, rates, time)) return FAULT_MATH_DOMAIN;
+    vc_errors(c, y[0], y[1], ref, &e1, &e2);
+    VmDrive drive = {time[0], time[1], time[2]};  /* as in loop_rhs */
+    double a = vm_accel_driven(&l->model, t, &drive, y[0], y[1], U, &fault);
+    if (fault) return fault;
+    out[0] = y[0];
+    out[1] = y[1];
+    out[2] = ref[0];
+    out[3] = U;
+    out[4] = e1;
+    out[5] = e2;
+    out[6] = vc_lyapunov(c, e1, e2, y + 2);
+    out[7] = vc_lyapunov_rate(c, y[0], y[1], a, ref, y + 2, rates);
+    out[8] = vc_promised_rate(c, e1, e2);
+    memcpy(out + 9, y + 2, VC_N * sizeof(double));
+    return FAULT_NONE;
+}
+
+/* Leave error `code` pending at (t, x, v) with `text`; the fast path stops. */
+static int set_error(VlLoop *l, int code, double t, const double *y, const char *text)
+{
+    snprintf(l->message, VL_MESSAGE, "%s", text);
+    l->error = code;
+    l->error_t = t;
+    l->error_x = y[0];
+    l->error_v = y[1];
+    l->enabled = 0;
+    return code;
+}
+
+static int solver_error(VlLoop *l, int code, const DopReport *r)
+{
+    char text[VL_MESSAGE];
+    vk_solver_message(&l->model, code, r, text, sizeof text);
+    return set_error(l, code, r->t, r->y, text);
+}
+
+static int raise_fault(VlLoop *l, int fault, double t, const double *y)
+{
+    char text[VL_MESSAGE];
+    py_fault_text(fault, text, sizeof text);
+    return set_error(l, VL_RAISED, t, y, text);
+}
+
+int vl_publish(VlLoop *l)
+{
+    double y[DOP_MAX_DIM], out[VL_OUTPUTS];
+    DopReport r;
+    if (l->solver == VL_RK4) {
+        memcpy(y, l->rk4.y, sizeof y);  /* RK4 ends every advance on its target: t */
+    } else {
+        int code = dop_value_at(&l->dop, loop_rhs, l, l->t, y, &r);
+        if (code) return solver_error(l, code, &r);
+    }
+    int fault = vl_outputs_at(l, l->t, y, out);
+    if (fault) return raise_fault(l, fault, l->t, y);
+    for (int i = 0; i < VL_OUTPUTS; i++)  /* StatusSlave._set_finite */
+        if (!isfinite(out[i])) return VL_OK;
+    memcpy(l->out, out, sizeof out);
+    return VL_OK;
+}
+
+int vl_init(VlLoop *l, double t0, const double *y0)
+{
+    DopReport r;
+    l->dop.n = l->rk4.n = VL_DIM;
+    vk_set_events(&l->dop.n_events, l->dop.events, &l->model);
+    vk_set_events(&l->rk4.n_events, l->rk4.events, &l->model);
+    l->dop.h = 0.0;
+    l->t = t0;
+    if (l->solver == VL_RK4) {
+        l->rk4.t = t0;
+        memcpy(l->rk4.y, y0, VL_DIM * sizeof(double));
+    } else {
+        int code = dop_restart(&l->dop, loop_rhs, l, t0, y0, &r);
+        if (code) return solver_error(l, code, &r);
+    }
+    return vl_publish(l);
+}
+
+int vl_do_step(VlLoop *l, double t, double h)
+{
+    DopReport r;
+    if (l->error) return (int)l->error;
+    if (!(isfinite(h) && h > 0.0)) return VL_BAD_STEP;
+    if (!(isfinite(t) && fabs(t - l->t) <= l->time_tolerance * py_max(1.0, fabs(t)))) return VL_BAD_TIME;
+    int code = l->solver == VL_RK4 ? rk4_advance(&l->rk4, loop_rhs, l, t + h, &r)
+                                   : dop_advance(&l->dop, loop_rhs, l, t + h, &r);
+    if (code) return solver_error(l, code, &r);
+    l->t = t + h;
+    return vl_publish(l);
+}
+
+void vl_layout(size_t *sizes)
+{
+    sizes[0] = sizeof(VlLoop);
+    sizes[1] = offsetof(VlLoop, dop);
+    sizes[2] = offsetof(VlLoop, t);
+    sizes[3] = offsetof(VlLoop, out);
+    sizes[4] = offsetof(VlLoop, enabled);
+    sizes[5] = offsetof(VlLoop, error);
+    sizes[6] = offsetof(VlLoop, message);
+    sizes[7] = offsetof(VlLoop, reference);
+}

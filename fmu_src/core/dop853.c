@@ -1,0 +1,568 @@
+/*
+ * dop853.c -- adaptive DOP853 with dense output and event location (dop853.h), operation for operation as
+ * vibromodel/integrate.py's Dop853.  Where Python raises inside Dop853._trial's try (ArithmeticError,
+ * ValueError), the step fails as there; anywhere else the exception escapes, and here the call returns
+ * DOP_RAISED with the exception's text.
+ */
+#include "dop853.h"
+
+#include <math.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <string.h>
+
+#include "dop853_tableau.h"
+#include "pyfloat.h"
+#include "roots.h"
+
+/* integrate.py's step control constants */
+#define SAFETY 0.9
+#define MIN_FACTOR 0.2
+#define MAX_FACTOR 10.0
+#define ERROR_EXPONENT (-1.0 / 8.0)
+/* integrate.EVENT_MAX_DEPTH, EVENT_SCREEN (event location: docs/events.md) */
+#define EVENT_MAX_DEPTH DOP_EVENT_MAX_DEPTH
+#define EVENT_SCREEN 2.0
+
+/* The stages of one step: k[component][stage], stages 0..n-1 */
+typedef struct {
+    double k[DOP_MAX_DIM][DOP_STAGES];
+    int n;
+} Stages;
+
+/* Leave code with (t, y) and the formatted message in the report. */
+static int report(const Dop853 *s, DopReport *r, int code, double t, const double *y, const char *format, ...)
+{
+    va_list args;
+    va_start(args, format);
+    vsnprintf(r->message, DOP_MESSAGE, format, args);
+    va_end(args);
+    r->t = t;
+    memcpy(r->y, y, sizeof(double) * (size_t)s->n);
+    r->event = -1;
+    return code;
+}
+
+/* The exception a fault raises in Python, escaping. */
+static int raise_fault(const Dop853 *s, DopReport *r, int fault)
+{
+    char text[DOP_MESSAGE];
+    py_fault_text(fault, text, sizeof text);
+    return report(s, r, DOP_RAISED, s->t, s->y, "%s", text);
+}
+
+/* integrate._dot over the first m stages of one component: sum of c[j] * k[j], left to right from 0 */
+static double dot(const double *c, int m, const double *k)
+{
+    double sum = 0.0;
+    for (int j = 0; j < m; j++) sum += c[j] * k[j];
+    return sum;
+}
+
+double dop_event_g(const Dop853 *s, int i, const double *y)
+{
+    const DopEvent *e = &s->events[i];
+    double g = e->c0;
+    for (int j = 0; j < s->n; j++)
+        if (e->c[j] != 0.0) g += e->c[j] * y[j];
+    return g;
+}
+
+/* sum of c[j] * values[j] over the event's nonzero coefficients, from 0.0 (the rate of g along f, and the like) */
+static double event_linear(const Dop853 *s, int i, const double *values)
+{
+    const DopEvent *e = &s->events[i];
+    double g = 0.0;
+    for (int j = 0; j < s->n; j++)
+        if (e->c[j] != 0.0) g += e->c[j] * values[j];
+    return g;
+}
+
+/* Dop853._f: counted evaluation */
+static int counted(Dop853 *s, DopRhs rhs, void *ctx, double t, const double *y, double *f)
+{
+    s->nfev += 1;
+    return rhs(ctx, t, y, f);
+}
+
+/* Dop853._run_stages for rows first..last of DOP_A (row st has st coefficients, node DOP_C[st]) or, with
+ * first = DOP_N_STAGES, the FSAL stage (row DOP_B, node 1); a stage is appended once its derivative is in. */
+static inline __attribute__((always_inline)) int stages_of(DopRhs rhs, void *ctx, double t, const double *y,
+                                                           double h, int first, int last, Stages *k, double *y_last,
+                                                           int n)
+{
+    double ys[DOP_MAX_DIM], f[DOP_MAX_DIM];
+    for (int st = first; st <= last; st++) {
+        const double *row = st == DOP_N_STAGES ? DOP_B : DOP_A[st];
+        double c = st == DOP_N_STAGES ? 1.0 : DOP_C[st];
+        double ts = t + c * h;
+        int m = st < k->n ? st : k->n;
+        for (int i = 0; i < n; i++) ys[i] = y[i] + h * dot(row, m, k->k[i]);
+        int fault = rhs(ctx, ts, ys, f);
+        if (fault) return fault;
+        for (int i = 0; i < n; i++) k->k[i][k->n] = f[i];
+        k->n += 1;
+        memcpy(y_last, ys, sizeof(double) * (size_t)n);
+    }
+    return FAULT_NONE;
+}
+
+/* stages_of with the dimension a constant where it is the plant's (2): the compiler unrolls the component loops */
+static int run_stages(const Dop853 *s, DopRhs rhs, void *ctx, double t, const double *y, double h, int first,
+                      int last, Stages *k, double *y_last)
+{
+    if (s->n == 2) return stages_of(rhs, ctx, t, y, h, first, last, k, y_last, 2);
+    return stages_of(rhs, ctx, t, y, h, first, last, k, y_last, (int)s->n);
+}
+
+/* Dop853._trial: one step of size h from (t, y) with derivative s->f. Stages into k, new state into y_new;
+ * *error is the scaled error norm, inf when a stage raised (caught, as Python's try) or the error is not
+ * finite. Returns a fault that Python would not catch (an overflowing square, a zero divisor). */
+static int trial(Dop853 *s, DopRhs rhs, void *ctx, double t, const double *y, double h, Stages *k,
+                 double *y_new, double *error)
+{
+    int n = (int)s->n, fault = FAULT_NONE;
+    double scale[DOP_MAX_DIM];
+    for (int i = 0; i < n; i++) k->k[i][0] = s->f[i];
+    k->n = 1;
+    if (run_stages(s, rhs, ctx, t, y, h, 1, DOP_N_STAGES, k, y_new) != FAULT_NONE) {
+        s->nfev += k->n;  /* Python: self.nfev += len(stages[1]) */
+        memcpy(y_new, y, sizeof(double) * (size_t)n);
+        *error = INFINITY;
+        return FAULT_NONE;
+    }
+    s->nfev += DOP_N_STAGES;
+    for (int i = 0; i < n; i++) scale[i] = s->atol + s->rtol * py_max(fabs(y[i]), fabs(y_new[i]));
+    double e5 = 0.0, e3 = 0.0;
+    for (int i = 0; i < n; i++) {
+        double term = py_pow(dot(DOP_E5, DOP_N_STAGES + 1, k->k[i]) / scale[i], 2.0, &fault);
+        if (fault) return fault;
+        e5 += term;
+    }
+    for (int i = 0; i < n; i++) {
+        double term = py_pow(dot(DOP_E3, DOP_N_STAGES + 1, k->k[i]) / scale[i], 2.0, &fault);
+        if (fault) return fault;
+        e3 += term;
+    }
+    if (!isfinite(e5 + e3)) {
+        memcpy(y_new, y, sizeof(double) * (size_t)n);
+        *error = INFINITY;
+    } else if (e5 == 0.0 && e3 == 0.0) {
+        *error = 0.0;
+    } else {
+        *error = py_div(fabs(h) * e5, sqrt((e5 + 0.01 * e3) * (double)n), &fault);
+    }
+    return fault;
+}
+
+/* Dop853._accept (t, y may not alias s->y) */
+static void accept(Dop853 *s, double t, const double *y, double h, const double *y_new, const Stages *k)
+{
+    size_t bytes = sizeof(double) * (size_t)s->n;
+    s->t_old = t;
+    memcpy(s->y_old, y, bytes);
+    memcpy(s->f_old, s->f, bytes);
+    s->has_old = 1;
+    for (int i = 0; i < s->n; i++) {
+        memcpy(s->k[i], k->k[i], sizeof(double) * (size_t)k->n);
+        s->f[i] = k->k[i][k->n - 1];
+    }
+    s->n_stages = k->n;
+    s->dense_ready = 0;
+    s->t = t + h;
+    memcpy(s->y, y_new, bytes);
+    s->n_steps += 1;
+}
+
+/* Dop853._build_dense: coefficients of scipy's Dop853DenseOutput from three extra stages (uncounted unless
+ * all three succeed). */
+static int build_dense(Dop853 *s, DopRhs rhs, void *ctx)
+{
+    Stages k;
+    int n = (int)s->n;
+    double h = s->t - s->t_old, y_last[DOP_MAX_DIM];
+    k.n = (int)s->n_stages;
+    for (int i = 0; i < n; i++) memcpy(k.k[i], s->k[i], sizeof(double) * (size_t)k.n);
+    int fault = run_stages(s, rhs, ctx, s->t_old, s->y_old, h, DOP_N_STAGES + 1, DOP_STAGES - 1, &k, y_last);
+    if (fault) return fault;
+    s->nfev += DOP_STAGES - DOP_N_STAGES - 1;
+    for (int i = 0; i < n; i++) {
+        double dy = s->y[i] - s->y_old[i];
+        s->dense[i][0] = dy;
+        s->dense[i][1] = h * s->f_old[i] - dy;
+        s->dense[i][2] = 2.0 * dy - h * (s->f[i] + s->f_old[i]);
+        for (int row = 0; row < 4; row++) s->dense[i][3 + row] = h * dot(DOP_D[row], k.n, k.k[i]);
+    }
+    s->dense_ready = 1;
+    return FAULT_NONE;
+}
+
+/* integrate._evaluate: dense output increment of component i at the fraction f of the step */
+static double evaluate(const Dop853 *s, int i, double f)
+{
+    double y = 0.0;
+    for (int j = DOP_DENSE - 1; j >= 0; j--) {
+        y += s->dense[i][j];
+        y *= (DOP_DENSE - 1 - j) % 2 == 0 ? f : 1.0 - f;
+    }
+    return y;
+}
+
+/* Dop853.value_at (with _interpolant) */
+int dop_value_at(Dop853 *s, DopRhs rhs, void *ctx, double t, double *y, DopReport *r)
+{
+    int n = (int)s->n;
+    if (t == s->t) {
+        memcpy(y, s->y, sizeof(double) * (size_t)n);
+        return DOP_OK;
+    }
+    if (!s->has_old || !(s->t_old <= t && t <= s->t)) {
+        number_text t_text, old_text, end_text;
+        return report(s, r, DOP_RAISED, s->t, s->y, "ValueError: tau = %s is outside the last step [%s, %s]",
+                      py_repr(t_text, t), s->has_old ? py_repr(old_text, s->t_old) : "None", py_repr(end_text, s->t));
+    }
+    if (!s->dense_ready) {
+        int fault = build_dense(s, rhs, ctx);
+        if (fault) return raise_fault(s, r, fault);
+    }
+    double f = (t - s->t_old) / (s->t - s->t_old);  /* the step has a length: t_old < t */
+    for (int i = 0; i < n; i++) y[i] = s->y_old[i] + evaluate(s, i, f);
+    return DOP_OK;
+}
+
+/* Dop853._restart */
+int dop_restart(Dop853 *s, DopRhs rhs, void *ctx, double t, const double *y, DopReport *r)
+{
+    s->t = t;
+    memmove(s->y, y, sizeof(double) * (size_t)s->n);
+    int fault = counted(s, rhs, ctx, t, s->y, s->f);
+    if (fault) return raise_fault(s, r, fault);
+    s->has_old = 0;
+    s->dense_ready = 0;
+    s->stopped = 0;
+    for (int i = 0; i < s->n_events; i++)
+        if (!s->events[i].terminal) s->side[i] = dop_event_g(s, i, s->y) > 0.0;
+    return DOP_OK;
+}
+
+/* Dop853._initial_step: Hairer's starting step (scipy's select_initial_step) over all components */
+static int initial_step(Dop853 *s, DopRhs rhs, void *ctx, double *h)
+{
+    int n = (int)s->n, fault;
+    double scale[DOP_MAX_DIM], w[DOP_MAX_DIM] = {0.0}, y1[DOP_MAX_DIM] = {0.0}, f1[DOP_MAX_DIM] = {0.0}, t = s->t;
+    double root_n = sqrt((double)n);
+    for (int i = 0; i < n; i++) scale[i] = s->atol + fabs(s->y[i]) * s->rtol;
+    for (int i = 0; i < n; i++) w[i] = s->y[i] / scale[i];
+    double d0 = py_hypot(w, n) / root_n;
+    for (int i = 0; i < n; i++) w[i] = s->f[i] / scale[i];
+    double d1 = py_hypot(w, n) / root_n;
+    double h0 = d0 < 1e-5 || d1 < 1e-5 ? 1e-6 : 0.01 * d0 / d1;
+    h0 = py_min(h0, s->max_step);
+    for (int i = 0; i < n; i++) y1[i] = s->y[i] + h0 * s->f[i];
+    fault = counted(s, rhs, ctx, t + h0, y1, f1);
+    if (fault) return fault;
+    for (int i = 0; i < n; i++) w[i] = (f1[i] - s->f[i]) / scale[i];
+    double d2 = py_div(py_hypot(w, n) / root_n, h0, &fault);
+    if (fault) return fault;
+    double d_max = py_max(d1, d2);
+    double h1 = d_max <= 1e-15 ? py_max(1e-6, h0 * 1e-3) : py_pow(0.01 / d_max, 1.0 / 9.0, &fault);
+    if (fault) return fault;
+    *h = py_min(py_min(100.0 * h0, h1), s->max_step);
+    return FAULT_NONE;
+}
+
+/* ---- event location ---- */
+
+/* The function brentq sees: f(tt) = g(value_at(tt)) wrapped by scipy's _wrap_nan_raise. */
+static int root_function(Dop853 *s, DopRhs rhs, void *ctx, int event, double tt, double *f, DopReport *r)
+{
+    double y[DOP_MAX_DIM];
+    int code = dop_value_at(s, rhs, ctx, tt, y, r);
+    if (code) return code;
+    *f = dop_event_g(s, event, y);
+    if (isnan(*f)) {
+        number_text text;
+        return report(s, r, DOP_RAISED, s->t, s->y,
+                      "ValueError: The function value at x=%s is NaN; solver cannot continue.", py_repr(text, tt));
+    }
+    return DOP_OK;
+}
+
+typedef struct {
+    Dop853 *s;
+    DopRhs rhs;
+    void *ctx;
+    int event;
+    DopReport *r;
+} RootContext;
+
+static int event_on_dense(void *context, double tt, double *f)
+{
+    RootContext *c = context;
+    return root_function(c->s, c->rhs, c->ctx, c->event, tt, f, c->r);
+}
+
+/* Dop853._locate: brentq on the dense output in [xa, xb], its errors as Python raises them */
+static int locate(Dop853 *s, DopRhs rhs, void *ctx, int event, double xa, double xb, double *root, DopReport *r)
+{
+    RootContext c = {s, rhs, ctx, event, r};
+    int iterations, code = brentq(event_on_dense, &c, xa, xb, root, &iterations);
+    if (code == ROOT_SIGN_ERROR)
+        return report(s, r, DOP_RAISED, s->t, s->y, "ValueError: f(a) and f(b) must have different signs");
+    if (code == ROOT_NO_CONVERGENCE)
+        return report(s, r, DOP_RAISED, s->t, s->y, "RuntimeError: Failed to converge after %d iterations.", iterations);
+    return code;
+}
+
+/* integrate._monotone */
+int dop_monotone(const double *b, int degree)
+{
+    int rising = 1, falling = 1;
+    for (int k = 0; k < degree; k++) {
+        rising = rising && b[k + 1] > b[k];
+        falling = falling && b[k + 1] < b[k];
+    }
+    return rising || falling;
+}
+
+/* integrate._split: de Casteljau at 1/2 */
+void dop_split(const double *b_in, int degree, double *left, double *right)
+{
+    double b[DOP_DENSE + 1];
+    memcpy(b, b_in, sizeof(double) * (size_t)(degree + 1));
+    left[0] = b[0];
+    right[degree] = b[degree];
+    for (int r = 1; r <= degree; r++) {
+        for (int k = 0; k <= degree - r; k++) b[k] = 0.5 * (b[k] + b[k + 1]);
+        left[r] = b[0];
+        right[degree - r] = b[degree - r];
+    }
+}
+
+typedef struct {
+    double s_a, s_b;
+    int depth;
+    double b[8];
+} Piece;
+
+/* Dop853._first_zero: the earliest time in the last step where event i is reached on the dense output
+ * (terminal: g <= 0; other: g on the other side than side[i]); *found = 0 if none. */
+static int first_zero(Dop853 *s, DopRhs rhs, void *ctx, int i, int *found, double *t_event, DopReport *r)
+{
+    const DopEvent *e = &s->events[i];
+    int positive = e->terminal ? 1 : (int)s->side[i], code;
+    double y[DOP_MAX_DIM];
+#define BEYOND(g) (positive ? !((g) > 0.0) : (g) > 0.0)
+    *found = 0;
+    double g0 = dop_event_g(s, i, s->y_old), g1 = dop_event_g(s, i, s->y);
+    if (BEYOND(g0)) {
+        *found = 1;
+        *t_event = s->t_old;
+        return DOP_OK;
+    }
+    double h = s->t - s->t_old;
+    if (!BEYOND(g1)) {
+        double reach = EVENT_SCREEN * (fabs(g1 - g0) + h * (fabs(event_linear(s, i, s->f_old)) +
+                                                            fabs(event_linear(s, i, s->f))));
+        if (fabs(g0) > reach && fabs(g1) > reach) return DOP_OK;
+    }
+    if (!s->dense_ready) {
+        int fault = build_dense(s, rhs, ctx);
+        if (fault) return raise_fault(s, r, fault);
+    }
+    double G[DOP_DENSE];
+    for (int j = 0; j < DOP_DENSE; j++) {
+        double column[DOP_MAX_DIM];
+        for (int m = 0; m < s->n; m++) column[m] = s->dense[m][j];
+        G[j] = event_linear(s, i, column);
+    }
+    Piece stack[EVENT_MAX_DEPTH + 2];
+    int top = 0;
+    stack[0].s_a = 0.0;
+    stack[0].s_b = 1.0;
+    stack[0].depth = 0;
+    for (int k = 0; k < 8; k++) {
+        double sum = 0.0;
+        for (int j = 0; j < DOP_DENSE; j++) sum += G[j] * DOP_BERNSTEIN[j][k];
+        stack[0].b[k] = g0 + sum;
+    }
+    top = 1;
+    while (top > 0) {
+        Piece piece = stack[--top];
+        double lo = piece.b[0], hi = piece.b[0];
+        for (int k = 1; k < 8; k++) {
+            lo = py_min(lo, piece.b[k]);
+            hi = py_max(hi, piece.b[k]);
+        }
+        if (positive ? lo > 0.0 : !(hi > 0.0)) continue;  /* the hull of g on the piece is on the start side */
+        double t_b = piece.s_b == 1.0 ? s->t : s->t_old + piece.s_b * h;
+        int resolved = piece.depth >= EVENT_MAX_DEPTH;
+        code = dop_value_at(s, rhs, ctx, t_b, y, r);
+        if (code) return code;
+        if (BEYOND(dop_event_g(s, i, y)) && (resolved || dop_monotone(piece.b, DOP_DENSE))) {
+            double t_a = piece.s_a == 0.0 ? s->t_old : s->t_old + piece.s_a * h;
+            code = dop_value_at(s, rhs, ctx, t_a, y, r);
+            if (code) return code;
+            *found = 1;
+            if (BEYOND(dop_event_g(s, i, y))) {  /* a rounding of the hull's verdict on the piece before */
+                *t_event = t_a;
+                return DOP_OK;
+            }
+            return locate(s, rhs, ctx, i, t_a, t_b, t_event, r);  /* one zero in the piece */
+        }
+        if (!resolved) {
+            double middle = 0.5 * (piece.s_a + piece.s_b);
+            Piece *right = &stack[top++], *left = &stack[top++];
+            dop_split(piece.b, DOP_DENSE, left->b, right->b);
+            right->s_a = middle;
+            right->s_b = piece.s_b;
+            left->s_a = piece.s_a;
+            left->s_b = middle;
+            right->depth = left->depth = piece.depth + 1;
+        }
+    }
+#undef BEYOND
+    return DOP_OK;
+}
+
+/* Dop853._move_to_side: the state onto event i's zero, then ulp by ulp onto its side `side`; a new derivative */
+static int move_to_side(Dop853 *s, DopRhs rhs, void *ctx, int i, int side, DopReport *r)
+{
+    const DopEvent *e = &s->events[i];
+    int j = 0, n = (int)s->n;
+    for (int m = 1; m < n; m++)
+        if (fabs(e->c[m]) > fabs(e->c[j])) j = m;
+    double rest = e->c0;
+    for (int m = 0; m < n; m++)
+        if (m != j && e->c[m] != 0.0) rest += e->c[m] * s->y[m];
+    s->y[j] = -rest / e->c[j];
+    double direction = (e->c[j] > 0.0) == side ? INFINITY : -INFINITY;
+    for (int attempt = 0; attempt < 8; attempt++) {
+        if ((dop_event_g(s, i, s->y) > 0.0) == side) break;
+        s->y[j] = nextafter(s->y[j], direction);
+    }
+    int fault = counted(s, rhs, ctx, s->t, s->y, s->f);
+    if (fault) return raise_fault(s, r, fault);
+    s->dense_ready = 0;
+    return DOP_OK;
+}
+
+/* Dop853._handle_events: find the earliest event in the last step; cut the step there. */
+static int handle_events(Dop853 *s, DopRhs rhs, void *ctx, double t0, const double *y0, DopReport *r)
+{
+    int earliest = -1, code, found;
+    double earliest_t = 0.0, t_event = 0.0;
+    for (int i = 0; i < s->n_events; i++) {
+        code = first_zero(s, rhs, ctx, i, &found, &t_event, r);
+        if (code) return code;
+        if (found && (earliest < 0 || t_event < earliest_t)) {
+            earliest = i;
+            earliest_t = t_event;
+        }
+    }
+    if (earliest < 0) return DOP_OK;
+    size_t bytes = sizeof(double) * (size_t)s->n;
+    double h = earliest_t - t0;
+    s->t = t0;
+    memcpy(s->y, y0, bytes);
+    memcpy(s->f, s->f_old, bytes);
+    if (h > 0.0) {
+        Stages k;
+        double y_new[DOP_MAX_DIM], error;
+        int fault = trial(s, rhs, ctx, t0, y0, h, &k, y_new, &error);
+        if (fault) return raise_fault(s, r, fault);
+        if (!isfinite(error)) {
+            number_text event_text, start_text;
+            return report(s, r, DOP_FAILED, t0, y0, "the step cut at an event at tau = %s from tau = %s failed (a "
+                          "stage left the model's domain)", py_g(event_text, earliest_t, 10), py_g(start_text, t0, 10));
+        }
+        accept(s, t0, y0, h, y_new, &k);
+    } else {  /* the event is at the step's start: the step is undone */
+        s->has_old = 0;
+        s->dense_ready = 0;
+    }
+    if (s->events[earliest].terminal) {
+        s->stopped = earliest + 1;
+        s->stop_t = s->t;
+        memcpy(s->stop_y, s->y, bytes);
+        return DOP_OK;
+    }
+    int side = !s->side[earliest];
+    if ((dop_event_g(s, earliest, s->y) > 0.0) != side) {
+        code = move_to_side(s, rhs, ctx, earliest, side, r);
+        if (code) return code;
+    }
+    s->side[earliest] = side;
+    return DOP_OK;
+}
+
+/* SAFETY * error**ERROR_EXPONENT of Dop853._step: the error is positive and finite there, pow cannot fault */
+static double step_factor(double error)
+{
+    int fault = FAULT_NONE;
+    return SAFETY * py_pow(error, ERROR_EXPONENT, &fault);
+}
+
+/* Dop853._step: one accepted step (the step size adapted on the way), then its events */
+static int step(Dop853 *s, DopRhs rhs, void *ctx, DopReport *r)
+{
+    double t = s->t, y[DOP_MAX_DIM], y_new[DOP_MAX_DIM], h, error;
+    int rejected = 0, fault;
+    Stages k;
+    memcpy(y, s->y, sizeof(double) * (size_t)s->n);
+    if (s->h <= 0.0) {  /* Dop853.h is None: a chosen step size is > 0 (or NaN) */
+        fault = initial_step(s, rhs, ctx, &h);
+        if (fault) return raise_fault(s, r, fault);
+        s->h = h;
+    }
+    double min_step = 10.0 * (nextafter(t, INFINITY) - t);
+    h = py_min(s->h, s->max_step);
+    for (;;) {
+        if (!(h >= min_step)) {
+            number_text h_text, t_text, x_text;
+            return report(s, r, DOP_FAILED, t, y, "step size collapsed to %s at tau = %s, x = %s (stiff or singular)",
+                          py_g(h_text, h, 3), py_g(t_text, t, 10), py_g(x_text, y[0], 10));
+        }
+        fault = trial(s, rhs, ctx, t, y, h, &k, y_new, &error);
+        if (fault) return raise_fault(s, r, fault);
+        if (error < 1.0) {
+            double factor = error == 0.0 ? MAX_FACTOR : py_min(MAX_FACTOR, step_factor(error));
+            s->h = h * (rejected ? py_min(1.0, factor) : factor);
+            break;
+        }
+        if (!isfinite(error)) h *= MIN_FACTOR;
+        else h *= py_max(MIN_FACTOR, step_factor(error));
+        rejected = 1;
+    }
+    accept(s, t, y, h, y_new, &k);
+    return handle_events(s, rhs, ctx, t, y, r);
+}
+
+static int terminal(const Dop853 *s, DopReport *r)
+{
+    r->t = s->stop_t;
+    memcpy(r->y, s->stop_y, sizeof(double) * (size_t)s->n);
+    r->event = s->stopped - 1;
+    r->message[0] = '\0';
+    return DOP_TERMINAL;
+}
+
+/* Dop853.advance: step until t_target is covered */
+int dop_advance(Dop853 *s, DopRhs rhs, void *ctx, double t_target, DopReport *r)
+{
+    long long steps = 0;
+    while (s->t < t_target) {
+        if (s->stopped) return terminal(s, r);
+        if ((double)steps >= s->step_budget) {
+            number_text t_text, target_text;
+            return report(s, r, DOP_FAILED, s->t, s->y,
+                          "%lld steps reached only tau = %s of %s: make smaller communication steps", steps,
+                          py_g(t_text, s->t, 10), py_g(target_text, t_target, 10));
+        }
+        int code = step(s, rhs, ctx, r);
+        if (code) return code;
+        steps += 1;
+    }
+    if (s->stopped && s->stop_t <= t_target) return terminal(s, r);
+    return DOP_OK;
+}

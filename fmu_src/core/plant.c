@@ -1,0 +1,255 @@
+/*
+ * plant.c -- the plant's step logic (plant.h): Plant.do_step, state and outputs of vibromodel/plant.py on the
+ * model (model.c) and the solver of the settings (dop853.c or rk4.c).
+ */
+#include "plant.h"
+
+#include <math.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <string.h>
+
+#include "pyfloat.h"
+
+enum { CONTACT = 0, UPPER_GAP = 1, LOWER_GAP = 2 };  /* ExactModel.events, in order */
+
+/* Leave error `code` pending with (t, x, v) and the formatted message; the fast path stops. */
+static int set_error(VkPlant *p, int code, double t, double x, double v, const char *format, ...)
+{
+    va_list args;
+    va_start(args, format);
+    vsnprintf(p->message, VK_MESSAGE, format, args);
+    va_end(args);
+    p->error = code;
+    p->error_t = t;
+    p->error_x = x;
+    p->error_v = v;
+    p->enabled = 0;
+    return code;
+}
+
+void vk_solver_message(const VkModel *m, int code, const DopReport *r, char *buf, size_t size)
+{
+    if (code == DOP_TERMINAL) {
+        number_text t_text, x_text, gap_text;
+        int upper = r->event == UPPER_GAP;  /* models.pull_in_events' names */
+        snprintf(buf, size, "pull-in: %s gap 1 %s 2x/(3R) below %s at tau = %s, x = %s", upper ? "upper" : "lower",
+                 upper ? "-" : "+", py_g(gap_text, m->pull_in_gap, 6), py_g(t_text, r->t, 10),
+                 py_g(x_text, r->y[0], 10));
+        return;
+    }
+    snprintf(buf, size, "%s", r->message);
+}
+
+/* A solver's report as the pending error (vk_solver_message). */
+static int solver_error(VkPlant *p, int code, const DopReport *r)
+{
+    char text[VK_MESSAGE];
+    vk_solver_message(&p->model, code, r, text, sizeof text);
+    return set_error(p, code, r->t, r->y[0], r->y[1], "%s", text);
+}
+
+/* The exception a fault raises in Python, at the solver's state. */
+static int raise_fault(VkPlant *p, int fault)
+{
+    char text[VK_MESSAGE];
+    py_fault_text(fault, text, sizeof text);
+    const double *y = p->solver == VK_RK4 ? p->rk4.y : p->dop.y;
+    return set_error(p, VK_RAISED, p->solver == VK_RK4 ? p->rk4.t : p->dop.t, y[0], y[1], "%s", text);
+}
+
+/* The solvers' right-hand side: (x, v)' = (v, x'') at the held input U */
+static int plant_rhs(void *context, double t, const double *y, double *f)
+{
+    const VkPlant *p = context;
+    int fault;
+    f[0] = y[1];
+    f[1] = vm_accel(&p->model, t, y[0], y[1], p->U, &fault);
+    return fault;
+}
+
+double vk_accel(const VkPlant *p, double t, double x, double v, double U)
+{
+    int fault;
+    double a = vm_accel(&p->model, t, x, v, U, &fault);
+    return fault ? NAN : a;
+}
+
+/* The model's events as the solvers take them (ExactModel.events: contact, upper gap, lower gap) */
+void vk_set_events(int64_t *n_events, DopEvent *events, const VkModel *m)
+{
+    memset(events, 0, sizeof(DopEvent) * DOP_MAX_EVENTS);
+    if (m->polynomial) {  /* PolynomialModel.events is empty */
+        *n_events = 0;
+        return;
+    }
+    *n_events = 3;
+    events[CONTACT].c0 = 1.0;  /* models.CONTACT_EVENT: 1 + (2/3) x */
+    events[CONTACT].c[0] = 2.0 / 3.0;
+    events[UPPER_GAP].c0 = 1.0 - m->pull_in_gap;  /* models.pull_in_events */
+    events[UPPER_GAP].c[0] = -m->pull_in_c;
+    events[UPPER_GAP].terminal = 1;
+    events[LOWER_GAP].c0 = 1.0 - m->pull_in_gap;
+    events[LOWER_GAP].c[0] = m->pull_in_c;
+    events[LOWER_GAP].terminal = 1;
+}
+
+int vk_init(VkPlant *p, double t0, double x0, double v0)
+{
+    p->dop.n = p->rk4.n = 2;
+    vk_set_events(&p->dop.n_events, p->dop.events, &p->model);
+    vk_set_events(&p->rk4.n_events, p->rk4.events, &p->model);
+    p->dop.h = 0.0;
+    return vk_restart(p, t0, x0, v0, 0.0);
+}
+
+int vk_restart(VkPlant *p, double t, double x, double v, double U)
+{
+    double y[2] = {x, v};
+    DopReport r;
+    p->U = U;
+    if (p->solver == VK_RK4) {
+        p->rk4.t = t;
+        p->rk4.y[0] = x;
+        p->rk4.y[1] = v;
+        return VK_OK;
+    }
+    int code = dop_restart(&p->dop, plant_rhs, p, t, y, &r);
+    return code ? solver_error(p, code, &r) : VK_OK;
+}
+
+int vk_value_at(VkPlant *p, double t, double *x, double *v)
+{
+    double y[DOP_MAX_DIM];
+    DopReport r;
+    if (p->solver == VK_RK4) {  /* Rk4._require_current */
+        if (t != p->rk4.t) {
+            number_text own, asked;
+            return set_error(p, VK_RAISED, p->rk4.t, p->rk4.y[0], p->rk4.y[1], "ValueError: RK4 holds only tau = %s, "
+                             "not %s", py_repr(own, p->rk4.t), py_repr(asked, t));
+        }
+        *x = p->rk4.y[0];
+        *v = p->rk4.y[1];
+        return VK_OK;
+    }
+    int code = dop_value_at(&p->dop, plant_rhs, p, t, y, &r);
+    if (code) return solver_error(p, code, &r);
+    *x = y[0];
+    *v = y[1];
+    return VK_OK;
+}
+
+int vk_set_input(VkPlant *p, double t, double U)
+{
+    double x, v;
+    if (p->solver == VK_RK4) {  /* Rk4.set_input */
+        p->U = U;
+        return VK_OK;
+    }
+    if (U == p->U) return VK_OK;
+    int code = vk_value_at(p, t, &x, &v);
+    if (code) return code;
+    p->U = U;
+    return vk_restart(p, t, x, v, U);
+}
+
+int vk_advance(VkPlant *p, double t_target)
+{
+    DopReport r;
+    int code = p->solver == VK_RK4 ? rk4_advance(&p->rk4, plant_rhs, p, t_target, &r)
+                                   : dop_advance(&p->dop, plant_rhs, p, t_target, &r);
+    return code ? solver_error(p, code, &r) : VK_OK;
+}
+
+/* Plant.outputs_at */
+int vk_outputs_at(VkPlant *p, double t, double x, double v, const double *a)
+{
+    double f_contact, f_electrostatic, a_model = 0.0;
+    int fault = vm_forces(&p->model, t, x, &f_contact, &f_electrostatic);
+    if (!fault && a == NULL) a_model = vm_accel(&p->model, t, x, v, p->U_input, &fault);
+    if (fault) return raise_fault(p, fault);
+    p->out[0] = x;
+    p->out[1] = v;
+    p->out[2] = a == NULL ? a_model : *a;
+    p->out[3] = f_contact;
+    p->out[4] = f_electrostatic;
+    p->in_contact = vm_contact_indentation(x) > 0.0;
+    return VK_OK;
+}
+
+/* Plant.state */
+int vk_plant_state(VkPlant *p, double *xva)
+{
+    int fault, code = vk_value_at(p, p->plant_t, &xva[0], &xva[1]);
+    if (code) return code;
+    xva[2] = vm_accel(&p->model, p->plant_t, xva[0], xva[1], p->U_input, &fault);
+    return fault ? raise_fault(p, fault) : VK_OK;
+}
+
+/* Plant.advance(t_end, U_input) */
+int vk_plant_advance(VkPlant *p, double t_end, double *xva)
+{
+    if (p->error) return (int)p->error;
+    int code = vk_set_input(p, p->plant_t, p->U_input);  /* at the old time: U changes there */
+    if (!code) code = vk_advance(p, t_end);
+    if (code) return code;
+    p->plant_t = t_end;
+    return vk_plant_state(p, xva);
+}
+
+/* Plant.do_step's checks (plant.check_step), without messages: vibromodel raises the ParameterError */
+static int check_step(const VkPlant *p, double t, double h)
+{
+    double ceiling = p->solver == VK_RK4 ? p->rk4.max_step : p->dop.max_step;
+    if (!(isfinite(h) && h > 0.0)) return VK_BAD_STEP;
+    if (!isfinite(p->U_input)) return VK_BAD_INPUT;
+    if (h / ceiling > p->max_steps_per_dostep) return VK_TOO_MANY_STEPS;
+    if (!(isfinite(t) && fabs(t - p->plant_t) <= p->time_tolerance * py_max(1.0, fabs(t)))) return VK_BAD_TIME;
+    return VK_OK;
+}
+
+/* Plant.do_step(t, h, U_input) */
+int vk_do_step(VkPlant *p, double t, double h)
+{
+    double xva[3];
+    if (p->error) return (int)p->error;
+    int code = check_step(p, t, h);
+    if (code) return code;
+    code = vk_plant_advance(p, t + h, xva);
+    if (code) return code;
+    return vk_outputs_at(p, p->plant_t, xva[0], xva[1], &xva[2]);  /* every output at the new point t + h */
+}
+
+int vk_run(VkPlant *p, double dt, size_t n, double *x_out)
+{
+    for (size_t i = 0; i < n; i++) {
+        int code = vk_do_step(p, p->plant_t, dt);
+        if (code) return code;
+        x_out[i] = p->out[0];
+    }
+    return VK_OK;
+}
+
+#define FIELD(name) offsetof(VkPlant, name)
+size_t vk_layout(size_t *offsets, size_t n_fields)
+{
+    static const size_t fields[] = {
+        FIELD(model), FIELD(time_tolerance), FIELD(max_steps_per_dostep), FIELD(solver), FIELD(dop), FIELD(rk4),
+        FIELD(U), FIELD(plant_t), FIELD(U_input), FIELD(out), FIELD(in_contact), FIELD(enabled),
+        FIELD(error), FIELD(error_t), FIELD(error_x), FIELD(error_v), FIELD(message),
+    };
+    size_t n = sizeof fields / sizeof fields[0];
+    if (n_fields != n) return 0;
+    memcpy(offsets, fields, sizeof fields);
+    return sizeof(VkPlant);
+}
+#undef FIELD
+
+void vk_sizes(size_t *sizes)
+{
+    sizes[0] = sizeof(Dop853);
+    sizes[1] = sizeof(Rk4);
+    sizes[2] = sizeof(VkModel);
+    sizes[3] = offsetof(Dop853, t);
+    sizes[4] = offsetof(Rk4, t);
+}

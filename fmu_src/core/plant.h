@@ -1,0 +1,99 @@
+/*
+ * plant.h -- the plant FMU's step logic in C (fidelities 0, 1, 2 with DOP853 or RK4): the twin of
+ * vibromodel/plant.py's Plant.do_step, operation for operation, so that both give the same bits.
+ *
+ * One VkPlant holds everything: the model's constants, the solver's state, the plant's time and input, the
+ * outputs and a pending error.  It contains no pointers, so its bytes are the plant's FMU state.
+ * vibromodel/compiled.py mirrors the layout with ctypes and checks it with vk_layout().  The library built from
+ * fmu_src/core (every .c file) is vibrokernel.so (harness/vibrofmu/kernel.py).
+ */
+#ifndef VIBRO_PLANT_H
+#define VIBRO_PLANT_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "dop853.h"
+#include "model.h"
+#include "rk4.h"
+
+enum {
+    VK_OK = 0,
+    /* do_step pre-checks (nothing changed; vibromodel raises the matching ParameterError): */
+    VK_BAD_STEP = 1,      /* communicationStepSize not finite or <= 0 */
+    VK_BAD_INPUT = 2,     /* U not finite */
+    VK_TOO_MANY_STEPS = 3,/* h / max_step > MAX_STEPS_PER_DOSTEP */
+    VK_BAD_TIME = 4,      /* currentCommunicationPoint not the plant's time */
+    /* integration (message, error_t/x/v set; the plant keeps the state it reached): */
+    VK_TERMINAL = DOP_TERMINAL,  /* terminal event (pull-in): vibromodel.integrate.TerminalEvent */
+    VK_FAILED = DOP_FAILED,      /* step collapse, step budget spent, non-finite state: IntegrationError */
+    /* where the Python code raises a plain exception that nothing catches: message "<type>: <text>" */
+    VK_RAISED = DOP_RAISED
+};
+
+#define VK_MESSAGE DOP_MESSAGE
+enum { VK_DOP853 = 0, VK_RK4 = 1 };  /* plant.Solver */
+
+typedef struct {
+    /* ---- model and settings (set once by vibromodel.compiled) ---- */
+    VkModel model;
+    double time_tolerance, max_steps_per_dostep;
+    int64_t solver;                     /* VK_DOP853 or VK_RK4 */
+    /* ---- the solver in use (its configuration first, then its state) ---- */
+    Dop853 dop;
+    Rk4 rk4;
+    double U;                           /* the input the solver holds (Dop853.U) */
+    /* ---- plant ---- */
+    double plant_t, U_input;            /* Plant.t; the input held over the next doStep */
+    double out[5];                      /* x, v, a, F_contact, F_electrostatic */
+    int64_t in_contact;                 /* 0/1 (an FMI Boolean reads it as int32: little-endian low word) */
+    int64_t enabled;                    /* the FMU's C fast path may step this plant */
+    /* ---- pending error (code != 0 until vibromodel reads it) ---- */
+    int64_t error;
+    double error_t, error_x, error_v;
+    char message[VK_MESSAGE];
+} VkPlant;
+
+/* sizeof(VkPlant) and the offsets of its top-level fields in declaration order into offsets[0..n_fields-1];
+   0 (and nothing written) when n_fields is not the number of fields. */
+size_t vk_layout(size_t *offsets, size_t n_fields);
+/* sizeof(Dop853), sizeof(Rk4), sizeof(VkModel) and offsetof(Dop853, t), offsetof(Rk4, t) into sizes[0..4] */
+void vk_sizes(size_t *sizes);
+
+/* Functions returning int give VK_OK or an error code. Integration errors (VK_TERMINAL, VK_FAILED, VK_RAISED)
+   are also left pending in p->error (with message, error_t/x/v; enabled = 0) until vibromodel reads them;
+   while one is pending, vk_plant_advance, vk_do_step and vk_run return it and change nothing. */
+
+/* The model's events as the solvers take them (ExactModel.events: contact, upper gap, lower gap; none for Eq. 7);
+   also the closed loop's (closedloop.c) */
+void vk_set_events(int64_t *n_events, DopEvent *events, const VkModel *m);
+/* The message of a solver's report: TerminalEvent(f"{name} at tau = {t:.10g}, x = {x:.10g}") for a stop, else the
+   solver's own message; also the closed loop's */
+void vk_solver_message(const VkModel *m, int code, const DopReport *r, char *buf, size_t size);
+
+/* Configure both solvers from the model (n = 2, the model's events; the first DOP853 step not chosen) and
+   restart at (t0, x0, v0) with U = 0.  The caller has set model, settings, solver, dop.rtol/atol/max_step/
+   step_budget, rk4.max_step. */
+int vk_init(VkPlant *p, double t0, double x0, double v0);
+/* Solver restart at (t, x, v) with input U (Dop853._restart; RK4: the state is set). */
+int vk_restart(VkPlant *p, double t, double x, double v, double U);
+/* integrator.set_input: if U changed, restart at t from the dense output (RK4: U is taken). */
+int vk_set_input(VkPlant *p, double t, double U);
+/* integrator.advance(t_target). */
+int vk_advance(VkPlant *p, double t_target);
+/* integrator.value_at(t); VK_RAISED (ValueError) if t is outside the last step (RK4: t is not its time). */
+int vk_value_at(VkPlant *p, double t, double *x, double *v);
+/* the model's x'' (NaN where the Python model raises) */
+double vk_accel(const VkPlant *p, double t, double x, double v, double U);
+/* Plant.outputs_at(t, x, v, a): fills out[] and in_contact; a == NULL: the model's x'' at U_input. */
+int vk_outputs_at(VkPlant *p, double t, double x, double v, const double *a);
+/* Plant.state(): (x, x', x'') at plant_t into xva[0..2]. */
+int vk_plant_state(VkPlant *p, double *xva);
+/* Plant.advance(t_end, U_input): set_input at plant_t, advance, plant_t = t_end, state into xva[0..2]. */
+int vk_plant_advance(VkPlant *p, double t_end, double *xva);
+/* Plant.do_step(t, h, U_input): pre-checks, Plant.advance(t + h), outputs at t + h, plant_t = t + h. */
+int vk_do_step(VkPlant *p, double t, double h);
+/* The compiled floor: n do_steps of dt, each from plant_t, x after each into x_out; stops at the first error. */
+int vk_run(VkPlant *p, double dt, size_t n, double *x_out);
+
+#endif

@@ -1,0 +1,220 @@
+/*
+ * pyfloat.c -- Python's float semantics (pyfloat.h).
+ * Build: no FMA contraction, never -ffast-math (harness/vibrofmu/kernel.py holds the command).
+ */
+#include "pyfloat.h"
+
+#include <errno.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+/* Python's min(a, b) and max(a, b): a unless b compares smaller (larger). */
+double py_min(double a, double b) { return b < a ? b : a; }
+double py_max(double a, double b) { return b > a ? b : a; }
+
+/* Python's a / b for floats (float_div). */
+double py_div(double a, double b, int *fault)
+{
+    if (b == 0.0) {
+        *fault = FAULT_ZERO_DIVISION;
+        return 0.0;
+    }
+    return a / b;
+}
+
+/* math.cos / math.sin (CPython's math_1): a NaN from a non-NaN argument (an infinity) is a ValueError. */
+double py_cos(double x, int *fault)
+{
+    double r = cos(x);
+    if (isnan(r) && !isnan(x)) *fault = FAULT_MATH_DOMAIN;
+    return r;
+}
+
+double py_sin(double x, int *fault)
+{
+    double r = sin(x);
+    if (isnan(r) && !isnan(x)) *fault = FAULT_MATH_DOMAIN;
+    return r;
+}
+
+/* Python's iv ** iw for floats (CPython 3.11 float_pow) with the exponents used here: 2 (squares of any
+ * float) and -1/8, 1/9 (of error ratios, which are >= 0 or NaN). So float_pow's branches for an exponent
+ * that is 0, NaN, infinite or an odd integer, for 0 ** negative (ZeroDivisionError) and for negative **
+ * fraction (a complex result) cannot be taken and are left out. noipa: GCC must neither fold pow(iv, 2.0)
+ * into iv * iv nor drop its errno (libm's pow need not round the square as the product does). */
+__attribute__((noipa)) double py_pow(double iv, double iw, int *fault)
+{
+    double ix;
+    if (isnan(iv)) return iv;
+    if (isinf(iv)) return iw > 0.0 ? fabs(iv) : 0.0;
+    if (iv == 0.0) return 0.0;
+    if (iv < 0.0) iv = -iv;  /* iw is the even integer 2 */
+    if (iv == 1.0) return 1.0;
+    errno = 0;
+    ix = pow(iv, iw);
+    if (errno == 0 && isinf(ix)) errno = ERANGE;     /* _Py_ADJUST_ERANGE1 */
+    else if (errno == ERANGE && ix == 0.0) errno = 0;  /* underflow is fine */
+    if (errno != 0) *fault = FAULT_OVERFLOW;  /* ERANGE: the only errno pow sets for a positive finite base */
+    return ix;
+}
+
+/* math.hypot(*values): CPython's math_hypot and vector_norm (Modules/mathmodule.c, 3.11), n <= PY_HYPOT_MAX. */
+double py_hypot(const double *values, int n)
+{
+    const double T27 = 134217729.0;  /* ldexp(1.0, 27) + 1.0 */
+    double vec[PY_HYPOT_MAX];
+    double max = 0.0, scale, csum = 1.0, oldcsum, frac1 = 0.0, frac2 = 0.0, frac3 = 0.0, t, hi, lo, h, x;
+    int found_nan = 0, max_e, i;
+    for (i = 0; i < n; i++) {
+        vec[i] = fabs(values[i]);
+        found_nan |= isnan(vec[i]);
+        if (vec[i] > max) max = vec[i];
+    }
+    if (isinf(max)) return max;
+    if (found_nan) return NAN;
+    if (max == 0.0 || n <= 1) return max;
+    frexp(max, &max_e);
+    if (max_e >= -1023) {
+        scale = ldexp(1.0, -max_e);
+        for (i = 0; i < n; i++) {
+            x = vec[i] * scale;  /* lossless scaling */
+            t = x * T27;         /* Veltkamp-Dekker split */
+            hi = t - (t - x);
+            lo = x - hi;
+            x = hi * hi;
+            oldcsum = csum;
+            csum += x;
+            frac1 += (oldcsum - csum) + x;
+            x = 2.0 * hi * lo;
+            oldcsum = csum;
+            csum += x;
+            frac2 += (oldcsum - csum) + x;
+            frac3 += lo * lo;
+        }
+        h = sqrt(csum - 1.0 + (frac1 + frac2 + frac3));
+        x = h;
+        t = x * T27;
+        hi = t - (t - x);
+        lo = x - hi;
+        x = -hi * hi;
+        oldcsum = csum;
+        csum += x;
+        frac1 += (oldcsum - csum) + x;
+        x = -2.0 * hi * lo;
+        oldcsum = csum;
+        csum += x;
+        frac2 += (oldcsum - csum) + x;
+        x = -lo * lo;
+        oldcsum = csum;
+        csum += x;
+        frac3 += (oldcsum - csum) + x;
+        x = csum - 1.0 + (frac1 + frac2 + frac3);
+        return (h + x / (2.0 * h)) / scale;
+    }
+    /* subnormal max: ldexp(1.0, -max_e) would overflow, divide by max instead */
+    for (i = 0; i < n; i++) {
+        x = vec[i] / max;
+        x = x * x;
+        oldcsum = csum;
+        csum += x;
+        frac1 += (oldcsum - csum) + x;
+    }
+    return max * sqrt(csum - 1.0 + frac1);
+}
+
+
+/* f"{x:.{precision}g}": C's %.*g, but a NaN prints "nan" whatever its sign bit. */
+const char *py_g(number_text buf, double x, int precision)
+{
+    if (isnan(x)) return "nan";
+    snprintf(buf, sizeof(number_text), "%.*g", precision, x);
+    return buf;
+}
+
+/* The `precision` significant digits of ax > 0 rounded to nearest, or with `up` the next such decimal above
+ * them, and their decimal exponent; true if they read back as ax. */
+static int decimal_digits(double ax, int precision, int up, char *digits, int *exponent)
+{
+    char text[40];
+    int n = 0;
+    snprintf(text, sizeof text, "%.*e", precision - 1, ax);
+    for (const char *c = text; *c != 'e'; c++)
+        if (*c != '.') digits[n++] = *c;
+    digits[n] = '\0';
+    *exponent = atoi(strchr(text, 'e') + 1);
+    if (up) {
+        int i = n - 1;
+        for (; i >= 0 && digits[i] == '9'; i--) digits[i] = '0';
+        if (i >= 0) {
+            digits[i] += 1;
+        } else {  /* 99..9 -> 100..0 */
+            digits[0] = '1';
+            *exponent += 1;
+        }
+    }
+    snprintf(text, sizeof text, "%c.%se%d", digits[0], digits + 1, *exponent);
+    return strtod(text, NULL) == ax;
+}
+
+/* repr(x) (float_repr_style 'short'): the fewest significant digits that read back as x, of those the
+ * nearest to x (the nearest decimal, or for a power of two, whose rounding interval reaches twice as far
+ * above as below, possibly the next one above); positional notation when the decimal point falls within
+ * -4 < point <= 16 of the digits' start, else d.ddde+XX. */
+const char *py_repr(number_text buf, double x)
+{
+    char digits[20], *out = buf;
+    int n, precision, exponent, point, i;
+    if (isnan(x)) return "nan";
+    if (isinf(x)) return x > 0 ? "inf" : "-inf";
+    if (x == 0.0) return signbit(x) ? "-0.0" : "0.0";
+    for (precision = 1; precision < 17; precision++) {
+        if (decimal_digits(fabs(x), precision, 0, digits, &exponent)) break;
+        if (decimal_digits(fabs(x), precision, 1, digits, &exponent)) break;
+    }
+    if (precision == 17) decimal_digits(fabs(x), precision, 0, digits, &exponent);
+    n = (int)strlen(digits);
+    point = exponent + 1;
+    if (x < 0) *out++ = '-';
+    if (point <= -4 || point > 16) {
+        *out++ = digits[0];
+        if (n > 1) *out++ = '.';
+        for (i = 1; i < n; i++) *out++ = digits[i];
+        snprintf(out, sizeof(number_text) - (size_t)(out - buf), "e%c%02d", exponent < 0 ? '-' : '+', abs(exponent));
+        return buf;
+    }
+    if (point <= 0) {
+        *out++ = '0';
+        *out++ = '.';
+        for (i = 0; i < -point; i++) *out++ = '0';
+        for (i = 0; i < n; i++) *out++ = digits[i];
+    } else {
+        for (i = 0; i < point || i < n; i++) {
+            if (i == point) *out++ = '.';
+            *out++ = i < n ? digits[i] : '0';
+        }
+        if (point >= n) {
+            *out++ = '.';
+            *out++ = '0';
+        }
+    }
+    *out = '\0';
+    return buf;
+}
+
+
+void py_fault_text(int fault, char *buf, unsigned long size)
+{
+    switch (fault) {
+    case FAULT_ZERO_DIVISION:
+        snprintf(buf, size, "ZeroDivisionError: float division by zero");
+        break;
+    case FAULT_MATH_DOMAIN:
+        snprintf(buf, size, "ValueError: math domain error");
+        break;
+    default:  /* FAULT_OVERFLOW: PyErr_SetFromErrno(OverflowError) raises OverflowError(ERANGE, strerror(ERANGE)) */
+        snprintf(buf, size, "OverflowError: %d %s", ERANGE, strerror(ERANGE));
+        break;
+    }
+}

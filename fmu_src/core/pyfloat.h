@@ -1,0 +1,35 @@
+/*
+ * pyfloat.h -- Python's float semantics in C, for the compiled twins of vibromodel (model.c, dop853.c, plant.c):
+ * the operations whose result or error differs from C's (min/max with NaN, division by zero, math.cos of an
+ * infinity, float ** with its OverflowError, math.hypot), and Python's number formatting for messages.
+ * A function that can raise in Python sets *fault (left unchanged otherwise).
+ */
+#ifndef VIBRO_PYFLOAT_H
+#define VIBRO_PYFLOAT_H
+
+/* What a Python operation raised (nothing: FAULT_NONE). */
+enum { FAULT_NONE = 0, FAULT_ZERO_DIVISION, FAULT_MATH_DOMAIN, FAULT_OVERFLOW };
+
+#define PY_HYPOT_MAX 32
+
+/* Python's min(a, b) and max(a, b): a unless b compares smaller (larger). */
+double py_min(double a, double b);
+double py_max(double a, double b);
+/* a / b: FAULT_ZERO_DIVISION for b == 0 */
+double py_div(double a, double b, int *fault);
+/* math.cos, math.sin: FAULT_MATH_DOMAIN for an infinite argument */
+double py_cos(double x, int *fault);
+double py_sin(double x, int *fault);
+/* iv ** iw for iw = 2, -1/8, 1/9 (float_pow): FAULT_OVERFLOW */
+double py_pow(double iv, double iw, int *fault);
+/* math.hypot(*values[0..n-1]) */
+double py_hypot(const double *values, int n);
+
+/* Text of numbers in messages */
+typedef char number_text[40];
+const char *py_g(number_text buf, double x, int precision);  /* f"{x:.{precision}g}" */
+const char *py_repr(number_text buf, double x);              /* repr(x) */
+/* "<exception type>: <text>" that a fault raises in Python */
+void py_fault_text(int fault, char *buf, unsigned long size);
+
+#endif

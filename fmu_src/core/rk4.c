@@ -1,0 +1,266 @@
+/*
+ * rk4.c -- fixed-step RK4 (rk4.h), operation for operation as vibromodel/integrate.py's Rk4.
+ */
+#include "rk4.h"
+
+#include <math.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <string.h>
+
+#include "pyfloat.h"
+#include "roots.h"
+
+static int report(const Rk4 *s, DopReport *r, int code, double t, const double *y, const char *format, ...)
+{
+    va_list args;
+    va_start(args, format);
+    vsnprintf(r->message, DOP_MESSAGE, format, args);
+    va_end(args);
+    r->t = t;
+    memcpy(r->y, y, sizeof(double) * (size_t)s->n);
+    r->event = -1;
+    return code;
+}
+
+/* integrate._rk4_growth: |R(zr + i zi)| */
+static double growth(double zr, double zi)
+{
+    double pr = 1.0 / 6.0 + zr / 24.0, pi = zi / 24.0, qr, qi;
+    qr = 0.5 + (zr * pr - zi * pi);
+    qi = zr * pi + zi * pr;
+    pr = 1.0 + (zr * qr - zi * qi);
+    pi = zr * qi + zi * qr;
+    qr = 1.0 + (zr * pr - zi * pi);
+    qi = zr * pi + zi * pr;
+    double w[2] = {qr, qi};
+    return py_hypot(w, 2);
+}
+
+/* Rk4._check_stability: refuse h if RK4 is unstable on the local linearisation x'' = -k x - c x' */
+static int check_stability(Rk4 *s, DopRhs rhs, void *ctx, double h, DopReport *r)
+{
+    int n = (int)s->n;
+    double y[DOP_MAX_DIM], f[DOP_MAX_DIM], values[4], t = s->t, x = s->y[0], v = s->y[1];
+    double dx = 1e-6 * py_max(1.0, fabs(x)), dv = 1e-6 * py_max(1.0, fabs(v));
+    const double shifts[4][2] = {{dx, 0.0}, {-dx, 0.0}, {0.0, dv}, {0.0, -dv}};
+    for (int j = 0; j < 4; j++) {
+        memcpy(y, s->y, sizeof(double) * (size_t)n);
+        if (j < 2) y[0] = x + shifts[j][0];
+        else y[1] = v + shifts[j][1];
+        if (rhs(ctx, t, y, f)) return DOP_OK;  /* a model error: no verdict (Python's except: return) */
+        values[j] = f[1];
+    }
+    double k = -(values[0] - values[1]) / (2.0 * dx);
+    double c = -(values[2] - values[3]) / (2.0 * dv);
+    s->nfev += 4;
+    double disc = c * c / 4.0 - k, half = -c / 2.0, eigen[2][2];
+    int count;
+    if (disc >= 0.0) {
+        double root = sqrt(disc);
+        eigen[0][0] = half + root;
+        eigen[0][1] = 0.0;
+        eigen[1][0] = half - root;
+        eigen[1][1] = 0.0;
+        count = 2;
+    } else {  /* a complex pair: the conjugate has the same |R| */
+        eigen[0][0] = half;
+        eigen[0][1] = sqrt(-disc);
+        count = 1;
+    }
+    for (int j = 0; j < count; j++) {
+        double re = eigen[j][0], im = eigen[j][1], zr = h * re, zi = h * im;
+        if (re <= 0.0 && growth(zr, zi) > 1.0 + 1e-12) {
+            double size = py_hypot(eigen[j], 2);
+            number_text h_text, t_text, zr_text, size_text, limit_text;
+            char zi_text[48];
+            snprintf(zi_text, sizeof zi_text, isnan(zi) ? "+nan" : "%+.3g", zi);
+            return report(s, r, DOP_FAILED, t, s->y, "RK4 unstable: step h = %s at tau = %s gives h*lambda = %s%sj "
+                          "outside the stability region (|lambda| = %s); reduce max_step below %s", py_g(h_text, h, 3),
+                          py_g(t_text, t, 10), py_g(zr_text, zr, 3), zi_text, py_g(size_text, size, 3),
+                          py_g(limit_text, 2.5 / size, 3));
+        }
+    }
+    return DOP_OK;
+}
+
+/* One fixed step's cubic Hermite interpolant (integrate._hermite_event's state) */
+typedef struct {
+    double x, v, h, x_new, v_new, c0, cx;
+    int nan_seen;
+    double nan_at;
+} Hermite;
+
+static void hermite_state(const Hermite *c, double s, double *xs, double *vs)
+{
+    double s2 = s * s, s3 = s * s * s;
+    *xs = (2 * s3 - 3 * s2 + 1) * c->x + (s3 - 2 * s2 + s) * c->h * c->v + (3 * s2 - 2 * s3) * c->x_new +
+          (s3 - s2) * c->h * c->v_new;
+    *vs = ((6 * s2 - 6 * s) * (c->x - c->x_new) / c->h + (3 * s2 - 4 * s + 1) * c->v + (3 * s2 - 2 * s) * c->v_new);
+}
+
+static double hermite_g(const Hermite *c, double s)
+{
+    double xs, vs;
+    hermite_state(c, s, &xs, &vs);
+    return c->c0 + c->cx * xs;
+}
+
+#define NAN_FOUND 1
+static int hermite_root_function(void *context, double s, double *f)
+{
+    Hermite *c = context;
+    *f = hermite_g(c, s);
+    if (isnan(*f)) {  /* scipy's _wrap_nan_raise */
+        c->nan_seen = 1;
+        c->nan_at = s;
+        return NAN_FOUND;
+    }
+    return 0;
+}
+
+/* integrate._hermite_event: *found and the fraction *s_event of the first point where terminal event e is
+   reached on the step's cubic; DOP_RAISED where Python's brentq raises */
+static int hermite_event(const Rk4 *st, Hermite *c, double t, int *found, double *s_event,
+                         DopReport *r)
+{
+    typedef struct {
+        double s_a, s_b;
+        int depth;
+        double b[4];
+    } Piece;
+    Piece stack[DOP_EVENT_MAX_DEPTH + 2];
+    double b[4];
+    int top;
+    *found = 0;
+    if (!(c->c0 + c->cx * c->x > 0.0)) {
+        *found = 1;
+        *s_event = 0.0;
+        return DOP_OK;
+    }
+    b[0] = c->c0 + c->cx * c->x;
+    b[1] = c->c0 + c->cx * (c->x + c->h * c->v / 3.0);
+    b[2] = c->c0 + c->cx * (c->x_new - c->h * c->v_new / 3.0);
+    b[3] = c->c0 + c->cx * c->x_new;
+    double lo = py_min(py_min(py_min(b[0], b[1]), b[2]), b[3]);
+    if (lo > 0.0) return DOP_OK;
+    stack[0].s_a = 0.0;
+    stack[0].s_b = 1.0;
+    stack[0].depth = 0;
+    memcpy(stack[0].b, b, sizeof b);
+    top = 1;
+    while (top > 0) {
+        Piece piece = stack[--top];
+        lo = py_min(py_min(py_min(piece.b[0], piece.b[1]), piece.b[2]), piece.b[3]);
+        if (lo > 0.0) continue;
+        int resolved = piece.depth >= DOP_EVENT_MAX_DEPTH;
+        if (!(hermite_g(c, piece.s_b) > 0.0) && (resolved || dop_monotone(piece.b, 3))) {
+            *found = 1;
+            if (!(hermite_g(c, piece.s_a) > 0.0)) {
+                *s_event = piece.s_a;
+                return DOP_OK;
+            }
+            int iterations, code = brentq(hermite_root_function, c, piece.s_a, piece.s_b, s_event, &iterations);
+            number_text text;
+            if (code == NAN_FOUND)
+                return report(st, r, DOP_RAISED, t, st->y, "ValueError: The function value at x=%s is NaN; solver "
+                              "cannot continue.", py_repr(text, c->nan_at));
+            if (code == ROOT_SIGN_ERROR)
+                return report(st, r, DOP_RAISED, t, st->y, "ValueError: f(a) and f(b) must have different signs");
+            if (code == ROOT_NO_CONVERGENCE)
+                return report(st, r, DOP_RAISED, t, st->y, "RuntimeError: Failed to converge after %d iterations.",
+                              iterations);
+            return DOP_OK;
+        }
+        if (!resolved) {
+            double middle = 0.5 * (piece.s_a + piece.s_b);
+            Piece *right = &stack[top++], *left = &stack[top++];
+            dop_split(piece.b, 3, left->b, right->b);
+            right->s_a = middle;
+            right->s_b = piece.s_b;
+            left->s_a = piece.s_a;
+            left->s_b = middle;
+            right->depth = left->depth = piece.depth + 1;
+        }
+    }
+    (void)t;
+    return DOP_OK;
+}
+
+/* Rk4._step */
+static int step(Rk4 *s, DopRhs rhs, void *ctx, double h, DopReport *r)
+{
+    int n = (int)s->n;
+    double t = s->t, *y = s->y, half = 0.5 * h;
+    double k1[DOP_MAX_DIM], k2[DOP_MAX_DIM], k3[DOP_MAX_DIM], k4[DOP_MAX_DIM], ys[DOP_MAX_DIM], y_new[DOP_MAX_DIM];
+    int fault = rhs(ctx, t, y, k1);
+    if (!fault) {
+        for (int i = 0; i < n; i++) ys[i] = y[i] + half * k1[i];
+        fault = rhs(ctx, t + half, ys, k2);
+    }
+    if (!fault) {
+        for (int i = 0; i < n; i++) ys[i] = y[i] + half * k2[i];
+        fault = rhs(ctx, t + half, ys, k3);
+    }
+    if (!fault) {
+        for (int i = 0; i < n; i++) ys[i] = y[i] + h * k3[i];
+        fault = rhs(ctx, t + h, ys, k4);
+    }
+    if (fault) {
+        number_text h_text, t_text, x_text;
+        return report(s, r, DOP_FAILED, t, y, "RK4 step h = %s from tau = %s left the model's domain (x = %s); "
+                      "reduce max_step", py_g(h_text, h, 3), py_g(t_text, t, 10), py_g(x_text, y[0], 10));
+    }
+    s->nfev += 4;
+    for (int i = 0; i < n; i++) y_new[i] = y[i] + h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
+    if (!(isfinite(y_new[0]) && isfinite(y_new[1]))) {
+        number_text t_text, h_text;
+        return report(s, r, DOP_FAILED, t, y, "RK4 unstable: the state became non-finite after tau = %s with h = %s; "
+                      "reduce max_step", py_g(t_text, t, 10), py_g(h_text, h, 3));
+    }
+    for (int i = 0; i < s->n_events; i++) {
+        const DopEvent *e = &s->events[i];
+        if (!e->terminal) continue;
+        Hermite c = {y[0], y[1], h, y_new[0], y_new[1], e->c0, e->c[0], 0, 0.0};
+        int found, code;
+        double s_event;
+        code = hermite_event(s, &c, t, &found, &s_event, r);
+        if (code) return code;
+        if (found) {
+            double xe, ve;
+            if (s_event == 0.0 && !(e->c0 + e->c[0] * y[0] > 0.0)) {  /* on the event at the step's start */
+                xe = y[0];
+                ve = y[1];
+            } else {
+                hermite_state(&c, s_event, &xe, &ve);
+            }
+            r->t = t + s_event * h;
+            memcpy(r->y, y, sizeof(double) * (size_t)n);
+            r->y[0] = xe;
+            r->y[1] = ve;
+            r->event = i;
+            r->message[0] = '\0';
+            return DOP_TERMINAL;
+        }
+    }
+    memcpy(s->y, y_new, sizeof(double) * (size_t)n);
+    s->n_steps += 1;
+    return DOP_OK;
+}
+
+int rk4_advance(Rk4 *s, DopRhs rhs, void *ctx, double t_target, DopReport *r)
+{
+    double span = t_target - s->t;
+    if (span <= 0.0) return DOP_OK;
+    double count = ceil(span / s->max_step * (1.0 - 1e-12));
+    if (count < 1.0) count = 1.0;
+    double h = span / count, t0 = s->t;
+    int code = check_stability(s, rhs, ctx, h, r);
+    if (code) return code;
+    for (double i = 1.0; i <= count; i += 1.0) {
+        code = step(s, rhs, ctx, h, r);
+        if (code) return code;
+        s->t = i == count ? t_target : t0 + i * h;
+    }
+    return DOP_OK;
+}

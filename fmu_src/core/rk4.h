@@ -1,0 +1,28 @@
+/*
+ * rk4.h -- classic fixed-step Runge-Kutta 4 on a state y[0..n-1] (n <= DOP_MAX_DIM), the C twin of
+ * vibromodel/integrate.py's Rk4: each advance splits [t, t_target] into equal steps no longer than max_step,
+ * refuses a step size outside RK4's stability region on the local linearisation of (y[0], y[1]) = (x, v), and
+ * stops at a terminal event located on each step's cubic Hermite interpolant of y[0] (excursions that begin and
+ * end inside a step included).  Events: DopEvent of dop853.h, only terminal ones are checked; g's affine form
+ * may involve y[0] only.  Pointer-free struct; the right-hand side (DopRhs) is passed to each call.
+ */
+#ifndef VIBRO_RK4_H
+#define VIBRO_RK4_H
+
+#include "dop853.h"
+
+typedef struct {
+    /* ---- configuration ---- */
+    int64_t n, n_events;
+    double max_step;
+    DopEvent events[DOP_MAX_EVENTS];
+    /* ---- state ---- */
+    double t, y[DOP_MAX_DIM];
+    int64_t nfev, n_steps;
+} Rk4;
+
+/* Integrate to exactly t_target (nothing if t_target <= t).  DOP_TERMINAL (report->event, t, y: the located
+   event), DOP_FAILED (unstable step size, non-finite state, a stage outside the model's domain). */
+int rk4_advance(Rk4 *s, DopRhs rhs, void *context, double t_target, DopReport *report);
+
+#endif

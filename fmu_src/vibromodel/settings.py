@@ -1,0 +1,124 @@
+"""The plant's settings (fidelity, solver, tolerance, kernel), their checks, its outputs and the checks of a step:
+shared by every plant implementation (plant.Plant, compiled.CompiledPlant) and the closed loop, so that neither
+imports the other.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+from enum import IntEnum
+
+from .analytic import OafmSettings
+from .fidelities import entry
+from .integrate import RK4_DRIVE_ERROR, RK4_DRIVE_THETA, rk4_drive_gains
+from .models import Fidelity
+from .parameters import ParameterError, Scene, clamp_tolerance, validate_max_step, validate_tolerance
+
+DEFAULT_EXPERIMENT = (0.0, 200.0, 0.1)  # start, stop, communication step of the FMU's DefaultExperiment
+RK4_DEFAULT_STEP = 0.01  # RK4 step when max_step = 0 ("automatic")
+TIME_TOLERANCE = 1e-9  # relative mismatch allowed between the host's time and the plant's
+MAX_STEPS_PER_DOSTEP = 10**6  # more steps in one doStep: refused up front (step ceiling) or stopped
+
+
+class Solver(IntEnum):
+    ADAPTIVE = 0
+    RK4 = 1
+
+
+class Kernel(IntEnum):
+    COMPILED = 0  # vibromodel.compiled (C) where it applies (fidelities.FidelityEntry.compiled_model)
+    PYTHON = 1
+
+
+@dataclass(frozen=True)
+class Settings:
+    fidelity: int = Fidelity.EXACT
+    solver: int = Solver.ADAPTIVE
+    rtol: float = 1e-8
+    max_step: float = 0.0  # 0: automatic (no ceiling for the adaptive solver, 0.01 for RK4)
+    kernel: int = Kernel.COMPILED
+    oafm: OafmSettings = field(default_factory=OafmSettings)  # fidelity 4 only
+
+    def validate(self) -> None:
+        level = entry(self.fidelity)  # ParameterError for an unknown fidelity
+        if level.check_settings is not None:
+            level.check_settings(self)
+        if self.solver not in set(Solver):
+            raise ParameterError("solver", self.solver, "must be 0 (adaptive) or 1 (RK4)")
+        if self.kernel not in set(Kernel):
+            raise ParameterError("kernel", self.kernel, "must be 0 (compiled) or 1 (pure Python)")
+        validate_tolerance(self.rtol)
+        if self.max_step != 0.0:
+            validate_max_step(self.max_step)
+
+
+def checked_settings(scene: Scene, settings: Settings) -> tuple[Settings, list[str]]:
+    """(the settings a plant runs with, warnings about them). Raises ParameterError for bad settings.
+
+    rtol below MIN_RTOL is clamped to it (parameters.clamp_tolerance); an RK4 step that does not resolve a
+    forcing term of Eq. 3 or 7 is warned about (rk4_drive_warnings). Every plant implementation (and the closed
+    loop) calls this one function.
+    """
+    settings.validate()
+    rtol, warning = clamp_tolerance(settings.rtol)
+    warnings = [] if warning is None else [warning]
+    if settings.solver == Solver.RK4 and entry(settings.fidelity).integrated:
+        warnings += rk4_drive_warnings(scene, settings.max_step or RK4_DEFAULT_STEP)
+    return replace(settings, rtol=rtol), warnings
+
+
+def rk4_drive_warnings(scene: Scene, max_step: float) -> list[str]:
+    """Warnings for the forcing terms that RK4 steps of max_step do not resolve (integrate.RK4_DRIVE_THETA).
+
+    The electrostatic AC terms oscillate at Omega (beta sin Omega t) and 2 Omega (gamma cos 2 Omega t), the load
+    at omega (Delta cos omega t); a term with zero amplitude needs no resolving. Steps are at most max_step (a
+    communication step that is not a multiple of it gets shorter steps), so the check is on max_step.
+    """
+    ac = ([(2.0 * scene.Omega, "gamma cos(2 Omega tau)")] if scene.gamma != 0.0 else []) + \
+         ([(scene.Omega, "beta sin(Omega tau)")] if scene.beta != 0.0 else [])
+    drives = [("AC drive", "Omega", scene.Omega, ac[0][0], ac[0][1])] if ac else []
+    if scene.Delta != 0.0:
+        drives.append(("load forcing", "omega", scene.omega, scene.omega, "Delta cos(omega tau)"))
+    warnings = []
+    for what, name, value, nu, term in drives:
+        theta = nu * max_step
+        if theta <= RK4_DRIVE_THETA * (1.0 + 1e-12):  # the step this warning names, RK4_DRIVE_THETA / nu, passes
+            continue
+        gain = rk4_drive_gains(theta)[0]
+        error = abs(gain - 1.0)  # inf at theta = 2 pi k: every step samples the drive at the same phase
+        wrong = f"by {error:.0%}" if error <= 10.0 else "by more than 1000% (near 2 pi k rad per step, a resonance)"
+        warnings.append(
+            f"RK4 max_step = {max_step:g} does not resolve the {what} at {name} = {value:g}: its term {term} "
+            f"turns by {theta:.3g} rad per step (more than {RK4_DRIVE_THETA:.3g}, i.e. fewer than "
+            f"{2.0 * math.pi / RK4_DRIVE_THETA:.2g} steps per period), so RK4 gets the ripple it drives in x wrong "
+            f"{wrong}; the largest step that resolves it (ripple within {RK4_DRIVE_ERROR:.0%}) is "
+            f"max_step = {RK4_DRIVE_THETA / nu:.3g}")
+    return warnings
+
+
+@dataclass(frozen=True)
+class Outputs:
+    x: float
+    v: float
+    a: float
+    F_contact: float
+    F_electrostatic: float
+    in_contact: bool
+
+
+def check_step(plant_t: float, t: float, h: float, U: float, ceiling: float, open_loop: int | None = None) -> None:
+    """Plant.do_step's checks of a step from the communication point t (the plant is at plant_t) over h with
+    input U; ceiling is the solver's max_step (inf: none), open_loop the fidelity of an open-loop plant (3, 4)
+    or None. Raises ParameterError for the first check that fails."""
+    if not (math.isfinite(h) and h > 0.0):
+        raise ParameterError("communicationStepSize", h, "must be a finite number > 0")
+    if not math.isfinite(U):
+        raise ParameterError("U", U, "input must be a finite number")
+    if h / ceiling > MAX_STEPS_PER_DOSTEP:
+        raise ParameterError("communicationStepSize", h, f"needs more than {MAX_STEPS_PER_DOSTEP} steps of "
+                             f"{ceiling:g} (max_step); make smaller communication steps or raise max_step")
+    if not (math.isfinite(t) and abs(t - plant_t) <= TIME_TOLERANCE * max(1.0, abs(t))):
+        raise ParameterError("currentCommunicationPoint", t, f"the plant is at tau = {plant_t!r}")
+    if open_loop is not None and U != 0.0:
+        raise ParameterError("U", U, f"fidelity {open_loop} ({Fidelity(open_loop).name.lower()}) is open loop: "
+                             "the input must be 0")

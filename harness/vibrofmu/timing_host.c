@@ -1,0 +1,149 @@
+/*
+ * timing_host.c -- the plain C FMI 2.0 host of `vibrofmu bench`'s ladder: the cost per output of an FMU as a
+ * system-simulation tool pays it, without any Python host around the calls (compiled by vibrofmu.bench).
+ *
+ * Usage: timing_host LIBRARY RESOURCE_URI GUID STOP STEP REPEATS XVR [rVR=VALUE | iVR=VALUE ...]
+ *
+ * Each of REPEATS runs: fmi2Instantiate, fmi2SetupExperiment(0, STOP), enter initialisation, the parameters
+ * (r: fmi2SetReal, i: fmi2SetInteger), exit initialisation -- timed together as "init" -- then the output loop
+ * -- timed as "loop" -- of fmi2DoStep(t, STEP) + fmi2GetReal(XVR) from 0 to STOP (communication points n*STEP,
+ * the last clipped to STOP, as FMPy's simulate_fmu makes them), then fmi2Terminate, fmi2FreeInstance.
+ *
+ * stdout: "init SECONDS" and "loop SECONDS STEPS" for every run, then "x T VALUE" for every output of the last
+ * run (%.17g).  Exit code 0, or 1 (usage, loading) or 2 (an FMI call failed; named on stderr).
+ */
+#include <dlfcn.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+#include "fmi2_types.h"
+
+#define MAX_PARAMETERS 64
+
+typedef struct {
+    fmi2Component (*Instantiate)(fmi2String, fmi2Type, fmi2String, fmi2String, const fmi2CallbackFunctions *,
+                                 fmi2Boolean, fmi2Boolean);
+    void (*FreeInstance)(fmi2Component);
+    fmi2Status (*SetupExperiment)(fmi2Component, fmi2Boolean, fmi2Real, fmi2Real, fmi2Boolean, fmi2Real);
+    fmi2Status (*EnterInitializationMode)(fmi2Component);
+    fmi2Status (*ExitInitializationMode)(fmi2Component);
+    fmi2Status (*Terminate)(fmi2Component);
+    fmi2Status (*GetReal)(fmi2Component, const fmi2ValueReference[], size_t, fmi2Real[]);
+    fmi2Status (*SetReal)(fmi2Component, const fmi2ValueReference[], size_t, const fmi2Real[]);
+    fmi2Status (*SetInteger)(fmi2Component, const fmi2ValueReference[], size_t, const fmi2Integer[]);
+    fmi2Status (*DoStep)(fmi2Component, fmi2Real, fmi2Real, fmi2Boolean);
+} Api;
+
+static void logger(fmi2ComponentEnvironment env, fmi2String instance, fmi2Status status, fmi2String category,
+                   fmi2String message, ...)
+{
+    (void)env; (void)instance; (void)category;
+    if (status > fmi2Warning) fprintf(stderr, "timing_host: FMU says (status %d): %s\n", (int)status, message);
+}
+
+static double now(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+}
+
+static int isclose(double a, double b) { return fabs(a - b) <= 1e-9 * fmax(fabs(a), fabs(b)); }
+
+static int failed(const char *call, fmi2Status st)
+{
+    if (st <= fmi2Warning) return 0;
+    fprintf(stderr, "timing_host: %s returned status %d\n", call, (int)st);
+    return 1;
+}
+
+int main(int argc, char **argv)
+{
+    if (argc < 8 || argc - 8 > MAX_PARAMETERS) {
+        fprintf(stderr, "usage: timing_host LIBRARY RESOURCE_URI GUID STOP STEP REPEATS XVR [rVR=VALUE|iVR=VALUE ...]\n");
+        return 1;
+    }
+    double stop = strtod(argv[4], NULL), step = strtod(argv[5], NULL);
+    int repeats = atoi(argv[6]);
+    fmi2ValueReference xvr = (fmi2ValueReference)strtoul(argv[7], NULL, 10);
+    size_t n_real = 0, n_int = 0;
+    fmi2ValueReference real_vr[MAX_PARAMETERS], int_vr[MAX_PARAMETERS];
+    fmi2Real real_value[MAX_PARAMETERS];
+    fmi2Integer int_value[MAX_PARAMETERS];
+    for (int i = 8; i < argc; i++) {
+        char *end, *text = argv[i] + 1;
+        unsigned long vr = strtoul(text, &end, 10);
+        if ((argv[i][0] != 'r' && argv[i][0] != 'i') || *end != '=') {
+            fprintf(stderr, "timing_host: expected rVR=VALUE or iVR=VALUE, got %s\n", argv[i]);
+            return 1;
+        }
+        if (argv[i][0] == 'r') {
+            real_vr[n_real] = (fmi2ValueReference)vr;
+            real_value[n_real++] = strtod(end + 1, NULL);
+        } else {
+            int_vr[n_int] = (fmi2ValueReference)vr;
+            int_value[n_int++] = atoi(end + 1);
+        }
+    }
+    if (!(step > 0.0 && stop > 0.0 && repeats > 0)) {
+        fprintf(stderr, "timing_host: STOP, STEP and REPEATS must be > 0\n");
+        return 1;
+    }
+    void *lib = dlopen(argv[1], RTLD_NOW | RTLD_LOCAL);
+    if (lib == NULL) {
+        fprintf(stderr, "timing_host: cannot load %s: %s\n", argv[1], dlerror());
+        return 1;
+    }
+    Api api;
+#define LOAD(name)                                                                         \
+    if ((*(void **)&api.name = dlsym(lib, "fmi2" #name)) == NULL) {                        \
+        fprintf(stderr, "timing_host: no fmi2" #name "\n");                                \
+        return 1;                                                                          \
+    }
+    LOAD(Instantiate); LOAD(FreeInstance); LOAD(SetupExperiment); LOAD(EnterInitializationMode);
+    LOAD(ExitInitializationMode); LOAD(Terminate); LOAD(GetReal); LOAD(SetReal); LOAD(SetInteger); LOAD(DoStep);
+#undef LOAD
+    size_t capacity = (size_t)(stop / step) + 2;
+    double *times = malloc(capacity * sizeof *times), *xs = malloc(capacity * sizeof *xs);
+    size_t count = 0;
+    fmi2CallbackFunctions callbacks = {logger, calloc, free, NULL, NULL};
+    for (int r = 0; r < repeats; r++) {
+        double started = now();
+        fmi2Component c = api.Instantiate("timing", fmi2CoSimulation, argv[3], argv[2], &callbacks, 0, 0);
+        if (c == NULL) {
+            fprintf(stderr, "timing_host: fmi2Instantiate failed\n");
+            return 2;
+        }
+        if (failed("fmi2SetupExperiment", api.SetupExperiment(c, 0, 0.0, 0.0, 1, stop))
+            || failed("fmi2EnterInitializationMode", api.EnterInitializationMode(c))
+            || (n_real && failed("fmi2SetReal", api.SetReal(c, real_vr, n_real, real_value)))
+            || (n_int && failed("fmi2SetInteger", api.SetInteger(c, int_vr, n_int, int_value)))
+            || failed("fmi2ExitInitializationMode", api.ExitInitializationMode(c)))
+            return 2;
+        printf("init %.9g\n", now() - started);
+        double t = 0.0, x;
+        count = 0;
+        started = now();
+        for (long n = 1; !(t > stop || isclose(t, stop)); n++) {
+            double next = n * step;
+            if (next > stop && !isclose(next, stop)) next = stop;
+            if (failed("fmi2DoStep", api.DoStep(c, t, next - t, 1)) || failed("fmi2GetReal", api.GetReal(c, &xvr, 1, &x)))
+                return 2;
+            t = next;
+            if (count < capacity) {
+                times[count] = t;
+                xs[count++] = x;
+            }
+        }
+        printf("loop %.9g %zu\n", now() - started, count);
+        if (failed("fmi2Terminate", api.Terminate(c))) return 2;
+        api.FreeInstance(c);
+    }
+    for (size_t i = 0; i < count; i++) printf("x %.17g %.17g\n", times[i], xs[i]);
+    free(times);
+    free(xs);
+    return 0;
+}
