@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import sys
 import zipfile
 from pathlib import Path
@@ -122,6 +123,21 @@ def _say_compiled_parts() -> None:
     line = compiled_parts()
     if line:
         print(line, file=sys.stderr)
+
+
+def writable_folder(path: str) -> Path:
+    """`path` if the output folder exists or can be created there (nothing is created); UserError otherwise."""
+    folder = Path(path)
+    for parent in (folder, *folder.parents):
+        if parent.exists():
+            if parent == folder and not folder.is_dir():
+                raise UserError(f"cannot use {folder} as the output folder: a file of that name exists")
+            if not parent.is_dir():
+                raise UserError(f"cannot create the output folder {folder}: {parent} is not a folder")
+            if not os.access(parent, os.W_OK | os.X_OK):
+                raise UserError(f"cannot create the output folder {folder}: {parent} is not writable")
+            break
+    return folder
 
 
 def out_folder(path: str) -> Path:
@@ -255,10 +271,12 @@ def cmd_simulate(args) -> int:
     scene = Scene().with_values(**parse_set(args.set))
     settings = Settings(fidelity=FIDELITIES[args.fidelity], solver=SOLVERS[args.solver], rtol=args.rtol,
                         max_step=args.max_step)
-    check_inputs(scene, settings, args.stop_time, args.output_interval)  # bad values: ParameterError, now
-    if args.output_interval > args.stop_time:
-        raise UserError(f"--output-interval {args.output_interval:g} is longer than --stop-time {args.stop_time:g}")
     fmu = plant_fmu(args.fmu)
+    writable_folder(args.out)
+    if 0 < args.stop_time < args.output_interval:
+        raise UserError(f"--output-interval {args.output_interval:g} is longer than --stop-time {args.stop_time:g}")
+    # bad values raise ParameterError now; the last check (it may print the one-time note on the scene)
+    check_inputs(scene, settings, args.stop_time, args.output_interval)
     out = out_folder(args.out)
     run, summary, _ = simulate(built_plant(fmu), scene, settings, args.stop_time, args.output_interval, out,
                                compare=args.compare, progress=progress_printer("simulate"))
