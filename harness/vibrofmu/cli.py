@@ -567,6 +567,8 @@ def make_parser(commands=None) -> argparse.ArgumentParser:
     # heavy imports inside their command.
     from . import container, report, ssp  # light modules: heavy imports happen inside their commands
     ssp.add_parser(sub); container.add_parser(sub); report.add_parser(sub)
+    from .study import add_parser as add_study_parser  # issue 16: harness/vibrofmu/study/
+    add_study_parser(sub)
     return parser
 
 

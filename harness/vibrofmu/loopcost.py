@@ -1,4 +1,4 @@
-"""Cost per output of the closed-loop FMU against the plant FMU at fidelity 0 (issue 13: closed loop <= 3 x plant),
+"""Cost per output of the closed-loop FMU against the plant FMU at fidelity 0 (target: closed loop <= 3 x plant),
 side by side in one run: doStep + getReal(x) over tau in [0, STOP], paper example, best of REPEATS, at intervals
 0.1 and 1, in the plain C host of the bench ladder (timing_host.c, `vibrofmu doctor`'s environment) and under FMPy.
 
@@ -9,7 +9,7 @@ defaults (the closed loop's reference: --reference, default its own). Numbers on
 host and interval runs the two FMUs one after the other, so their ratio is the number to read. On a loaded
 machine a long loop is preempted more often than a short one, which inflates the wall-time ratio; --clock cpu
 builds the C host with the calling thread's CPU clock instead (CLOCK_THREAD_CPUTIME_ID: the fast path runs in
-that thread) and reports CPU time for the C host (FMPy stays on wall time).
+that thread) and times the FMPy loop with time.thread_time().
 """
 from __future__ import annotations
 
@@ -21,7 +21,10 @@ from fmpy import extract
 
 import subprocess
 
-from .ladder import FMU_SRC, TIMING_HOST_SOURCE, compile_timing_host, fmpy_run, host_run
+import time
+
+from .ladder import FMU_SRC, TIMING_HOST_SOURCE, communication_points, compile_timing_host, fmpy_run, host_run
+from .run import FmuInstance
 
 STOP = 200.0
 INTERVALS = (0.1, 1.0)
@@ -41,6 +44,28 @@ def compile_cpu_clock_host(out_dir: Path) -> Path:
     return host
 
 
+def fmpy_cpu_run(fmu: Path, unzip_dir: str, start: dict, stop: float, step: float, repeats: int) -> dict:
+    """The ladder's FMPy loop (ladder.fmpy_run) timed on this thread's CPU clock."""
+    points = communication_points(stop, step)
+    loops = []
+    for _ in range(repeats):
+        with FmuInstance(fmu, instance_name="loopcost", unzip_dir=unzip_dir) as instance:
+            f = instance.fmu
+            f.setupExperiment(startTime=0.0, stopTime=stop)
+            f.enterInitializationMode()
+            instance.set(start)
+            f.exitInitializationMode()
+            refs = instance.value_references(["x"])
+            do_step, get_real = f.doStep, f.getReal
+            started, t = time.thread_time(), 0.0
+            for next_t in points:
+                do_step(t, next_t - t)
+                get_real(refs)
+                t = next_t
+            loops.append(time.thread_time() - started)
+    return {"loop": loops, "outputs": len(points)}
+
+
 def measure(build_dir: Path, repeats: int, kernel: int, reference: int | None,
             clock: str = "wall") -> list[tuple[str, float, float]]:
     """[(host and interval, plant's seconds per output, closed loop's)]."""
@@ -53,8 +78,8 @@ def measure(build_dir: Path, repeats: int, kernel: int, reference: int | None,
         for interval in INTERVALS:
             for label, run in ((f"C host ({clock})", lambda name: host_run(host, Path(unzipped[name]), start[name], STOP,
                                                                 interval, repeats)),
-                               ("FMPy", lambda name: fmpy_run(build_dir / FMUS[name], unzipped[name], start[name],
-                                                              STOP, interval, repeats))):
+                               (f"FMPy ({clock})", lambda name: (fmpy_cpu_run if clock == "cpu" else fmpy_run)(
+                                   build_dir / FMUS[name], unzipped[name], start[name], STOP, interval, repeats))):
                 cost = {}
                 for name in FMUS:
                     record = run(name)

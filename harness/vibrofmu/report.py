@@ -313,8 +313,8 @@ def generate(names, fmu_dir: Path, sources: list[Path], quick: bool, work_dir: P
 
 
 def run_studies(fmu_dir: Path, work_dir: Path, quick: bool) -> list[Path] | None:
-    """Run oafm, stability and bench (quick: fewer orders, quick bench) into work_dir; their folders, or None
-    if one failed (its error is printed)."""
+    """Run oafm, stability and bench (quick: fewer orders, quick bench) into work_dir; the folders of those that
+    completed (a failure is printed and skipped)."""
     from .cli import main
 
     plant = str(fmu_dir / "HertzEAOscillator.fmu")
@@ -325,9 +325,14 @@ def run_studies(fmu_dir: Path, work_dir: Path, quick: bool) -> list[Path] | None
     for name, argv in runs.items():
         folder = work_dir / name
         print(f"report: running vibrofmu {' '.join(argv[:1] + argv[3:])} ...", file=sys.stderr, flush=True)
-        if main(argv + ["--out", str(folder)]) != 0:
-            print(f"error: vibrofmu {name} failed; its numbers are not updated", file=sys.stderr)
-            return None
+        try:
+            code = main(argv + ["--out", str(folder)])
+        except Exception as error:  # a failing study must not lose the other blocks: say which and go on
+            code = f"{type(error).__name__}: {error}"
+        if code != 0:
+            print(f"error: vibrofmu {name} failed ({code}); the blocks from its summary are not updated",
+                  file=sys.stderr)
+            continue
         folders.append(folder)
     return folders
 

@@ -62,7 +62,7 @@ class Sweep:
 HYSTERESIS_THRESHOLD = 0.05  # up and down amplitudes this far apart (relative) are on different branches
 
 
-def hysteresis_jumps(up: Sweep, down: Sweep) -> list[dict]:
+def hysteresis_jumps(up: Sweep, down: Sweep, threshold: float = HYSTERESIS_THRESHOLD) -> list[dict]:
     """Jumps read off the two sweeps over the same grid: where up and down both settle, on different
     branches, the response is bistable; the up sweep jumps just past the high end of that interval, the
     down sweep just past its low end. A point still unsettled is in transit (near a fold the jump can
@@ -73,7 +73,7 @@ def hysteresis_jumps(up: Sweep, down: Sweep) -> list[dict]:
     if len(down.points) != len(up.points) or not np.allclose(omega, down.omega[::-1], rtol=0, atol=1e-15):
         return []
     settled = np.array([p.settled for p in up.points]) & np.array([p.settled for p in down.points][::-1])
-    apart = np.abs(up.r - r_down) > HYSTERESIS_THRESHOLD * np.maximum(up.r, r_down)
+    apart = np.abs(up.r - r_down) > threshold * np.maximum(up.r, r_down)
     bistable = np.flatnonzero(apart & settled)
     if bistable.size == 0:
         return []
@@ -98,34 +98,49 @@ class SweepStopped(RuntimeError):
     """The FMU refused a call during a sweep; the message carries its log message."""
 
 
+def settle_loop(step, scene: Scene, accept=None, rate: float | None = None) -> tuple[complex, float, bool, int]:
+    """The settling loop of the module docstring on any stepper: step(t, h) advances one communication step
+    from t and returns x at t + h (it may raise to stop). Returns (c, mean, settled, periods).
+
+    accept(c), if given, must also hold to stop: near a saddle of the slow flow c creeps as slowly as at a
+    settled focus (its unstable eigenvalue is small), and a caller that knows where the attractors are can
+    refuse to stop there. rate: the slowest decay rate of the transient, -Re lambda (default mu/2, a focus);
+    a caller that knows a slower one (a stable node near a fold) passes it, and the bound stays true."""
+    T = 2 * math.pi / scene.omega
+    h = T / SAMPLES_PER_PERIOD
+    decay = 1.0 - math.exp(-(scene.mu / 2 if rate is None else rate) * WINDOW_PERIODS * T)
+    c_previous, n, periods = complex(math.nan), 0, 0
+    while True:
+        x = np.empty(WINDOW_PERIODS * SAMPLES_PER_PERIOD)
+        for k in range(len(x)):
+            x[k] = step(n * h, h)
+            n += 1
+        periods += WINDOW_PERIODS
+        c, mean = first_harmonic(np.roll(x, 1))  # x[k] is at (k + 1) h: roll so that index = phase
+        settled = abs(c - c_previous) <= SETTLE_TOLERANCE * abs(c) * decay and (accept is None or accept(c))
+        if settled or periods >= MAX_PERIODS:
+            return c, mean, settled, periods
+        c_previous = c
+
+
 def settle(fmu_path, unzip_dir: str, scene: Scene, settings: Settings) -> SweepPoint:
     """Run one frequency from the scene's start state until the transient has decayed (module docstring).
     Raises SweepStopped with the FMU's own log message if the FMU fails."""
-    T = 2 * math.pi / scene.omega
-    h = T / SAMPLES_PER_PERIOD
-    decay = 1.0 - math.exp(-scene.mu * WINDOW_PERIODS * T / 2)
     instance = FmuInstance(fmu_path, unzip_dir=unzip_dir)
     fmu = instance.fmu
     refs = instance.value_references(["x", "v"])
+
+    def step(t, h):
+        fmu.doStep(currentCommunicationPoint=t, communicationStepSize=h)
+        return fmu.getReal(refs[:1])[0]
+
     try:
         fmu.setupExperiment(startTime=0.0)
         fmu.enterInitializationMode()
         instance.set(start_values(scene, settings))
         fmu.exitInitializationMode()
-        c_previous, step, periods = complex(math.nan), 0, 0
-        while True:
-            x = np.empty(WINDOW_PERIODS * SAMPLES_PER_PERIOD)
-            for k in range(len(x)):
-                fmu.doStep(currentCommunicationPoint=step * h, communicationStepSize=h)
-                step += 1
-                x[k] = fmu.getReal(refs[:1])[0]
-            periods += WINDOW_PERIODS
-            c, mean = first_harmonic(np.roll(x, 1))  # x[k] is at (k + 1) h: roll so that index = phase
-            settled = abs(c - c_previous) <= SETTLE_TOLERANCE * abs(c) * decay
-            if settled or periods >= MAX_PERIODS:
-                state = tuple(fmu.getReal(refs))
-                return SweepPoint(scene.omega, abs(c), mean, settled, periods, state)
-            c_previous = c
+        c, mean, settled, periods = settle_loop(step, scene)
+        return SweepPoint(scene.omega, abs(c), mean, settled, periods, tuple(fmu.getReal(refs)))
     except FMICallException as error:
         raise SweepStopped(_reason(error, instance.log)) from None
     finally:

@@ -1,0 +1,132 @@
+"""`vibrofmu study KIND --out DIR`: response maps, basins of attraction and Monte Carlo on Dask distributed,
+results in Parquet, compared with the averaged (slow-flow) predictions. See docs/studies.md.
+
+Modules: spec (what to compute), cases (the cases and how one runs), engines (FMU under FMPy or the compiled
+core), scheduling (cluster, batches, progress), storage (Parquet, resume), analysis (predictions, agreement,
+summary), plots. Heavy modules (dask, pyarrow) are imported inside the command.
+"""
+from __future__ import annotations
+
+import sys
+import time
+from pathlib import Path
+
+from .spec import KINDS
+
+
+def add_parser(sub) -> None:
+    """The `study` subcommand (the one hook in cli.py)."""
+    p = sub.add_parser("study", help="response map, basins or Monte Carlo on Dask; Parquet results, plots, and "
+                                     "agreement with the averaged prediction")
+    p.add_argument("kind", choices=KINDS)
+    p.add_argument("--out", required=True, help="output folder (results.parquet, summary.json, plots)")
+    p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
+                   help="scene parameter, or a setting of the kind (basins: sigma; monte-carlo: samples, seed)")
+    p.add_argument("--spec", default=None, help="TOML spec: [scene], [grid], [tolerances], [settings]")
+    p.add_argument("--scheduler", default=None, help="address of an existing Dask scheduler (tcp://HOST:PORT)")
+    p.add_argument("--workers", type=int, default=None, help="local worker processes (default: one per core)")
+    p.add_argument("--resume", action="store_true", help="continue the study in --out; recompute nothing written")
+    p.add_argument("--quick", action="store_true", help="a small version of the kind (under a minute on 2 cores)")
+    p.add_argument("--engine", choices=["fmu", "core"], default=None,
+                   help="fmu: the plant FMU under FMPy (default); core: the compiled kernel directly")
+    p.add_argument("--fmu", default=None, help="plant FMU (default: build/HertzEAOscillator.fmu, built when missing)")
+    p.set_defaults(func=cmd_study)
+
+
+def cmd_study(args) -> int:
+    from .spec import SpecError
+
+    try:
+        return _run(args)
+    except SpecError as error:
+        print(f"error: {error}", file=sys.stderr)
+        return 2
+
+
+def _run(args) -> int:
+    import hashlib
+    import json
+
+    from .. import export
+    from ..build import PLANT_FMU, build_plant
+    from . import analysis, plots
+    from .cases import make_cases
+    from .scheduling import FmuFile, Progress, connect, execute, stop_on_sigint
+    from .spec import SpecError, build_spec
+    from .storage import Store
+
+    spec = build_spec(args.kind, args.spec, args.set, args.quick, args.engine)
+    if args.workers is not None and args.workers < 1:
+        raise SpecError(f"--workers {args.workers}: must be >= 1")
+    cases = make_cases(spec)
+    if not cases:
+        raise SpecError("empty study: no cases")
+    out = Path(args.out)
+    store = Store(out)
+    store.prepare({"digest": spec.digest(), "spec": spec.as_dict(), "cases": len(cases)}, args.resume)
+    resumed = len(store.written)
+
+    fmu_digest = plugin = None
+    if spec.engine == "fmu":
+        fmu = Path(args.fmu) if args.fmu else PLANT_FMU
+        if not fmu.exists():
+            if args.fmu:
+                raise SpecError(f"--fmu {fmu}: no such file")
+            print(f"building {fmu} ...", file=sys.stderr)
+            build_plant(fmu.parent)
+        data = fmu.read_bytes()
+        fmu_digest = hashlib.sha256(data).hexdigest()
+        plugin = FmuFile(fmu_digest, data)
+
+    started = time.perf_counter()
+    try:
+        client, cluster = connect(args.scheduler, args.workers)
+    except KeyboardInterrupt:
+        print("interrupted while starting the cluster: nothing computed", file=sys.stderr)
+        return 130
+    interrupted, run = False, {}
+    try:
+        workers = len(client.scheduler_info(n_workers=-1)["workers"])
+    except Exception:  # noqa: BLE001 - only for the summary
+        workers = None
+    progress = Progress(len(cases), resumed, args.kind)
+    try:
+        if plugin is not None:
+            client.register_plugin(plugin)
+        with stop_on_sigint():
+            run = execute(client, spec, cases, store, fmu_digest, progress)
+    except KeyboardInterrupt:
+        interrupted = True
+    finally:
+        progress.close()
+        try:
+            client.close()
+            if cluster is not None:
+                cluster.close()
+        except Exception:  # a cluster torn down by Ctrl-C: nothing left to close
+            pass
+        table = store.compact()
+    wall = time.perf_counter() - started
+    rows = 0 if table is None else table.num_rows
+    done = len(store.load_cases())
+    summary = {"kind": spec.kind, "engine": spec.engine, "cases": done, "cases_in_study": len(cases),
+               "rows": rows, "computed_this_run": done - resumed, "resumed_from_disk": resumed,
+               "workers": run.get("workers", workers), "wall_s": wall, "interrupted": interrupted,
+               "scheduler": args.scheduler or "LocalCluster", "spec": spec.as_dict(), "run": run}
+    if run:
+        summary["projection_64_workers"] = analysis.projection(run, 64)
+    if not interrupted and table is not None:
+        result = analysis.analyse(spec, table)
+        summary.update(result["summary"])
+        plots.plot(spec, table, result, out)
+    export.write_json(out / "summary.json", summary)
+    print(analysis.headline(summary), file=sys.stderr)
+    if interrupted:
+        print(f"interrupted: {done}/{len(cases)} cases in {out / 'results.parquet'}; continue with --resume",
+              file=sys.stderr)
+        return 130
+    if run.get("failed_batches") or done < len(cases):
+        print(f"error: {len(cases) - done} cases not computed ({(run.get('failed_batches') or ['?'])[0]}); "
+              f"continue with --resume", file=sys.stderr)
+        return 1
+    return 0

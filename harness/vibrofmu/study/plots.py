@@ -1,0 +1,130 @@
+"""The study's plots (PNG in the output folder), each with the averaged prediction drawn on top."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from .spec import Spec  # noqa: E402
+
+
+def plot(spec: Spec, table, result: dict, out: Path) -> list[Path]:
+    data = {name: np.asarray(table.column(name).to_pylist()) for name in table.column_names}
+    if spec.kind == "monte-carlo":
+        return [monte_carlo(data, result, out / "monte_carlo.png")]
+    if spec.kind == "basins":
+        return [basins(spec, data, result, out / "basins.png")]
+    return [response_map(result, out / "response_map.png")]
+
+
+def monte_carlo(d: dict, result: dict, path: Path) -> Path:
+    summary = result["summary"]
+    ok = ~(d["pull_in"] | d["failed"]) & d["settled"]
+    fig, axes = plt.subplots(1, 2, figsize=(12, 4.5))
+    r, predicted = d["r"][ok], result["predicted_r"][ok]
+    bins = np.histogram_bin_edges(np.concatenate([r, predicted[np.isfinite(predicted)]]), bins=30)
+    axes[0].hist(r, bins=bins, alpha=0.7, label=f"runs ({len(r)} settled)")
+    axes[0].hist(predicted[np.isfinite(predicted)], bins=bins, histtype="step", lw=1.5, color="k",
+                 label="slow flow at the same samples")
+    lo, hi = summary["amplitude"]["mean_ci95"]
+    axes[0].axvspan(lo, hi, color="C1", alpha=0.3, label="95 % CI of the mean")
+    axes[0].set_xlabel("settled amplitude r (first harmonic)")
+    axes[0].set_ylabel("samples")
+    axes[0].legend(fontsize=8)
+    axes[0].set_title(f"amplitude; agreement with the slow flow {summary['agreement']['fraction']:.3f}")
+    labels, values, errors = [], [], []
+    for key in ("contact_loss", "pull_in"):
+        p, (lo, hi) = summary[key]["probability"], summary[key]["ci95_wilson"]
+        labels.append(key.replace("_", " "))
+        values.append(p)
+        errors.append([max(0.0, p - lo), max(0.0, hi - p)])
+    axes[1].bar(labels, values, yerr=np.array(errors).T, capsize=8, color=["C2", "C3"])
+    axes[1].set_ylabel("probability (95 % Wilson interval)")
+    axes[1].set_ylim(0, max(0.05, max(hi for _, hi in (summary[k]["ci95_wilson"] for k in ("contact_loss", "pull_in"))) * 1.2))
+    axes[1].set_title(f"{len(d['case'])} samples")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def basins(spec: Spec, d: dict, result: dict, path: Path) -> Path:
+    x0, v0 = np.array(spec.axis("x0")), np.array(spec.axis("v0"))
+    grid = np.full((len(x0), len(v0)), np.nan)
+    grid[d["i"], d["j"]] = result["measured"]
+    fig, ax = plt.subplots(figsize=(8, 7))
+    cmap = matplotlib.colors.ListedColormap(["0.6", "C0", "C3"])
+    dx, dv = (x0[1] - x0[0] if len(x0) > 1 else 1) / 2, (v0[1] - v0[0] if len(v0) > 1 else 1) / 2
+    ax.imshow(grid.T, origin="lower", extent=[x0[0] - dx, x0[-1] + dx, v0[0] - dv, v0[-1] + dv], cmap=cmap,
+              vmin=-1.5, vmax=1.5, aspect="auto", interpolation="nearest")
+    wrong = (result["measured"] != result["predicted"])
+    ax.plot(d["x_start"][wrong], d["v_start"][wrong], "kx", ms=4, label="run differs from the averaged prediction")
+    for k, branch in enumerate(result["boundary"]):
+        ax.plot(branch[:, 0], branch[:, 1], "k-", lw=1.2, label="predicted boundary (saddle's stable manifold)" if k == 0 else None)
+    stable = result["stable"]
+    names = ["low-amplitude vibration", "high-amplitude vibration"]
+    for k, colour in enumerate(("C0", "C3")):
+        ax.plot([], [], "s", color=colour, label=f"runs reach {names[k]} (r = {stable[k].r:.3f})" if k < len(stable) else None)
+    ax.plot([], [], "s", color="0.6", label="unsettled / other")
+    ax.set_xlim(x0[0] - dx, x0[-1] + dx)
+    ax.set_ylim(v0[0] - dv, v0[-1] + dv)
+    ax.set_xlabel("x0")
+    ax.set_ylabel("v0")
+    agreement = result["summary"]["agreement"]
+    ax.set_title(f"basins at omega = {result['omega']:.6f}, mu = {spec.base_scene().mu:g}: agreement "
+                 f"{agreement['fraction']:.3f} beyond {agreement['margin']:g} of the boundary", fontsize=9)
+    ax.legend(fontsize=7, loc="upper right", framealpha=0.85)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def response_map(result: dict, path: Path) -> Path:
+    omegas, deltas = result["omegas"], result["deltas"]
+    fig, axes = plt.subplots(1, 3, figsize=(16, 5), sharey=True)
+    dw = (omegas[1] - omegas[0]) / 2 if len(omegas) > 1 else 1e-4
+    dd = (deltas[1] - deltas[0]) / 2 if len(deltas) > 1 else 1e-5
+    extent = [omegas[0] - dw, omegas[-1] + dw, deltas[0] - dd, deltas[-1] + dd]
+    vmax = np.nanmax([np.nanmax(result["r"]["up"]), np.nanmax(result["r"]["down"])])
+    for ax, direction in zip(axes[:2], ("up", "down")):
+        image = ax.imshow(result["r"][direction], origin="lower", extent=extent, aspect="auto", vmin=0, vmax=vmax,
+                          interpolation="nearest", cmap="viridis")
+        ax.set_title(f"settled amplitude r, sweep {direction}")
+    fig.colorbar(image, ax=axes[:2], shrink=0.85, label="r")
+    code = np.where(result["measured"], 1.0, 0.0) + np.where(result["predicted"], 2.0, 0.0)
+    cmap = matplotlib.colors.ListedColormap(["white", "C1", "C0", "C2"])
+    axes[2].imshow(code, origin="lower", extent=extent, aspect="auto", cmap=cmap, vmin=-0.5, vmax=3.5,
+                   interpolation="nearest")
+    near = np.argwhere(result["near"])
+    axes[2].plot(omegas[near[:, 1]], deltas[near[:, 0]], ".", color="0.5", ms=3, label="within the fold margin")
+    for label, colour in (("bistable: runs only", "C1"), ("bistable: slow flow only", "C0"), ("bistable: both", "C2")):
+        axes[2].plot([], [], "s", color=colour, label=label)
+    axes[2].set_title("bistability: runs vs slow flow")
+    for ax in axes:
+        for side, style in ((0, "w--"), (-1, "w-")):
+            points = [(f[side].omega, delta) for f, delta in zip(result["folds"], deltas) if len(f) >= 2]
+            if points:
+                w, dl = zip(*points)
+                ax.plot(w, dl, style if ax is not axes[2] else style.replace("w", "k"), lw=1.2,
+                        label="slow-flow folds" if side == 0 else None)
+        if result["cusp"]:
+            ax.plot(result["cusp"]["omega"], result["cusp"]["Delta"], "r*", ms=12, label="cusp (slow flow)")
+        if result["run_cusp"]:
+            ax.plot(result["run_cusp"]["omega"], result["run_cusp"]["first_bistable_Delta"], "mP", ms=9,
+                    label="first bistable row (runs)")
+        ax.set_xlabel("omega")
+        ax.set_xlim(extent[0], extent[1])
+        ax.set_ylim(extent[2], extent[3])
+    axes[0].set_ylabel("Delta")
+    axes[2].legend(fontsize=7, loc="upper left")
+    agreement = result["summary"]["agreement"]
+    fig.suptitle(f"response map: bistability agreement {agreement['fraction']:.3f} "
+                 f"({agreement['agreeing']}/{agreement['compared']} points off the folds' margin)")
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path

@@ -1,0 +1,209 @@
+"""Running the cases on Dask distributed: the cluster, the batch size, the progress bar, the results as
+they arrive.
+
+- Cluster: a LocalCluster of worker processes on 127.0.0.1 (one thread each, one per core by default), or
+  an existing scheduler (--scheduler tcp://HOST:PORT; an unreachable one fails within CONNECT_TIMEOUT_S).
+- The FMU reaches the workers through a worker plugin (FmuFile) holding its bytes: the scheduler installs it
+  on every worker, also on a worker that joins or is restarted after a crash, and no shared file system is
+  needed.
+- Batches: the scheduler's cost per task c_s is measured first (OVERHEAD_PROBE_TASKS empty tasks); one
+  case per worker then runs alone (the pilot: it warms the workers and measures the cost per case c_w);
+  the rest go in batches of b cases, the smallest b with c_s / (b c_w) <= 5 % and b / c_s >= W / c_w (the
+  scheduler keeps W workers busy), but small enough that every worker gets at least BATCHES_PER_WORKER
+  batches (balance at the end).
+- Worker loss: Dask re-runs the tasks of a lost worker on the others (its Nanny restarts it); a batch's
+  rows are written once, when its result reaches the client, and Store.write drops cases already on disk.
+"""
+from __future__ import annotations
+
+import contextlib
+import logging
+import math
+import os
+import signal
+import threading
+import time
+
+from distributed import as_completed
+from distributed.diagnostics.plugin import WorkerPlugin
+
+from .spec import Spec, SpecError
+
+CONNECT_TIMEOUT_S = 3.0  # --scheduler: give up connecting after this (the whole command must fail within 10 s)
+OVERHEAD_PROBE_TASKS = 200
+MAX_OVERHEAD = 0.05  # scheduling cost per task / work per task
+BATCHES_PER_WORKER = 4
+
+_FMU_BYTES: dict[str, bytes] = {}  # per worker process: digest -> FMU bytes (filled by FmuFile)
+
+
+class FmuFile(WorkerPlugin):
+    """Gives every worker (also restarted or late ones) the plant FMU's bytes."""
+
+    name = "vibrofmu-study-fmu"
+
+    def __init__(self, digest: str, data: bytes):
+        self.digest, self.data = digest, data
+
+    def setup(self, worker):
+        _FMU_BYTES[self.digest] = self.data
+
+
+STOP = threading.Event()
+
+
+@contextlib.contextmanager
+def stop_on_sigint():
+    """The first Ctrl-C sets STOP (execute stops at the next finished batch: no signal lands inside Dask's
+    own code, where it could be taken for a failed task); a second one interrupts at once."""
+    def handler(signum, frame):
+        if STOP.is_set():
+            raise KeyboardInterrupt
+        STOP.set()
+
+    STOP.clear()
+    previous = signal.signal(signal.SIGINT, handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+def noop(i):
+    return i
+
+
+def run_batch(spec_dict: dict, fmu_digest: str | None, cases: list[dict]) -> list[dict]:
+    """A task: the rows of every case of the batch, on this worker's engine."""
+    from .engines import engine_for
+    from .cases import run_case
+
+    spec = Spec(**spec_dict)
+    engine = engine_for(spec.engine, _FMU_BYTES.get(fmu_digest) if fmu_digest else None)
+    if spec.engine == "fmu" and fmu_digest not in _FMU_BYTES:
+        raise RuntimeError("the FMU plugin is not installed on this worker")
+    rows = []
+    for case in cases:
+        rows.extend(run_case(spec, engine, case))
+    return rows
+
+
+def quiet_dask() -> None:
+    for name in ("distributed", "distributed.nanny", "distributed.scheduler", "distributed.worker",
+                 "distributed.core", "distributed.comm", "tornado"):
+        logging.getLogger(name).setLevel(logging.CRITICAL)
+
+
+def connect(scheduler: str | None, workers: int | None):
+    """(client, cluster or None): an existing scheduler, or a LocalCluster of worker processes."""
+    from distributed import Client, LocalCluster
+
+    quiet_dask()
+    if scheduler:
+        try:
+            client = Client(scheduler, timeout=CONNECT_TIMEOUT_S)
+        except (OSError, TimeoutError) as error:
+            raise SpecError(f"cannot reach the Dask scheduler at {scheduler} within {CONNECT_TIMEOUT_S:g} s "
+                            f"({type(error).__name__})") from None
+        except ValueError as error:
+            raise SpecError(f"--scheduler {scheduler!r}: {error}") from None
+        except Exception as error:  # something answered that does not speak Dask's protocol
+            raise SpecError(f"--scheduler {scheduler}: not a Dask scheduler ({type(error).__name__})") from None
+        try:
+            client.wait_for_workers(1, timeout=CONNECT_TIMEOUT_S)
+        except TimeoutError:
+            client.close()
+            raise SpecError(f"the Dask scheduler at {scheduler} has no workers") from None
+        return client, None
+    n = workers or os.cpu_count() or 1
+    # Ctrl-C in a terminal reaches the whole process group: the worker processes ignore SIGINT (a disposition
+    # they inherit, and their nannies' restarted workers too) and the client shuts them down itself
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
+                               dashboard_address=None, silence_logs=logging.CRITICAL)
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    return Client(cluster), cluster
+
+
+def scheduler_cost(client, n: int = OVERHEAD_PROBE_TASKS) -> float:
+    """Seconds of scheduling per task: wall time of n empty tasks (after a warm-up round) over n. With the
+    scheduler handling one task at a time this is its cost per task, client round trip included."""
+    client.gather(client.map(noop, range(20), pure=False))
+    started = time.perf_counter()
+    client.gather(client.map(noop, range(n), pure=False))
+    return (time.perf_counter() - started) / n
+
+
+def needed_batch(c_s: float, c_w: float, workers: int) -> int:
+    """Smallest b with c_s / (b c_w) <= MAX_OVERHEAD (a worker's share) and b / c_s >= workers / c_w (the one
+    scheduler, handing out a task per c_s, keeps every worker busy)."""
+    if not c_w > 0:
+        return 1
+    return max(1, math.ceil(c_s / (MAX_OVERHEAD * c_w)), math.ceil(workers * c_s / c_w))
+
+
+def batch_size(c_s: float, c_w: float, remaining: int, workers: int) -> int:
+    balance = max(1, remaining // (BATCHES_PER_WORKER * workers))
+    return max(1, min(needed_batch(c_s, c_w, workers), balance))
+
+
+class Progress:
+    """tqdm bar on stderr: cases done (resumed ones counted from the start), rate and ETA of this run."""
+
+    def __init__(self, total: int, done: int, label: str):
+        from tqdm import tqdm
+
+        self.bar = tqdm(total=total, initial=done, unit="case", desc=label, mininterval=0.5, smoothing=0.1,
+                        dynamic_ncols=True)
+
+    def update(self, n: int) -> None:
+        self.bar.update(n)
+
+    def close(self) -> None:
+        self.bar.close()
+
+
+def execute(client, spec: Spec, cases: list[dict], store, fmu_digest: str | None, progress: Progress) -> dict:
+    """Run every case not on disk; write each batch's rows as it arrives. Returns the run's measurements."""
+    n_workers = max(1, len(client.scheduler_info(n_workers=-1)["workers"]))
+    c_s = scheduler_cost(client)
+    spec_dict = spec.as_dict()
+    todo = [case for case in cases if case["case"] not in store.written]
+    started = time.perf_counter()
+    tally = {"cases": 0, "cost": 0.0}
+    failures = []
+
+    def collect(futures):
+        for future in as_completed(futures):
+            if STOP.is_set():  # Ctrl-C (stop_on_sigint): stop after the batch in hand, keep what is written
+                client.cancel(futures)
+                raise KeyboardInterrupt
+            try:
+                rows = future.result()
+            except Exception as error:  # a batch that failed (e.g. its worker died too often): not written
+                failures.append(f"{type(error).__name__}: {error}")
+                continue
+            tally["cases"] += len({row["case"] for row in rows})
+            tally["cost"] += sum(row["cost_s"] for row in rows)
+            progress.update(store.write(rows))
+
+    pilot, rest = todo[:n_workers], todo[n_workers:]
+    collect(client.map(run_batch, [spec_dict] * len(pilot), [fmu_digest] * len(pilot), [[c] for c in pilot],
+                       pure=False))
+    c_w = tally["cost"] / tally["cases"] if tally["cases"] else 0.0
+    b = batch_size(c_s, c_w, len(rest), n_workers)
+    batches = [rest[i:i + b] for i in range(0, len(rest), b)]
+    collect(client.map(run_batch, [spec_dict] * len(batches), [fmu_digest] * len(batches), batches, pure=False))
+    wall = time.perf_counter() - started
+    done = tally["cases"]
+    per_case = tally["cost"] / done if done else math.nan
+    return {"workers": n_workers, "scheduler_s_per_task": c_s, "pilot_case_cost_s": c_w, "batch_size": b,
+            "batches": len(batches) + len(pilot),
+            "expected_overhead_fraction": c_s / (b * c_w) if c_w else math.nan,
+            "compute_wall_s": wall, "case_cost_s_mean": per_case, "case_cost_s_sum": tally["cost"],
+            # every worker-second not spent inside a case, per case: scheduling, transfers, writing, the
+            # pilot's wait and the idle tail
+            "overhead_s_per_case": (n_workers * wall - tally["cost"]) / done if done else math.nan,
+            "failed_batches": failures, "computed": done}
