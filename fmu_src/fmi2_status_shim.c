@@ -3,8 +3,9 @@
  * 0.7.0 library, giving Python slaves a way to return fmi2Error.
  *
  * Layout inside the FMU (done by harness/vibrofmu/shim.py):
- *   binaries/linux64/<id>.so            this shim
+ *   binaries/linux64/<id>.so            this shim (with pyloader.c)
  *   binaries/linux64/<id>_pythonfmu.so  pythonfmu's original library
+ *   resources/python_env.txt            the Python it needs (pythonenv.py)
  *
  * The inner library is found next to the shim's own file (dladdr), so it
  * works wherever the host extracted the FMU.  Its name is derived from the
@@ -83,7 +84,9 @@
  * finished its work.  RTLD_NODELETE would not help: it only keeps dlclose
  * from unmapping the library; _dl_fini still runs onLibraryUnload last.
  * So, when it loads the inner library, the shim
- *   1. initializes the interpreter itself if the host has not, then releases
+ *   1. (before) initializes the interpreter itself if the host has not
+ *      (pyloader.c: it also loads libpython and points Python at the
+ *      environment recorded at build time), then releases
  *      the GIL (Py_InitializeEx(0): unlike pythonfmu's Py_Initialize() it
  *      leaves the host's signal handling alone -- no SIGINT turned into a
  *      KeyboardInterrupt of whatever Python code runs next, no SIGPIPE
@@ -120,6 +123,7 @@
 #define FLAG_ERROR 3
 
 #include "fmi2_types.h"  /* minimal FMI 2.0 type definitions */
+#include "pyloader.h"    /* finding Python */
 
 #define EXPORT __attribute__((visibility("default")))
 
@@ -168,26 +172,6 @@ static void *inner_handle = NULL;
 static char load_error[8192] = "";
 static pthread_once_t load_once = PTHREAD_ONCE_INIT;
 
-/* Step 1 of "Process exit" above.  libpython is already in the process (the
-   inner library needs its symbols to load), so its functions are looked up.
-   The program name is pythonfmu's, so that Python finds its installation the
-   same way as when pythonfmu initializes it. */
-static void adopt_python_interpreter(void)
-{
-    int (*is_initialized)(void);
-    void (*set_program_name)(const wchar_t *);
-    void (*initialize_ex)(int);
-    void *(*save_thread)(void);
-    *(void **)(&is_initialized) = dlsym(RTLD_DEFAULT, "Py_IsInitialized");
-    *(void **)(&set_program_name) = dlsym(RTLD_DEFAULT, "Py_SetProgramName");
-    *(void **)(&initialize_ex) = dlsym(RTLD_DEFAULT, "Py_InitializeEx");
-    *(void **)(&save_thread) = dlsym(RTLD_DEFAULT, "PyEval_SaveThread");
-    if (is_initialized == NULL || initialize_ex == NULL || save_thread == NULL || is_initialized()) return;
-    if (set_program_name != NULL) set_program_name(L"./PythonFMU");
-    initialize_ex(0);
-    save_thread();
-}
-
 /* A static function: its address cannot be interposed by another library. */
 static void anchor(void) {}
 
@@ -206,6 +190,8 @@ static void load_inner(void)
         snprintf(load_error, sizeof load_error, "path of the inner library is too long");
         return;
     }
+    /* libpython loaded, the interpreter started (step 1 of "Process exit"), the modules there (pyloader.c) */
+    if (vibro_python_prepare(own, load_error, sizeof load_error) != 0) return;
     void *h = dlopen(path, RTLD_NOW | RTLD_LOCAL | RTLD_DEEPBIND);
     if (h == NULL) {
         snprintf(load_error, sizeof load_error, "cannot load inner library: %s", dlerror());
@@ -233,7 +219,6 @@ static void load_inner(void)
     RESOLVE(GetStatus); RESOLVE(GetRealStatus); RESOLVE(GetIntegerStatus);
     RESOLVE(GetBooleanStatus); RESOLVE(GetStringStatus);
 #undef RESOLVE
-    adopt_python_interpreter();
     void (*release_py_state)(void);
     *(void **)(&release_py_state) = dlsym(h, "finalizePythonInterpreter");
     if (release_py_state != NULL) atexit(release_py_state);

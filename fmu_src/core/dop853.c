@@ -447,7 +447,33 @@ static int move_to_side(Dop853 *s, DopRhs rhs, void *ctx, int i, int side, DopRe
     return DOP_OK;
 }
 
-/* Dop853._handle_events: find the earliest event in the last step; cut the step there. */
+static double step_factor(double error);
+
+/* Dop853._shorten: the step cut at an event failed its error test: an error-controlled shorter step instead */
+static int shorten(Dop853 *s, DopRhs rhs, void *ctx, double t0, const double *y0, double h, double error, DopReport *r)
+{
+    Stages k;
+    double y_new[DOP_MAX_DIM];
+    double min_step = 10.0 * (nextafter(t0, INFINITY) - t0);
+    for (;;) {
+        if (!isfinite(error)) h *= MIN_FACTOR;
+        else h *= py_max(MIN_FACTOR, step_factor(error));
+        if (!(h >= min_step)) {
+            number_text h_text, t_text, x_text;
+            return report(s, r, DOP_FAILED, t0, y0, "step size collapsed to %s at tau = %s, x = %s (stiff or singular)",
+                          py_g(h_text, h, 3), py_g(t_text, t0, 10), py_g(x_text, y0[0], 10));
+        }
+        int fault = trial(s, rhs, ctx, t0, y0, h, &k, y_new, &error);
+        if (fault) return raise_fault(s, r, fault);
+        if (error < 1.0) break;
+    }
+    accept(s, t0, y0, h, y_new, &k);
+    s->h = py_min(s->h, h);
+    return DOP_OK;
+}
+
+/* Dop853._handle_events: find the earliest event in the last step; cut the step there (a redone step that fails
+   the error test: shorten). */
 static int handle_events(Dop853 *s, DopRhs rhs, void *ctx, double t0, const double *y0, DopReport *r)
 {
     int earliest = -1, code, found;
@@ -471,11 +497,7 @@ static int handle_events(Dop853 *s, DopRhs rhs, void *ctx, double t0, const doub
         double y_new[DOP_MAX_DIM], error;
         int fault = trial(s, rhs, ctx, t0, y0, h, &k, y_new, &error);
         if (fault) return raise_fault(s, r, fault);
-        if (!isfinite(error)) {
-            number_text event_text, start_text;
-            return report(s, r, DOP_FAILED, t0, y0, "the step cut at an event at tau = %s from tau = %s failed (a "
-                          "stage left the model's domain)", py_g(event_text, earliest_t, 10), py_g(start_text, t0, 10));
-        }
+        if (!(error < 1.0)) return shorten(s, rhs, ctx, t0, y0, h, error, r);
         accept(s, t0, y0, h, y_new, &k);
     } else {  /* the event is at the step's start: the step is undone */
         s->has_old = 0;

@@ -19,7 +19,7 @@ import numpy as np
 from . import settings as plant
 from .fidelities import entry
 from .integrate import ATOL_PER_RTOL, IntegrationError, TerminalEvent
-from .models import pull_in_slope
+from .models import PolynomialModel, pull_in_slope
 from .parameters import PULL_IN_GAP, validate
 from .settings import Outputs, Settings, Solver, check_step, checked_settings
 
@@ -216,8 +216,11 @@ def supports(settings: Settings) -> bool:
     return entry(settings.fidelity).compiled_model is not None and settings.solver in (Solver.ADAPTIVE, Solver.RK4)
 
 
-def _model_fields(scene, model, polynomial: int) -> dict:
-    """The model's constants and switches (models.ExactModel / PolynomialModel: the terms they evaluate)."""
+def _model_fields(scene, model, polynomial: int | None = None) -> dict:
+    """The model's constants and switches (models.ExactModel / PolynomialModel: the terms they evaluate); polynomial:
+    the registry's compiled_model (None: read from the model's class, as the closed loop calls it)."""
+    if polynomial is None:
+        polynomial = int(isinstance(model, PolynomialModel))
     fields = {name: getattr(scene, name) for name in ("mu", "Delta", "omega", "alpha", "beta", "gamma", "Omega", "R")}
     ac = scene.beta != 0.0 or scene.gamma != 0.0
     fields.update(pull_in_c=pull_in_slope(scene.R), pull_in_gap=PULL_IN_GAP, load_forcing=scene.Delta != 0.0, ac=ac)

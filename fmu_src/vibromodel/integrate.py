@@ -322,7 +322,8 @@ class Dop853:
         """Find the earliest zero of an event in the last step (zeros of excursions that begin and end inside
         the step included); cut the step there (redo it with the exact length, so no step straddles the
         event). A contact event's state then lies on its new side (moved there if the redone step ends a
-        rounding short), and the side flips; a terminal event stops the run."""
+        rounding short), and the side flips; a terminal event stops the run. A redone step that fails the error
+        test is replaced by a shorter one (_shorten) and the event is left to the next step."""
         earliest = None
         for event in self.events:
             t_event = self._first_zero(event)
@@ -336,9 +337,9 @@ class Dop853:
         self.U, self.dU = self.U_old, self.dU_old
         if h > 0.0:
             x_new, v_new, stages, error = self._trial(t0, x0, v0, h)
-            if not math.isfinite(error):
-                raise IntegrationError(f"the step to the {event.name} event at tau = {t_event:.10g} from "
-                                       f"tau = {t0:.10g} failed (a stage left the model's domain)", t0, x0, v0)
+            if not error < 1.0:
+                self._shorten(t0, x0, v0, h, error)
+                return
             self._accept(t0, x0, v0, h, x_new, v_new, stages)
         else:  # the event is at the step's start: the step is undone
             self.t_old = None
@@ -350,6 +351,22 @@ class Dop853:
         if (event.g(self.x) > 0.0) != side:
             self._move_to_side(event, side)
         self.contact_side[event.name] = side
+
+    def _shorten(self, t0, x0, v0, h, error):
+        """The step cut at an event fails its error test (the contact force's higher derivatives are singular at
+        the event): an error-controlled shorter step is taken instead, which ends before the event; the next step
+        meets the event again."""
+        min_step = 10.0 * (math.nextafter(t0, math.inf) - t0)
+        while True:
+            h *= MIN_FACTOR if not math.isfinite(error) else max(MIN_FACTOR, SAFETY * error**ERROR_EXPONENT)
+            if not h >= min_step:
+                raise IntegrationError(
+                    f"step size collapsed to {h:.3g} at tau = {t0:.10g}, x = {x0:.10g} (stiff or singular)", t0, x0, v0)
+            x_new, v_new, stages, error = self._trial(t0, x0, v0, h)
+            if error < 1.0:
+                break
+        self._accept(t0, x0, v0, h, x_new, v_new, stages)
+        self.h = min(self.h, h)
 
     def _move_to_side(self, event, side):
         """Put x on the event's zero and then, ulp by ulp, on its side `side` (g > 0 or not); a new derivative.

@@ -12,7 +12,8 @@ from .analytic import OafmSettings
 from .fidelities import entry
 from .integrate import RK4_DRIVE_ERROR, RK4_DRIVE_THETA, rk4_drive_gains
 from .models import Fidelity
-from .parameters import ParameterError, Scene, check_parameters, clamp_tolerance, validate_max_step, validate_tolerance
+from .parameters import (ParameterError, Scene, check_parameters, clamp_tolerance, validate_max_step,
+                         validate_tolerance)
 
 DEFAULT_EXPERIMENT = (0.0, 200.0, 0.1)  # start, stop, communication step of the FMU's DefaultExperiment
 RK4_DEFAULT_STEP = 0.01  # RK4 step when max_step = 0 ("automatic")
@@ -60,7 +61,7 @@ def checked_settings(scene: Scene, settings: Settings) -> tuple[Settings, list[s
     loop) calls this one function.
     """
     settings.validate()
-    check_parameters({**scene.as_dict(), "fidelity": int(settings.fidelity)})  # the fidelity's own ranges
+    check_parameters({**scene.as_dict(), "fidelity": int(settings.fidelity)})  # the fidelity's own ranges (robust)
     rtol, warning = clamp_tolerance(settings.rtol)
     warnings = [] if warning is None else [warning]
     if settings.solver == Solver.RK4 and entry(settings.fidelity).integrated:

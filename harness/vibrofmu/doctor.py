@@ -1,29 +1,35 @@
-"""Run a pythonfmu FMU from a host that is not Python: the environment it needs, and a check.
+"""Run a vibrofmu FMU from a host that is not Python: what it needs, and a check.
 
-A pythonfmu library embeds this machine's Python: a C host must load libpython (LD_PRELOAD, as
-pythonfmu's library does not link it), point Python at its installation (PYTHONHOME) and at the
-site-packages holding what the FMU imports (PYTHONPATH).  `check` proves the environment by
-compiling the minimal C host (tests/c_host/fmi2_host.c), running the FMU's default experiment
-with it, and comparing its outputs with FMPy's `simulate_fmu` run of the same FMU.
+A pythonfmu FMU embeds a Python.  Its C layer (fmu_src/pyloader.c) finds that Python itself from the
+environment recorded at build time (resources/python_env.txt: libpython, PYTHONHOME, the site-packages
+holding numpy and scipy): on the building machine a C host needs no set-up at all, even when started with an
+empty environment.  On another machine (or with another Python) the environment variable
+VIBROFMU_PYTHON_ENV names an environment file of the same format, which `write_env_file` (`vibrofmu doctor
+--env-file FILE --python PYTHON`) writes for a Python that has what the FMU imports.  A native FMU
+(build/native/) needs nothing: it has no Python in it.
+
+`check` proves it: it compiles the minimal C host (tests/c_host/fmi2_host.c), runs the FMU's default
+experiment with it in an empty environment (plus VIBROFMU_PYTHON_ENV if set) and compares its outputs with
+FMPy's `simulate_fmu` run of the same FMU.
 """
 from __future__ import annotations
 
-import ast
-import importlib.util
 import os
 import shlex
 import subprocess
 import sys
-import sysconfig
+import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 from fmpy import extract, read_model_description, simulate_fmu
 
-from .build import FMU_SRC, REPO_ROOT
+from . import paths
+from .pythonenv import ENV_FILE, ENV_VARIABLE, describe, env_text, imported_modules, missing, parse_env, record_for
 
-HOST_SOURCE = REPO_ROOT / "tests" / "c_host" / "fmi2_host.c"
+FMU_SRC = paths.FMU_SRC
+HOST_SOURCE = paths.C_HOST_DIR / "fmi2_host.c"
 # Both hosts run the same Python code on the same inputs with the same communication points, so
 # the outputs should agree to the last bit; 1e-15 absolute is the agreed bound (about 10 ulp at
 # the |x| ~ 0.04 of the paper example).
@@ -44,56 +50,69 @@ class CheckResult:
     message: str
 
 
-def _site_dir(module: str) -> Path | None:
-    """The sys.path entry a top-level module is imported from (None: unknown or not importable)."""
-    try:
-        spec = importlib.util.find_spec(module)
-    except (ImportError, ValueError):
-        return None
-    if spec is None or spec.origin in (None, "built-in", "frozen"):
-        return None
-    if spec.submodule_search_locations:
-        return Path(spec.submodule_search_locations[0]).parent
-    return Path(spec.origin).parent
-
-
-def _imported_modules(resources: Path) -> set[str]:
-    """Top-level modules imported by the FMU's Python files that are neither packed nor stdlib."""
-    packed = {p.stem for p in resources.iterdir() if p.suffix == ".py" or (p / "__init__.py").exists()}
-    names = set()
-    for source in resources.rglob("*.py"):
-        for node in ast.walk(ast.parse(source.read_bytes())):
-            if isinstance(node, ast.Import):
-                names.update(alias.name.split(".")[0] for alias in node.names)
-            elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
-                names.add(node.module.split(".")[0])
-    return names - packed - set(sys.stdlib_module_names)
-
-
 def host_environment(resources: Path) -> dict[str, str]:
-    """LD_PRELOAD, PYTHONHOME, PYTHONPATH for running the FMU unpacked with these resources."""
-    libpython = Path(sysconfig.get_config_var("LIBDIR")) / sysconfig.get_config_var("INSTSONAME")
-    sites = sorted({str(d) for d in map(_site_dir, _imported_modules(resources)) if d is not None})
-    return {"LD_PRELOAD": str(libpython), "PYTHONHOME": sys.base_prefix, "PYTHONPATH": os.pathsep.join(sites)}
+    """What a C host must add to an empty environment to run the FMU unpacked with these resources: nothing
+    when the FMU records its Python (resources/python_env.txt) or has no Python; VIBROFMU_PYTHON_ENV when this
+    process has it set (the user's override is passed on)."""
+    override = os.environ.get(ENV_VARIABLE)
+    return {ENV_VARIABLE: override} if override else {}
+
+
+def recorded_environment(resources: Path) -> dict[str, str] | None:
+    """The FMU's resources/python_env.txt as a dict (None: the FMU records no Python)."""
+    path = Path(resources) / ENV_FILE
+    return parse_env(path.read_text()) if path.is_file() else None
+
+
+def write_env_file(out: Path, python: str | None = None, fmu: Path | None = None) -> dict:
+    """Write the environment file (VIBROFMU_PYTHON_ENV) for `python` (default: this interpreter), for the modules
+    `fmu` imports (default: those of the vibrofmu FMUs); returns the record. Raises RuntimeError when that Python
+    lacks one of them (nothing is written)."""
+    if fmu is not None:
+        with tempfile.TemporaryDirectory() as tmp:
+            unzip_dir = Path(extract(str(fmu), unzipdir=tmp))
+            record = record_for(unzip_dir / "resources", python)
+    else:  # the vibrofmu FMUs pack pythonfmu's Python part themselves
+        record = describe([name for name in imported_modules(FMU_SRC) if name != "pythonfmu"], python)
+    if missing(record):
+        raise RuntimeError(f"{python or sys.executable} lacks {', '.join(missing(record))}: install it there "
+                           f"(pip install {' '.join(missing(record))}) or name another Python with --python")
+    Path(out).write_text(env_text(record))
+    return record
 
 
 def export_lines(env: dict[str, str]) -> str:
+    if not env:
+        return "# nothing to set: the FMU finds its Python itself (or has none)"
     return "\n".join(f"export {name}={shlex.quote(value)}" for name, value in env.items())
 
 
 def compile_host(out_dir: Path) -> Path:
     host = Path(out_dir) / "fmi2_host"
-    cmd = ["gcc", "-O2", "-Wall", "-Wextra", f"-I{FMU_SRC}", "-o", str(host), str(HOST_SOURCE), "-ldl", "-lm"]
+    cmd = [*paths.c_compiler(), "-O2", "-Wall", "-Wextra", f"-I{FMU_SRC}", "-o", str(host), str(HOST_SOURCE),
+           "-ldl", "-lm"]
     proc = subprocess.run(cmd, capture_output=True, text=True)
     if proc.returncode != 0:
         raise RuntimeError(f"compiling the C host failed ({' '.join(cmd)}):\n{proc.stderr}")
     return host
 
 
+def compile_windows_host(out_dir: Path) -> Path:
+    """The same host for Windows (mingw-w64), to run win64 binaries under wine."""
+    host = Path(out_dir) / "fmi2_host.exe"
+    cmd = ["x86_64-w64-mingw32-gcc", "-O2", "-Wall", "-Wextra", "-D__USE_MINGW_ANSI_STDIO=1", f"-I{FMU_SRC}",
+           "-o", str(host), str(HOST_SOURCE)]
+    proc = subprocess.run(cmd, capture_output=True, text=True)
+    if proc.returncode != 0:
+        raise RuntimeError(f"compiling the Windows C host failed ({' '.join(cmd)}):\n{proc.stderr}")
+    return host
+
+
 def run_host(host: Path, unzip_dir: Path, outputs: list[str], start: float, stop: float, step: float,
              parameters: dict[str, float] | None = None, env: dict[str, str] | None = None,
              wrapper: list[str] | None = None, timeout: float = 600) -> HostRun:
-    """Run the C host on an unpacked FMU; `wrapper` prefixes the command (e.g. valgrind)."""
+    """Run the C host on an unpacked FMU in an environment holding only `env` (as `env -i`); `wrapper`
+    prefixes the command (e.g. valgrind)."""
     md = read_model_description(str(unzip_dir))
     vr = {v.name: v.valueReference for v in md.modelVariables}
     library = Path(unzip_dir) / "binaries" / "linux64" / f"{md.coSimulation.modelIdentifier}.so"
@@ -101,7 +120,7 @@ def run_host(host: Path, unzip_dir: Path, outputs: list[str], start: float, stop
            repr(start), repr(stop), repr(step), ",".join(str(vr[n]) for n in outputs),
            *(f"{vr[name]}={value!r}" for name, value in (parameters or {}).items())]
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout,
-                          env={**os.environ, **(env or {})})
+                          env=dict(env or {}))
     lines = proc.stdout.splitlines()
     data = np.array([[float(x) for x in line.split(",")] for line in lines[1:]]).reshape(-1, len(outputs) + 1)
     return HostRun(proc.returncode, proc.stderr, data[:, 0], {n: data[:, j + 1] for j, n in enumerate(outputs)})
@@ -137,4 +156,14 @@ def check(fmu: Path, work_dir: Path) -> tuple[dict[str, str], CheckResult]:
         return env, CheckResult(False, f"the C host failed with exit code {run.returncode}: "
                                        f"{run.stderr.strip() or 'no message'}")
     reference = simulate_fmu(str(fmu), start_time=start, stop_time=stop, output_interval=step, output=outputs)
-    return env, _compare(run, reference, outputs)
+    result = _compare(run, reference, outputs)
+    return env, CheckResult(result.ok, f"{result.message}; {python_summary(unzip_dir / 'resources')}")
+
+
+def python_summary(resources: Path) -> str:
+    """What the unpacked FMU needs of Python, in a few words."""
+    recorded = recorded_environment(resources)
+    if recorded is None:
+        return "no Python recorded (a native FMU needs none)"
+    return (f"its Python (resources/{ENV_FILE}): {recorded['python_version']} at {recorded['home']}, "
+            f"{recorded['modules'] or 'no modules'}")

@@ -8,6 +8,8 @@
  *   fmi2ExitInitializationMode, fmi2DoStep loop with fmi2GetReal of the output
  *   value references after each step, fmi2Terminate, fmi2FreeInstance, dlclose.
  *
+ * The same file compiles for Windows (x86_64-w64-mingw32-gcc, LoadLibrary instead of dlopen).
+ *
  * Usage: fmi2_host LIBRARY RESOURCE_URI GUID START STOP STEP VR[,VR...] [VR=VALUE ...]
  *
  * stdout: CSV, header "time,<vr>,...", one row at START and one after every
@@ -15,20 +17,66 @@
  * Communication points are computed as FMPy's simulate_fmu does
  * (START + n*STEP, the last one clipped to STOP), so both hosts make the same calls.
  *
+ * With FMI2_HOST_LIST_LIBRARIES set (Linux), the host lists the files mapped into
+ * its process (/proc/self/maps) on stderr before it exits, one "fmi2_host: mapped
+ * PATH" line each: the tests check that a native FMU brings no Python along.
+ *
+ * With FMI2_HOST_TIMING set, the host reports on stderr the wall time of loading the
+ * library + fmi2Instantiate + initialization, and of the doStep + fmi2GetReal loop
+ * per output row ("fmi2_host: timing instantiate_s=... per_output_s=... rows=...");
+ * with FMI2_HOST_QUIET set it prints no CSV rows (so that printing is not timed).
+ *
  * Exit code: 0 success; 1 usage or loading error; 2 an FMI call returned
  * fmi2Error or fmi2Fatal (named on stderr).  After fmi2Error the instance is
  * still freed (fmi2Terminate is not allowed in the error state); after
  * fmi2Fatal nothing more is called, as the standard requires.
  */
 
-#include <dlfcn.h>
 #include <math.h>
 #include <stdarg.h>
+#include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <time.h>
 
 #include "fmi2_types.h"  /* fmu_src/: the FMI 2.0 types, shared with the status shim */
+
+/* Loading a library: dlopen, or on Windows (cross-compiled with mingw-w64, run under wine) LoadLibrary. */
+#ifdef _WIN32
+#include <windows.h>
+static void *dlopen(const char *path, int flags) { (void)flags; return (void *)LoadLibraryA(path); }
+static void *dlsym(void *lib, const char *name) { return (void *)(intptr_t)GetProcAddress((HMODULE)lib, name); }
+static int dlclose(void *lib) { return !FreeLibrary((HMODULE)lib); }
+static const char *dlerror(void)
+{
+    static char text[64];
+    snprintf(text, sizeof text, "Windows error %lu", (unsigned long)GetLastError());
+    return text;
+}
+#define RTLD_NOW 0
+#define RTLD_LOCAL 0
+#else
+#include <dlfcn.h>
+#endif
+
+static double now(void)
+{
+#ifdef _WIN32
+    LARGE_INTEGER count, frequency;
+    QueryPerformanceCounter(&count);
+    QueryPerformanceFrequency(&frequency);
+    return (double)count.QuadPart / (double)frequency.QuadPart;
+#else
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+#endif
+}
+
+static int quiet = 0;
+static double t_loaded, t_initialised, t_done;
+static long rows_done = 0;
 
 typedef struct {
     fmi2Component (*Instantiate)(fmi2String, fmi2Type, fmi2String, fmi2String,
@@ -44,6 +92,8 @@ typedef struct {
 } Api;
 
 #define MAX_VRS 64
+
+
 
 static const char *const STATUS_NAMES[] = {"fmi2OK", "fmi2Warning", "fmi2Discard",
                                            "fmi2Error", "fmi2Fatal", "fmi2Pending"};
@@ -129,6 +179,8 @@ static int failed(const char *call, fmi2Status st, double t)
 
 static void print_row(double t, const fmi2Real *values, size_t n)
 {
+    rows_done++;
+    if (quiet) return;
     printf("%.17g", t);
     for (size_t i = 0; i < n; i++) printf(",%.17g", values[i]);
     putchar('\n');
@@ -157,6 +209,7 @@ static fmi2Status simulate(const Api *api, fmi2Component c, const Experiment *e)
         && failed("fmi2SetReal", st = api->SetReal(c, e->param_vr, e->nparams, e->param_value), t))
         return st;
     if (failed("fmi2ExitInitializationMode", st = api->ExitInitializationMode(c), t)) return st;
+    t_initialised = now();
 
     printf("time");
     for (size_t i = 0; i < e->nout; i++) printf(",%u", e->out[i]);
@@ -171,8 +224,28 @@ static fmi2Status simulate(const Api *api, fmi2Component c, const Experiment *e)
         if (failed("fmi2GetReal", st = api->GetReal(c, e->out, e->nout, values), t)) return st;
         print_row(t, values, e->nout);
     }
+    t_done = now();
     if (failed("fmi2Terminate", st = api->Terminate(c), t)) return st;
     return fmi2OK;
+}
+
+/* The files mapped into this process (FMI2_HOST_LIST_LIBRARIES), each once. */
+static void list_libraries(void)
+{
+#ifndef _WIN32
+    FILE *maps = fopen("/proc/self/maps", "r");
+    char line[4096], last[4096] = "";
+    if (maps == NULL) return;
+    while (fgets(line, sizeof line, maps) != NULL) {
+        char *path = strchr(line, '/');
+        if (path == NULL) continue;
+        path[strcspn(path, "\n")] = '\0';
+        if (strcmp(path, last) == 0) continue;
+        fprintf(stderr, "fmi2_host: mapped %s\n", path);
+        snprintf(last, sizeof last, "%s", path);
+    }
+    fclose(maps);
+#endif
 }
 
 int main(int argc, char **argv)
@@ -189,6 +262,8 @@ int main(int argc, char **argv)
         if (!parse_param(argv[8 + e.nparams], &e.param_vr[e.nparams], &e.param_value[e.nparams]))
             return die("expected VR=VALUE, got", argv[8 + e.nparams]);
 
+    quiet = getenv("FMI2_HOST_QUIET") != NULL;
+    t_loaded = now();
     void *lib = dlopen(argv[1], RTLD_NOW | RTLD_LOCAL);
     if (lib == NULL) return die("cannot load the FMU binary", dlerror());
     Api api;
@@ -200,6 +275,10 @@ int main(int argc, char **argv)
 
     fmi2Status st = simulate(&api, c, &e);
     fflush(stdout);
+    if (getenv("FMI2_HOST_LIST_LIBRARIES") != NULL) list_libraries();
+    if (getenv("FMI2_HOST_TIMING") != NULL && st == fmi2OK)
+        fprintf(stderr, "fmi2_host: timing instantiate_s=%.9g per_output_s=%.9g rows=%ld\n", t_initialised - t_loaded,
+                (t_done - t_initialised) / (double)(rows_done > 1 ? rows_done - 1 : 1), rows_done);
     if (st != fmi2Fatal) api.FreeInstance(c);
     dlclose(lib);
     return st == fmi2OK ? 0 : 2;

@@ -1,0 +1,285 @@
+/*
+ * model.c -- the native plant FMU: HertzEAOscillator.py's slave logic (vibromodel.plant.make_plant,
+ * CompiledPlant, StatusSlave._initialise / _guarded_step) on the compiled kernel vibrokernel.c, with the
+ * same checks, in the same order, and the same messages.  The rules' constants and fixed texts come from
+ * rules.h, generated from vibromodel at build time (harness/vibrofmu/native.py).
+ *
+ * Fidelities 0, 1, 2 with DOP853 or RK4 run here (kernel = 0 and 1 alike: the pure-Python plant gives the
+ * compiled kernel's bits).  Fidelity 3 (slow-flow table) and fidelity 4 (OAFM fit) need set-up code that only
+ * the pythonfmu FMU has: they are refused with fmi2Error naming it.
+ */
+#include <math.h>
+#include <stdio.h>
+#include <string.h>
+
+#include "fmi2_native.h"
+#include "pytext.h"
+#include "rules.h"
+#include "scene_checks.h"
+#include "series.h"
+
+#define PYTHONFMU_ALTERNATIVE "use the pythonfmu FMU HertzEAOscillator.fmu (build/HertzEAOscillator.fmu), which runs it in Python"
+
+static const fmi2ValueReference OUTPUT_VRS[5] = {VR_x, VR_v, VR_a, VR_F_contact, VR_F_electrostatic};
+
+void model_instantiate(State *s) { memset(&s->model, 0, sizeof s->model); }
+
+/* U is read by the next doStep (the plant holds it over the step). */
+void model_input_set(Instance *inst, State *s, fmi2ValueReference vr) { (void)inst; (void)s; (void)vr; }
+
+/* ---- parameter checks (vibromodel.parameters.validate, plant.Settings.validate, OafmSettings.validate) ---- */
+
+/* ParameterError text: "parameter NAME = repr(value): reason" */
+static void halt_parameter(Instance *inst, const char *name, double value, int integer, const char *reason)
+{
+    char text[64];
+    if (integer) snprintf(text, sizeof text, "%d", (int)value);
+    else native_repr(value, text, sizeof text);
+    native_halt(inst, "parameter %s = %s: %s", name, text, reason);
+}
+
+/* After the table of rules (checked before this model starts, fmi2_native.c): the checks vibromodel makes in
+   code, in its order (parameters.validate's electrode gaps, OafmSettings.validate's tau_star < oafm_tau_end). */
+static int valid(Instance *inst, const State *s)
+{
+    char reason[256];
+    if (!vibro_gaps_check(s->value[VR_x_start], s->value[VR_R], reason, sizeof reason)) {
+        halt_parameter(inst, "x_start", s->value[VR_x_start], 0, reason);
+        return 0;
+    }
+    if (s->value[VR_fidelity] == 4) {
+        const double tau_star = s->value[VR_tau_star], tau_end = s->value[VR_oafm_tau_end];
+        if (tau_end != 0.0 && tau_star != 0.0 && tau_end <= tau_star) {
+            snprintf(reason, sizeof reason, "must exceed tau_star = %g", tau_star);
+            halt_parameter(inst, "oafm_tau_end", tau_end, 0, reason);
+            return 0;
+        }
+    }
+    return 1;
+}
+
+/* ---- the kernel's errors as the Python slave reports them ---- */
+
+/* The pending error's exception: message; clears it as CompiledPlant._raise_pending does. Returns its code. */
+static int take_pending(VkPlant *p, char *message, size_t size, double *t, double *x, double *v)
+{
+    int code = (int)p->error;
+    snprintf(message, size, "%s", p->message);
+    *t = p->error_t; *x = p->error_x; *v = p->error_v;
+    p->error = 0;
+    p->error_t = p->error_x = p->error_v = 0.0;
+    memset(p->message, 0, sizeof p->message);
+    return code;
+}
+
+static int is_arithmetic(const char *message)
+{
+    return strncmp(message, "ZeroDivisionError:", 18) == 0 || strncmp(message, "OverflowError:", 14) == 0;
+}
+
+/* ---- initialisation ---- */
+
+static const char *const OUTPUT_NAMES[5] = {"x", "v", "a", "F_contact", "F_electrostatic"};
+
+/* The first non-finite output (StatusSlave._set_finite's NonFiniteOutput), or -1. */
+static int non_finite_output(const VkPlant *p)
+{
+    for (int i = 0; i < 5; i++)
+        if (!isfinite(p->out[i])) return i;
+    return -1;
+}
+
+static void publish(State *s)
+{
+    const VkPlant *p = &s->model.plant;
+    for (int i = 0; i < 5; i++) s->value[OUTPUT_VRS[i]] = p->out[i];
+    s->value[VR_in_contact] = p->in_contact != 0;
+}
+
+/* integrate.rk4_drive_gains(theta)[0]: G_x, RK4's ripple of x under a drive e^(i nu t) over the true one
+   (theta = nu h) -- the formula of vibromodel/integrate.py, here only for the warning's number. */
+static double rk4_gain_x(double theta)
+{
+    const double phi = 0.5 * theta, s = sin(phi);
+    if (theta == 0.0) return 1.0;
+    if (fabs(s) < 1e-300) return INFINITY;
+    return theta * theta * (1.0 + 2.0 * cos(phi)) / (12.0 * s * s);
+}
+
+/* plant.rk4_drive_warnings: the forcing terms RK4 steps of max_step do not resolve, logged as fmi2Warning. */
+static void rk4_drive_warnings(Instance *inst, const State *s, double max_step)
+{
+    const double Omega = s->value[VR_Omega], omega = s->value[VR_omega];
+    typedef struct { const char *what, *name; double value, nu; const char *term; } Drive;
+    Drive drives[2];
+    int n = 0;
+    if (s->value[VR_gamma] != 0.0) {
+        Drive d = {"AC drive", "Omega", Omega, 2.0 * Omega, "gamma cos(2 Omega tau)"};
+        drives[n++] = d;
+    } else if (s->value[VR_beta] != 0.0) {
+        Drive d = {"AC drive", "Omega", Omega, Omega, "beta sin(Omega tau)"};
+        drives[n++] = d;
+    }
+    if (s->value[VR_Delta] != 0.0) {
+        Drive d = {"load forcing", "omega", omega, omega, "Delta cos(omega tau)"};
+        drives[n++] = d;
+    }
+    for (int i = 0; i < n; i++) {
+        const double theta = drives[i].nu * max_step;
+        if (theta <= RULE_RK4_DRIVE_THETA * (1.0 + 1e-12)) continue;
+        const double error = fabs(rk4_gain_x(theta) - 1.0);
+        char wrong[96];
+        if (error <= 10.0) snprintf(wrong, sizeof wrong, "by %.0f%%", 100.0 * error);
+        else snprintf(wrong, sizeof wrong, "by more than 1000%% (near 2 pi k rad per step, a resonance)");
+        native_log(inst, fmi2Warning, "RK4 max_step = %g does not resolve the %s at %s = %g: its term %s turns by "
+                   "%.3g rad per step (more than %.3g, i.e. fewer than %.2g steps per period), so RK4 gets the ripple "
+                   "it drives in x wrong %s; the largest step that resolves it (ripple within %.0f%%) is max_step = "
+                   "%.3g", max_step, drives[i].what, drives[i].name, drives[i].value, drives[i].term, theta,
+                   RULE_RK4_DRIVE_THETA, 2.0 * 3.141592653589793 /* math.pi */ / RULE_RK4_DRIVE_THETA, wrong, 100.0 * RULE_RK4_DRIVE_ERROR,
+                   RULE_RK4_DRIVE_THETA / drives[i].nu);
+    }
+}
+
+void model_initialise(Instance *inst, State *s)
+{
+    const double rtol_requested = s->has_tolerance ? s->tolerance : s->value[VR_rtol];
+    if (!valid(inst, s)) return;
+    const int fidelity = (int)s->value[VR_fidelity], solver = (int)s->value[VR_solver];
+    if (fidelity == 3 || fidelity == 4) {
+        halt_parameter(inst, "fidelity", fidelity, 1, fidelity == 3
+            ? "the native FMU cannot tabulate the averaged slow flow (fidelity 3 needs Python); " PYTHONFMU_ALTERNATIVE
+            : "the native FMU cannot fit the OAFM solution (fidelity 4 needs Python); " PYTHONFMU_ALTERNATIVE);
+        return;
+    }
+    double rtol = rtol_requested;
+    int clamped = rtol < RULE_MIN_RTOL; /* parameters.clamp_tolerance */
+    if (clamped) rtol = RULE_MIN_RTOL;
+    VkPlant *p = &s->model.plant;
+    memset(p, 0, sizeof *p);
+    VkModel *m = &p->model; /* compiled._model_fields */
+    const double Delta = s->value[VR_Delta], alpha = s->value[VR_alpha], beta = s->value[VR_beta],
+                 gamma = s->value[VR_gamma], R = s->value[VR_R];
+    m->mu = s->value[VR_mu]; m->Delta = Delta; m->omega = s->value[VR_omega]; m->alpha = alpha; m->beta = beta;
+    m->gamma = gamma; m->Omega = s->value[VR_Omega]; m->R = R;
+    m->pull_in_c = 2.0 / (3.0 * R); /* models.pull_in_slope */
+    m->pull_in_gap = RULE_PULL_IN_GAP;
+    m->load_forcing = Delta != 0.0;
+    m->ac = beta != 0.0 || gamma != 0.0;
+    if (fidelity == 0) {
+        m->polynomial = 0;
+        m->electrostatics = alpha != 0.0 || m->ac;
+    } else { /* (models.PolynomialModel's "R out of range" cannot happen: the rules keep R in [1e-6, 1e6]) */
+        m->polynomial = 1;
+        m->electrostatics = m->ac;
+        vibro_series(fidelity == 2, alpha, gamma, R, m->poly, m->g1, m->g2, m->g3);
+    }
+    const double max_step = s->value[VR_max_step];
+    p->dop.rtol = rtol;
+    p->dop.atol = rtol * RULE_ATOL_PER_RTOL;
+    p->dop.max_step = max_step != 0.0 ? max_step : INFINITY;
+    p->dop.step_budget = RULE_MAX_STEPS_PER_DOSTEP;
+    p->rk4.max_step = max_step != 0.0 ? max_step : RULE_RK4_DEFAULT_STEP;
+    p->solver = solver;
+    p->time_tolerance = RULE_TIME_TOLERANCE;
+    p->max_steps_per_dostep = RULE_MAX_STEPS_PER_DOSTEP;
+    p->plant_t = s->start_time;
+    p->U_input = 0.0;
+    p->enabled = 1;
+    s->model.built = 1;
+    char message[VK_MESSAGE + 64];
+    double et, ex, ev, xva[3];
+    int code = vk_init(p, s->start_time, s->value[VR_x_start], s->value[VR_v_start]);
+    if (code == VK_OK) { /* the slave's _start: notes (fmi2OK), warnings, the first outputs */
+        native_log(inst, fmi2OK, "%s on the native FMU's compiled kernel (no Python)", solver ? "RK4" : "DOP853");
+        if (clamped) {
+            char requested[64];
+            native_repr(rtol_requested, requested, sizeof requested);
+            native_log(inst, fmi2Warning, "parameter rtol = %s is below %.3g (100 machine epsilons: the error "
+                       "control would see only rounding): using rtol = %.3g", requested, RULE_MIN_RTOL, RULE_MIN_RTOL);
+        }
+        if (solver == 1) rk4_drive_warnings(inst, s, p->rk4.max_step);
+        code = vk_plant_state(p, xva);
+    }
+    if (code == VK_OK) code = vk_outputs_at(p, p->plant_t, xva[0], xva[1], &xva[2]);
+    if (code != VK_OK) { /* StatusSlave._initialise */
+        char what[VK_MESSAGE + 64];
+        int pending = take_pending(p, message, sizeof message, &et, &ex, &ev);
+        if (pending == VK_TERMINAL || pending == VK_FAILED) {
+            native_halt(inst, "simulation stopped: %s", message);
+        } else {
+            py_exception_repr(message, what, sizeof what);
+            native_halt(inst, "initialisation failed: %s", what);
+        }
+        return;
+    }
+    int bad = non_finite_output(p);
+    if (bad >= 0) {
+        char value[64];
+        native_repr(p->out[bad], value, sizeof value);
+        native_halt(inst, "initialisation failed: NonFiniteOutput('output %s = %s is not finite; the parameters are "
+                    "beyond the model's numerical range')", OUTPUT_NAMES[bad], value);
+        return;
+    }
+    p->U_input = s->value[VR_U];
+    publish(s);
+}
+
+/* ---- doStep ---- */
+
+void model_do_step(Instance *inst, State *s, double t, double h)
+{
+    VkPlant *p = &s->model.plant;
+    const double U = s->value[VR_U];
+    p->U_input = U;
+    int code = vk_do_step(p, t, h);
+    if (code == VK_OK) {
+        int bad = non_finite_output(p);
+        if (bad >= 0) { /* the status shim's fast_outputs_checked */
+            native_error(inst, "simulation stopped: output with valueReference %u is %g (not finite) after the step "
+                         "from tau = %.17g; the parameters are beyond the model's numerical range",
+                         (unsigned)OUTPUT_VRS[bad], p->out[bad], t);
+            return;
+        }
+        publish(s);
+        return;
+    }
+    char a[64], b[64], message[VK_MESSAGE + 64], what[VK_MESSAGE + 64];
+    switch (code) { /* plant.check_step's ParameterErrors */
+    case VK_BAD_STEP:
+        native_repr(h, a, sizeof a);
+        native_error(inst, "doStep refused: parameter communicationStepSize = %s: %s", a, RULE_STEP_SIZE);
+        return;
+    case VK_BAD_INPUT:
+        native_repr(U, a, sizeof a);
+        native_error(inst, "doStep refused: parameter U = %s: %s", a, RULE_INPUT);
+        return;
+    case VK_TOO_MANY_STEPS:
+        native_repr(h, a, sizeof a);
+        native_error(inst, "doStep refused: parameter communicationStepSize = %s: needs more than %.0f steps of %g "
+                     "(max_step); make smaller communication steps or raise max_step", a,
+                     RULE_MAX_STEPS_PER_DOSTEP, p->solver == 1 ? p->rk4.max_step : p->dop.max_step);
+        return;
+    case VK_BAD_TIME:
+        native_repr(t, a, sizeof a);
+        native_repr(p->plant_t, b, sizeof b);
+        native_error(inst, "doStep refused: parameter currentCommunicationPoint = %s: the plant is at tau = %s", a, b);
+        return;
+    default:
+        break;
+    }
+    double et, ex, ev;
+    int pending = take_pending(p, message, sizeof message, &et, &ex, &ev);
+    if (pending == VK_TERMINAL || pending == VK_FAILED) { /* HertzEAOscillator.do_step's `stopped` */
+        if (vk_outputs_at(p, et, ex, ev, NULL) == VK_OK && non_finite_output(p) < 0) publish(s);
+        else take_pending(p, what, sizeof what, &et, &ex, &ev);
+        native_halt(inst, "simulation stopped: %s", message);
+        return;
+    }
+    native_repr(t, a, sizeof a);
+    py_exception_repr(message, what, sizeof what);
+    if (is_arithmetic(message))
+        native_halt(inst, "simulation stopped: floating-point failure after tau = %s (%s); the parameters are beyond "
+                    "the model's numerical range", a, what);
+    else
+        native_halt(inst, "doStep failed at tau = %s: %s", a, what);
+}

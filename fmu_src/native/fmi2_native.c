@@ -1,0 +1,657 @@
+/*
+ * fmi2_native.c -- FMI 2.0 co-simulation API of a native vibrofmu FMU (see fmi2_native.h).
+ *
+ * Compiled once per model with that model's folder (config.h, model.c) and its generated variables.h on the
+ * include path.  No global state: every instance is independent.
+ */
+#include "fmi2_native.h"
+
+#include <math.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "pytext.h"
+#include "rules.h"
+
+#ifdef _WIN32
+#define EXPORT __declspec(dllexport)
+#else
+#define EXPORT __attribute__((visibility("default")))
+#endif
+
+#define STOP_TIME_TOLERANCE 1e-9 /* slave_support.STOP_TIME_TOLERANCE */
+#define FLAG_OK 0
+#define FLAG_ERROR 3
+
+typedef enum { MODE_OK, MODE_ERROR } Mode;
+
+struct Instance {
+    State s;
+    Mode mode;                /* MODE_ERROR: a state-changing call ended in fmi2Error (fmi2_status_shim.c) */
+    fmi2CallbackFunctions cb;
+    char *name;
+    int logging_on;
+};
+
+/* The serialized FMU state: this header, then the State's bytes. */
+typedef struct {
+    char format[64];
+    uint64_t size;
+} StateHeader;
+
+/* ---- logging ---- */
+
+static void noop_logger(fmi2ComponentEnvironment e, fmi2String i, fmi2Status s, fmi2String c, fmi2String m, ...)
+{
+    (void)e; (void)i; (void)s; (void)c; (void)m;
+}
+
+static void vlog(Instance *inst, fmi2Status status, const char *format, va_list args)
+{
+    if (status == fmi2OK && !inst->logging_on) return;
+    char message[2048], escaped[4096];
+    vsnprintf(message, sizeof message, format, args);
+    size_t k = 0; /* the host treats the message as a printf format */
+    for (const char *p = message; *p && k + 2 < sizeof escaped; p++) {
+        if (*p == '%') escaped[k++] = '%';
+        escaped[k++] = *p;
+    }
+    escaped[k] = '\0';
+    const char *category = status >= fmi2Error ? "logStatusError" : status == fmi2Warning ? "logStatusWarning"
+                                                                                          : "logAll";
+    inst->cb.logger(inst->cb.componentEnvironment, inst->name, status, category, escaped);
+}
+
+void native_log(Instance *inst, fmi2Status status, const char *format, ...)
+{
+    va_list args;
+    va_start(args, format);
+    vlog(inst, status, format, args);
+    va_end(args);
+}
+
+void native_error(Instance *inst, const char *format, ...)
+{
+    va_list args;
+    inst->s.value[VR_fmi_status] = FLAG_ERROR;
+    va_start(args, format);
+    vlog(inst, fmi2Error, format, args);
+    va_end(args);
+}
+
+void native_halt(Instance *inst, const char *format, ...)
+{
+    va_list args;
+    va_start(args, format);
+    vsnprintf(inst->s.halt_message, sizeof inst->s.halt_message, format, args);
+    va_end(args);
+    inst->s.halted = 1;
+    native_error(inst, "%s", inst->s.halt_message);
+}
+
+int native_logging_on(const Instance *inst) { return inst->logging_on; }
+State *native_state(Instance *inst) { return &inst->s; }
+
+/* ---- the FMI 2.0 state machine (slave_support.StatusSlave: phase; the status shim: the error state) ---- */
+
+static const char *const PHASE_NAMES[] = {"instantiated", "initialization mode", "step mode", "terminated"};
+
+/* StatusSlave._allowed: call allowed in phase `allowed`, else an error naming both. */
+static int allowed(Instance *inst, const char *call, int64_t phase)
+{
+    if (inst->s.phase == phase) return 1;
+    native_error(inst, "%s is not allowed in the %s state (FMI 2.0 allows it in: %s)", call,
+                 PHASE_NAMES[inst->s.phase], PHASE_NAMES[phase]);
+    return 0;
+}
+
+/* The current value of variable vr as Python prints it (repr). */
+static void value_text(const State *s, fmi2ValueReference vr, char *out, size_t size)
+{
+    const VariableInfo *v = &VARIABLES[vr];
+    if (v->type == T_REAL) native_repr(s->value[vr], out, size);
+    else if (v->type == T_INTEGER) snprintf(out, size, "%d", (int)s->value[vr]);
+    else snprintf(out, size, "%s", s->value[vr] != 0.0 ? "True" : "False");
+}
+
+/* StatusSlave._initialise's first step, parameters.check_parameters: the first parameter (in the table's
+   order) out of its range halts the instance, naming it.  rtol is the experiment's tolerance when
+   fmi2SetupExperiment gave one (StatusSlave._parameter_values). */
+static int parameter_index(const char *name)
+{
+    for (size_t i = 0; i < N_VARIABLES; i++)
+        if (VARIABLES[i].causality == C_PARAMETER && strcmp(VARIABLES[i].name, name) == 0) return (int)i;
+    return -1;
+}
+
+static int check_parameters(Instance *inst)
+{
+    for (size_t r = 0; r < N_RULES; r++) {
+        const VibroRule *rule = &RULES[r];
+        int vr = parameter_index(rule->name);
+        if (vr < 0) continue;
+        if (rule->when != NULL) {
+            int other = parameter_index(rule->when);
+            int applies = 0;
+            for (int k = 0; other >= 0 && k < rule->n_when; k++)
+                if (inst->s.value[other] == rule->when_values[k]) applies = 1;
+            if (!applies) continue;
+        }
+        double number = inst->s.value[vr];
+        int tolerance = strcmp(rule->name, "rtol") == 0 && inst->s.has_tolerance;
+        if (tolerance) number = inst->s.tolerance;
+        if (rule->has_automatic && number == rule->automatic) continue;
+        int ok = isfinite(number) && (!rule->integer || number == trunc(number));
+        ok = ok && (rule->low_inclusive ? number >= rule->low : number > rule->low);
+        ok = ok && (rule->high_inclusive ? number <= rule->high : number < rule->high);
+        if (ok) continue;
+        char text[64];
+        if (tolerance) native_repr(number, text, sizeof text);
+        else value_text(&inst->s, (fmi2ValueReference)vr, text, sizeof text);
+        native_halt(inst, "parameter %s = %s: %s", rule->name, text, rule->text);
+        return 0;
+    }
+    return 1;
+}
+
+
+static fmi2Status settle(Instance *inst, int may_clear_error)
+{
+    if (inst->s.value[VR_fmi_status] == FLAG_ERROR) {
+        inst->mode = MODE_ERROR;
+        return fmi2Error;
+    }
+    if (may_clear_error) inst->mode = MODE_OK;
+    return fmi2OK;
+}
+
+static fmi2Status refuse(Instance *inst, const char *fn)
+{
+    native_log(inst, fmi2Error, "call %s not allowed after an error", fn);
+    return fmi2Error;
+}
+
+#define INST(c) Instance *I = (Instance *)(c); if (I == NULL) return fmi2Error
+#define ONLY_IN_OK(fn) if (I->mode != MODE_OK) return refuse(I, fn)
+
+static void reset_state(State *s)
+{
+    memset(s, 0, sizeof *s);
+    for (size_t i = 0; i < N_VARIABLES; i++) s->value[i] = VARIABLES[i].start;
+    s->value[VR_fmi_status] = FLAG_OK;
+    s->phase = PHASE_INSTANTIATED;
+    s->halted = 1;
+    snprintf(s->halt_message, sizeof s->halt_message, "the FMU has not been initialised");
+    model_instantiate(s);
+}
+
+/* ---- API ---- */
+
+EXPORT const char *fmi2GetTypesPlatform(void) { return "default"; }
+EXPORT const char *fmi2GetVersion(void) { return "2.0"; }
+
+EXPORT fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2String fmuGUID,
+                                     fmi2String fmuResourceLocation, const fmi2CallbackFunctions *functions,
+                                     fmi2Boolean visible, fmi2Boolean loggingOn)
+{
+    (void)fmuGUID; (void)fmuResourceLocation; (void)visible;
+    Instance *inst = calloc(1, sizeof *inst);
+    if (inst == NULL) return NULL;
+    if (functions != NULL) inst->cb = *functions;
+    if (inst->cb.logger == NULL) inst->cb.logger = noop_logger;
+    inst->name = malloc(strlen(instanceName ? instanceName : "") + 1);
+    if (inst->name == NULL) { free(inst); return NULL; }
+    strcpy(inst->name, instanceName ? instanceName : "");
+    inst->logging_on = loggingOn != 0;
+    if (fmuType != fmi2CoSimulation) {
+        native_log(inst, fmi2Error, "%s is a co-simulation FMU: fmuType must be fmi2CoSimulation", MODEL_IDENTIFIER);
+        free(inst->name);
+        free(inst);
+        return NULL;
+    }
+    reset_state(&inst->s);
+    return inst;
+}
+
+EXPORT void fmi2FreeInstance(fmi2Component c)
+{
+    Instance *I = (Instance *)c;
+    if (I == NULL) return;
+    free(I->name);
+    free(I);
+}
+
+EXPORT fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingOn, size_t n, const fmi2String cats[])
+{
+    INST(c);
+    (void)n; (void)cats;
+    I->logging_on = loggingOn != 0;
+    return fmi2OK;
+}
+
+EXPORT fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean tolDef, fmi2Real tol, fmi2Real tStart,
+                                      fmi2Boolean stopDef, fmi2Real tStop)
+{
+    INST(c); ONLY_IN_OK("fmi2SetupExperiment");
+    if (!allowed(I, "fmi2SetupExperiment", PHASE_INSTANTIATED)) return settle(I, 0);
+    I->s.start_time = tStart;
+    I->s.has_stop = stopDef != 0;
+    I->s.stop_time = stopDef ? tStop : 0.0;
+    I->s.has_tolerance = tolDef != 0;
+    I->s.tolerance = tolDef ? tol : 0.0;
+    return settle(I, 0);
+}
+
+EXPORT fmi2Status fmi2EnterInitializationMode(fmi2Component c)
+{
+    INST(c); ONLY_IN_OK("fmi2EnterInitializationMode");
+    if (allowed(I, "fmi2EnterInitializationMode", PHASE_INSTANTIATED)) I->s.phase = PHASE_INITIALIZATION_MODE;
+    return settle(I, 0);
+}
+
+EXPORT fmi2Status fmi2ExitInitializationMode(fmi2Component c)
+{
+    INST(c); ONLY_IN_OK("fmi2ExitInitializationMode");
+    if (!allowed(I, "fmi2ExitInitializationMode", PHASE_INITIALIZATION_MODE)) return settle(I, 0);
+    I->s.phase = PHASE_STEP_MODE;
+    I->s.initialised = 1;
+    if (check_parameters(I)) { /* StatusSlave._initialise: the table, then the model */
+        I->s.halted = 0;
+        I->s.halt_message[0] = '\0';
+        model_initialise(I, &I->s);
+    }
+    return settle(I, 0);
+}
+
+EXPORT fmi2Status fmi2Terminate(fmi2Component c)
+{
+    INST(c); ONLY_IN_OK("fmi2Terminate");
+    if (allowed(I, "fmi2Terminate", PHASE_STEP_MODE)) {
+        I->s.phase = PHASE_TERMINATED;
+        I->s.halted = 1;
+        snprintf(I->s.halt_message, sizeof I->s.halt_message,
+                 "fmi2Terminate was called (FMI 2.0: only fmi2Reset or fmi2FreeInstance may follow)");
+    }
+    return settle(I, 0);
+}
+
+EXPORT fmi2Status fmi2Reset(fmi2Component c)
+{
+    INST(c);
+    reset_state(&I->s);
+    return settle(I, 1);
+}
+
+static const char *const TYPE_NAMES[] = {"Real", "Integer", "Boolean"};
+
+/* StatusSlave._get_values: an unknown value reference, a wrong type, or any variable but fmi_status before
+   fmi2EnterInitializationMode is an error (logged; that value reads as 0); then the call returns fmi2Error and
+   the instance is in the error state (the status shim's checked_getter). */
+static fmi2Status get_values(Instance *I, const fmi2ValueReference vr[], size_t nvr, const char *type,
+                             int type_index, const char *call, double out[])
+{
+    int failed = 0;
+    for (size_t i = 0; i < nvr; i++) {
+        out[i] = 0.0;
+        if (vr[i] >= N_VARIABLES) {
+            native_error(I, "%s: no variable has valueReference %u", call, vr[i]);
+        } else if (type_index < 0 || (int)VARIABLES[vr[i]].type != type_index) {
+            native_error(I, "%s: variable %s (valueReference %u) is a %s, not a %s", call, VARIABLES[vr[i]].name,
+                         vr[i], TYPE_NAMES[VARIABLES[vr[i]].type], type);
+        } else if (I->s.phase == PHASE_INSTANTIATED && vr[i] != VR_fmi_status) {
+            native_error(I, "%s of %s is not allowed in the instantiated state (FMI 2.0 allows it from "
+                         "fmi2EnterInitializationMode on)", call, VARIABLES[vr[i]].name);
+        } else {
+            out[i] = I->s.value[vr[i]];
+            continue;
+        }
+        failed = 1;
+    }
+    if (failed) {
+        I->mode = MODE_ERROR;
+        return fmi2Error;
+    }
+    return fmi2OK;
+}
+
+#define MAX_GET 64
+#define GETTER(Name, T, TYPE, CONVERT, CHECK)                                                             \
+    EXPORT fmi2Status fmi2Get##Name(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, T value[])  \
+    {                                                                                                     \
+        INST(c);                                                                                          \
+        fmi2Status worst = fmi2OK;                                                                        \
+        for (size_t done = 0; done < nvr; done += MAX_GET) {                                              \
+            size_t n = nvr - done < MAX_GET ? nvr - done : MAX_GET;                                       \
+            double values[MAX_GET];                                                                       \
+            fmi2Status st = get_values(I, vr + done, n, #Name, TYPE, "fmi2Get" #Name, values);            \
+            for (size_t i = 0; i < n; i++) value[done + i] = CONVERT(values[i]);                          \
+            if (st > worst) worst = st;                                                                   \
+        }                                                                                                 \
+        return CHECK(worst);                                                                              \
+    }
+#define AS_REAL(v) (v)
+#define AS_INTEGER(v) ((fmi2Integer)(v))
+#define AS_BOOLEAN(v) ((v) != 0.0)
+#define NO_CHECK(st) (st)
+#define FINITE_CHECK(st) finite_reals(I, (st), vr, nvr, value)
+
+/* The status shim's finite_reals: no Real is returned non-finite with fmi2OK. */
+static fmi2Status finite_reals(Instance *I, fmi2Status st, const fmi2ValueReference vr[], size_t nvr,
+                               const fmi2Real value[])
+{
+    if (st > fmi2Warning) return st;
+    for (size_t i = 0; i < nvr; i++) {
+        if (isfinite(value[i])) continue;
+        native_log(I, fmi2Error, "fmi2GetReal: variable with valueReference %u is %g (not finite): refused",
+                   (unsigned)vr[i], value[i]);
+        I->mode = MODE_ERROR;
+        return fmi2Error;
+    }
+    return st;
+}
+
+GETTER(Real, fmi2Real, T_REAL, AS_REAL, FINITE_CHECK)
+GETTER(Integer, fmi2Integer, T_INTEGER, AS_INTEGER, NO_CHECK)
+GETTER(Boolean, fmi2Boolean, T_BOOLEAN, AS_BOOLEAN, NO_CHECK)
+
+EXPORT fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2String value[])
+{
+    INST(c);
+    fmi2Status worst = fmi2OK;
+    for (size_t i = 0; i < nvr; i++) {
+        double ignored;
+        value[i] = "";
+        fmi2Status st = get_values(I, vr + i, 1, "String", -1, "fmi2GetString", &ignored);
+        if (st > worst) worst = st;
+    }
+    return worst;
+}
+
+/* StatusSlave._set_refusal: why FMI 2.0 forbids setting variable vr now, or NULL. */
+static const char *set_refusal(Instance *I, fmi2ValueReference vr, char *buf, size_t size)
+{
+    const VariableInfo *v = &VARIABLES[vr];
+    static const char *const CAUSALITY[] = {"parameter", "input", "output", "local"};
+    if (I->s.phase == PHASE_TERMINATED) return "no variable may be set in the terminated state (FMI 2.0)";
+    if (v->causality == C_INPUT) return NULL;
+    if (v->causality == C_PARAMETER && strcmp(v->variability, "tunable") == 0) return NULL;
+    if (!v->settable_start) {
+        snprintf(buf, size, "a %s variable computed by the FMU cannot be set", CAUSALITY[v->causality]);
+        return buf;
+    }
+    if (I->s.initialised) {
+        char current[64];
+        value_text(&I->s, vr, current, sizeof current);
+        snprintf(buf, size, "a %s %s cannot be set after fmi2ExitInitializationMode (FMI 2.0: only inputs and "
+                 "tunable parameters); it keeps %s", v->variability, CAUSALITY[v->causality], current);
+        return buf;
+    }
+    if (v->causality == C_OUTPUT) /* its start value is the model's initial output */
+        return "an output is computed by the FMU from its parameters (x_start, v_start, ...); setting it would be "
+               "ignored, so it is refused";
+    return NULL;
+}
+
+/* StatusSlave._set_values: each refusal logged as ParameterError(name, value, reason), the rest set. */
+static fmi2Status set_values(Instance *I, const fmi2ValueReference vr[], size_t nvr, VarType type,
+                             const double value[], const char *const text[])
+{
+    char reason[512], name[96];
+    for (size_t i = 0; i < nvr; i++) {
+        const char *refusal;
+        if (vr[i] >= N_VARIABLES) {
+            snprintf(name, sizeof name, "with valueReference %u", vr[i]);
+            refusal = "no such variable";
+        } else {
+            snprintf(name, sizeof name, "%s", VARIABLES[vr[i]].name);
+            refusal = set_refusal(I, vr[i], reason, sizeof reason);
+            if (refusal == NULL && VARIABLES[vr[i]].type != type) { /* pythonfmu's TypeError */
+                snprintf(reason, sizeof reason, "Variable with valueReference=%u is not of type %s!", vr[i],
+                         TYPE_NAMES[type]);
+                refusal = reason;
+            }
+        }
+        if (refusal == NULL) {
+            I->s.value[vr[i]] = value[i];
+            if (VARIABLES[vr[i]].causality == C_INPUT) model_input_set(I, &I->s, vr[i]);
+            continue;
+        }
+        native_error(I, "parameter %s = %s: %s", name, text[i], refusal);
+    }
+    return settle(I, 0);
+}
+
+#define MAX_SET 64
+#define SETTER(Name, T, Type, FORMAT)                                                                     \
+    EXPORT fmi2Status fmi2Set##Name(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const T value[]) \
+    {                                                                                                     \
+        INST(c); ONLY_IN_OK("fmi2Set" #Name);                                                             \
+        fmi2Status worst = fmi2OK;                                                                        \
+        for (size_t done = 0; done < nvr; done += MAX_SET) {                                              \
+            size_t n = nvr - done < MAX_SET ? nvr - done : MAX_SET;                                       \
+            double values[MAX_SET];                                                                       \
+            char texts[MAX_SET][48];                                                                      \
+            const char *text[MAX_SET];                                                                    \
+            for (size_t i = 0; i < n; i++) {                                                              \
+                values[i] = (double)value[done + i];                                                      \
+                FORMAT(value[done + i], texts[i], sizeof texts[i]);                                       \
+                text[i] = texts[i];                                                                       \
+            }                                                                                             \
+            fmi2Status st = set_values(I, vr + done, n, Type, values, text);                              \
+            if (st > worst) worst = st;                                                                   \
+        }                                                                                                 \
+        return worst;                                                                                     \
+    }
+#define FORMAT_REAL(v, out, size) native_repr(v, out, size)
+#define FORMAT_INTEGER(v, out, size) snprintf(out, size, "%d", (int)(v))
+#define FORMAT_BOOLEAN(v, out, size) snprintf(out, size, "%s", (v) ? "True" : "False")
+SETTER(Real, fmi2Real, T_REAL, FORMAT_REAL)
+SETTER(Integer, fmi2Integer, T_INTEGER, FORMAT_INTEGER)
+SETTER(Boolean, fmi2Boolean, T_BOOLEAN, FORMAT_BOOLEAN)
+
+EXPORT fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2String value[])
+{
+    INST(c); ONLY_IN_OK("fmi2SetString");
+    for (size_t i = 0; i < nvr; i++) {
+        char quoted[256];
+        py_str_repr(value[i] ? value[i] : "", quoted, sizeof quoted);
+        if (vr[i] >= N_VARIABLES)
+            native_error(I, "parameter with valueReference %u = %s: no such variable", vr[i], quoted);
+        else
+            native_error(I, "parameter %s = %s: Variable with valueReference=%u is not of type String!",
+                         VARIABLES[vr[i]].name, quoted, vr[i]);
+    }
+    return settle(I, 0);
+}
+
+EXPORT fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean noSetPrior)
+{
+    INST(c); ONLY_IN_OK("fmi2DoStep");
+    (void)noSetPrior;
+    /* StatusSlave._step_allowed: step mode only, and not beyond the declared stop time */
+    if (I->s.phase == PHASE_TERMINATED) {
+        native_error(I, "doStep refused: %s", I->s.halt_message);
+        return settle(I, 0);
+    }
+    if (!allowed(I, "fmi2DoStep", PHASE_STEP_MODE)) return settle(I, 0);
+    if (I->s.has_stop) {
+        const double stop = I->s.stop_time, end = stop + STOP_TIME_TOLERANCE * fmax(1.0, fabs(stop));
+        if (isfinite(t) && isfinite(h) && t <= end && end < t + h) {
+            char a[64], b[64], e[64], f[64];
+            native_repr(h, a, sizeof a);
+            native_repr(t, b, sizeof b);
+            native_repr(t + h, e, sizeof e);
+            native_repr(stop, f, sizeof f);
+            native_error(I, "parameter communicationStepSize = %s: the step from tau = %s would end at tau = %s, "
+                         "beyond the stop time %s declared in fmi2SetupExperiment", a, b, e, f);
+            return settle(I, 0);
+        }
+    }
+    if (I->s.halted) {
+        native_error(I, "doStep refused: %s", I->s.halt_message);
+        return settle(I, 0);
+    }
+    model_do_step(I, &I->s, t, h);
+    return settle(I, 0);
+}
+
+EXPORT fmi2Status fmi2CancelStep(fmi2Component c)
+{
+    INST(c);
+    native_log(I, fmi2Error, "fmi2CancelStep: doStep always completes (no asynchronous steps)");
+    return fmi2Error;
+}
+
+/* ---- FMU state: a copy of the State ---- */
+
+EXPORT fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *state)
+{
+    INST(c);
+    if (state == NULL) return fmi2Error;
+    State *copy = *state != NULL ? (State *)*state : malloc(sizeof *copy);
+    if (copy == NULL) {
+        native_log(I, fmi2Error, "fmi2GetFMUstate: out of memory");
+        return fmi2Error;
+    }
+    memcpy(copy, &I->s, sizeof *copy);
+    *state = copy;
+    return fmi2OK;
+}
+
+EXPORT fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate state)
+{
+    INST(c);
+    if (state == NULL) {
+        native_log(I, fmi2Error, "fmi2SetFMUstate refused: no state given");
+        return fmi2Error;
+    }
+    memcpy(&I->s, state, sizeof I->s);
+    if (I->s.value[VR_fmi_status] == FLAG_ERROR)
+        native_log(I, fmi2Error, "restored a state saved after an error: %s",
+                   I->s.halted ? I->s.halt_message : "a call had failed");
+    return settle(I, 1);
+}
+
+EXPORT fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *state)
+{
+    INST(c);
+    if (state != NULL) {
+        free(*state);
+        *state = NULL;
+    }
+    return fmi2OK;
+}
+
+EXPORT fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate state, size_t *size)
+{
+    INST(c);
+    (void)state;
+    *size = sizeof(StateHeader) + sizeof(State);
+    return fmi2OK;
+}
+
+EXPORT fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate state, fmi2Byte bytes[], size_t size)
+{
+    INST(c);
+    if (state == NULL || size < sizeof(StateHeader) + sizeof(State)) {
+        native_log(I, fmi2Error, "fmi2SerializeFMUstate: no state, or %zu bytes are too few", size);
+        return fmi2Error;
+    }
+    StateHeader header;
+    memset(&header, 0, sizeof header);
+    snprintf(header.format, sizeof header.format, "%s", STATE_FORMAT);
+    header.size = sizeof(State);
+    memcpy(bytes, &header, sizeof header);
+    memcpy(bytes + sizeof header, state, sizeof(State));
+    return fmi2OK;
+}
+
+EXPORT fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte bytes[], size_t size, fmi2FMUstate *state)
+{
+    INST(c);
+    StateHeader header;
+    if (size != sizeof header + sizeof(State)) {
+        native_log(I, fmi2Error, "fmi2DeSerializeFMUstate refused: not a state of this FMU (%zu bytes, expected "
+                   "%zu)", size, sizeof header + sizeof(State));
+        return fmi2Error;
+    }
+    memcpy(&header, bytes, sizeof header);
+    if (strncmp(header.format, STATE_FORMAT, sizeof header.format) != 0 || header.size != sizeof(State)) {
+        native_log(I, fmi2Error, "fmi2DeSerializeFMUstate refused: not a state of this FMU (format %.63s, "
+                   "expected %s)", header.format, STATE_FORMAT);
+        return fmi2Error;
+    }
+    State *copy = *state != NULL ? (State *)*state : malloc(sizeof *copy);
+    if (copy == NULL) return fmi2Error;
+    memcpy(copy, bytes + sizeof header, sizeof *copy);
+    *state = copy;
+    return fmi2OK;
+}
+
+/* ---- not provided by a co-simulation FMU without these capabilities ---- */
+
+EXPORT fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReference vU[], size_t nU,
+                                               const fmi2ValueReference vK[], size_t nK,
+                                               const fmi2Real dvK[], fmi2Real dvU[])
+{
+    INST(c);
+    (void)vU; (void)nU; (void)vK; (void)nK; (void)dvK; (void)dvU;
+    native_log(I, fmi2Error, "fmi2GetDirectionalDerivative is not provided (providesDirectionalDerivative=false)");
+    return fmi2Error;
+}
+
+EXPORT fmi2Status fmi2SetRealInputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+                                              const fmi2Integer order[], const fmi2Real value[])
+{
+    INST(c);
+    (void)vr; (void)nvr; (void)order; (void)value;
+    native_log(I, fmi2Error, "fmi2SetRealInputDerivatives is not provided (canInterpolateInputs=false)");
+    return fmi2Error;
+}
+
+EXPORT fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+                                               const fmi2Integer order[], fmi2Real value[])
+{
+    INST(c);
+    (void)vr; (void)nvr; (void)order; (void)value;
+    native_log(I, fmi2Error, "fmi2GetRealOutputDerivatives is not provided (maxOutputDerivativeOrder=0)");
+    return fmi2Error;
+}
+
+EXPORT fmi2Status fmi2GetStatus(fmi2Component c, const fmi2StatusKind s, fmi2Status *value)
+{
+    INST(c);
+    if (s != fmi2DoStepStatus) return fmi2Discard;
+    *value = I->mode == MODE_OK ? fmi2OK : fmi2Error;
+    return fmi2OK;
+}
+
+EXPORT fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind s, fmi2Real *value)
+{
+    INST(c);
+    (void)s; (void)value;
+    return fmi2Discard;
+}
+
+EXPORT fmi2Status fmi2GetIntegerStatus(fmi2Component c, const fmi2StatusKind s, fmi2Integer *value)
+{
+    INST(c);
+    (void)s; (void)value;
+    return fmi2Discard;
+}
+
+EXPORT fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind s, fmi2Boolean *value)
+{
+    INST(c);
+    (void)s; (void)value;
+    return fmi2Discard;
+}
+
+EXPORT fmi2Status fmi2GetStringStatus(fmi2Component c, const fmi2StatusKind s, fmi2String *value)
+{
+    INST(c);
+    (void)s; (void)value;
+    return fmi2Discard;
+}

@@ -1,0 +1,78 @@
+/*
+ * fmi2_native.h -- the FMI 2.0 co-simulation layer of the native vibrofmu FMUs (no Python at run time).
+ *
+ * Written once (fmi2_native.c) for every native FMU, in the spirit of the Reference-FMUs: each model has a
+ * folder with config.h (its ModelData: every FMI variable's value plus the model's own plain-data state) and
+ * native_model.c (the hooks below).  variables.h, generated at build time from the pythonfmu FMU's
+ * modelDescription.xml (harness/vibrofmu/native.py), lists the variables with the same value references,
+ * causalities and start values, so the native FMU has the pythonfmu FMU's interface.
+ *
+ * The layer reproduces the behaviour of the pythonfmu slaves behind the status shim (slave_support.py,
+ * fmi2_status_shim.c): the same setting rules and messages, the status flag fmi_status (0 ok, 3 error), the
+ * error state (after an fmi2Error only getters, fmi2Reset, fmi2SetFMUstate and fmi2FreeInstance), and the
+ * FMU state (the instance's State is plain data without pointers: get/set is a copy, serialization its bytes).
+ */
+#ifndef FMI2_NATIVE_H
+#define FMI2_NATIVE_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "fmi2_types.h"
+
+typedef enum { T_REAL, T_INTEGER, T_BOOLEAN } VarType;
+typedef enum { C_PARAMETER, C_INPUT, C_OUTPUT, C_LOCAL } VarCausality;
+
+typedef struct {
+    const char *name;
+    VarType type;
+    VarCausality causality;
+    const char *variability; /* "fixed", "tunable", "discrete", "continuous" */
+    int settable_start;      /* parameter, or initial exact/approx: may be set before initialization */
+    double start;
+} VariableInfo;
+
+#include "variables.h"  /* N_VARIABLES, VR_<name>, VARIABLES[] (generated) */
+#include "config.h"     /* MODEL_IDENTIFIER, STATE_FORMAT, ModelData (per model) */
+
+#define HALT_MESSAGE 640
+
+/* Everything that decides an instance's future: plain data (the FMU state). */
+/* FMI 2.0 co-simulation states (slave_support.StatusSlave.phase); the error state is Instance.mode */
+enum { PHASE_INSTANTIATED, PHASE_INITIALIZATION_MODE, PHASE_STEP_MODE, PHASE_TERMINATED };
+
+typedef struct {
+    double value[N_VARIABLES];   /* every FMI variable, by value reference (Integer/Boolean as exact doubles) */
+    int64_t phase;               /* PHASE_* */
+    int64_t initialised;         /* fmi2ExitInitializationMode was called: only inputs may be set */
+    int64_t halted;              /* doStep refuses, with halt_message */
+    double start_time, stop_time, tolerance;
+    int64_t has_stop, has_tolerance;
+    ModelData model;
+    char halt_message[HALT_MESSAGE];
+} State;
+
+typedef struct Instance Instance;
+
+/* ---- provided by fmi2_native.c for the models ---- */
+void native_log(Instance *inst, fmi2Status status, const char *format, ...);
+/* an error: fmi_status = 3, message logged as fmi2Error (StatusSlave._error) */
+void native_error(Instance *inst, const char *format, ...);
+/* an error after which doStep refuses (StatusSlave._halt) */
+void native_halt(Instance *inst, const char *format, ...);
+int native_logging_on(const Instance *inst);
+State *native_state(Instance *inst);
+
+/* ---- provided by each model (native_model.c) ---- */
+/* After the generic start values are in value[]: the model's own defaults. */
+void model_instantiate(State *s);
+/* fmi2ExitInitializationMode, after every parameter passed the table of rules (rules.h): the model's own
+   checks, build the model, publish the first outputs; report failures with
+   native_halt (the instance then refuses doStep). */
+void model_initialise(Instance *inst, State *s);
+/* After fmi2SetXXX set input vr (its new value is in s->value[vr]). */
+void model_input_set(Instance *inst, State *s, fmi2ValueReference vr);
+/* fmi2DoStep from t over h (s->halted is 0); failures through native_error / native_halt. */
+void model_do_step(Instance *inst, State *s, double t, double h);
+
+#endif
