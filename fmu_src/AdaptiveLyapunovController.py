@@ -25,7 +25,7 @@ from slave_support import MODEL_PARAMETERS, StatusSlave
 from vibromodel.compiled import load_library
 from vibromodel.compiled_loop import CONTROLLER_INPUTS, CONTROLLER_OUTPUTS, make_estimator
 from vibromodel.control import ESTIMATE_NAMES
-from vibromodel.parameters import ParameterError, Scene
+from vibromodel.parameters import ParameterError, Scene, check_parameters
 from vibromodel.plant import DEFAULT_EXPERIMENT, TIME_TOLERANCE
 
 INPUTS = ("x", "v", "x_ref", "v_ref", "a_ref")
@@ -69,6 +69,11 @@ class AdaptiveLyapunovController(fast_path.CompiledModelSlave, StatusSlave):
         return make_estimator(scene, gains, law, estimates, float(self.start_time), int(self.kernel), library)
 
     def _set_input(self, name, value):
+        try:  # U, e1, e2 follow the inputs at once: a value out of range would make them overflow
+            check_parameters({name: value})
+        except ParameterError as error:
+            self._error(f"{error}")
+            return
         setattr(self, name, value)
         if self.halted is None:
             try:

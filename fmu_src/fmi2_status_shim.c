@@ -364,6 +364,10 @@ static int fast_set_real(Shim *s, const fmi2ValueReference vr[], size_t nvr, con
     if (!fast_enabled(s) || s->fast.inputs_set == NULL) return 0;
     for (size_t i = 0; i < nvr; i++)
         if (fast_index(s->fast.input_vr, s->fast.n_input, vr[i]) < 0) return 0;
+    /* Issue 15: every input's valid range (vibromodel/parameters.py, RULES) contains [-1e6, 1e6]; a value
+       outside it, or not finite, goes to the slave, which checks the input's own rule and names it. */
+    for (size_t i = 0; i < nvr; i++)
+        if (!(fabs(value[i]) <= 1e6)) return 0;
     for (size_t i = 0; i < nvr; i++) *s->fast.input[fast_index(s->fast.input_vr, s->fast.n_input, vr[i])] = value[i];
     return s->fast.inputs_set(s->fast.model) == 0;
 }

@@ -8,6 +8,7 @@ instance): errors are logged with the parameter and value, `fmi_status` is set t
 fmi2Error to the host.
 """
 import functools
+import json
 import math
 from pathlib import Path
 
@@ -29,6 +30,15 @@ RUN_FIELDS = ("phase", "halted", "initialised", "start_time", "stop_time", "expe
 STOP_TIME_TOLERANCE = 1e-9
 # The scene's parameters without the plant's initial state (the controller's view of the plant).
 MODEL_PARAMETERS = tuple(name for name in scene_names() if name not in ("x_start", "v_start"))
+
+
+def _number(value) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+def _same(a, b) -> bool:
+    """Equal as plain data, NaN equal to NaN (a host may give a NaN stop time or tolerance)."""
+    return json.dumps(a, sort_keys=True) == json.dumps(b, sort_keys=True)
 
 
 class NonFiniteOutput(ArithmeticError):
@@ -60,6 +70,7 @@ class StatusSlave(Fmi2Slave):
         self.start_time, self.stop_time, self.experiment_tolerance = 0.0, None, None
         self.model = None  # built by _make_model() at exitInitializationMode
         self._published = {}  # the outputs last published (all finite)
+        self._built_with = None  # _fingerprint() of the parameters the model was built from
 
     def _parameter(self, kind, name, value, description=None):
         """A fixed parameter with its start value."""
@@ -139,6 +150,7 @@ class StatusSlave(Fmi2Slave):
         self.initialised = True
         try:
             check_parameters(self._parameter_values())  # every range up front, the parameter named
+            self._built_with = self._fingerprint()
             start()
             self.halted = None
         except ParameterError as error:
@@ -201,7 +213,9 @@ class StatusSlave(Fmi2Slave):
         end = None if stop is None else stop + STOP_TIME_TOLERANCE * max(1.0, abs(stop))
         # a t beyond the stop is a wrong currentCommunicationPoint: the model's own check names it
         if end is not None and math.isfinite(t) and math.isfinite(h) and t <= end < t + h:
-            self._error(f"{ParameterError('communicationStepSize', h, f'the step from tau = {t!r} would end at tau = {t + h!r}, beyond the stop time {stop!r} declared in fmi2SetupExperiment')}")
+            reason = (f"the step from tau = {t!r} would end at tau = {t + h!r}, beyond the stop time {stop!r} "
+                      "declared in fmi2SetupExperiment")
+            self._error(f"{ParameterError('communicationStepSize', h, reason)}")
             return False
         return True
 
@@ -231,31 +245,97 @@ class StatusSlave(Fmi2Slave):
             "format": self.state_format,
             "variables": super()._get_fmu_state(),
             "run": {name: getattr(self, name) for name in RUN_FIELDS},
+            "built_with": self._built_with,
             "model": None if self.model is None else self.model.snapshot(),
         }
 
     def _set_fmu_state(self, state):
+        self._backup = None  # taken by _restore just before it changes anything
         try:
             self._restore(state)
-        except Exception as error:  # a foreign or damaged state: refuse, never raise
-            self._halt(f"fmi2SetFMUstate refused: not a state of this FMU ({error!r})")
+        except Exception as error:  # a foreign, damaged or forged state: refuse, never raise
+            try:
+                if self._backup is not None:
+                    self._restore(self._backup)  # the instance stays as it was
+            except Exception as second:  # cannot happen for a state this instance made; be safe anyway
+                self._halt(f"fmi2SetFMUstate refused ({error}); the previous state could not be restored ({second!r})")
+                return
+            finally:
+                self._backup = None
+            self._error(f"fmi2SetFMUstate refused: not a state of this FMU or a damaged one ({error})")
             return
         if self.fmi_status == STATUS_ERROR:
             self.log(f"restored a state saved after an error: {self.halted or 'a call had failed'}",
                      Fmi2Status.error)
 
+    def _fingerprint(self) -> dict:
+        """What a model is built from: every parameter and the experiment (start, stop, tolerance)."""
+        return {"parameters": self._parameter_values(),
+                "experiment": [self.start_time, self.stop_time, self.experiment_tolerance]}
+
     def _restore(self, state):
-        if state.get("format") != self.state_format:
-            raise ValueError(f"format {state.get('format')!r}, expected {self.state_format!r}")
-        variables = state["variables"]
+        """Check every field of `state`, then put it back; raises ValueError (nothing half-done before the model)."""
+        if isinstance(state, dict) and set(state) == {"unreadable"}:
+            raise ValueError(f"unreadable bytes: {state['unreadable']}")
+        if not isinstance(state, dict) or state.get("format") != self.state_format:
+            found = state.get("format") if isinstance(state, dict) else type(state).__name__
+            raise ValueError(f"format {found!r}, expected {self.state_format!r}")
+        if set(state) != {"format", "variables", "run", "built_with", "model"}:
+            raise ValueError(f"fields {sorted(state)}")
+        variables, run = state["variables"], state["run"]
+        self._check_variables(variables)
+        self._check_run(run)
+        if getattr(self, "_backup", None) is None:
+            self._backup = self._get_fmu_state()
         for var in self.vars.values():  # not through the setters: a state may hold any value
             setattr(self, var.local_name, variables[var.name])
         for name in RUN_FIELDS:
-            setattr(self, name, state["run"][name])
+            setattr(self, name, run[name])
+        self._built_with = state["built_with"]
         self.model = None
         if state["model"] is not None:
+            # the state's parameters must be those its model was built with (a changed one is refused)
+            if not _same(state["built_with"], self._fingerprint()):
+                raise ValueError("its parameters or experiment differ from those its model was built with")
+            check_parameters(self._parameter_values())
             self.model = self._make_model()
             self.model.restore(state["model"])
+        self._published = {var.local_name: getattr(self, var.local_name) for var in self.vars.values()
+                           if var.causality == Fmi2Causality.output}
+
+    def _check_variables(self, variables):
+        """Every variable present with a value of its type; outputs finite (inputs and parameters are the host's
+        values as given: doStep and initialisation check them)."""
+        if not isinstance(variables, dict) or set(variables) != {var.name for var in self.vars.values()}:
+            raise ValueError("its variables are not this FMU's")
+        for var in self.vars.values():
+            value = variables[var.name]
+            kinds = {Real: (float, int), Integer: (int,), Boolean: (bool,), String: (str,)}[type(var)]
+            if not isinstance(value, kinds) or (isinstance(value, bool) and type(var) is not Boolean):
+                raise ValueError(f"variable {var.name} = {value!r} is not a {type(var).__name__}")
+            if type(var) is Real and var.causality == Fmi2Causality.output and not math.isfinite(value):
+                raise ValueError(f"variable {var.name} = {value!r} is not finite")
+        if variables["fmi_status"] not in (STATUS_OK, STATUS_ERROR):
+            raise ValueError(f"fmi_status = {variables['fmi_status']!r}")
+
+    @staticmethod
+    def _check_run(run):
+        if not isinstance(run, dict) or set(run) != set(RUN_FIELDS):
+            raise ValueError("its run fields are not this FMU's")
+        checks = {
+            "phase": lambda v: v in (INSTANTIATED, INITIALIZATION_MODE, STEP_MODE, TERMINATED),
+            "halted": lambda v: v is None or isinstance(v, str),
+            "initialised": lambda v: isinstance(v, bool),
+            # the host's experiment as given (checked when the model is built from it)
+            "start_time": lambda v: _number(v),
+            "stop_time": lambda v: v is None or _number(v),
+            "experiment_tolerance": lambda v: v is None or _number(v),
+        }
+        for name, check in checks.items():
+            if not check(run[name]):
+                raise ValueError(f"run field {name} = {run[name]!r}")
+        if run["initialised"] != (run["phase"] in (STEP_MODE, TERMINATED)):
+            raise ValueError(f"initialised = {run['initialised']!r} in the {run['phase']} state")
 
     @staticmethod
     def _fmu_state_to_bytes(state):
@@ -268,7 +348,7 @@ class StatusSlave(Fmi2Slave):
         try:
             return snapshot.from_bytes(data)
         except Exception as error:
-            return {"format": f"unreadable ({error!r})"}
+            return {"unreadable": f"{error}"}
 
     # -- getting variables: unknown value references and wrong types give fmi2Error, never an exception -------
     def get_real(self, vrs):

@@ -55,11 +55,19 @@ def test_each_rule_accepts_its_ends_and_refuses_just_beyond(rule):
         check_parameters({**context, rule.name: rule.automatic})
 
 
+def test_every_input_rule_contains_what_the_fast_path_sets_itself():
+    """The shim's fast path sets inputs in [-FAST_INPUT_LIMIT, FAST_INPUT_LIMIT] without the slave's check."""
+    from vibromodel.parameters import FAST_INPUT_LIMIT
+
+    inputs = [rule for rule in RULES if rule.causality == "input"]
+    assert inputs and all(rule.low <= -FAST_INPUT_LIMIT and FAST_INPUT_LIMIT <= rule.high for rule in inputs)
+
+
 def test_rules_export_as_plain_json_records_in_checking_order():
     records = json.loads(json.dumps(rules_as_records()))
     assert [r["name"] for r in records] == [rule.name for rule in RULES]
     assert set(records[0]) == {"name", "low", "high", "low_inclusive", "high_inclusive", "reason", "integer",
-                               "automatic", "when"}
+                               "automatic", "when", "causality"}
     averaged = [r for r in records if r["when"] is not None]
     assert averaged and all(r["when"] == {"name": "fidelity", "values": [3, 4]} for r in averaged)
 
@@ -127,3 +135,33 @@ def test_the_controller_at_its_smallest_weight_keeps_finite_outputs(start_contro
         for k in range(20):
             instance.fmu.doStep(currentCommunicationPoint=0.1 * k, communicationStepSize=0.1)
         assert all(map(math.isfinite, instance.read_outputs()))
+
+
+@pytest.mark.parametrize("name,value", [("x", -1e300), ("v", math.nan), ("a_ref", 1e9), ("x_ref", math.inf)])
+def test_the_controller_refuses_inputs_out_of_range_naming_them(start_controller, name, value):
+    """Found by the strengthened fuzzing: x = -1e300 made U overflow (the outputs are algebraic in the inputs)."""
+    with start_controller() as instance:
+        before = instance.read_outputs()
+        with pytest.raises(FMICallException) as failure:
+            instance.set({name: value})
+        assert failure.value.status == 3
+        assert f"parameter {name} = {value!r}: must be" in instance.log.errors()[-1]
+        assert instance.read_outputs() == before
+
+
+def test_a_non_finite_output_fails_the_call_naming_it_and_keeps_the_last_finite_values(monkeypatch):
+    """Issue 15: slave_support skipped non-finite values silently (the controller then answered fmi2OK with frozen
+    outputs). Now publishing one raises NonFiniteOutput, an ArithmeticError: doStep turns it into fmi2Error with
+    "simulation stopped: ... tau = ..." (StatusSlave._guarded_step), initialisation into fmi2Error too."""
+    from vibrofmu.build import FMU_SRC
+
+    monkeypatch.syspath_prepend(str(FMU_SRC))
+    from AdaptiveLyapunovController import AdaptiveLyapunovController
+    from slave_support import NonFiniteOutput
+
+    slave = AdaptiveLyapunovController(instance_name="direct")
+    slave._set_finite({"U": 1.5, "e1": 0.25})
+    with pytest.raises(NonFiniteOutput, match=r"output e1 = nan is not finite"):
+        slave._set_finite({"U": 2.0, "e1": math.nan})
+    assert (slave.U, slave.e1) == (1.5, 0.25)
+    assert issubclass(NonFiniteOutput, ArithmeticError)

@@ -153,23 +153,24 @@ def test_setting_an_output_is_refused(request, which):
 
 
 @pytest.mark.parametrize("which", FMUS)
-@pytest.mark.parametrize("getter", ["getReal", "getInteger", "getBoolean"])
-@pytest.mark.parametrize("wrong", ["unknown", "type"])
-def test_get_with_unknown_reference_or_wrong_type_is_an_error_not_fatal(request, which, getter, wrong):
-    """Issue 15: an unknown value reference or the wrong type gave fmi2Fatal (reset fatal afterwards)."""
+def test_get_with_unknown_reference_or_wrong_type_is_an_error_not_fatal(request, which):
+    """Issue 15: an unknown value reference or the wrong type gave fmi2Fatal (reset fatal afterwards). Each getter,
+    each way, then fmi2Reset and a run."""
     instance, values, output, _ = new(request, which)
     with instance:
-        instance.fmu.exitInitializationMode()
-        steps(instance, 1)
-        kind = {"getReal": "Real", "getInteger": "Integer", "getBoolean": "Boolean"}[getter]
-        if wrong == "unknown":
-            vr = max(v.valueReference for v in instance.variables.values()) + 1000
-        else:
-            vr = next(v.valueReference for v in instance.variables.values() if v.type not in (kind, "String"))
-        assert status(getattr(instance.fmu, getter), [vr]) == ERROR
-        message = last_error(instance)
-        assert f"fmi2G{getter[1:]}" in message and str(vr) in message, message
-        assert_reset_runs(instance, values, output)
+        for getter, kind in (("getReal", "Real"), ("getInteger", "Integer"), ("getBoolean", "Boolean")):
+            for vr in (max(v.valueReference for v in instance.variables.values()) + 1000,
+                       next(v.valueReference for v in instance.variables.values() if v.type not in (kind, "String"))):
+                instance.fmu.exitInitializationMode()
+                steps(instance, 1)
+                assert status(getattr(instance.fmu, getter), [vr]) == ERROR
+                message = last_error(instance)
+                assert f"fmi2G{getter[1:]}" in message and str(vr) in message, message
+                assert_reset_runs(instance, values, output)
+                instance.fmu.reset()
+                instance.fmu.setupExperiment(startTime=0.0)
+                instance.fmu.enterInitializationMode()
+                instance.set(values)
 
 
 @pytest.mark.parametrize("which", ["plant_fast", "controller", "closed_loop"])
@@ -182,3 +183,22 @@ def test_get_before_initialisation_is_refused(request, which):
         assert status(instance.fmu.getReal, instance.value_references([output])) == ERROR
         assert "instantiated state" in last_error(instance)
         assert_reset_runs(instance, values, output)
+
+
+@pytest.mark.parametrize("which", FMUS)
+def test_set_with_unknown_reference_or_wrong_type_is_an_error_not_fatal(request, which):
+    instance, values, output, _ = new(request, which)
+    with instance:
+        for setter, kind, value in (("setReal", "Real", 1.0), ("setInteger", "Integer", 1),
+                                    ("setBoolean", "Boolean", True)):
+            for vr in (max(v.valueReference for v in instance.variables.values()) + 1000,
+                       next(v.valueReference for v in instance.variables.values()
+                            if v.type not in (kind, "String") and v.causality == "parameter")):
+                assert status(getattr(instance.fmu, setter), [vr], [value]) == ERROR
+                message = last_error(instance)
+                assert str(vr) in message or "not of type" in message, message
+                assert_reset_runs(instance, values, output)
+                instance.fmu.reset()
+                instance.fmu.setupExperiment(startTime=0.0)
+                instance.fmu.enterInitializationMode()
+                instance.set(values)

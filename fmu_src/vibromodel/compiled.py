@@ -90,6 +90,64 @@ class VkPlant(ctypes.Structure):
     ]
 
 
+# Valid values of the compiled models' integer fields (core/*.h), by field name, checked by check_structure on
+# restore: a state whose counts or switches are out of range would index the stage arrays out of bounds (issue 15:
+# n_stages = 20 with dense_ready = 0 crashed the next doStep). A field without an entry is only read as a number.
+INT_FIELD_RANGES = {
+    "has_old": (0, 1), "n_stages": (0, DOP_STAGES), "dense_ready": (0, 1), "stopped": (0, DOP_MAX_EVENTS),
+    "side": (0, 1), "nfev": (0, 2**62), "n_steps": (0, 2**62), "in_contact": (0, 1), "enabled": (0, 1),
+    "error": (VK_OK, 15),
+}
+# Doubles that hold a host's input as given (checked when used: a doStep refuses a non-finite input)
+HOST_VALUE_FIELDS = {"U_input", "in"}
+
+
+def _leaves(structure, base: int = 0, prefix: str = ""):
+    """(path, field name, ctypes type, offset) of every scalar of a ctypes structure, nested ones and arrays
+    unrolled (a char array is one leaf)."""
+    for name, kind in structure._fields_:
+        yield from _unroll(kind, base + getattr(structure, name).offset, prefix + name, name)
+
+
+def _unroll(kind, offset: int, path: str, name: str):
+    if issubclass(kind, ctypes.Structure):
+        yield from _leaves(kind, offset, path + ".")
+    elif issubclass(kind, ctypes.Array) and kind._type_ is not ctypes.c_char:
+        for i in range(kind._length_):
+            yield from _unroll(kind._type_, offset + i * ctypes.sizeof(kind._type_), f"{path}[{i}]", name)
+    else:
+        yield path, name, kind, offset
+
+
+def check_structure(structure, data: bytes, constant_ranges=()) -> None:
+    """Raise ValueError unless `data` (a compiled model's state: the first len(data) bytes of `structure`) could be
+    one its kernel left: every integer in its range (INT_FIELD_RANGES), every double finite but the host's inputs
+    (HOST_VALUE_FIELDS), every text NUL-terminated. Bytes in constant_ranges (parameters and settings, compared
+    with the current model's by the caller) are skipped. Goes by the ctypes field lists, so fields added to the
+    structures are covered without offsets written here."""
+    for path, name, kind, offset in _leaves(structure):
+        size = ctypes.sizeof(kind)
+        if offset + size > len(data) or any(low <= offset < high for low, high in constant_ranges):
+            continue
+        raw = data[offset:offset + size]
+        if kind is _double:
+            value = _double.from_buffer_copy(raw).value
+            if not math.isfinite(value) and name not in HOST_VALUE_FIELDS:
+                raise ValueError(f"kernel field {path} = {value!r} is not finite")
+        elif kind is _int:
+            value = _int.from_buffer_copy(raw).value
+            low, high = INT_FIELD_RANGES.get(name, (-2**63, 2**63 - 1))
+            if not low <= value <= high:
+                raise ValueError(f"kernel field {path} = {value} outside [{low}, {high}]")
+        elif issubclass(kind, ctypes.Array) and b"\0" not in raw:
+            raise ValueError(f"kernel field {path} is not NUL-terminated")
+
+
+def check_state(data: bytes) -> None:
+    """check_structure for a VkPlant (the compiled plant's snapshot)."""
+    check_structure(VkPlant, data, _constant_ranges())
+
+
 def _declare(library) -> None:
     """Argument and result types of the kernel's functions (the plant goes by address)."""
     address, d, status, doubles = ctypes.c_void_p, _double, ctypes.c_int, ctypes.POINTER(_double)
@@ -348,6 +406,7 @@ class CompiledPlant:
         current = ctypes.string_at(self._address, len(data))
         if any(data[start:end] != current[start:end] for start, end in _constant_ranges()):
             raise ValueError("the snapshot is of a compiled plant with other parameters or settings")
+        check_state(data)
         ctypes.memmove(self._address, data, len(data))
 
     # -- errors -----------------------------------------------------------------------------------------------

@@ -15,6 +15,7 @@ import math
 
 import numpy as np
 
+from .compiled import check_structure
 from .control import ESTIMATE_NAMES, Controller, Gains, validate_estimates, validate_law
 from .fidelities import entry
 from .parameters import ParameterError, Scene, validate
@@ -200,6 +201,7 @@ def restore_bytes(address: int, structure, constants: int, snapshot: dict) -> No
         raise ValueError(f"not a snapshot of a compiled {structure.__name__}")
     if data[:constants] != ctypes.string_at(address, constants):
         raise ValueError("the snapshot is of a compiled model with other parameters or settings")
+    check_structure(structure, data, ((0, constants),))  # every other field in range (issue 15)
     ctypes.memmove(address, data, len(data))
 
 
@@ -388,6 +390,7 @@ class CompiledClosedLoop:
         if data[:constants] != current[:constants] or \
                 data[rk4_config[0]:rk4_config[1]] != current[rk4_config[0]:rk4_config[1]]:
             raise ValueError("the snapshot is of a compiled closed loop with other parameters or settings")
+        check_structure(S, data, ((0, constants), rk4_config))  # every other field in range (issue 15)
         ctypes.memmove(self.address, data, len(data))
 
     # -- errors ------------------------------------------------------------------------------------------------

@@ -104,6 +104,10 @@ GAIN_MIN, GAIN_MAX = 1e-6, 1e6
 # initial estimates of theta: its true entries are products of scene parameters bounded by MAX_SCALE and R;
 # 1e12 keeps the Lyapunov function sum(theta~^2/lambda) <= 1e30 and the control force inside double range
 MAX_ESTIMATE = 1e12
+MAX_INPUT_RATE = 1e8  # speeds and accelerations the controller accepts as inputs
+# The status shim's fast path sets inputs within [-1e6, 1e6] itself and hands any other value to the slave, which
+# applies the rule: every input rule must contain that interval (tests/test_robust_ranges.py checks it).
+FAST_INPUT_LIMIT = 1e6
 
 
 @dataclass(frozen=True)
@@ -119,6 +123,7 @@ class Rule:
     integer: bool = False
     automatic: float | None = None  # a value outside [low, high] that means "automatic"
     when: tuple | None = None  # (other parameter, allowed values): the rule applies only then
+    causality: str = "parameter"  # or "input": checked when the input is set
 
     def describe(self) -> str:
         left, right = "[" if self.low_inclusive else "(", "]" if self.high_inclusive else ")"
@@ -194,6 +199,13 @@ RULES: tuple[Rule, ...] = (
     Rule("reference", 0, 2, reason="0 OAFM, 1 ERRATA §3.5 harmonic, 2 harmonic + tones", integer=True),
     Rule("x_ref_start", -1.5 * R_MAX, 1.5 * R_MAX, reason="the reference's initial x: inside the electrodes"),
     Rule("v_ref_start", -MAX_SCALE, MAX_SCALE, reason=f"the reference's initial speed: {_RATE}"),
+    # the controller's inputs: the plant's state and the reference (a doStep and V are polynomials of degree <= 5
+    # in x and 2 in the errors: with these bounds and the gains' they stay below ~1e60, far inside double range)
+    *(Rule(name, -1.5 * R_MAX, 1.5 * R_MAX, reason=f"{name} of the plant: inside the electrodes at +-3R/2",
+           causality="input") for name in ("x", "x_ref")),
+    *(Rule(name, -MAX_INPUT_RATE, MAX_INPUT_RATE, reason=f"{name}: beyond {MAX_INPUT_RATE:g} the control law and "
+                                                          "its Lyapunov function overflow", causality="input")
+      for name in ("v", "v_ref", "a_ref")),
 )
 
 

@@ -1,12 +1,18 @@
 """Build the FMUs: pythonfmu packs the slave, slave_support, fast_path and the vibromodel package; the status shim
-goes on top; the plant also gets the compiled kernel (vibrokernel.so) in its resources; the reference result of
-the default experiment goes into the documentation."""
+goes on top; each FMU also gets the compiled kernel (vibrokernel.so) in its resources; the reference result of
+the default experiment goes into the documentation; finally every variable gets its description and unit
+(fmu_variables.annotate) and the file is made readable by all (0644).
+
+Without a C compiler (paths.c_compiler) the FMUs are built without their compiled parts: no kernel (the plant
+integrates in Python, the same numbers, slower) and no status shim (pythonfmu's own binary: a failing call
+returns fmi2Discard or fmi2Fatal instead of fmi2Error). `compiled_parts()` says which case applies.
+"""
 from __future__ import annotations
 
+import os
 import tempfile
 from pathlib import Path
 
-import vibromodel
 from fmpy import read_model_description
 from pythonfmu import FmuBuilder
 from vibromodel.analytic import OafmSettings, cached_solve, covering
@@ -14,35 +20,54 @@ from vibromodel.compiled import LIBRARY_NAME
 from vibromodel.parameters import Scene
 from vibromodel.plant import DEFAULT_EXPERIMENT
 
+from . import paths
+from .entry import importable, pythonfmu_entry
+from .fmu_variables import annotate
 from .kernel import compile_kernel
 from .pythonenv import pack_python_env
 from .refresult import pack_reference
 from .shim import install_status_shim
 
-FMU_SRC = Path(vibromodel.__file__).resolve().parents[1]
-REPO_ROOT = FMU_SRC.parent
-BUILD_DIR = REPO_ROOT / "build"
+FMU_SRC = paths.FMU_SRC
 PLANT_SLAVE = FMU_SRC / "HertzEAOscillator.py"
 CONTROLLER_SLAVE = FMU_SRC / "AdaptiveLyapunovController.py"
 CLOSED_LOOP_SLAVE = FMU_SRC / "HertzEAClosedLoop.py"
-PLANT_FMU = BUILD_DIR / "HertzEAOscillator.fmu"
-CONTROLLER_FMU = BUILD_DIR / "AdaptiveLyapunovController.fmu"
-CLOSED_LOOP_FMU = BUILD_DIR / "HertzEAClosedLoop.fmu"
+# File names of the FMUs; they are written to paths.build_dir() (./build) unless an out_dir is given.
+PLANT_FMU = Path("HertzEAOscillator.fmu")
+CONTROLLER_FMU = Path("AdaptiveLyapunovController.fmu")
+CLOSED_LOOP_FMU = Path("HertzEAClosedLoop.fmu")
+FMU_MODE = 0o644  # rw-r--r--: the FMU is a deliverable others read (mkstemp alone would leave 0600)
 
 
-def build_fmu(slave: Path, out_dir: Path = BUILD_DIR, extra_resources: tuple[Path, ...] = ()) -> Path:
+def compiled_parts() -> str | None:
+    """None when a C compiler is available; else the one line that says what the FMUs are built without."""
+    try:
+        paths.c_compiler()
+        return None
+    except paths.NoCompiler as error:
+        return (f"warning: {error}; building the FMUs without their compiled parts (no C kernel: the plant "
+                f"integrates in Python, slower; no status shim: failures return fmi2Discard/fmi2Fatal, not fmi2Error)")
+
+
+def build_fmu(slave: Path, out_dir: Path | None = None, extra_resources: tuple[Path, ...] = ()) -> Path:
     """Build out_dir/<slave name>.fmu with vibromodel, slave_support (and extra_resources) in its resources,
     the status shim installed and the reference result packed. It declares state save/restore and serialization:
     the slaves save their whole state (slave_support.StatusSlave; pythonfmu alone saves registered variables only)."""
+    out_dir = Path(out_dir) if out_dir is not None else paths.build_dir()
     out_dir.mkdir(parents=True, exist_ok=True)
-    project_files = [FMU_SRC / "vibromodel", FMU_SRC / "slave_support.py", FMU_SRC / "fast_path.py",
-                     *extra_resources]
-    fmu = Path(FmuBuilder.build_FMU(slave, dest=out_dir, project_files=project_files,
-                                    canGetAndSetFMUstate=True, canSerializeFMUstate=True))
-    status = next(v for v in read_model_description(str(fmu)).modelVariables if v.name == "fmi_status")
-    install_status_shim(fmu, status.valueReference)
-    pack_python_env(fmu)  # the Python the FMU finds in a C host (resources/python_env.txt)
+    with tempfile.TemporaryDirectory() as tmp, importable(FMU_SRC):  # an entry script in front (vibrofmu.entry)
+        entry, implementation = pythonfmu_entry(slave, Path(tmp))
+        project_files = [paths.vibromodel_dir(), FMU_SRC / "slave_support.py", FMU_SRC / "fast_path.py",
+                         implementation, *extra_resources]
+        fmu = Path(FmuBuilder.build_FMU(entry, dest=out_dir, project_files=project_files,
+                                        canGetAndSetFMUstate=True, canSerializeFMUstate=True))
+    if compiled_parts() is None:
+        status = next(v for v in read_model_description(str(fmu)).modelVariables if v.name == "fmi_status")
+        install_status_shim(fmu, status.valueReference)
+        pack_python_env(fmu)  # the Python the FMU finds in a C host (resources/python_env.txt; read by the shim)
     pack_reference(fmu)
+    annotate(fmu)
+    os.chmod(fmu, FMU_MODE)
     return fmu
 
 
@@ -56,40 +81,43 @@ def build_with_default_oafm(slave: Path, scene: Scene, out_dir: Path, extra_reso
         return build_fmu(slave, out_dir, extra_resources=(cache, *extra_resources))
 
 
-def build_plant(out_dir: Path = BUILD_DIR) -> Path:
-    """The plant FMU with the compiled kernel; fidelity 4 of its default scene starts without a fit."""
+def build_plant(out_dir: Path | None = None) -> Path:
+    """The plant FMU with the compiled kernel (when there is a C compiler); fidelity 4 of its default scene
+    starts without a fit."""
     with tempfile.TemporaryDirectory() as tmp:
-        kernel = compile_kernel(Path(tmp) / LIBRARY_NAME)
-        return build_with_default_oafm(PLANT_SLAVE, Scene(), out_dir, extra_resources=(kernel,))
+        return build_with_default_oafm(PLANT_SLAVE, Scene(), out_dir, extra_resources=_kernel(Path(tmp)))
 
 
-def build_controller(out_dir: Path = BUILD_DIR) -> Path:
-    """The controller FMU with the compiled kernel (fmu_src/core/controller.c is in it)."""
+def build_controller(out_dir: Path | None = None) -> Path:
+    """The controller FMU with the compiled kernel (fmu_src/core/controller.c is in it) when there is a C
+    compiler."""
     with tempfile.TemporaryDirectory() as tmp:
-        return build_fmu(CONTROLLER_SLAVE, out_dir, extra_resources=(compile_kernel(Path(tmp) / LIBRARY_NAME),))
+        return build_fmu(CONTROLLER_SLAVE, out_dir, extra_resources=_kernel(Path(tmp)))
 
 
-def build_closed_loop(out_dir: Path = BUILD_DIR) -> Path:
-    """The monolithic closed loop with the compiled kernel (fmu_src/core/closedloop.c is in it); its OAFM reference
-    (x~(0) = 0.04, x~'(0) = 0: the paper example) is packed."""
+def build_closed_loop(out_dir: Path | None = None) -> Path:
+    """The monolithic closed loop with the compiled kernel (fmu_src/core/closedloop.c is in it) when there is a C
+    compiler; its OAFM reference (x~(0) = 0.04, x~'(0) = 0: the paper example) is packed."""
     with tempfile.TemporaryDirectory() as tmp:
-        kernel = compile_kernel(Path(tmp) / LIBRARY_NAME)
-        return build_with_default_oafm(CLOSED_LOOP_SLAVE, Scene(), out_dir, extra_resources=(kernel,))
+        return build_with_default_oafm(CLOSED_LOOP_SLAVE, Scene(), out_dir, extra_resources=_kernel(Path(tmp)))
 
 
-def build_all(out_dir: Path = BUILD_DIR) -> list[Path]:
-    """The pythonfmu FMUs in out_dir and their native twins in out_dir/native (vibrofmu.native)."""
+def _kernel(folder: Path) -> tuple[Path, ...]:
+    """(the compiled kernel in folder,), or () without a C compiler."""
+    return () if compiled_parts() else (compile_kernel(folder / LIBRARY_NAME),)
+
+
+def build_all(out_dir: Path | None = None) -> list[Path]:
+    """The pythonfmu FMUs in out_dir (default ./build) and their native twins in out_dir/native (vibrofmu.native)."""
     fmus = [build(out_dir) for build in (build_plant, build_controller, build_closed_loop)]
-    return fmus + build_natives(fmus, Path(out_dir) / "native")
+    return fmus + build_natives(fmus, Path(fmus[0]).parent / "native")
 
 
 def build_natives(fmus: list[Path], out_dir: Path) -> list[Path]:
-    """The native FMU of each pythonfmu FMU that has a native model (fmu_src/native/<id>/); none without gcc."""
-    import shutil
+    """The native FMU of each pythonfmu FMU that has a native model (fmu_src/native/<id>/); none without a C
+    compiler."""
+    from .native import NATIVE_SRC, build_native
 
-    from .native import LINUX_COMMAND, NATIVE_SRC, build_native
-
-    if shutil.which(LINUX_COMMAND[0]) is None:
+    if compiled_parts() is not None:
         return []
-
     return [build_native(fmu, out_dir) for fmu in fmus if (NATIVE_SRC / Path(fmu).stem / "native_model.c").is_file()]

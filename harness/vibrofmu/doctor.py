@@ -25,10 +25,11 @@ from pathlib import Path
 import numpy as np
 from fmpy import extract, read_model_description, simulate_fmu
 
-from .build import FMU_SRC, REPO_ROOT
+from . import paths
 from .pythonenv import ENV_FILE, ENV_VARIABLE, describe, env_text, imported_modules, missing, parse_env, record_for
 
-HOST_SOURCE = REPO_ROOT / "tests" / "c_host" / "fmi2_host.c"
+FMU_SRC = paths.FMU_SRC
+HOST_SOURCE = paths.C_HOST_DIR / "fmi2_host.c"
 # Both hosts run the same Python code on the same inputs with the same communication points, so
 # the outputs should agree to the last bit; 1e-15 absolute is the agreed bound (about 10 ulp at
 # the |x| ~ 0.04 of the paper example).
@@ -88,7 +89,8 @@ def export_lines(env: dict[str, str]) -> str:
 
 def compile_host(out_dir: Path) -> Path:
     host = Path(out_dir) / "fmi2_host"
-    cmd = ["gcc", "-O2", "-Wall", "-Wextra", f"-I{FMU_SRC}", "-o", str(host), str(HOST_SOURCE), "-ldl", "-lm"]
+    cmd = [*paths.c_compiler(), "-O2", "-Wall", "-Wextra", f"-I{FMU_SRC}", "-o", str(host), str(HOST_SOURCE),
+           "-ldl", "-lm"]
     proc = subprocess.run(cmd, capture_output=True, text=True)
     if proc.returncode != 0:
         raise RuntimeError(f"compiling the C host failed ({' '.join(cmd)}):\n{proc.stderr}")

@@ -1,7 +1,13 @@
-"""Results a person can read: CSV of every output, a JSON summary, a plot of x."""
+"""Results a person can read: CSV of every output, a JSON summary, plots.
+
+Plot conventions (every figure): constrained layout; the axes labelled with the model's dimensionless symbols
+(time tau, displacement x, ...); a title wrapped to the figure's width so it is never clipped; legends outside
+the axes (below them), so they cover no data; one curve alone gets no legend (its axis label names it).
+"""
 from __future__ import annotations
 
 import json
+import textwrap
 from pathlib import Path
 
 import matplotlib
@@ -9,6 +15,10 @@ import numpy as np
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
+from matplotlib.ticker import ScalarFormatter  # noqa: E402
+
+TAU = r"time $\tau$"
+DPI = 110
 
 
 def write_csv(path: Path, time: np.ndarray, columns: dict[str, np.ndarray]) -> None:
@@ -21,72 +31,130 @@ def write_json(path: Path, data: dict) -> None:
     path.write_text(json.dumps(data, indent=2, default=float) + "\n")
 
 
-def plot_x(path: Path, time, x, title: str, reference_x=None) -> None:
-    """x(tau); with a reference, the reference dashed and |error| on a log second axis."""
-    fig, ax = plt.subplots(figsize=(10, 4.5))
-    ax.plot(time, x, lw=1.0, label="FMU")
-    ax.set_xlabel("tau")
-    ax.set_ylabel("x")
+def wrapped(title: str, width_inches: float, fontsize: float) -> str:
+    """`title` broken into lines that fit `width_inches` at `fontsize` points (an average character of
+    DejaVu Sans is about 0.6 em wide; 0.9 of the width leaves the margins)."""
+    width = max(20, int(0.9 * width_inches * 72 / (0.6 * fontsize)))
+    lines = []  # break between the ", "-separated items where possible, so "beta = 0.0001" stays whole
+    for item in title.split(", "):
+        if lines and len(lines[-1]) + 2 + len(item) <= width:
+            lines[-1] += ", " + item
+        else:
+            if lines:
+                lines[-1] += ","
+            lines.extend(textwrap.wrap(item, width) or [""])
+    return "\n".join(lines)
+
+
+def _title(fig, ax, title: str, fontsize: float = 11) -> None:
+    ax.set_title(wrapped(title, fig.get_figwidth() * ax.get_position().width, fontsize), fontsize=fontsize)
+
+
+def _legend_below(fig, axes, columns: int = 4) -> None:
+    """One legend for the figure, outside and below the axes: the handles of every axes in `axes`."""
+    handles, labels = [], []
+    for ax in axes:
+        for handle, label in zip(*ax.get_legend_handles_labels()):
+            if label not in labels:
+                handles.append(handle)
+                labels.append(label)
+    if handles:
+        fig.legend(handles, labels, loc="outside lower center", ncols=min(columns, len(handles)), fontsize=9,
+                   frameon=False)
+
+
+def _save(fig, path: Path) -> None:
+    fig.savefig(path, dpi=DPI)
+    plt.close(fig)
+
+
+def contact_loss_intervals(time, in_contact) -> list[tuple[float, float]]:
+    """The intervals where the contact is open, from the sampled in_contact flag: each run of open samples
+    t_i..t_j widened to the midpoints (t_(i-1) + t_i)/2 and (t_j + t_(j+1))/2 (the flag is known at the
+    output points only: the interval is resolved to one output interval)."""
+    time = np.asarray(time, dtype=float)
+    open_ = ~np.asarray(in_contact, dtype=bool)
+    if not open_.any():
+        return []
+    edges = np.diff(np.concatenate(([0], open_.astype(np.int8), [0])))
+    starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1) - 1
+    mid = lambda i, j: 0.5 * (time[i] + time[j])
+    return [(mid(i - 1, i) if i > 0 else time[0], mid(j, j + 1) if j + 1 < len(time) else time[-1])
+            for i, j in zip(starts, ends)]
+
+
+def figure_x(time, x, title: str, reference_x=None, in_contact=None):
+    """x(tau), the contact-loss intervals shaded; with a reference, the reference dashed and |x - x_ref| on a
+    log second axis."""
+    fig, ax = plt.subplots(figsize=(10, 5), layout="constrained")
+    for k, (start, end) in enumerate(contact_loss_intervals(time, in_contact) if in_contact is not None else ()):
+        ax.axvspan(start, end, color="0.85", lw=0, label=r"contact lost ($1 + 2x/3 \leq 0$)" if k == 0 else None)
+    ax.plot(time, x, lw=1.0, color="tab:blue", label="FMU")
+    ax.set_xlabel(TAU)
+    ax.set_ylabel(r"displacement $x$")
+    axes = [ax]
     if reference_x is not None:
-        ax.plot(time, reference_x, "--", lw=1.0, label="reference (DOP853, rtol 1e-12)")
+        ax.plot(time, reference_x, "--", lw=1.0, color="tab:orange", label="reference (DOP853, rtol 1e-12)")
         err = np.abs(np.asarray(x) - np.asarray(reference_x))
         ax2 = ax.twinx()
-        ax2.semilogy(time, np.maximum(err, 1e-18), color="tab:red", lw=0.5, alpha=0.5, label="|x - x_ref|")
-        ax2.set_ylabel("|x - x_ref|", color="tab:red")
-        ax2.legend(loc="lower right")
+        ax2.semilogy(time, np.maximum(err, 1e-18), color="tab:red", lw=0.5, alpha=0.5,
+                     label=r"$|x - x_\mathrm{ref}|$ (right axis)")
+        ax2.set_ylabel(r"$|x - x_\mathrm{ref}|$", color="tab:red")
         ax.set_zorder(ax2.get_zorder() + 1)  # the solution in front of the error
         ax.patch.set_visible(False)
-    ax.legend(loc="upper right")
-    ax.set_title(title)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+        axes.append(ax2)
+    ax.set_xlim(time[0], time[-1]) if len(time) > 1 else None
+    _title(fig, ax, title)
+    _legend_below(fig, axes)
+    return fig
+
+
+def plot_x(path: Path, time, x, title: str, reference_x=None, in_contact=None) -> None:
+    _save(figure_x(time, x, title, reference_x, in_contact), path)
 
 
 def plot_analytic(path: Path, tau, x, x_ref, boundaries, title: str) -> None:
     """Analytic and numerical x(tau) on top, |error| on a log axis below; domain boundaries marked."""
-    fig, (top, bottom) = plt.subplots(2, 1, figsize=(10, 6.5), sharex=True, height_ratios=[3, 2])
+    fig, (top, bottom) = plt.subplots(2, 1, figsize=(10, 6.5), sharex=True, height_ratios=[3, 2],
+                                      layout="constrained")
     top.plot(tau, x_ref, lw=1.6, color="0.6", label="numerical (DOP853, rtol 1e-12)")
-    top.plot(tau, x, "--", lw=0.9, color="tab:blue", label="analytic (OAFM)")
-    top.set_ylabel("x")
-    top.legend(loc="upper right")
-    top.set_title(title)
+    top.plot(tau, x, "--", lw=0.9, color="tab:blue", label=r"analytic (OAFM) $\tilde x$")
+    top.set_ylabel(r"displacement $x$")
+    _title(fig, top, title)
     bottom.semilogy(tau, np.maximum(np.abs(np.asarray(x) - np.asarray(x_ref)), 1e-18), lw=0.6, color="tab:red")
-    bottom.set_ylabel("|x_oafm - x_num|")
-    bottom.set_xlabel("tau")
+    bottom.set_ylabel(r"$|\tilde x - x_\mathrm{num}|$")
+    bottom.set_xlabel(TAU)
     for ax in (top, bottom):
         for boundary in boundaries:
             ax.axvline(boundary, color="k", lw=0.6, ls=":")
         ax.grid(True, which="major", alpha=0.3)
-    for boundary, name in zip(boundaries, ("tau*", "fit ends")):
+    for boundary, name in zip(boundaries, (r"$\tau^*$", "fit ends")):
         top.annotate(name, (boundary, 1.0), xycoords=("data", "axes fraction"), fontsize=8, ha="left", va="top")
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    _legend_below(fig, [top])
+    _save(fig, path)
 
 
 def plot_convergence(path: Path, rows: list[dict]) -> None:
     """Error and residual against the number of convergence-control parameters, one line per domain."""
-    fig, ax = plt.subplots(figsize=(7, 4.5))
+    fig, ax = plt.subplots(figsize=(7, 5), layout="constrained")
     for domain, marker in ((0, "o"), (1, "s")):
         n = [r["unknowns"][domain] for r in rows]
-        ax.loglog(n, [r["max_abs_error"][domain] for r in rows], marker + "-", label=f"max |error|, domain {domain + 1}")
+        ax.loglog(n, [r["max_abs_error"][domain] for r in rows], marker + "-",
+                  label=rf"max $|\tilde x - x_\mathrm{{num}}|$, domain {domain + 1}")
         ax.loglog(n, [r["residual_rms"][domain] for r in rows], marker + "--", alpha=0.6,
                   label=f"RMS residual, domain {domain + 1}")
         for r, count in zip(rows, n):
             ax.annotate(f"{r['order']}", (count, r["max_abs_error"][domain]), fontsize=7,
                         textcoords="offset points", xytext=(3, 3))
-    ax.set_xlabel("number of convergence-control parameters C_i (labels: order)")
-    ax.set_ylabel("error / residual")
-    ax.set_title("OAFM harmonic basis: convergence")
+    ax.set_xlabel(r"number of convergence-control parameters $C_i$ (labels: basis order)")
+    ax.set_ylabel("error, residual")
+    _title(fig, ax, "OAFM harmonic basis: convergence with the order")
     ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    _legend_below(fig, [ax], columns=2)
+    _save(fig, path)
 
 
-def plot_frequency_response(path: Path, curve, continuation, sweeps, folds, omega_range, title: str) -> None:
+def figure_frequency_response(curve, continuation, sweeps, folds, omega_range, title: str):
     """Amplitude r against omega: the slow flow's curve (stable solid, unstable dashed), the shooting
     continuation (Floquet: filled stable, open unstable), FMU sweeps up/down, and the folds (dotted).
     With folds, a second panel zooms onto the hysteresis interval."""
@@ -94,7 +162,7 @@ def plot_frequency_response(path: Path, curve, continuation, sweeps, folds, omeg
     if len(folds) >= 2:
         width = folds[-1] - folds[0]
         panels.append((folds[0] - 1.5 * width, folds[-1] + 1.5 * width))
-    fig, axes = plt.subplots(1, len(panels), figsize=(7 * len(panels), 5.5), squeeze=False)
+    fig, axes = plt.subplots(1, len(panels), figsize=(7 * len(panels), 6), squeeze=False, layout="constrained")
     omega, r, stable = (np.asarray(a) for a in curve)
     c_omega, c_r, c_stable = (np.asarray(a) for a in continuation)
     for ax, (lo, hi) in zip(axes[0], panels):
@@ -105,60 +173,81 @@ def plot_frequency_response(path: Path, curve, continuation, sweeps, folds, omeg
                 label="shooting, unstable (Floquet)")
         for sweep, marker, color in zip(sweeps, ("^", "v"), ("tab:red", "tab:green")):
             ax.plot(sweep.omega, sweep.r, marker, ms=7, mfc="none", color=color, label=f"FMU sweep {sweep.direction}")
-        for fold in folds:
-            ax.axvline(fold, color="0.5", lw=0.7, ls=":")
+        for k, fold in enumerate(folds):
+            ax.axvline(fold, color="0.5", lw=0.7, ls=":", label="fold" if k == 0 else None)
         inside = (omega >= lo) & (omega <= hi)
         top = max(np.max(r[inside], initial=0.0), np.max(c_r, initial=0.0))
         ax.set_xlim(lo, hi)
         ax.set_ylim(0.0, 1.08 * top)
-        ax.set_xlabel("forcing frequency omega")
-        ax.set_ylabel("first-harmonic amplitude r")
+        ax.set_xlabel(r"forcing frequency $\omega$")
+        ax.set_ylabel(r"first-harmonic amplitude $r$")
         ax.grid(True, alpha=0.3)
-    axes[0][0].legend(fontsize=8, loc="upper left")
     if len(panels) > 1:
-        axes[0][1].set_title("hysteresis interval (folds dotted)", fontsize=10)
-    fig.suptitle(title, fontsize=10)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+        axes[0][1].set_title("zoom: hysteresis interval", fontsize=10)
+    fig.suptitle(wrapped(title, fig.get_figwidth(), 11), fontsize=11)
+    _legend_below(fig, axes[0][:1], columns=2 * len(panels))  # two entries fit in 7 inches
+    return fig
+
+
+def plot_frequency_response(path: Path, curve, continuation, sweeps, folds, omega_range, title: str) -> None:
+    _save(figure_frequency_response(curve, continuation, sweeps, folds, omega_range, title), path)
+
+
+ESTIMATE_SYMBOLS = {"mu": r"\mu", "Delta": r"\Delta", "beta": r"\beta", "gamma": r"\gamma"}
+
+
+def figures_closed_loop(time, series: dict, theta: dict, title: str) -> dict:
+    """Closed loop: x against the reference, e1 and e2, V, each estimate against its true value (dashed)."""
+    figures = {}
+    fig, ax = plt.subplots(figsize=(10, 5), layout="constrained")
+    ax.plot(time, series["x"], lw=1.0, label=r"plant $x$")
+    ax.plot(time, series["x_ref"], "--", lw=1.0, label=r"reference $\tilde x$")
+    _finish(fig, ax, title, r"displacement $x$")
+    figures["tracking.png"] = fig
+    fig, ax = plt.subplots(figsize=(10, 5), layout="constrained")
+    ax.plot(time, series["e1"], lw=0.8, label=r"$e_1 = x - \tilde x$")
+    ax.plot(time, series["e2"], lw=0.8, label=r"$e_2 = x' - \tilde x' + c\,e_1$")
+    ax.set_yscale("symlog", linthresh=1e-6)
+    _finish(fig, ax, title, r"tracking errors $e_1$, $e_2$ (linear within $\pm 10^{-6}$)")
+    figures["errors.png"] = fig
+    fig, ax = plt.subplots(figsize=(10, 5), layout="constrained")
+    V = np.asarray(series["V"], dtype=float)
+    ax.plot(time, V, lw=1.0)
+    positive = V[np.isfinite(V) & (V > 0)]
+    if positive.size and positive.max() > 100 * positive.min():  # a log axis only over two decades or more
+        ax.set_yscale("log")
+    else:  # within two decades a log axis shows one or two labels at best: linear, scientific notation
+        formatter = ScalarFormatter(useMathText=True)
+        formatter.set_powerlimits((-2, 3))
+        ax.yaxis.set_major_formatter(formatter)
+    _finish(fig, ax, title, r"Lyapunov function $V$")
+    figures["lyapunov.png"] = fig
+    fig, axes = plt.subplots(3, 3, figsize=(12, 8.5), sharex=True, layout="constrained")
+    for ax, (name, true) in zip(axes.flat, theta.items()):
+        symbol = ESTIMATE_SYMBOLS.get(name, name[0] + "_" + name[1:] if name[1:].isdigit() else name)
+        ax.plot(time, series[f"{name}_hat"], lw=1.0, label=r"estimate $\hat\theta_i$")
+        ax.axhline(true, color="k", ls="--", lw=0.8, label=r"true $\theta_i$")
+        ax.set_ylabel(rf"$\hat {symbol}$")
+        ax.grid(True, alpha=0.3)
+    for ax in axes[-1]:
+        ax.set_xlabel(TAU)
+    fig.suptitle(wrapped(f"{title}: parameter estimates", fig.get_figwidth(), 11), fontsize=11)
+    _legend_below(fig, axes.flat[:1])
+    figures["estimates.png"] = fig
+    return figures
 
 
 def plot_closed_loop(out_dir: Path, time, series: dict, theta: dict, title: str) -> list[Path]:
-    """Closed loop: x vs x_ref, e1 and e2, V on a log axis, each estimate against its true value (dashed)."""
-    paths = [out_dir / name for name in ("tracking.png", "errors.png", "lyapunov.png", "estimates.png")]
-    fig, ax = plt.subplots(figsize=(10, 4.5))
-    ax.plot(time, series["x"], lw=1.0, label="x (plant)")
-    ax.plot(time, series["x_ref"], "--", lw=1.0, label="x_ref")
-    _finish(fig, ax, paths[0], title, "x")
-    fig, ax = plt.subplots(figsize=(10, 4.5))
-    for name in ("e1", "e2"):
-        ax.plot(time, series[name], lw=0.8, label=name)
-    ax.set_yscale("symlog", linthresh=1e-6)
-    _finish(fig, ax, paths[1], title, "tracking error (symlog)")
-    fig, ax = plt.subplots(figsize=(10, 4.5))
-    ax.semilogy(time, series["V"], lw=1.0, label="V")
-    _finish(fig, ax, paths[2], title, "Lyapunov function V")
-    fig, axes = plt.subplots(3, 3, figsize=(12, 8), sharex=True)
-    for ax, (name, true) in zip(axes.flat, theta.items()):
-        ax.plot(time, series[f"{name}_hat"], lw=1.0, label="estimate")
-        ax.axhline(true, color="k", ls="--", lw=0.8, label="true")
-        ax.set_title(name, fontsize=9)
-    axes.flat[0].legend(fontsize=7)
-    for ax in axes[-1]:
-        ax.set_xlabel("tau")
-    fig.suptitle(title)
-    fig.tight_layout()
-    fig.savefig(paths[3], dpi=100)
-    plt.close(fig)
+    paths = []
+    for name, fig in figures_closed_loop(time, series, theta, title).items():
+        _save(fig, out_dir / name)
+        paths.append(out_dir / name)
     return paths
 
 
-def _finish(fig, ax, path: Path, title: str, ylabel: str) -> None:
-    ax.set_xlabel("tau")
+def _finish(fig, ax, title: str, ylabel: str) -> None:
+    ax.set_xlabel(TAU)
     ax.set_ylabel(ylabel)
-    ax.set_title(title)
+    _title(fig, ax, title)
     ax.grid(True, alpha=0.3)
-    ax.legend(loc="upper right")
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    _legend_below(fig, [ax])

@@ -13,10 +13,11 @@ import subprocess
 import tempfile
 from pathlib import Path
 
-import vibromodel
 from vibromodel import compiled
 
-FMU_SRC = Path(vibromodel.__file__).resolve().parents[1]
+from . import paths
+
+FMU_SRC = paths.FMU_SRC
 CORE = FMU_SRC / "core"
 TABLEAU_HEADER = CORE / "dop853_tableau.h"
 
@@ -37,7 +38,7 @@ GCC_COMMAND = ("gcc", "-std=c11", "-O2", "-ffp-contract=off", "-fPIC", "-shared"
 def compile_kernel(out_path: Path) -> Path:
     """Compile fmu_src/core/*.c into the shared library out_path; raises RuntimeError with gcc's output on failure."""
     out_path = Path(out_path)
-    cmd = [*GCC_COMMAND, "-o", str(out_path), *map(str, kernel_sources()), "-lm"]
+    cmd = [*paths.c_compiler(), *GCC_COMMAND[1:], "-o", str(out_path), *map(str, kernel_sources()), "-lm"]  # $CC for gcc
     proc = subprocess.run(cmd, capture_output=True, text=True)
     if proc.returncode != 0:
         raise RuntimeError(f"compiling the kernel failed ({' '.join(cmd)}):\n{proc.stderr}")

@@ -27,12 +27,13 @@ from vibromodel.integrate import ATOL_PER_RTOL
 from vibromodel.models import Fidelity
 from vibromodel.parameters import Scene
 
+from . import paths
 from .doctor import host_environment
 from .reference import reference_solution
 from .run import FmuInstance
 
 TIMING_HOST_SOURCE = Path(__file__).with_name("timing_host.c")
-FMU_SRC = Path(__import__("vibromodel").__file__).resolve().parents[1]
+FMU_SRC = paths.FMU_SRC  # the checkout's fmu_src/ or the installed vibrofmu/fmu_src/
 REFERENCE_RTOL = 1e-13
 CLOSED_LOOP_REFERENCE_RTOL = 1e-12
 C_INTERVALS = (0.1, 1.0)
@@ -52,7 +53,7 @@ LIMITS = {"averaged f3": 0.5, "analytic f4": 0.5, "RK4 h = 0.01": 4.0, "closed l
 
 def compile_timing_host(out_dir: Path) -> Path:
     host = Path(out_dir) / "timing_host"
-    cmd = ["gcc", "-O2", "-Wall", "-Wextra", f"-I{FMU_SRC}", "-o", str(host), str(TIMING_HOST_SOURCE), "-ldl", "-lm"]
+    cmd = [*paths.c_compiler(), "-O2", "-Wall", "-Wextra", f"-I{FMU_SRC}", "-o", str(host), str(TIMING_HOST_SOURCE), "-ldl", "-lm"]
     proc = subprocess.run(cmd, capture_output=True, text=True)
     if proc.returncode != 0:
         raise RuntimeError(f"compiling the timing host failed ({' '.join(cmd)}):\n{proc.stderr}")

@@ -23,6 +23,7 @@ import subprocess
 
 import time
 
+from . import paths
 from .ladder import FMU_SRC, TIMING_HOST_SOURCE, communication_points, compile_timing_host, fmpy_run, host_run
 from .run import FmuInstance
 
@@ -36,7 +37,7 @@ def compile_cpu_clock_host(out_dir: Path) -> Path:
     header = Path(out_dir) / "cpu_clock.h"
     header.write_text("#include <time.h>\n#undef CLOCK_MONOTONIC\n#define CLOCK_MONOTONIC CLOCK_THREAD_CPUTIME_ID\n")
     host = Path(out_dir) / "timing_host_cpu"
-    cmd = ["gcc", "-O2", f"-I{FMU_SRC}", "-include", "time.h", "-include", str(header), "-o", str(host),
+    cmd = [*paths.c_compiler(), "-O2", f"-I{FMU_SRC}", "-include", "time.h", "-include", str(header), "-o", str(host),
            str(TIMING_HOST_SOURCE), "-ldl", "-lm"]
     proc = subprocess.run(cmd, capture_output=True, text=True)
     if proc.returncode != 0:

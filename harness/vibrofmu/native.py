@@ -24,9 +24,9 @@ import xml.etree.ElementTree as ET
 import zipfile
 from pathlib import Path
 
-import vibromodel
+from . import paths
 
-FMU_SRC = Path(vibromodel.__file__).resolve().parents[1]
+FMU_SRC = paths.FMU_SRC  # a checkout's fmu_src/ or the installed package's copy
 NATIVE_SRC = FMU_SRC / "native"
 COMMON_SOURCES = (NATIVE_SRC / "fmi2_native.c", NATIVE_SRC / "pytext.c", NATIVE_SRC / "scene_checks.c",
                   NATIVE_SRC / "series.c", FMU_SRC / "core" / "pyfloat.c")
@@ -246,7 +246,7 @@ def write_sources(model_id: str, model_description: bytes, out: Path) -> list[st
 def compile_binary(sources: Path, c_files: list[str], out: Path, target: str = "linux64") -> Path:
     """Compile the sources into out (linux64: gcc .so; win64: mingw .dll); RuntimeError with the compiler's
     output on failure."""
-    command = LINUX_COMMAND if target == "linux64" else WIN64_COMMAND
+    command = (*paths.c_compiler(), *LINUX_COMMAND[1:]) if target == "linux64" else WIN64_COMMAND
     cmd = [*command, f"-I{sources}", "-o", str(out), *(str(sources / f) for f in c_files), "-lm"]
     proc = subprocess.run(cmd, capture_output=True, text=True)
     if proc.returncode != 0 or proc.stderr.strip():

@@ -184,13 +184,15 @@ def run_fmu(fmu_path: Path | str, start_values: dict, stop_time: float, output_i
         times.append(0.0)
         rows.append(read_outputs())
         for i in range(n_steps):
-            t = i * output_interval
+            t, h = i * output_interval, output_interval
+            if t + h > stop_time + 1e-9 * max(1.0, abs(stop_time)):  # FMI 2.0: no step beyond the stop time
+                h = stop_time - t  # (a stop time that is not a multiple of the interval: the last step is shorter)
             try:
-                fmu.doStep(currentCommunicationPoint=t, communicationStepSize=output_interval)
+                fmu.doStep(currentCommunicationPoint=t, communicationStepSize=h)
             except FMICallException as error:
                 stop_reason, status = _reason(error, instance.log), error.status
                 break
-            times.append(t + output_interval)  # the FMU's own clock: t + h
+            times.append(t + h)  # the FMU's own clock: t + h
             rows.append(read_outputs())
             if progress is not None:
                 progress(i + 1, n_steps)

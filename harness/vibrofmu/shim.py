@@ -34,7 +34,9 @@ import xml.etree.ElementTree as ET
 import zipfile
 from pathlib import Path
 
-SHIM_SOURCE = Path(__file__).resolve().parents[2] / "fmu_src" / "fmi2_status_shim.c"
+from . import paths
+
+SHIM_SOURCE = paths.FMU_SRC / "fmi2_status_shim.c"
 PYLOADER_SOURCE = SHIM_SOURCE.with_name("pyloader.c")  # finds the FMU's Python (see there)
 
 
@@ -52,7 +54,7 @@ def _model_identifier_and_check_vr(model_description: bytes, status_vr: int) -> 
 
 
 def _compile_shim(status_vr: int, out: Path) -> None:
-    cmd = ["gcc", "-shared", "-fPIC", "-O2", "-fvisibility=hidden",
+    cmd = [*paths.c_compiler(), "-shared", "-fPIC", "-O2", "-fvisibility=hidden",
            f"-DSTATUS_VR={int(status_vr)}", "-o", str(out), str(SHIM_SOURCE), str(PYLOADER_SOURCE),
            "-ldl", "-pthread"]
     proc = subprocess.run(cmd, capture_output=True, text=True)

@@ -97,5 +97,5 @@ def simulate(fmu: Path, scene: Scene, settings: Settings, stop_time: float, outp
     solver = {v: k for k, v in SOLVERS.items()}[settings.solver]
     export.plot_x(out_dir / "x.png", run.time, run.outputs["x"],
                   f"HertzEAOscillator: fidelity {fidelity}, solver {solver}, rtol {settings.rtol:g}",
-                  reference_x=reference_x)
+                  reference_x=reference_x, in_contact=run.outputs.get("in_contact"))
     return run, summary, reference

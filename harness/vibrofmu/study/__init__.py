@@ -21,9 +21,12 @@ def add_parser(sub) -> None:
     p.add_argument("kind", choices=KINDS)
     p.add_argument("--out", required=True, help="output folder (results.parquet, summary.json, plots)")
     p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
-                   help="scene parameter, or a setting of the kind (basins: sigma; monte-carlo: samples, seed)")
-    p.add_argument("--spec", default=None, help="TOML spec: [scene], [grid], [tolerances], [settings]")
-    p.add_argument("--scheduler", default=None, help="address of an existing Dask scheduler (tcp://HOST:PORT)")
+                   help="scene parameter, or a setting of the kind (basins: sigma; monte-carlo: samples, seed); "
+                        "repeatable (default: none)")
+    p.add_argument("--spec", default=None,
+                   help="TOML spec: [scene], [grid], [tolerances], [settings] (default: none, the kind's built-in spec)")
+    p.add_argument("--scheduler", default=None,
+                   help="address of an existing Dask scheduler (tcp://HOST:PORT; default: a local cluster)")
     p.add_argument("--workers", type=int, default=None, help="local worker processes (default: one per core)")
     p.add_argument("--resume", action="store_true", help="continue the study in --out; recompute nothing written")
     p.add_argument("--quick", action="store_true", help="a small version of the kind (under a minute on 2 cores)")

@@ -1,0 +1,63 @@
+"""Where the files that `build` and `doctor` need are, and which C compiler they use: the one resolver.
+
+Installed from a wheel (`pip install .`, `pip install dist/*.whl`), the repository's fmu_src/ (slaves, C
+sources and headers, including any sub-folders such as core/ and native/) is inside the package as
+vibrofmu/fmu_src/ and tests/c_host/ as vibrofmu/c_host/: setup.py maps those folders into the package
+(see the comment there). In a checkout (editable install, or the tests run from the repository) the
+package has no such folders and the files are read where they are, <repository>/fmu_src and
+<repository>/tests/c_host. The Python model (vibromodel) is an ordinary installed package in both cases.
+"""
+from __future__ import annotations
+
+import os
+import shlex
+import shutil
+from pathlib import Path
+
+PACKAGE_DIR = Path(__file__).resolve().parent
+SCENES_DIR = PACKAGE_DIR / "scenes"
+_CHECKOUT = PACKAGE_DIR.parents[1]  # <repository> when this file is <repository>/harness/vibrofmu/paths.py
+
+
+def _located(installed: Path, checkout: Path, marker: str) -> Path:
+    """`installed` if it holds `marker`, else `checkout` if it does; FileNotFoundError otherwise."""
+    for folder in (installed, checkout):
+        if (folder / marker).is_file():
+            return folder
+    raise FileNotFoundError(f"{marker} is neither in {installed} (installed package) nor in {checkout} "
+                            f"(checkout): reinstall vibrofmu")
+
+
+FMU_SRC = _located(PACKAGE_DIR / "fmu_src", _CHECKOUT / "fmu_src", "HertzEAOscillator.py")
+C_HOST_DIR = _located(PACKAGE_DIR / "c_host", _CHECKOUT / "tests" / "c_host", "fmi2_host.c")
+
+
+def vibromodel_dir() -> Path:
+    """The vibromodel package the FMUs carry: the one this Python imports."""
+    import vibromodel
+
+    return Path(vibromodel.__file__).resolve().parent
+
+
+def build_dir() -> Path:
+    """The default output folder of `vibrofmu build` and of the commands that build missing FMUs:
+    ./build of the current directory."""
+    return Path.cwd() / "build"
+
+
+class NoCompiler(RuntimeError):
+    """No C compiler: $CC is unset and neither cc nor gcc is on PATH, or $CC names no program."""
+
+
+def c_compiler() -> list[str]:
+    """The C compiler command: $CC (split like a shell word list, e.g. "ccache gcc"), else cc, else gcc.
+    Raises NoCompiler when there is none."""
+    command = shlex.split(os.environ.get("CC", ""))
+    if command:
+        if shutil.which(command[0]) is None:
+            raise NoCompiler(f"$CC = {os.environ['CC']!r} is not a program on PATH")
+        return command
+    for name in ("cc", "gcc"):
+        if shutil.which(name):
+            return [name]
+    raise NoCompiler("no C compiler: $CC is not set and neither cc nor gcc is on PATH")
