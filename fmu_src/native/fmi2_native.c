@@ -126,6 +126,26 @@ static int parameter_index(const char *name)
     return -1;
 }
 
+/* Rule.refusal is None: the value is in the rule's range (or its automatic value). */
+static int obeys(const VibroRule *rule, double number)
+{
+    if (rule->has_automatic && number == rule->automatic) return 1;
+    int ok = isfinite(number) && (!rule->integer || number == trunc(number));
+    ok = ok && (rule->low_inclusive ? number >= rule->low : number > rule->low);
+    ok = ok && (rule->high_inclusive ? number <= rule->high : number < rule->high);
+    return ok;
+}
+
+/* An input's rule (check_parameters({name: value}) in the controller slave's _set_input): its refusal text
+   when the value breaks it, else NULL (inputs without a rule, e.g. the plant's U, take any value). */
+static const char *input_refusal(fmi2ValueReference vr, double number)
+{
+    for (size_t r = 0; r < N_RULES; r++)
+        if (RULES[r].when == NULL && strcmp(RULES[r].name, VARIABLES[vr].name) == 0 && !obeys(&RULES[r], number))
+            return RULES[r].text;
+    return NULL;
+}
+
 static int check_parameters(Instance *inst)
 {
     for (size_t r = 0; r < N_RULES; r++) {
@@ -142,11 +162,7 @@ static int check_parameters(Instance *inst)
         double number = inst->s.value[vr];
         int tolerance = strcmp(rule->name, "rtol") == 0 && inst->s.has_tolerance;
         if (tolerance) number = inst->s.tolerance;
-        if (rule->has_automatic && number == rule->automatic) continue;
-        int ok = isfinite(number) && (!rule->integer || number == trunc(number));
-        ok = ok && (rule->low_inclusive ? number >= rule->low : number > rule->low);
-        ok = ok && (rule->high_inclusive ? number <= rule->high : number < rule->high);
-        if (ok) continue;
+        if (obeys(rule, number)) continue;
         char text[64];
         if (tolerance) native_repr(number, text, sizeof text);
         else value_text(&inst->s, (fmi2ValueReference)vr, text, sizeof text);
@@ -412,6 +428,7 @@ static fmi2Status set_values(Instance *I, const fmi2ValueReference vr[], size_t 
                          TYPE_NAMES[type]);
                 refusal = reason;
             }
+            if (refusal == NULL && VARIABLES[vr[i]].causality == C_INPUT) refusal = input_refusal(vr[i], value[i]);
         }
         if (refusal == NULL) {
             I->s.value[vr[i]] = value[i];
