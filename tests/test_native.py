@@ -663,3 +663,20 @@ def test_closed_loop_no_invalid_memory_access(c_host, native_closed_loop_fmu, tm
         host = run_host(c_host, unzipped, ["x"], 0.0, 5.0, 0.1, parameters=parameters, wrapper=wrapper)
         assert host.returncode == code, host.stderr
         assert "Invalid read" not in host.stderr and "Invalid write" not in host.stderr
+
+
+def test_closed_loop_fmpy_builds_the_sources(native_closed_loop_fmu, tmp_path):
+    """As the plant's: FMPy's CMake build of sources/ (reference.h included) gives the packed binary's bits."""
+    from fmpy.build import build_platform_binary
+
+    unzipped = Path(extract(str(native_closed_loop_fmu), unzipdir=str(tmp_path / "fmu")))
+    packed = unzipped / "binaries" / "linux64" / "HertzEAClosedLoop.so"
+    packed.unlink()
+    (tmp_path / "build").mkdir()
+    build_platform_binary(str(unzipped), build_dir=str(tmp_path / "build"))
+    assert packed.is_file()
+    outputs = ["x", "x_ref", "U", "V", "mu_hat"]
+    rebuilt = simulate_fmu(str(unzipped), output=outputs)
+    original = simulate_fmu(str(native_closed_loop_fmu), output=outputs)
+    for name in outputs:
+        np.testing.assert_array_equal(rebuilt[name], original[name], err_msg=name)
