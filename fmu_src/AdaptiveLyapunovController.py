@@ -34,7 +34,7 @@ OUTPUTS = ("U", "e1", "e2", "V")
 
 class AdaptiveLyapunovController(fast_path.CompiledModelSlave, StatusSlave):
     author = "vibrofmu"
-    description = "Adaptive Lyapunov tracking controller of the Hertzian-contact oscillator (ERRATA §3.5)"
+    description = "Adaptive Lyapunov tracking controller of the Hertzian-contact oscillator (corrected laws: docs/model.md)"
     default_experiment = DefaultExperiment(*DEFAULT_EXPERIMENT)
     state_format = "AdaptiveLyapunovController state 2"
     MEMORY = CONTROLLER_INPUTS + CONTROLLER_OUTPUTS

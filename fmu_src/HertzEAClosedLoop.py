@@ -27,7 +27,7 @@ OUTPUTS = ("x", "v", "x_ref", "U", "e1", "e2", "V", "V_rate", "V_rate_promised")
 
 class HertzEAClosedLoop(fast_path.CompiledModelSlave, StatusSlave):
     author = "vibrofmu"
-    description = "Hertzian-contact oscillator under adaptive Lyapunov tracking control, monolithic (ERRATA §3.5)"
+    description = "Hertzian-contact oscillator under adaptive Lyapunov tracking control, monolithic (corrected laws: docs/model.md)"
     default_experiment = DefaultExperiment(*DEFAULT_EXPERIMENT)
     state_format = "HertzEAClosedLoop state 2"
     MEMORY = FAST_OUTPUTS = OUTPUTS + ESTIMATE_NAMES
@@ -41,7 +41,7 @@ class HertzEAClosedLoop(fast_path.CompiledModelSlave, StatusSlave):
                         "plant: 0 exact Eq. 3, 1 polynomial Eq. 7, 2 Eq. 7 printed coefficients")
         self._solver_parameters(settings)
         self._parameter(Integer, "reference", int(reference.kind),
-                        "0 OAFM analytic solution, 1 ERRATA §3.5 x0 + X_f cos(w t - psi), 2 the same + tones "
+                        "0 OAFM analytic solution, 1 the corrected closed form x0 + X_f cos(w t - psi), 2 the same + tones "
                         "(persistent excitation)")
         self._parameter(Real, "x_ref_start", reference.x_start, "reference's initial x")
         self._parameter(Real, "v_ref_start", reference.v_start, "reference's initial x'")

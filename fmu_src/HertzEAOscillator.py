@@ -47,7 +47,7 @@ def _output(index: int):
 
 class HertzEAOscillator(StatusSlave):
     author = "vibrofmu"
-    description = "Hertzian-contact oscillator with two-sided electrostatic actuation (PAPER Eq. 3, ERRATA §3.1)"
+    description = "Hertzian-contact oscillator with two-sided electrostatic actuation (Eq. 3 with the corrected formulas: docs/model.md)"
     default_experiment = DefaultExperiment(*DEFAULT_EXPERIMENT)
     state_format = "HertzEAOscillator state 3"
 

@@ -443,7 +443,7 @@ class StatusSlave(Fmi2Slave):
     def _controller_parameters(self):
         gains = Gains()
         self._parameter(Integer, "law", int(Law.PAPER_CORRECTED),
-                        "0 paper-corrected (ERRATA §3.5), 1 damped (gain k_damping), 2 paper-literal (Eqs 78, 81 as printed)")
+                        "0 paper-corrected (docs/model.md), 1 damped (gain k_damping), 2 paper-literal (Eqs 78, 81 as printed)")
         for name, value in zip(GAIN_NAMES, gains.lambdas):
             self._parameter(Real, name, value, "Lyapunov weight (Eq. 76), > 0")
         self._parameter(Real, "k_damping", gains.k_damping, "damped law: e2 gain k > 0")
