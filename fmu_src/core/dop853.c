@@ -30,15 +30,14 @@ typedef struct {
     int n;
 } Stages;
 
-/* Leave code with (t, y) and the formatted message in the report. */
-static int report(const Dop853 *s, DopReport *r, int code, double t, const double *y, const char *format, ...)
+int dop_report(DopReport *r, int n, int code, double t, const double *y, const char *format, ...)
 {
     va_list args;
     va_start(args, format);
     vsnprintf(r->message, DOP_MESSAGE, format, args);
     va_end(args);
     r->t = t;
-    memcpy(r->y, y, sizeof(double) * (size_t)s->n);
+    memcpy(r->y, y, sizeof(double) * (size_t)n);
     r->event = -1;
     return code;
 }
@@ -48,7 +47,7 @@ static int raise_fault(const Dop853 *s, DopReport *r, int fault)
 {
     char text[DOP_MESSAGE];
     py_fault_text(fault, text, sizeof text);
-    return report(s, r, DOP_RAISED, s->t, s->y, "%s", text);
+    return dop_report(r, s->n, DOP_RAISED, s->t, s->y, "%s", text);
 }
 
 /* integrate._dot over the first m stages of one component: sum of c[j] * k[j], left to right from 0 */
@@ -218,7 +217,7 @@ int dop_value_at(Dop853 *s, DopRhs rhs, void *ctx, double t, double *y, DopRepor
     }
     if (!s->has_old || !(s->t_old <= t && t <= s->t)) {
         number_text t_text, old_text, end_text;
-        return report(s, r, DOP_RAISED, s->t, s->y, "ValueError: tau = %s is outside the last step [%s, %s]",
+        return dop_report(r, s->n, DOP_RAISED, s->t, s->y, "ValueError: tau = %s is outside the last step [%s, %s]",
                       py_repr(t_text, t), s->has_old ? py_repr(old_text, s->t_old) : "None", py_repr(end_text, s->t));
     }
     if (!s->dense_ready) {
@@ -282,7 +281,7 @@ static int root_function(Dop853 *s, DopRhs rhs, void *ctx, int event, double tt,
     *f = dop_event_g(s, event, y);
     if (isnan(*f)) {
         number_text text;
-        return report(s, r, DOP_RAISED, s->t, s->y,
+        return dop_report(r, s->n, DOP_RAISED, s->t, s->y,
                       "ValueError: The function value at x=%s is NaN; solver cannot continue.", py_repr(text, tt));
     }
     return DOP_OK;
@@ -308,9 +307,9 @@ static int locate(Dop853 *s, DopRhs rhs, void *ctx, int event, double xa, double
     RootContext c = {s, rhs, ctx, event, r};
     int iterations, code = brentq(event_on_dense, &c, xa, xb, root, &iterations);
     if (code == ROOT_SIGN_ERROR)
-        return report(s, r, DOP_RAISED, s->t, s->y, "ValueError: f(a) and f(b) must have different signs");
+        return dop_report(r, s->n, DOP_RAISED, s->t, s->y, "ValueError: f(a) and f(b) must have different signs");
     if (code == ROOT_NO_CONVERGENCE)
-        return report(s, r, DOP_RAISED, s->t, s->y, "RuntimeError: Failed to converge after %d iterations.", iterations);
+        return dop_report(r, s->n, DOP_RAISED, s->t, s->y, "RuntimeError: Failed to converge after %d iterations.", iterations);
     return code;
 }
 
@@ -460,7 +459,7 @@ static int shorten(Dop853 *s, DopRhs rhs, void *ctx, double t0, const double *y0
         else h *= py_max(MIN_FACTOR, step_factor(error));
         if (!(h >= min_step)) {
             number_text h_text, t_text, x_text;
-            return report(s, r, DOP_FAILED, t0, y0, "step size collapsed to %s at tau = %s, x = %s (stiff or singular)",
+            return dop_report(r, s->n, DOP_FAILED, t0, y0, "step size collapsed to %s at tau = %s, x = %s (stiff or singular)",
                           py_g(h_text, h, 3), py_g(t_text, t0, 10), py_g(x_text, y0[0], 10));
         }
         int fault = trial(s, rhs, ctx, t0, y0, h, &k, y_new, &error);
@@ -542,7 +541,7 @@ static int step(Dop853 *s, DopRhs rhs, void *ctx, DopReport *r)
     for (;;) {
         if (!(h >= min_step)) {
             number_text h_text, t_text, x_text;
-            return report(s, r, DOP_FAILED, t, y, "step size collapsed to %s at tau = %s, x = %s (stiff or singular)",
+            return dop_report(r, s->n, DOP_FAILED, t, y, "step size collapsed to %s at tau = %s, x = %s (stiff or singular)",
                           py_g(h_text, h, 3), py_g(t_text, t, 10), py_g(x_text, y[0], 10));
         }
         fault = trial(s, rhs, ctx, t, y, h, &k, y_new, &error);
@@ -577,7 +576,7 @@ int dop_advance(Dop853 *s, DopRhs rhs, void *ctx, double t_target, DopReport *r)
         if (s->stopped) return terminal(s, r);
         if ((double)steps >= s->step_budget) {
             number_text t_text, target_text;
-            return report(s, r, DOP_FAILED, s->t, s->y,
+            return dop_report(r, s->n, DOP_FAILED, s->t, s->y,
                           "%lld steps reached only tau = %s of %s: make smaller communication steps", steps,
                           py_g(t_text, s->t, 10), py_g(target_text, t_target, 10));
         }

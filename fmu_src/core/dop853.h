@@ -84,6 +84,9 @@ typedef struct {
 } DopReport;
 
 /* Start afresh at (t, y): derivative, sides of the non-terminal events; no dense output, no stop. */
+/* Leave code with (t, y[0..n-1]) and the formatted message in the report (the solvers' one way to fail). */
+int dop_report(DopReport *r, int n, int code, double t, const double *y, const char *format, ...);
+
 int dop_restart(Dop853 *s, DopRhs rhs, void *context, double t, const double *y, DopReport *report);
 /* Step until s->t >= t_target.  DOP_TERMINAL if a terminal event lies at or before t_target. */
 int dop_advance(Dop853 *s, DopRhs rhs, void *context, double t_target, DopReport *report);

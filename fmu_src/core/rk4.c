@@ -11,18 +11,6 @@
 #include "pyfloat.h"
 #include "roots.h"
 
-static int report(const Rk4 *s, DopReport *r, int code, double t, const double *y, const char *format, ...)
-{
-    va_list args;
-    va_start(args, format);
-    vsnprintf(r->message, DOP_MESSAGE, format, args);
-    va_end(args);
-    r->t = t;
-    memcpy(r->y, y, sizeof(double) * (size_t)s->n);
-    r->event = -1;
-    return code;
-}
-
 /* integrate._rk4_growth: |R(zr + i zi)| */
 static double growth(double zr, double zi)
 {
@@ -75,7 +63,7 @@ static int check_stability(Rk4 *s, DopRhs rhs, void *ctx, double h, DopReport *r
             number_text h_text, t_text, zr_text, size_text, limit_text;
             char zi_text[48];
             snprintf(zi_text, sizeof zi_text, isnan(zi) ? "+nan" : "%+.3g", zi);
-            return report(s, r, DOP_FAILED, t, s->y, "RK4 unstable: step h = %s at tau = %s gives h*lambda = %s%sj "
+            return dop_report(r, s->n, DOP_FAILED, t, s->y, "RK4 unstable: step h = %s at tau = %s gives h*lambda = %s%sj "
                           "outside the stability region (|lambda| = %s); reduce max_step below %s", py_g(h_text, h, 3),
                           py_g(t_text, t, 10), py_g(zr_text, zr, 3), zi_text, py_g(size_text, size, 3),
                           py_g(limit_text, 2.5 / size, 3));
@@ -163,12 +151,12 @@ static int hermite_event(const Rk4 *st, Hermite *c, double t, int *found, double
             int iterations, code = brentq(hermite_root_function, c, piece.s_a, piece.s_b, s_event, &iterations);
             number_text text;
             if (code == NAN_FOUND)
-                return report(st, r, DOP_RAISED, t, st->y, "ValueError: The function value at x=%s is NaN; solver "
+                return dop_report(r, st->n, DOP_RAISED, t, st->y, "ValueError: The function value at x=%s is NaN; solver "
                               "cannot continue.", py_repr(text, c->nan_at));
             if (code == ROOT_SIGN_ERROR)
-                return report(st, r, DOP_RAISED, t, st->y, "ValueError: f(a) and f(b) must have different signs");
+                return dop_report(r, st->n, DOP_RAISED, t, st->y, "ValueError: f(a) and f(b) must have different signs");
             if (code == ROOT_NO_CONVERGENCE)
-                return report(st, r, DOP_RAISED, t, st->y, "RuntimeError: Failed to converge after %d iterations.",
+                return dop_report(r, st->n, DOP_RAISED, t, st->y, "RuntimeError: Failed to converge after %d iterations.",
                               iterations);
             return DOP_OK;
         }
@@ -208,14 +196,14 @@ static int step(Rk4 *s, DopRhs rhs, void *ctx, double h, DopReport *r)
     }
     if (fault) {
         number_text h_text, t_text, x_text;
-        return report(s, r, DOP_FAILED, t, y, "RK4 step h = %s from tau = %s left the model's domain (x = %s); "
+        return dop_report(r, s->n, DOP_FAILED, t, y, "RK4 step h = %s from tau = %s left the model's domain (x = %s); "
                       "reduce max_step", py_g(h_text, h, 3), py_g(t_text, t, 10), py_g(x_text, y[0], 10));
     }
     s->nfev += 4;
     for (int i = 0; i < n; i++) y_new[i] = y[i] + h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
     if (!(isfinite(y_new[0]) && isfinite(y_new[1]))) {
         number_text t_text, h_text;
-        return report(s, r, DOP_FAILED, t, y, "RK4 unstable: the state became non-finite after tau = %s with h = %s; "
+        return dop_report(r, s->n, DOP_FAILED, t, y, "RK4 unstable: the state became non-finite after tau = %s with h = %s; "
                       "reduce max_step", py_g(t_text, t, 10), py_g(h_text, h, 3));
     }
     for (int i = 0; i < s->n_events; i++) {
