@@ -14,7 +14,7 @@ from pythonfmu import Boolean, DefaultExperiment, Fmi2Causality, Fmi2Variability
 from pythonfmu.enums import Fmi2Initial
 
 import fast_path
-from slave_support import STATUS_OK, StatusSlave
+from slave_support import StatusSlave
 from vibromodel.analytic import OafmSettings
 from vibromodel.compiled import CompiledPlant, load_library
 from vibromodel.compiled_open_loop import CompiledOpenLoopPlant
@@ -45,7 +45,7 @@ def _output(index: int):
     return property(get, set)
 
 
-class HertzEAOscillator(StatusSlave):
+class HertzEAOscillator(fast_path.FastPathSwitch, StatusSlave):
     author = "vibrofmu"
     description = "Hertzian-contact oscillator with two-sided electrostatic actuation (Eq. 3 with the corrected formulas: docs/model.md)"
     default_experiment = DefaultExperiment(*DEFAULT_EXPERIMENT)
@@ -124,23 +124,6 @@ class HertzEAOscillator(StatusSlave):
             references = {var.name: vr for vr, var in self.vars.items()}
             fast_path.attach(self._shim, self._kernel, {references[name]: i for i, name in enumerate(OUTPUTS)},
                              {references["in_contact"]: 0})
-
-    def _enable_fast_path(self):
-        """The shim may step the compiled plant while the slave is running without error."""
-        if self._kernel is not None:
-            self._kernel.fast_path_enabled = self.halted is None and self.fmi_status == STATUS_OK
-
-    def exit_initialization_mode(self):
-        super().exit_initialization_mode()
-        self._enable_fast_path()
-
-    def _set_fmu_state(self, state):
-        super()._set_fmu_state(state)
-        self._enable_fast_path()
-
-    def _error(self, message):
-        super()._error(message)
-        self._enable_fast_path()
 
     def do_step(self, current_time, step_size):
         return self._guarded_step(

@@ -86,7 +86,31 @@ def memory_variable(name: str):
     return property(get, set)
 
 
-class CompiledModelSlave:
+class FastPathSwitch:
+    """Mixin (before slave_support.StatusSlave) of a slave whose model may be compiled (`_kernel`): the shim may
+    step the compiled model only while the slave is initialised and without error, so the switch follows every
+    change of those (initialisation, state restore, error)."""
+
+    _kernel = None  # the model when it is compiled
+
+    def _enable_fast_path(self):
+        if self._kernel is not None:
+            self._kernel.fast_path_enabled = self.halted is None and self.fmi_status == 0  # STATUS_OK
+
+    def exit_initialization_mode(self):
+        super().exit_initialization_mode()
+        self._enable_fast_path()
+
+    def _set_fmu_state(self, state):
+        super()._set_fmu_state(state)
+        self._enable_fast_path()
+
+    def _error(self, message):
+        super()._error(message)
+        self._enable_fast_path()
+
+
+class CompiledModelSlave(FastPathSwitch):
     """Mixin (before slave_support.StatusSlave) of a slave whose model may be compiled: a model with a
     `step_function` takes over the variables named in MEMORY (declared with memory_variable) and is handed to
     the shim's fast path, which then steps it and serves the outputs named in FAST_OUTPUTS. The fast path runs
@@ -96,7 +120,6 @@ class CompiledModelSlave:
     FAST_OUTPUTS: tuple[str, ...] = ()
     FAST_INPUTS: tuple[str, ...] = ()  # set in C when the model has an `inputs_function` (0: done)
     _model = None
-    _kernel = None  # the model when it is compiled
     _shim = None  # the status shim's attach function (shim_attach), if any
 
     def __init__(self, **kwargs):
@@ -130,19 +153,3 @@ class CompiledModelSlave:
             names = self.FAST_INPUTS
             self._shim_inputs(kernel.inputs_function, len(names), _vr_array(*(references[n] for n in names)),
                               _address_array(*(kernel.variable_address(n) for n in names)))
-
-    def _enable_fast_path(self):
-        if self._kernel is not None:
-            self._kernel.fast_path_enabled = self.halted is None and self.fmi_status == 0  # STATUS_OK
-
-    def exit_initialization_mode(self):
-        super().exit_initialization_mode()
-        self._enable_fast_path()
-
-    def _set_fmu_state(self, state):
-        super()._set_fmu_state(state)
-        self._enable_fast_path()
-
-    def _error(self, message):
-        super()._error(message)
-        self._enable_fast_path()
