@@ -68,6 +68,26 @@ static int plant_rhs(void *context, double t, const double *y, double *f)
     return fault;
 }
 
+/* plant_rhs with the drive's phasors given: (cos, sin) of omega t, Omega t, 2 Omega t (plant_frequencies) */
+static int plant_rhs_phased(void *context, double t, const double *phases, const double *y, double *f)
+{
+    const VkPlant *p = context;
+    const VmDrive drive = {phases[0], phases[3], phases[4]};
+    int fault;
+    f[0] = y[1];
+    f[1] = vm_accel_driven(&p->model, t, &drive, y[0], y[1], p->U, &fault);
+    return fault;
+}
+
+/* The drive's frequencies omega, Omega, 2 Omega (0 for a term the model leaves out: its phasor stays (1, 0)),
+   as plant.drive_frequencies */
+static void plant_frequencies(const VkModel *m, double *freq)
+{
+    freq[0] = m->load_forcing ? m->omega : 0.0;
+    freq[1] = m->ac ? m->Omega : 0.0;
+    freq[2] = m->ac ? 2.0 * m->Omega : 0.0;
+}
+
 double vk_accel(const VkPlant *p, double t, double x, double v, double U)
 {
     int fault;
@@ -156,8 +176,14 @@ int vk_set_input(VkPlant *p, double t, double U)
 int vk_advance(VkPlant *p, double t_target)
 {
     DopReport r;
-    int code = p->solver == VK_RK4 ? rk4_advance(&p->rk4, plant_rhs, p, t_target, &r)
-                                   : dop_advance(&p->dop, plant_rhs, p, t_target, &r);
+    int code;
+    if (p->solver == VK_RK4) {
+        double freq[3];
+        plant_frequencies(&p->model, freq);
+        code = rk4_advance_phased(&p->rk4, plant_rhs_phased, p, 3, freq, t_target, &r);
+    } else {
+        code = dop_advance(&p->dop, plant_rhs, p, t_target, &r);
+    }
     return code ? solver_error(p, code, &r) : VK_OK;
 }
 

@@ -10,35 +10,6 @@
 #include <stdlib.h>
 #include <string.h>
 
-/* Python's min(a, b) and max(a, b): a unless b compares smaller (larger). */
-double py_min(double a, double b) { return b < a ? b : a; }
-double py_max(double a, double b) { return b > a ? b : a; }
-
-/* Python's a / b for floats (float_div). */
-double py_div(double a, double b, int *fault)
-{
-    if (b == 0.0) {
-        *fault = FAULT_ZERO_DIVISION;
-        return 0.0;
-    }
-    return a / b;
-}
-
-/* math.cos / math.sin (CPython's math_1): a NaN from a non-NaN argument (an infinity) is a ValueError. */
-double py_cos(double x, int *fault)
-{
-    double r = cos(x);
-    if (isnan(r) && !isnan(x)) *fault = FAULT_MATH_DOMAIN;
-    return r;
-}
-
-double py_sin(double x, int *fault)
-{
-    double r = sin(x);
-    if (isnan(r) && !isnan(x)) *fault = FAULT_MATH_DOMAIN;
-    return r;
-}
-
 /* Python's iv ** iw for floats (CPython 3.11 float_pow) with the exponents used here: 2 (squares of any
  * float) and -1/8, 1/9 (of error ratios, which are >= 0 or NaN). So float_pow's branches for an exponent
  * that is 0, NaN, infinite or an odd integer, for 0 ** negative (ZeroDivisionError) and for negative **

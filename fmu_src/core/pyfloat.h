@@ -12,14 +12,34 @@ enum { FAULT_NONE = 0, FAULT_ZERO_DIVISION, FAULT_MATH_DOMAIN, FAULT_OVERFLOW };
 
 #define PY_HYPOT_MAX 32
 
+/* The small ones are inline (they sit in the solvers' inner loops). */
+#include <math.h>
+
 /* Python's min(a, b) and max(a, b): a unless b compares smaller (larger). */
-double py_min(double a, double b);
-double py_max(double a, double b);
-/* a / b: FAULT_ZERO_DIVISION for b == 0 */
-double py_div(double a, double b, int *fault);
-/* math.cos, math.sin: FAULT_MATH_DOMAIN for an infinite argument */
-double py_cos(double x, int *fault);
-double py_sin(double x, int *fault);
+static inline double py_min(double a, double b) { return b < a ? b : a; }
+static inline double py_max(double a, double b) { return b > a ? b : a; }
+/* a / b (float_div): FAULT_ZERO_DIVISION for b == 0 */
+static inline double py_div(double a, double b, int *fault)
+{
+    if (b == 0.0) {
+        *fault = FAULT_ZERO_DIVISION;
+        return 0.0;
+    }
+    return a / b;
+}
+/* math.cos, math.sin (CPython's math_1): a NaN from a non-NaN argument (an infinity) is FAULT_MATH_DOMAIN */
+static inline double py_cos(double x, int *fault)
+{
+    double r = cos(x);
+    if (isnan(r) && !isnan(x)) *fault = FAULT_MATH_DOMAIN;
+    return r;
+}
+static inline double py_sin(double x, int *fault)
+{
+    double r = sin(x);
+    if (isnan(r) && !isnan(x)) *fault = FAULT_MATH_DOMAIN;
+    return r;
+}
 /* iv ** iw for iw = 2, -1/8, 1/9 (float_pow): FAULT_OVERFLOW */
 double py_pow(double iv, double iw, int *fault);
 /* math.hypot(*values[0..n-1]) */

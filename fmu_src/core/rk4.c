@@ -175,24 +175,71 @@ static int hermite_event(const Rk4 *st, Hermite *c, double t, int *found, double
     return DOP_OK;
 }
 
-/* Rk4._step */
-static int step(Rk4 *s, DopRhs rhs, void *ctx, double h, DopReport *r)
+/* The drive's phasors of a phased advance (Rk4._phases): p[2k], p[2k+1] = cos, sin of freq[k] t */
+typedef struct {
+    Rk4PhasedRhs rhs;
+    int n_freq;
+    const double *freq;
+    double rotation[2 * RK4_MAX_PHASES];  /* cos, sin of freq[k] h/2 */
+    double at_t[2 * RK4_MAX_PHASES];      /* the phasors at the step's start */
+    int64_t since_anchor;                 /* steps since at_t was evaluated directly (-1: never) */
+} Phases;
+
+/* cos and sin of freq[k] t directly (integrate._phases_at); a fault as math.cos/math.sin raise */
+static int phases_at(const Phases *ph, double t, double *p)
+{
+    int fault = FAULT_NONE;
+    for (int k = 0; k < ph->n_freq; k++) {
+        double angle = ph->freq[k] * t;
+        p[2 * k] = py_cos(angle, &fault);
+        p[2 * k + 1] = py_sin(angle, &fault);
+    }
+    return fault;
+}
+
+/* p_out = p rotated by `rotation` (integrate._rotate): angle addition */
+static void rotate(const Phases *ph, const double *p, double *p_out)
+{
+    for (int k = 0; k < ph->n_freq; k++) {
+        double c = p[2 * k], sn = p[2 * k + 1], rc = ph->rotation[2 * k], rs = ph->rotation[2 * k + 1];
+        p_out[2 * k] = c * rc - sn * rs;
+        p_out[2 * k + 1] = sn * rc + c * rs;
+    }
+}
+
+/* Rk4._step (ph == NULL: rhs; else ph->rhs with the phasors of each stage's time) */
+static int step(Rk4 *s, DopRhs rhs, Phases *ph, void *ctx, double h, DopReport *r)
 {
     int n = (int)s->n;
     double t = s->t, *y = s->y, half = 0.5 * h;
     double k1[DOP_MAX_DIM], k2[DOP_MAX_DIM], k3[DOP_MAX_DIM], k4[DOP_MAX_DIM], ys[DOP_MAX_DIM], y_new[DOP_MAX_DIM];
-    int fault = rhs(ctx, t, y, k1);
+    double p_half[2 * RK4_MAX_PHASES], p_end[2 * RK4_MAX_PHASES];
+    int fault = FAULT_NONE;
+    if (ph) {
+        if (ph->since_anchor < 0 || ph->since_anchor >= RK4_PHASE_RESYNC) {
+            if (ph->since_anchor < 0) {  /* the rotations, at the advance's first step */
+                fault = phases_at(ph, half, ph->rotation);
+            }
+            if (!fault) fault = phases_at(ph, t, ph->at_t);
+            ph->since_anchor = 0;
+        }
+        if (!fault) {
+            rotate(ph, ph->at_t, p_half);
+            rotate(ph, p_half, p_end);
+        }
+    }
+    if (!fault) fault = ph ? ph->rhs(ctx, t, ph->at_t, y, k1) : rhs(ctx, t, y, k1);
     if (!fault) {
         for (int i = 0; i < n; i++) ys[i] = y[i] + half * k1[i];
-        fault = rhs(ctx, t + half, ys, k2);
+        fault = ph ? ph->rhs(ctx, t + half, p_half, ys, k2) : rhs(ctx, t + half, ys, k2);
     }
     if (!fault) {
         for (int i = 0; i < n; i++) ys[i] = y[i] + half * k2[i];
-        fault = rhs(ctx, t + half, ys, k3);
+        fault = ph ? ph->rhs(ctx, t + half, p_half, ys, k3) : rhs(ctx, t + half, ys, k3);
     }
     if (!fault) {
         for (int i = 0; i < n; i++) ys[i] = y[i] + h * k3[i];
-        fault = rhs(ctx, t + h, ys, k4);
+        fault = ph ? ph->rhs(ctx, t + h, p_end, ys, k4) : rhs(ctx, t + h, ys, k4);
     }
     if (fault) {
         number_text h_text, t_text, x_text;
@@ -233,22 +280,58 @@ static int step(Rk4 *s, DopRhs rhs, void *ctx, double h, DopReport *r)
     }
     memcpy(s->y, y_new, sizeof(double) * (size_t)n);
     s->n_steps += 1;
+    if (ph) {  /* the next step starts from this one's end */
+        memcpy(ph->at_t, p_end, sizeof p_end);
+        ph->since_anchor += 1;
+    }
     return DOP_OK;
 }
 
-int rk4_advance(Rk4 *s, DopRhs rhs, void *ctx, double t_target, DopReport *r)
+/* The stability check's right-hand side on a phased advance: the phasors at the advance's start (the check's
+   time), which are direct cos and sin, the same values as the plain right-hand side computes */
+typedef struct {
+    Phases *ph;
+    void *ctx;
+} AnchorContext;
+
+static int anchor_rhs(void *context, double t, const double *y, double *f)
+{
+    const AnchorContext *a = context;
+    return a->ph->rhs(a->ctx, t, a->ph->at_t, y, f);
+}
+
+static int advance(Rk4 *s, DopRhs rhs, Phases *ph, void *ctx, double t_target, DopReport *r)
 {
     double span = t_target - s->t;
     if (span <= 0.0) return DOP_OK;
     double count = ceil(span / s->max_step * (1.0 - 1e-12));
     if (count < 1.0) count = 1.0;
     double h = span / count, t0 = s->t;
-    int code = check_stability(s, rhs, ctx, h, r);
+    AnchorContext anchor = {ph, ctx};
+    int code = DOP_OK;
+    if (!ph) {
+        code = check_stability(s, rhs, ctx, h, r);
+    } else if (!phases_at(ph, 0.5 * h, ph->rotation) && !phases_at(ph, s->t, ph->at_t)) {
+        ph->since_anchor = 0;  /* the first step's rotations and phasors, evaluated here for the check too */
+        code = check_stability(s, anchor_rhs, &anchor, h, r);
+    }  /* else a fault: no verdict (as where the right-hand side faults); the first step meets it again */
     if (code) return code;
     for (double i = 1.0; i <= count; i += 1.0) {
-        code = step(s, rhs, ctx, h, r);
+        code = step(s, rhs, ph, ctx, h, r);
         if (code) return code;
         s->t = i == count ? t_target : t0 + i * h;
     }
     return DOP_OK;
+}
+
+int rk4_advance(Rk4 *s, DopRhs rhs, void *ctx, double t_target, DopReport *r)
+{
+    return advance(s, rhs, NULL, ctx, t_target, r);
+}
+
+int rk4_advance_phased(Rk4 *s, Rk4PhasedRhs rhs, void *ctx, int n_freq, const double *freq, double t_target,
+                       DopReport *r)
+{
+    Phases ph = {rhs, n_freq, freq, {0}, {0}, -1};
+    return advance(s, NULL, &ph, ctx, t_target, r);
 }

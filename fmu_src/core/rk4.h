@@ -25,4 +25,17 @@ typedef struct {
    event), DOP_FAILED (unstable step size, non-finite state, a stage outside the model's domain). */
 int rk4_advance(Rk4 *s, DopRhs rhs, void *context, double t_target, DopReport *report);
 
+/* A right-hand side that takes the drive's phasors at t: phases[2k], phases[2k+1] = cos, sin of freq[k] t */
+typedef int (*Rk4PhasedRhs)(void *context, double t, const double *phases, const double *y, double *f);
+#define RK4_MAX_PHASES 3
+/* Steps between two direct evaluations of the phasors (integrate.PHASE_RESYNC) */
+#define RK4_PHASE_RESYNC 16
+/* rk4_advance for a right-hand side whose time dependence is cos and sin of freq[0..n_freq-1] t (the twin of
+   integrate.Rk4 with `phased`): the phasors are evaluated directly (cos, sin of freq[k] t) at the advance's
+   start (also for the stability check) and every RK4_PHASE_RESYNC steps; in between, each stage's from the
+   previous by one rotation through freq[k] h/2 (its cos and sin once per advance).  Stages 2 and 3 share
+   t + h/2. */
+int rk4_advance_phased(Rk4 *s, Rk4PhasedRhs rhs, void *context, int n_freq, const double *freq, double t_target,
+                       DopReport *report);
+
 #endif

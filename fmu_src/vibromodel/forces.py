@@ -18,13 +18,16 @@ def contact_indentation(x: float) -> float:
     return 1.0 + 2.0 * x / 3.0
 
 
-def electrostatic(t: float, x: float, alpha: float, beta: float, gamma: float, Omega: float, R: float) -> float:
-    """Right-hand electrostatic terms of Eq. 3: alpha*F2(x) + (beta sin Omega t + gamma(1 - cos 2 Omega t)) F3(x)."""
+def electrostatic(t: float, x: float, alpha: float, beta: float, gamma: float, Omega: float, R: float,
+                  drive: tuple[float, float] | None = None) -> float:
+    """Right-hand electrostatic terms of Eq. 3: alpha*F2(x) + (beta sin Omega t + gamma(1 - cos 2 Omega t)) F3(x).
+    drive: (sin Omega t, cos 2 Omega t) given (default: computed here)."""
     u = 2.0 * x / (3.0 * R)
     f3 = 1.0 / ((1.0 - u) * (1.0 - u))
     force = alpha * (f3 - 1.0 / ((1.0 + u) * (1.0 + u)))
     if beta or gamma:
-        force += (beta * math.sin(Omega * t) + gamma * (1.0 - math.cos(2.0 * Omega * t))) * f3
+        s, c = (math.sin(Omega * t), math.cos(2.0 * Omega * t)) if drive is None else drive
+        force += (beta * s + gamma * (1.0 - c)) * f3
     return force
 
 

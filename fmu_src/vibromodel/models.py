@@ -63,6 +63,14 @@ def pull_in_events(R: float) -> tuple[Event, Event]:
 CONTACT_EVENT = affine_event("contact", 1.0, 2.0 / 3.0, False)
 
 
+def drive_frequencies(s: Scene) -> tuple[float, float, float]:
+    """The frequencies of the drive terms' time functions cos(omega t), sin(Omega t), cos(2 Omega t), as a model's
+    accel_phased takes them: phases = [cos f0 t, sin f0 t, cos f1 t, sin f1 t, cos f2 t, sin f2 t] for these f
+    (0 for a term the model leaves out; core/plant.c's plant_frequencies)."""
+    ac = s.beta != 0.0 or s.gamma != 0.0
+    return (s.omega if s.Delta != 0.0 else 0.0, s.Omega if ac else 0.0, 2.0 * s.Omega if ac else 0.0)
+
+
 class ExactModel:
     """Eq. 3 with U added: x'' = 1 + Delta cos(omega t) + F_em(t, x) - H(x) - mu x' + U."""
 
@@ -71,7 +79,8 @@ class ExactModel:
     def __init__(self, scene: Scene):
         self.scene = scene
         self.events = (CONTACT_EVENT,) + pull_in_events(scene.R)
-        self.accel = self._make_accel(scene)
+        self.accel, self.accel_phased = self._make_accel(scene)
+        self.drive_frequencies = drive_frequencies(scene)
 
     @staticmethod
     def _make_accel(s: Scene):
@@ -90,7 +99,16 @@ class ExactModel:
                 a += electrostatic(t, x, alpha, beta, gamma, Omega, R)
             return a
 
-        return accel
+        def accel_phased(t, phases, x, v, U):  # accel with the drive's phasors given (drive_frequencies)
+            a = 1.0 + U - mu * v
+            a -= hertz(x)
+            if load_forcing:
+                a += Delta * phases[0]
+            if electrostatics:
+                a += electrostatic(t, x, alpha, beta, gamma, Omega, R, (phases[3], phases[4]))
+            return a
+
+        return accel, accel_phased
 
     def forces(self, t: float, x: float) -> tuple[float, float]:
         """(F_contact, F_electrostatic) as they enter Eq. 3."""
@@ -114,7 +132,8 @@ class PolynomialModel:
             self.g3 = forces.series_g3(scene.R)
         except ArithmeticError:
             raise ParameterError("R", scene.R, R_OUT_OF_RANGE) from None
-        self.accel = self._make_accel(scene, self.a, self.g3)
+        self.accel, self.accel_phased = self._make_accel(scene, self.a, self.g3)
+        self.drive_frequencies = drive_frequencies(scene)
 
     @staticmethod
     def _make_accel(s: Scene, a, g3):
@@ -134,7 +153,16 @@ class PolynomialModel:
                 acc += (beta * sin(Omega * t) - gamma * cos(2.0 * Omega * t)) * G3
             return acc
 
-        return accel
+        def accel_phased(t, phases, x, v, U):  # accel with the drive's phasors given (drive_frequencies)
+            acc = U - mu * v - (a0 + x * (a1 + x * (a2 + x * (a3 + x * (a4 + x * a5)))))
+            if load_forcing:
+                acc += Delta * phases[0]
+            if ac:
+                G3 = g30 + x * (g31 + x * (g32 + x * (g33 + x * (g34 + x * g35))))
+                acc += (beta * phases[3] - gamma * phases[4]) * G3
+            return acc
+
+        return accel, accel_phased
 
     def forces(self, t: float, x: float) -> tuple[float, float]:
         """(G1(x), alpha G2(x) + (beta sin + gamma(1 - cos 2 Omega t)) G3(x)): the series of Eq. 5."""

@@ -55,7 +55,8 @@ class Plant:
                                      0.0, settings.rtol, max_step, step_budget=MAX_STEPS_PER_DOSTEP)
         else:
             self.integrator = Rk4(self.model.accel, self.model.events, t0, scene.x_start, scene.v_start,
-                                  0.0, settings.max_step or RK4_DEFAULT_STEP)
+                                  0.0, settings.max_step or RK4_DEFAULT_STEP,
+                                  phased=(self.model.drive_frequencies, self.model.accel_phased))
 
     def do_step(self, t: float, h: float, U: float) -> Outputs:
         """Advance from the communication point t to t + h with input U held constant.

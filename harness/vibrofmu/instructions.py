@@ -1,0 +1,108 @@
+"""Instructions per output of an FMU in the ladder's plain C host, counted by valgrind's callgrind.
+
+Wall time on a shared machine varies by a factor ~1.6 between runs; the number of instructions executed is
+deterministic. This module runs the ladder's C timing host (timing_host.c, one repeat) under
+`valgrind --tool=callgrind` with collection switched on only inside fmi2DoStep and fmi2GetReal, so the count is
+the work of the output loop (doStep + getReal(x)) and nothing of instantiation or initialisation; divided by
+the number of outputs it is the instruction cost per output.
+
+    python -m vibrofmu.instructions [--build DIR] [--stop 200] [--interval 0.1 --interval 1]
+
+prints the ladder's rungs on the native FMUs of DIR/native (default build/native), plus the pythonfmu FMUs of
+DIR where they run in the C host. Needs valgrind.
+"""
+from __future__ import annotations
+
+import argparse
+import re
+import shutil
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+from fmpy import extract, read_model_description
+
+from .doctor import host_environment
+from .ladder import RUNGS, compile_timing_host
+
+COUNTED = ("fmi2DoStep", "fmi2GetReal")
+FMU_FILES = {"plant": "HertzEAOscillator.fmu", "closed_loop": "HertzEAClosedLoop.fmu"}
+
+
+def _host_command(host: Path, unzip_dir: Path, start: dict, stop: float, interval: float) -> tuple[list[str], dict]:
+    md = read_model_description(str(unzip_dir))
+    variables = {v.name: v for v in md.modelVariables}
+    library = Path(unzip_dir) / "binaries" / "linux64" / f"{md.coSimulation.modelIdentifier}.so"
+    arguments = [("i" if variables[name].type == "Integer" else "r") + f"{variables[name].valueReference}={value!r}"
+                 for name, value in start.items()]
+    cmd = [str(host), str(library), (Path(unzip_dir) / "resources").as_uri(), md.guid, repr(stop), repr(interval),
+           "1", str(variables["x"].valueReference), *arguments]
+    return cmd, host_environment(Path(unzip_dir) / "resources")
+
+
+def count_instructions(fmu_unzip_dir, start_values: dict, stop: float, interval: float,
+                       host: Path | None = None) -> float:
+    """Instructions executed inside fmi2DoStep + fmi2GetReal(x) per output, for one run of the FMU unpacked in
+    fmu_unzip_dir from 0 to stop at this output interval with these start values (names as in the ladder's
+    RUNGS), in the ladder's C timing host under callgrind. host: a compiled timing host (default: compiled
+    here). Raises RuntimeError when valgrind is missing or the run fails."""
+    import os
+
+    if shutil.which("valgrind") is None:
+        raise RuntimeError("valgrind is not installed (apt-get install valgrind)")
+    with tempfile.TemporaryDirectory(prefix="vibrofmu-instr-") as work:
+        if host is None:
+            host = compile_timing_host(Path(work))
+        cmd, env = _host_command(Path(host), Path(fmu_unzip_dir), start_values, stop, interval)
+        out = Path(work) / "callgrind.out"
+        valgrind = ["valgrind", "--tool=callgrind", f"--callgrind-out-file={out}", "--collect-atstart=no",
+                    *[f"--toggle-collect={name}" for name in COUNTED]]
+        proc = subprocess.run(valgrind + cmd, capture_output=True, text=True, env={**os.environ, **env},
+                              timeout=3600)
+        if proc.returncode != 0:
+            raise RuntimeError(f"timing host under callgrind failed ({proc.returncode}): {proc.stderr.strip()[-500:]}")
+        outputs = [int(line.split()[2]) for line in proc.stdout.splitlines() if line.startswith("loop ")]
+        text = out.read_text()
+        match = re.search(r"^(?:summary|totals):\s+(\d+)", text, re.MULTILINE)
+        if not outputs or match is None:
+            raise RuntimeError("no loop line from the timing host or no total in callgrind's output")
+        return int(match.group(1)) / outputs[0]
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m vibrofmu.instructions", description=__doc__.split("\n\n")[0])
+    parser.add_argument("--build", type=Path, default=Path("build"), help="folder with the built FMUs")
+    parser.add_argument("--stop", type=float, default=200.0)
+    parser.add_argument("--interval", type=float, action="append", help="output interval (repeatable)")
+    parser.add_argument("--pythonfmu", action="store_true", help="also the pythonfmu FMUs (slow under valgrind)")
+    parser.add_argument("--rung", action="append", help="only these rungs (names as in the ladder)")
+    args = parser.parse_args(argv)
+    intervals = args.interval or [0.1, 1.0]
+    kinds = [("native", args.build / "native")] + ([("pythonfmu", args.build)] if args.pythonfmu else [])
+    with tempfile.TemporaryDirectory(prefix="vibrofmu-instr-") as work:
+        host = compile_timing_host(Path(work))
+        print(f"{'FMU':10s} {'rung':16s} " + " ".join(f"{'interval ' + format(i, 'g'):>16s}" for i in intervals))
+        for kind, folder in kinds:
+            unzipped = {}
+            for name, start_values, which in [(n, s, w) for n, w, s in RUNGS]:
+                if args.rung and name not in args.rung:
+                    continue
+                fmu = folder / FMU_FILES[which]
+                if not fmu.is_file():
+                    print(f"error: {fmu} not found (run `vibrofmu build`)", file=sys.stderr)
+                    return 2
+                if which not in unzipped:
+                    unzipped[which] = extract(str(fmu), str(Path(work) / f"{kind}-{which}"))
+                try:
+                    counts = [f"{count_instructions(unzipped[which], start_values, args.stop, i, host):16.0f}"
+                              for i in intervals]
+                except RuntimeError as error:  # e.g. fidelities 3 and 4 need the pythonfmu FMU
+                    counts = [f"{'n/a':>16s}"] * len(intervals)
+                    print(f"{kind} {name}: {str(error).splitlines()[-1][:200]}", file=sys.stderr)
+                print(f"{kind:10s} {name:16s} " + " ".join(counts), flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
