@@ -17,7 +17,7 @@ import numpy as np
 
 from .control import ERRATA_INITIAL_ESTIMATES, Controller, Gains, Law, validate_estimates, validate_law
 from .integrate import Dop853, Rk4
-from .models import Fidelity, make_model
+from .fidelities import entry, integrated
 from .parameters import ParameterError, Scene, validate
 from .plant import INTEGRATOR_REBUILT, RK4_DEFAULT_STEP, TIME_TOLERANCE, Settings, Solver, checked_settings
 from .snapshot import plain_attributes, restore_attributes
@@ -25,7 +25,7 @@ from .tracking import ReferenceSettings, make_reference
 
 # ERRATA §3.5 simulation: the plant starts at x(0) = 0.06, x'(0) = 0.01, off the reference.
 ERRATA_SCENE = Scene(x_start=0.06, v_start=0.01)
-PLANT_FIDELITIES = (Fidelity.EXACT, Fidelity.POLYNOMIAL, Fidelity.POLYNOMIAL_PAPER)
+PLANT_FIDELITIES = integrated()  # the registry's levels that integrate Eq. 3 or 7 (0, 1, 2)
 # What a snapshot leaves out: built by the constructor (_stage is a cache of the last stage's control U).
 LOOP_REBUILT = ("scene", "settings", "loop", "model", "controller", "reference", "integrator", "_stage", "warnings")
 
@@ -53,9 +53,11 @@ class ClosedLoop:
         settings, self.warnings = checked_settings(scene, settings)  # rtol clamped; RK4 drive resolution
         loop.validate()
         if settings.fidelity not in PLANT_FIDELITIES:
-            raise ParameterError("fidelity", settings.fidelity, "the closed loop's plant must be 0, 1 or 2")
+            levels = [str(int(level)) for level in PLANT_FIDELITIES]
+            raise ParameterError("fidelity", settings.fidelity, f"the closed loop's plant must be "
+                                                                f"{', '.join(levels[:-1])} or {levels[-1]}")
         self.scene, self.settings, self.loop = scene, settings, loop
-        self.model = make_model(scene, settings.fidelity)
+        self.model = entry(settings.fidelity).model(scene)
         self.controller = Controller(scene, loop.gains, loop.law)
         self.reference, note = make_reference(scene, loop.reference, t0, stop_time, cache_dirs)
         self.notes = [note]

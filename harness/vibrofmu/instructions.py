@@ -70,6 +70,67 @@ def count_instructions(fmu_unzip_dir, start_values: dict, stop: float, interval:
         return int(match.group(1)) / outputs[0]
 
 
+# The kernel floor of exact f0: Plant.do_step in C (vk_run), without the FMI layer, for this tree's kernel or the
+# single-file kernel of older ones (fmu_src/vibrokernel.c, commit f1a4d0f). The tree's own Python sets up the
+# plant (CompiledPlant) and writes the plant structure's bytes (pointer-free in every version) into a file;
+# the small C driver below loads them and runs vk_run under callgrind, so no Python is inside the count.
+_FLOOR_SETUP = """
+import ctypes, sys
+from pathlib import Path
+from vibrofmu.kernel import compile_kernel
+from vibromodel.compiled import CompiledPlant, load_library
+from vibromodel.parameters import Scene
+from vibromodel.plant import Settings
+out = Path(sys.argv[1])
+compile_kernel(out / 'vibrokernel.so')
+library, why = load_library([out])
+assert library is not None, why
+plant = CompiledPlant(Scene(), Settings(), library, 0.0)
+(out / 'plant.bin').write_bytes(ctypes.string_at(plant._address, ctypes.sizeof(plant._plant)))
+"""
+_FLOOR_DRIVER = r"""
+#include <dlfcn.h>
+#include <stdio.h>
+#include <stdlib.h>
+int main(int argc, char **argv)
+{
+    void *lib = dlopen(argv[1], RTLD_NOW);
+    int (*run)(void *, double, size_t, double *) = (int (*)(void *, double, size_t, double *))dlsym(lib, "vk_run");
+    FILE *f = fopen(argv[2], "rb");
+    static unsigned char plant[1 << 20];
+    size_t size = fread(plant, 1, sizeof plant, f);
+    double dt = strtod(argv[3], NULL);
+    size_t n = strtoul(argv[4], NULL, 10);
+    double *x = malloc(n * sizeof *x);
+    int code = run(plant, dt, n, x);
+    printf("%d %zu %.17g\n", code, size, x[n - 1]);
+    return code;
+}
+"""
+
+
+def count_kernel_floor(tree: Path, python: Path, stop: float, interval: float) -> float:
+    """Instructions per output inside vk_run (stop / interval do_steps of the paper example's exact f0 plant) for
+    the kernel of the checkout `tree`, set up by `python` (that tree's environment)."""
+    import os
+
+    n = int(round(stop / interval))
+    with tempfile.TemporaryDirectory(prefix="vibrofmu-floor-") as work:
+        work = Path(work)
+        env = {**os.environ, "PYTHONPATH": f"{Path(tree) / 'fmu_src'}{os.pathsep}{Path(tree) / 'harness'}"}
+        subprocess.run([str(python), "-c", _FLOOR_SETUP, str(work)], check=True, env=env, cwd=tree)
+        (work / "driver.c").write_text(_FLOOR_DRIVER)
+        subprocess.run(["gcc", "-O2", "-o", str(work / "driver"), str(work / "driver.c"), "-ldl"], check=True)
+        out = work / "callgrind.out"
+        proc = subprocess.run(["valgrind", "--tool=callgrind", f"--callgrind-out-file={out}", "--collect-atstart=no",
+                               "--toggle-collect=vk_run", str(work / "driver"), str(work / "vibrokernel.so"),
+                               str(work / "plant.bin"), repr(interval), str(n)], capture_output=True, text=True)
+        if proc.returncode != 0:
+            raise RuntimeError(f"kernel floor under callgrind failed: {proc.stderr.strip()[-800:]}")
+        match = re.search(r"^(?:summary|totals):\s+(\d+)", out.read_text(), re.MULTILINE)
+        return int(match.group(1)) / n
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="python -m vibrofmu.instructions", description=__doc__.split("\n\n")[0])
     parser.add_argument("--build", type=Path, default=Path("build"), help="folder with the built FMUs")
@@ -77,8 +138,17 @@ def main(argv=None) -> int:
     parser.add_argument("--interval", type=float, action="append", help="output interval (repeatable)")
     parser.add_argument("--pythonfmu", action="store_true", help="also the pythonfmu FMUs (slow under valgrind)")
     parser.add_argument("--rung", action="append", help="only these rungs (names as in the ladder)")
+    parser.add_argument("--floor", type=Path, metavar="TREE", action="append",
+                        help="instead: exact f0's kernel floor (vk_run) of this checkout, with its .venv (repeatable)")
     args = parser.parse_args(argv)
     intervals = args.interval or [0.1, 1.0]
+    if args.floor:
+        print(f"{'kernel floor, exact f0':40s} " + " ".join(f"{'interval ' + format(i, 'g'):>16s}" for i in intervals))
+        for tree in args.floor:
+            counts = [count_kernel_floor(tree.resolve(), tree.resolve() / ".venv" / "bin" / "python", args.stop, i)
+                      for i in intervals]
+            print(f"{str(tree):40s} " + " ".join(f"{c:16.0f}" for c in counts), flush=True)
+        return 0
     kinds = [("native", args.build / "native")] + ([("pythonfmu", args.build)] if args.pythonfmu else [])
     with tempfile.TemporaryDirectory(prefix="vibrofmu-instr-") as work:
         host = compile_timing_host(Path(work))
