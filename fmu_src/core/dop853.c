@@ -106,11 +106,13 @@ static inline __attribute__((always_inline)) int stages_of(DopRhs rhs, void *ctx
     return FAULT_NONE;
 }
 
-/* stages_of with the dimension a constant where it is the plant's (2): the compiler unrolls the component loops */
+/* stages_of with the dimension a constant where it is the plant's (2) or the closed loop's (11: x, v and nine
+   estimates, closedloop.h): the compiler unrolls the component loops */
 static int run_stages(const Dop853 *s, DopRhs rhs, void *ctx, double t, const double *y, double h, int first,
                       int last, Stages *k, double *y_last)
 {
     if (s->n == 2) return stages_of(rhs, ctx, t, y, h, first, last, k, y_last, 2);
+    if (s->n == 11) return stages_of(rhs, ctx, t, y, h, first, last, k, y_last, 11);
     return stages_of(rhs, ctx, t, y, h, first, last, k, y_last, (int)s->n);
 }
 
@@ -134,12 +136,12 @@ static int trial(Dop853 *s, DopRhs rhs, void *ctx, double t, const double *y, do
     for (int i = 0; i < n; i++) scale[i] = s->atol + s->rtol * py_max(fabs(y[i]), fabs(y_new[i]));
     double e5 = 0.0, e3 = 0.0;
     for (int i = 0; i < n; i++) {
-        double term = py_pow(dot(DOP_E5, DOP_N_STAGES + 1, k->k[i]) / scale[i], 2.0, &fault);
+        double term = py_square(dot(DOP_E5, DOP_N_STAGES + 1, k->k[i]) / scale[i], &fault);
         if (fault) return fault;
         e5 += term;
     }
     for (int i = 0; i < n; i++) {
-        double term = py_pow(dot(DOP_E3, DOP_N_STAGES + 1, k->k[i]) / scale[i], 2.0, &fault);
+        double term = py_square(dot(DOP_E3, DOP_N_STAGES + 1, k->k[i]) / scale[i], &fault);
         if (fault) return fault;
         e3 += term;
     }

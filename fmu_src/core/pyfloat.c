@@ -10,18 +10,18 @@
 #include <stdlib.h>
 #include <string.h>
 
-/* Python's iv ** iw for floats (CPython 3.11 float_pow) with the exponents used here: 2 (squares of any
- * float) and -1/8, 1/9 (of error ratios, which are >= 0 or NaN). So float_pow's branches for an exponent
+/* Python's iv ** iw for floats (CPython 3.11 float_pow) with the exponents used here: -1/8, 1/9 (of error
+ * ratios, which are >= 0 or NaN; squares are py_square's products). So float_pow's branches for an exponent
  * that is 0, NaN, infinite or an odd integer, for 0 ** negative (ZeroDivisionError) and for negative **
- * fraction (a complex result) cannot be taken and are left out. noipa: GCC must neither fold pow(iv, 2.0)
- * into iv * iv nor drop its errno (libm's pow need not round the square as the product does). */
+ * fraction (a complex result) cannot be taken and are left out; a negative base (an even integer exponent)
+ * is kept. noipa: GCC must not drop pow's errno. */
 __attribute__((noipa)) double py_pow(double iv, double iw, int *fault)
 {
     double ix;
     if (isnan(iv)) return iv;
     if (isinf(iv)) return iw > 0.0 ? fabs(iv) : 0.0;
     if (iv == 0.0) return 0.0;
-    if (iv < 0.0) iv = -iv;  /* iw is the even integer 2 */
+    if (iv < 0.0) iv = -iv;  /* only for an even integer iw */
     if (iv == 1.0) return 1.0;
     errno = 0;
     ix = pow(iv, iw);

@@ -40,7 +40,14 @@ static inline double py_sin(double x, int *fault)
     if (isnan(r) && !isnan(x)) *fault = FAULT_MATH_DOMAIN;
     return r;
 }
-/* iv ** iw for iw = 2, -1/8, 1/9 (float_pow): FAULT_OVERFLOW */
+/* q * q, FAULT_OVERFLOW where it overflows from a finite q, as q ** 2 raises (integrate._square) */
+static inline double py_square(double q, int *fault)
+{
+    double square = q * q;
+    if (isinf(square) && !isinf(q)) *fault = FAULT_OVERFLOW;
+    return square;
+}
+/* iv ** iw for iw = -1/8, 1/9 (float_pow): FAULT_OVERFLOW */
 double py_pow(double iv, double iw, int *fault);
 /* math.hypot(*values[0..n-1]) */
 double py_hypot(const double *values, int n);

@@ -18,8 +18,10 @@ The plant's scalar path only pays one `is None` test per stage.
 """
 from __future__ import annotations
 
+import errno
 import importlib.util
 import math
+import os
 import sys
 
 import numpy as np
@@ -245,15 +247,15 @@ class Dop853:
         kx, kv, kU = stages
         sx = self.atol + self.rtol * max(abs(x), abs(x_new))
         sv = self.atol + self.rtol * max(abs(v), abs(v_new))
-        e5 = (_dot(E5, kx) / sx) ** 2 + (_dot(E5, kv) / sv) ** 2
-        e3 = (_dot(E3, kx) / sx) ** 2 + (_dot(E3, kv) / sv) ** 2
+        e5 = _square(_dot(E5, kx) / sx) + _square(_dot(E5, kv) / sv)
+        e3 = _square(_dot(E3, kx) / sx) + _square(_dot(E3, kv) / sv)
         n = 2
         if self.rates is not None:  # component by component, left to right (the C twin's order)
             sU = (self.atol + self.rtol * np.maximum(np.abs(self.U), np.abs(self.U_new))).tolist()
             for e, s in zip(_dot(E5, kU).tolist(), sU):
-                e5 += (e / s) ** 2
+                e5 += _square(e / s)
             for e, s in zip(_dot(E3, kU).tolist(), sU):
-                e3 += (e / s) ** 2
+                e3 += _square(e / s)
             n += len(sU)
         if not math.isfinite(e5 + e3):
             return x, v, stages, math.inf
@@ -581,6 +583,15 @@ def _rk4_growth(zr, zi):
     pr, pi = 1.0 + (zr * pr - zi * pi), zr * pi + zi * pr
     pr, pi = 1.0 + (zr * pr - zi * pi), zr * pi + zi * pr
     return math.hypot(pr, pi)
+
+
+def _square(q):
+    """q * q, raising OverflowError where it overflows from a finite q, as q ** 2 does (core/pyfloat.h py_square;
+    one product instead of pow, which libm need not round as the product)."""
+    square = q * q
+    if square == math.inf and abs(q) != math.inf:
+        raise OverflowError(errno.ERANGE, os.strerror(errno.ERANGE))
+    return square
 
 
 PHASE_RESYNC = 16  # RK4 steps between two direct evaluations of the drive's phasors (core/rk4.h)

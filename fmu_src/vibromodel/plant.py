@@ -20,7 +20,7 @@ from .snapshot import plain_attributes, restore_attributes
 
 # What a snapshot leaves out: built from the scene and settings by the constructor.
 PLANT_REBUILT = ("scene", "settings", "model", "integrator", "solution", "warnings")
-INTEGRATOR_REBUILT = ("accel", "events", "rates")
+INTEGRATOR_REBUILT = ("accel", "events", "rates", "phased")
 SLOW_FLOW_REBUILT = ("flow",)  # fidelity 3: its table and integration end are plain data
 
 
