@@ -96,7 +96,13 @@ static inline __attribute__((always_inline)) int stages_of(DopRhs rhs, void *ctx
         double c = st == DOP_N_STAGES ? 1.0 : DOP_C[st];
         double ts = t + c * h;
         int m = st < k->n ? st : k->n;
-        for (int i = 0; i < n; i++) ys[i] = y[i] + h * dot(row, m, k->k[i]);
+        double sum[DOP_MAX_DIM];  /* dot(row, m, k->k[i]) for every i at once: each sum in the same order */
+        for (int i = 0; i < n; i++) sum[i] = 0.0;
+        for (int j = 0; j < m; j++) {
+            double a = row[j];
+            for (int i = 0; i < n; i++) sum[i] += a * k->k[i][j];
+        }
+        for (int i = 0; i < n; i++) ys[i] = y[i] + h * sum[i];
         int fault = rhs(ctx, ts, ys, f);
         if (fault) return fault;
         for (int i = 0; i < n; i++) k->k[i][k->n] = f[i];
