@@ -61,7 +61,8 @@ def count_instructions(fmu_unzip_dir, start_values: dict, stop: float, interval:
         proc = subprocess.run(valgrind + cmd, capture_output=True, text=True, env={**os.environ, **env},
                               timeout=3600)
         if proc.returncode != 0:
-            raise RuntimeError(f"timing host under callgrind failed ({proc.returncode}): {proc.stderr.strip()[-500:]}")
+            own = [line for line in proc.stderr.splitlines() if line and not line.startswith("==")]
+            raise RuntimeError(f"timing host under callgrind failed ({proc.returncode}): {' | '.join(own)[-500:]}")
         outputs = [int(line.split()[2]) for line in proc.stdout.splitlines() if line.startswith("loop ")]
         text = out.read_text()
         match = re.search(r"^(?:summary|totals):\s+(\d+)", text, re.MULTILINE)
@@ -169,7 +170,7 @@ def main(argv=None) -> int:
                               for i in intervals]
                 except RuntimeError as error:  # e.g. fidelities 3 and 4 need the pythonfmu FMU
                     counts = [f"{'n/a':>16s}"] * len(intervals)
-                    print(f"{kind} {name}: {str(error).splitlines()[-1][:200]}", file=sys.stderr)
+                    print(f"{kind} {name}: {str(error)[:300]}", file=sys.stderr)
                 print(f"{kind:10s} {name:16s} " + " ".join(counts), flush=True)
     return 0
 
