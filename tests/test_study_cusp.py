@@ -164,3 +164,28 @@ def test_reused_fmu_instances_give_the_core_bits_also_after_a_failure(plant_fmu)
         for key in ("r", "A", "B", "mean", "settled", "periods", "x_end", "v_end", "contact_loss", "pull_in", "failed"):
             assert a[key] == b[key], (case, key, a[key], b[key])
     assert fmu.made == 1  # one instance served every run
+
+
+@pytest.mark.parametrize("order", ["1,x", "0,2", ""])
+def test_scaling_command_rejects_a_bad_order(capsys, order):
+    from vibrofmu.study.scaling import main as scaling
+
+    assert scaling(["--order", order]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error: --order")
+
+
+@pytest.mark.parametrize("item, message", [("cusp_test=2", "cusp_test = 2"), ("cusp_test_periods=0.5", "cusp_test_periods")])
+def test_bad_cusp_test_settings_give_one_line_and_exit_2(tmp_path, capsys, item, message):
+    from vibrofmu.cli import main
+
+    assert main(["study", "response-map", "--quick", "--set", item, "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error: ") and message in err[0], err
+
+
+def test_the_cusp_test_does_not_change_the_studys_identity():
+    """--resume of a finished map with --set cusp_test=1 must find the same study on disk."""
+    plain = build_spec("response-map", quick=True)
+    tested = build_spec("response-map", sets=["cusp_test=1", "cusp_test_periods=9000"], quick=True)
+    assert plain.digest() == tested.digest()

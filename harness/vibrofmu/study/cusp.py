@@ -16,11 +16,12 @@
    flow's slowest relaxation rate -Re lambda there (capped). Two runs on one attractor converge to each other
    (same forcing, same phase) like e^{-lambda t}; on two attractors their distance tends to the branches'
    separation. The distance |c_a - c_b| (first harmonics over the same windows) is averaged over the beat
-   period of the AC drive (2 pi / |Omega - 2 omega|) and extrapolated to t -> infinity by Aitken's Delta^2
-   from three equally spaced samples (exact for d_inf + a e^{-lambda t}). Verdict: monostable if the distance
-   at the end is below TEST_BOUND r; bistable if the extrapolated distance is above it; else undecided (still
-   converging at the cap). The verdicts give a Delta bracket of the cusp and a ghost-free band per row, which
-   goes through the same extrapolation.
+   period of the AC drive (2 pi / |Omega - 2 omega|) and sampled at a third, two thirds and the end of the run.
+   Verdict: monostable if the distance at the end is below TEST_BOUND r; bistable if it is above and has
+   settled (changed by less than TEST_SETTLED over the last third); else the wait doubles, up to a cap, and a
+   point still moving at the cap is undecided (Aitken's Delta^2 extrapolation of the three samples is
+   reported for it, as a hint only: near the cusp the relaxation is not exponential). The verdicts give a
+   Delta bracket of the cusp and a ghost-free band per row, which goes through the same extrapolation.
 """
 from __future__ import annotations
 
@@ -40,7 +41,12 @@ MIN_POINTS = 3  # extrapolation: rows with at least 3 bistable grid points (widt
 # of Delta_c, 1 % of the grid's Delta step
 TEST_BOUND = 0.02
 TEST_MAX_PERIODS = 6000  # default cap of the two-start wait (forcing periods)
-TEST_E_FOLDS = 1.0  # wait: ln(d0 / bound) relaxation times, plus this many more
+TEST_E_FOLDS = 1.0  # first wait: ln(d0 / bound) relaxation times of the slow flow, plus this many more
+# bistable: the distance changed by less than 10 % over the last third of the run. Two runs heading for one
+# state, a few slow-flow relaxation times into the run, still lose more than that per third; two runs
+# creeping through a fold's ghost (where the relaxation is slower than any steady state's) are caught by the
+# doubling of the wait: their distance drops once one of them leaves the ghost
+TEST_SETTLED = 0.10
 
 
 # --- 1. extrapolation --------------------------------------------------------------------------------
@@ -138,9 +144,37 @@ def aitken(d1: float, d2: float, d3: float) -> float:
     return d3 - (d3 - d2) ** 2 / (d3 - 2 * d2 + d1)
 
 
+def judge(ca: np.ndarray, cb: np.ndarray, beat: int, bound: float = TEST_BOUND, long_enough: bool = True) -> dict:
+    """The verdict from the two runs' first harmonics per window (module docstring): the distance |c_a - c_b|
+    averaged over a beat, relative to the larger amplitude, at a third, two thirds and the end of the run.
+    long_enough: the run lasted the wait the slow flow's rate asks for (else a slow approach to one state
+    could pass for settled, and the verdict cannot be bistable)."""
+    d = np.abs(ca - cb)
+    windows = len(d)
+
+    def beat_mean(values, end):  # mean over the beat ending at window `end` (exclusive)
+        return float(np.mean(values[end - beat:end]))
+
+    ends = [max(windows // 3, beat), max(2 * windows // 3, beat), windows]
+    r = [beat_mean(np.abs(ca), windows), beat_mean(np.abs(cb), windows)]
+    scale = max(r)
+    samples = [beat_mean(d, end) / scale for end in ends]
+    end = samples[-1]
+    settled = abs(samples[2] - samples[1]) <= TEST_SETTLED * samples[2]
+    if end <= bound:
+        verdict = "monostable"
+    elif settled and long_enough:
+        verdict = "bistable"
+    else:
+        verdict = "undecided"
+    return {"verdict": verdict, "distance": end, "distance_samples": samples, "extrapolated": aitken(*samples),
+            "r": r, "jump": abs(r[0] - r[1])}
+
+
 def two_start(engine, scene, starts, max_periods: int = TEST_MAX_PERIODS, bound: float = TEST_BOUND) -> dict:
     """Run from the two start states side by side (same forcing phase) and decide whether they reach one
-    state or two (module docstring). starts: ((x0, v0), (x1, v1))."""
+    state or two (module docstring). starts: ((x0, v0), (x1, v1)). The first wait comes from the slow flow's
+    rate; while the verdict is undecided the wait doubles, up to max_periods."""
     import time
 
     started = time.perf_counter()
@@ -152,8 +186,9 @@ def two_start(engine, scene, starts, max_periods: int = TEST_MAX_PERIODS, bound:
     n_window = WINDOW_PERIODS * SAMPLES_PER_PERIOD
     c = [[], []]
     n = 0
-    wait = None
+    wait = first_wait = None
     message = ""
+    result = None
     try:
         while True:
             x = np.empty((2, n_window))
@@ -168,38 +203,27 @@ def two_start(engine, scene, starts, max_periods: int = TEST_MAX_PERIODS, bound:
                 d0 = float(np.mean(np.abs(np.array(c[0]) - np.array(c[1])))) / max(np.mean(np.abs(c[0])), 1e-300)
                 e_folds = math.log(max(d0, bound) / bound) + TEST_E_FOLDS
                 wanted = e_folds / max(rate, 1e-300) / T  # forcing periods
-                # at least three beats after the first, for three beat-averaged samples
-                wait = int(min(max_periods, max(wanted, 4 * beat * WINDOW_PERIODS)))
+                # at least four beats, for three beat-averaged samples a third of the run apart
+                needed = max(wanted, 4 * beat * WINDOW_PERIODS)
+                wait = first_wait = int(min(max_periods, needed))
             if wait is not None and windows * WINDOW_PERIODS >= wait:
-                break
+                result = judge(np.array(c[0]), np.array(c[1]), beat, bound, windows * WINDOW_PERIODS >= needed)
+                if result["verdict"] != "undecided" or wait >= max_periods:
+                    break
+                wait = min(max_periods, 2 * wait)
     except Exception as error:  # noqa: BLE001 - a run that stops (pull-in, solver) gives no verdict
         message = f"{type(error).__name__}: {error}"
     finally:
         for run in runs:
             run.release(not message)
     out = {"Delta": scene.Delta, "omega": scene.omega, "rate": rate, "beat_windows": beat,
-           "periods": len(c[0]) * WINDOW_PERIODS, "cost_s": time.perf_counter() - started, "message": message}
-    if message or len(c[0]) < 3 * beat:
+           "periods": len(c[0]) * WINDOW_PERIODS, "first_wait_periods": first_wait, "cap_periods": max_periods,
+           "cost_s": time.perf_counter() - started, "message": message}
+    if message or result is None:
         out.update(verdict="failed" if message else "too short", distance=math.nan, extrapolated=math.nan,
-                   r=[math.nan, math.nan])
+                   r=[math.nan, math.nan], jump=math.nan)
         return out
-    ca, cb = np.array(c[0]), np.array(c[1])
-    d = np.abs(ca - cb)
-    windows = len(d)
-
-    def beat_mean(values, end):  # mean over the beat ending at window `end` (exclusive)
-        return float(np.mean(values[end - beat:end]))
-
-    thirds = [windows // 3, 2 * windows // 3, windows]
-    thirds[0] = max(thirds[0], beat)
-    r = [beat_mean(np.abs(ca), windows), beat_mean(np.abs(cb), windows)]
-    scale = max(r)
-    samples = [beat_mean(d, end) / scale for end in thirds]
-    limit = aitken(*samples)
-    end = samples[-1]
-    verdict = "monostable" if end <= bound else ("bistable" if limit > bound else "undecided")
-    out.update(verdict=verdict, distance=end, distance_samples=samples, extrapolated=limit, r=r,
-               jump=abs(r[0] - r[1]), wait_periods=wait)
+    out.update(result)
     return out
 
 

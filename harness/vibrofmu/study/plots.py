@@ -131,7 +131,7 @@ def response_map(result: dict, path: Path) -> Path:
         ax.set_xlim(extent[0], extent[1])
         ax.set_ylim(extent[2], extent[3])
     axes[0].set_ylabel("Delta")
-    axes[2].legend(fontsize=7, loc="upper left")
+    axes[2].legend(fontsize=7, loc="lower left")
     agreement = result["summary"]["agreement"]
     fig.suptitle(f"response map: bistability agreement {agreement['fraction']:.3f} "
                  f"({agreement['agreeing']}/{agreement['compared']} points off the folds' margin)")
