@@ -189,3 +189,35 @@ def test_the_cusp_test_does_not_change_the_studys_identity():
     plain = build_spec("response-map", quick=True)
     tested = build_spec("response-map", sets=["cusp_test=1", "cusp_test_periods=9000"], quick=True)
     assert plain.digest() == tested.digest()
+
+
+def test_ghost_wait_outside_the_band_only_and_its_square_root_law():
+    """No ghost wait inside the slow flow's bistable band; outside, the passage pi / sqrt(|a b| d_omega) grows
+    as d_omega^(-1/2): four times closer to the fold, twice as long. Checked against a direct run of the slow
+    flow: started on the high branch just past the fold, it leaves that branch (r drops below the middle of
+    the two branches' amplitudes at the fold) within the ghost wait, and not within a tenth of it."""
+    from scipy.integrate import solve_ivp
+
+    from vibromodel import averaging as av
+
+    scene = Scene(mu=0.002, Delta=0.0007)
+    model = av.averaged(scene)
+    lo, hi = (f.omega for f in av.folds(model, samples=400))
+    assert cusp.ghost_periods(scene.with_values(omega=0.5 * (lo + hi))) == 0.0
+    # in tau (periods times 2 pi / omega): the square-root law exactly, to rounding
+    near, far = (cusp.ghost_periods(scene.with_values(omega=lo - d)) * 2 * math.pi / (lo - d) for d in (2.5e-6, 1e-5))
+    assert near / far == pytest.approx(2.0, rel=1e-9)
+    # the slow flow past the low-frequency fold, from the fold's state (the vanished high branch)
+    omega = lo - 1e-5
+    fold = min(av.folds(model, samples=400), key=lambda f: abs(f.omega - lo))
+    state = av.steady_state(model.flow(lo), fold.r)
+    low = min(s.r for s in av.steady_states(model.flow(omega), model.r_max) if s.stable)
+    flow = model.flow(omega)
+    wait = far  # tau
+    sol = solve_ivp(lambda t, z: flow.rhs(*z), (0.0, wait), [state.A, state.B], rtol=1e-9, atol=1e-12,
+                    dense_output=True)
+    t = np.linspace(0.0, wait, 4000)
+    r = np.hypot(*sol.sol(t))
+    left = t[np.argmax(r < 0.5 * (fold.r + low))]
+    assert r[-1] < 0.5 * (fold.r + low)  # it left within the ghost wait (two passages)
+    assert left > 0.1 * wait  # and the wait is not a gross overestimate

@@ -18,7 +18,9 @@
    separation. The distance |c_a - c_b| (first harmonics over the same windows) is averaged over the beat
    period of the AC drive (2 pi / |Omega - 2 omega|) and sampled at a third, two thirds and the end of the run.
    Verdict: monostable if the distance at the end is below TEST_BOUND r; bistable if it is above and has
-   settled (changed by less than TEST_SETTLED over the last third); else the wait doubles, up to a cap, and a
+   settled (changed by less than TEST_SETTLED over the last third) and, outside the slow flow's bistable band,
+   the run outlasted twice the passage through the nearest fold's ghost (ghost_periods); else the wait doubles,
+   up to a cap, and a
    point still moving at the cap is undecided (Aitken's Delta^2 extrapolation of the three samples is
    reported for it, as a hint only: near the cusp the relaxation is not exponential). The verdicts give a
    Delta bracket of the cusp and a ghost-free band per row, which goes through the same extrapolation.
@@ -124,6 +126,25 @@ def slowest_rate(scene) -> float:
     return min(rates, default=scene.mu / 2)
 
 
+GHOST_PASSAGES = 2.0  # a bistable verdict outside the slow flow's band needs this many ghost passage times
+
+
+def ghost_periods(scene) -> float:
+    """Forcing periods a run must last before its distance from a two-start partner can mean bistability at a
+    point outside the slow flow's bistable band: GHOST_PASSAGES times the passage through the nearest fold's
+    ghost, pi / sqrt(|a b| d_omega) (averaging.ghost_margin, Strogatz §4.3), d_omega the distance from the
+    fold. A run started on the vanished branch creeps that long and looks settled meanwhile. 0 inside the
+    band or where the slow flow has no fold."""
+    model = av.averaged(scene)
+    folds = av.folds(model, samples=400)
+    if len(folds) < 2 or folds[0].omega <= scene.omega <= folds[-1].omega:
+        return 0.0
+    fold = min(folds, key=lambda f: abs(f.omega - scene.omega))
+    # ghost_margin(wait) = pi^2 / (|a b| wait^2): at wait = 1 it is pi^2 / |a b|
+    passage = math.sqrt(av.ghost_margin(model, fold, 1.0) / abs(scene.omega - fold.omega))
+    return GHOST_PASSAGES * passage * scene.omega / (2 * math.pi)
+
+
 def beat_windows(scene) -> int:
     """Windows of WINDOW_PERIODS forcing periods that span one beat of the AC drive, 2 pi / |Omega - 2 omega|
     (1 when there is no AC drive or no beat)."""
@@ -182,6 +203,7 @@ def two_start(engine, scene, starts, max_periods: int = TEST_MAX_PERIODS, bound:
     T = 2 * math.pi / scene.omega
     h = T / SAMPLES_PER_PERIOD
     beat = beat_windows(scene)
+    ghost = ghost_periods(scene)
     runs = [engine.open(scene.with_values(x_start=x, v_start=v)) for x, v in starts]
     n_window = WINDOW_PERIODS * SAMPLES_PER_PERIOD
     c = [[], []]
@@ -204,7 +226,7 @@ def two_start(engine, scene, starts, max_periods: int = TEST_MAX_PERIODS, bound:
                 e_folds = math.log(max(d0, bound) / bound) + TEST_E_FOLDS
                 wanted = e_folds / max(rate, 1e-300) / T  # forcing periods
                 # at least four beats, for three beat-averaged samples a third of the run apart
-                needed = max(wanted, 4 * beat * WINDOW_PERIODS)
+                needed = max(wanted, 4 * beat * WINDOW_PERIODS, ghost)
                 wait = first_wait = int(min(max_periods, needed))
             if wait is not None and windows * WINDOW_PERIODS >= wait:
                 result = judge(np.array(c[0]), np.array(c[1]), beat, bound, windows * WINDOW_PERIODS >= needed)
@@ -216,7 +238,7 @@ def two_start(engine, scene, starts, max_periods: int = TEST_MAX_PERIODS, bound:
     finally:
         for run in runs:
             run.release(not message)
-    out = {"Delta": scene.Delta, "omega": scene.omega, "rate": rate, "beat_windows": beat,
+    out = {"Delta": scene.Delta, "omega": scene.omega, "rate": rate, "beat_windows": beat, "ghost_periods": ghost,
            "periods": len(c[0]) * WINDOW_PERIODS, "first_wait_periods": first_wait, "cap_periods": max_periods,
            "cost_s": time.perf_counter() - started, "message": message}
     if message or result is None:
@@ -273,12 +295,15 @@ def test_summary(tests: list[dict], deltas, omegas) -> dict:
     jump = np.full((n_d, n_w), np.nan)
     verdicts = {}
     for t in tests:
+        if t["verdict"] == "bistable" and t["periods"] < t.get("ghost_periods", 0.0):
+            t = {**t, "verdict": "undecided"}  # shorter than the ghost passage (ghost_periods)
         verdicts[t["verdict"]] = verdicts.get(t["verdict"], 0) + 1
         if t["verdict"] == "bistable":
             mask[t["Delta_index"], t["omega_index"]] = True
             jump[t["Delta_index"], t["omega_index"]] = t["jump"]
     rows_with = [j for j in range(n_d) if mask[j].any()]
-    undecided_rows = sorted({t["Delta_index"] for t in tests if t["verdict"] in ("undecided", "too short", "failed")})
+    undecided_rows = sorted({t["Delta_index"] for t in tests if t["verdict"] in ("undecided", "too short", "failed")
+                             or (t["verdict"] == "bistable" and t["periods"] < t.get("ghost_periods", 0.0))})
     bracket = None
     if rows_with:
         first = rows_with[0]
