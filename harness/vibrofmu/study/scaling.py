@@ -7,7 +7,9 @@ per entry of --order, each in a fresh folder and a fresh LocalCluster, and print
 wall time (first task to last result, summary.json run.compute_wall_s), the mean cost per case, the overhead
 per case (worker-seconds not spent in a case, per case) and the scheduler's cost per task; then the speed-up
 T(1) / T(2) of the mean compute wall times, and the 64-worker projection (analysis.projection) of the
-2-worker runs. Alternating 1, 2, 2, 1 cancels a slow drift of the machine's load to first order.
+2-worker runs. Alternating 1, 2, 2, 1 cancels a slow drift of the machine's load to first order; the speed-up
+at equal cost per case, 2 e_2 / e_1 (e_W = sum of case costs / (W x compute wall), the parallel efficiency),
+also leaves out the cost per case's drift with the load of a shared machine.
 """
 from __future__ import annotations
 
@@ -61,14 +63,22 @@ def main(argv: list[str] | None = None) -> int:
                   f"{run['computed']} cases, {run['case_cost_s_mean'] * 1e3:.1f} ms a case, overhead "
                   f"{run['overhead_s_per_case'] * 1e3:.1f} ms a case, scheduler {run['scheduler_s_per_task'] * 1e3:.2f} ms a task, "
                   f"batch {run['batch_size']}", flush=True)
-    by = {}
+    by, efficiency = {}, {}
     for workers, summary in runs:
-        by.setdefault(workers, []).append(summary["run"]["compute_wall_s"])
+        run = summary["run"]
+        by.setdefault(workers, []).append(run["compute_wall_s"])
+        # parallel efficiency: the fraction of the workers' time spent inside cases, sum(c) / (W T)
+        efficiency.setdefault(workers, []).append(run["case_cost_s_sum"] / (workers * run["compute_wall_s"]))
     if 1 in by and 2 in by:
         speedup = statistics.mean(by[1]) / statistics.mean(by[2])
         pairs = ", ".join(f"{statistics.mean(by[1]) / t:.2f}" for t in by[2])
         print(f"speed-up 2 workers vs 1: {speedup:.2f}x (mean compute wall {statistics.mean(by[1]):.2f} s / "
               f"{statistics.mean(by[2]):.2f} s; per 2-worker run: {pairs})")
+        # T(W) = N c / (W e_W): at equal cost per case the speed-up is 2 e_2 / e_1. On a shared machine the
+        # cost per case drifts with the load; this ratio leaves that drift out and keeps what scheduling loses
+        e1, e2 = statistics.mean(efficiency[1]), statistics.mean(efficiency[2])
+        print(f"speed-up at equal cost per case, 2 e_2 / e_1: {2 * e2 / e1:.2f}x (parallel efficiency e_1 = "
+              f"{e1:.3f}, e_2 = {e2:.3f}: the share of the workers' time spent inside cases)")
     last = [summary for workers, summary in runs if workers == max(order)][-1]
     projection = last.get("projection_64_workers", {})
     if projection:
