@@ -5,8 +5,9 @@ numbers, and the throughput projection.
   are bistable where the up and down sweeps settle on different branches (sweep.hysteresis_jumps' rule,
   with BRANCHES_APART).
   Points nearer a slow-flow fold than stability.sweep_tolerance (one omega step + the ghost margin of the
-  longest wait) are not compared. The cusp: the smallest Delta with two folds, by bisection (slow flow), and
-  the first Delta row with a bistable point (runs).
+  longest wait) are not compared. The cusp: the smallest Delta with two folds, by bisection (slow flow), the
+  first Delta row with a bistable point (runs), and the estimates of study.cusp (extrapolation of the bistable
+  bands of the runs and of the slow flow; the two-start test's bracket when it ran).
 - basins: which stable steady state each initial state reaches, against the averaged model's run from it
   (cases.predicted_attractor); the predicted boundary is the stable manifold of the slow flow's saddle,
   traced backwards in (A, B) and mapped to (x0, v0) by the averaged model's reconstruction of x, x'.
