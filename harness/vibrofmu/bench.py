@@ -521,7 +521,8 @@ def build_references(scene: Scene, stop_time: float, fidelities) -> tuple[dict, 
 
 def run_bench(fmu: Path, out_dir: Path, quick: bool = False, repeats: int | None = None,
               extreme_rows: Callable[[bool], list[dict]] | None = None,
-              progress: Callable[[str], None] | None = None, closed_loop_fmu: Path | None = None) -> dict:
+              progress: Callable[[str], None] | None = None, closed_loop_fmu: Path | None = None,
+              ladder_rounds: int | None = None, instructions: bool = True) -> dict:
     """Run every case and the speed-accuracy ladder (ladder.py; the closed-loop FMU is built when not given), write
     out_dir/bench.json, out_dir/work_precision.png and out_dir/ladder.png; return the JSON's content."""
     bench_started = time.perf_counter()
@@ -564,7 +565,7 @@ def run_bench(fmu: Path, out_dir: Path, quick: bool = False, repeats: int | None
                              "extract_seconds for the unpacking"}
     extremes = extreme_rows(quick) if extreme_rows is not None else []
     say("speed-accuracy ladder (C host and FMPy) ...")
-    ladder_record = run_ladder_with_fmus(fmu, closed_loop_fmu, quick, say)
+    ladder_record = run_ladder_with_fmus(fmu, closed_loop_fmu, quick, say, ladder_rounds, instructions)
     summary = {
         "bench": {"quick": quick, "stop_time": plan.stop_time, "repeats": plan.repeats, "threshold": THRESHOLD,
                   "output_intervals": list(INTERVALS), "scene": scene.as_dict(), "fmu": str(fmu),
@@ -591,18 +592,26 @@ def run_bench(fmu: Path, out_dir: Path, quick: bool = False, repeats: int | None
     return summary
 
 
-LADDER_QUICK_STOP, LADDER_QUICK_REPEATS = 50.0, 1  # --quick: a shorter ladder, one timed run per rung
+LADDER_QUICK_STOP, LADDER_QUICK_ROUNDS = 50.0, 2  # --quick: a shorter ladder, two interleaved rounds
+LADDER_ROUNDS = 3  # the issue's "best of 3"
+LADDER_QUICK_INSTRUCTION_INTERVALS = (0.1,)
 
 
-def run_ladder_with_fmus(fmu: Path, closed_loop_fmu: Path | None, quick: bool, say) -> dict:
-    """The ladder on tau in [0, 200] (issue 13), best of FULL_REPEATS; --quick: [0, 50], one run."""
-    stop, repeats = (LADDER_QUICK_STOP, LADDER_QUICK_REPEATS) if quick else (QUICK_STOP, FULL_REPEATS)
+def run_ladder_with_fmus(fmu: Path, closed_loop_fmu: Path | None, quick: bool, say, rounds: int | None = None,
+                         instructions: bool = True) -> dict:
+    """The ladder on tau in [0, 200] (issue 13) in LADDER_ROUNDS interleaved rounds, instruction counts at
+    intervals 0.1 and 1; --quick: [0, 50], two rounds, instructions at 0.1 only."""
+    stop = LADDER_QUICK_STOP if quick else QUICK_STOP
+    if rounds is None:
+        rounds = LADDER_QUICK_ROUNDS if quick else LADDER_ROUNDS
+    intervals = LADDER_QUICK_INSTRUCTION_INTERVALS if quick else ladder.INSTRUCTION_INTERVALS
     with tempfile.TemporaryDirectory(prefix="vibrofmu-bench-loop-") as tmp:
         if closed_loop_fmu is None:
             from .build import build_closed_loop
 
             closed_loop_fmu = build_closed_loop(Path(tmp))
-        record = ladder.run_ladder(fmu, closed_loop_fmu, stop=stop, repeats=repeats, progress=say)
+        record = ladder.run_ladder(fmu, closed_loop_fmu, stop=stop, rounds=rounds, instructions=instructions,
+                                   instruction_intervals=intervals, progress=say)
     record["quick"] = quick
     return record
 

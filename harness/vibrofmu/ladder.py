@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import math
 import os
+import shutil
 import subprocess
 import tempfile
 import time
@@ -49,6 +50,24 @@ RUNGS = (  # (name, FMU, start values)
 )
 # issue 13's acceptance: cost per output of a rung over exact f0's, at most
 LIMITS = {"averaged f3": 0.5, "analytic f4": 0.5, "RK4 h = 0.01": 4.0, "closed loop": 3.0}
+COLUMNS = tuple(("C host", interval) for interval in C_INTERVALS) + (("FMPy", FMPY_INTERVAL),)
+ACCEPTANCE_COLUMNS = (("C host", 0.1), ("FMPy", FMPY_INTERVAL))  # the issue's: C host at 0.1, FMPy at 1
+INSTRUCTION_INTERVALS = C_INTERVALS
+TIMING_NOTE = ("interleaved rounds: in each round every rung runs once in every column (C host 0.1, C host 1, "
+               "FMPy 1; within a column the rungs run back to back, round r starting at rung r), each from a fresh "
+               "instance (the C host: a fresh process, whose instantiation also starts the embedded Python); "
+               "cost per output = wall time of the doStep + getReal(x) loop / outputs; per cell all rounds are kept "
+               "(cost_per_output_seconds_runs), cost_per_output_seconds is the best of them")
+ACCEPTANCE_NOTE = ("the acceptance reads the median over rounds of the per-round ratio (rung's cost / exact f0's in "
+                   "the same round and column): the two costs were measured side by side under the same machine "
+                   "conditions, so a slow or fast machine phase cancels in the ratio; best/best "
+                   "(over_exact_f0_best) pairs two minima that may come from different rounds and phases, and is "
+                   "reported beside it")
+INSTRUCTIONS_NOTE = ("instructions executed in doStep + getReal(x) and everything they call, divided by the outputs: "
+                     "the C host under valgrind --tool=callgrind --collect-atstart=no --toggle-collect=timing_do_step "
+                     "--toggle-collect=timing_get_real (timing_host.c's wrappers of fmi2DoStep and fmi2GetReal), one "
+                     "run per rung and interval from a fresh instance; deterministic (no noise), but blind to "
+                     "memory stalls and to the cost of each instruction (a division or exp counts as one)")
 
 
 def compile_timing_host(out_dir: Path) -> Path:
@@ -60,22 +79,35 @@ def compile_timing_host(out_dir: Path) -> Path:
     return host
 
 
-def host_run(host: Path, unzip_dir: Path, start: dict, stop: float, step: float, repeats: int) -> dict:
-    """One rung in the C host: {"loop": [seconds per run], "init": [...], "t": grid, "x": x of the last run}."""
+def host_command(host: Path, unzip_dir: Path, specs: list[tuple[dict, float]], stop: float,
+                 repeats: int) -> tuple[list[str], dict]:
+    """(argv, environment) of the C host for the run specifications [(start values, output interval)] of one FMU:
+    the first as STEP and parameters, every further one after "then" (timing_host.c)."""
     md = read_model_description(str(unzip_dir))
     variables = {v.name: v for v in md.modelVariables}
     library = Path(unzip_dir) / "binaries" / "linux64" / f"{md.coSimulation.modelIdentifier}.so"
-    arguments = [("i" if variables[name].type == "Integer" else "r") + f"{variables[name].valueReference}={value!r}"
-                 for name, value in start.items()]
+
+    def arguments(start):
+        return [("i" if variables[name].type == "Integer" else "r") + f"{variables[name].valueReference}={value!r}"
+                for name, value in start.items()]
+
+    (first, step), *others = specs
     cmd = [str(host), str(library), (Path(unzip_dir) / "resources").as_uri(), md.guid, repr(stop), repr(step),
-           str(repeats), str(variables["x"].valueReference), *arguments]
-    env = {**os.environ, **host_environment(Path(unzip_dir) / "resources")}
-    proc = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=1800)
-    if proc.returncode != 0:
-        raise RuntimeError(f"timing host failed ({proc.returncode}): {proc.stderr.strip()[-500:]}")
-    record = {"loop": [], "init": [], "t": [], "x": []}
-    for line in proc.stdout.splitlines():
+           str(repeats), str(variables["x"].valueReference), *arguments(first)]
+    for start, interval in others:
+        cmd += ["then", repr(interval), *arguments(start)]
+    return cmd, {**os.environ, **host_environment(Path(unzip_dir) / "resources")}
+
+
+def parse_host_output(stdout: str, specs: int) -> list[dict]:
+    """The C host's stdout as one record per specification: {"loop": [seconds per run], "init": [...], "outputs",
+    "t": grid, "x": x of the last run}."""
+    records, record = [], None
+    for line in stdout.splitlines():
         kind, *values = line.split()
+        if kind == "init" and (record is None or record["x"]):  # the first run of the next specification
+            record = {"loop": [], "init": [], "t": [], "x": []}
+            records.append(record)
         if kind == "init":
             record["init"].append(float(values[0]))
         elif kind == "loop":
@@ -84,8 +116,51 @@ def host_run(host: Path, unzip_dir: Path, start: dict, stop: float, step: float,
         elif kind == "x":
             record["t"].append(float(values[0]))
             record["x"].append(float(values[1]))
-    record["t"], record["x"] = np.array(record["t"]), np.array(record["x"])
-    return record
+    if len(records) != specs:
+        raise RuntimeError(f"the timing host reported {len(records)} run specifications, not {specs}")
+    for record in records:
+        record["t"], record["x"] = np.array(record["t"]), np.array(record["x"])
+    return records
+
+
+def host_run(host: Path, unzip_dir: Path, start: dict, stop: float, step: float, repeats: int) -> dict:
+    """One rung in the C host: {"loop": [seconds per run], "init": [...], "t": grid, "x": x of the last run}."""
+    cmd, env = host_command(host, unzip_dir, [(start, step)], stop, repeats)
+    proc = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=1800)
+    if proc.returncode != 0:
+        raise RuntimeError(f"timing host failed ({proc.returncode}): {proc.stderr.strip()[-500:]}")
+    return parse_host_output(proc.stdout, 1)[0]
+
+
+# ---- instruction counts (callgrind) ---------------------------------------------------------------------------
+
+def valgrind_missing() -> str | None:
+    """None if valgrind's callgrind can count instructions here, else the reason it cannot."""
+    if shutil.which("valgrind") is None:
+        return "valgrind is not installed (apt-get install valgrind): no instruction counts"
+    return None
+
+
+def callgrind_counts(cmd: list[str], env: dict, runs: int) -> tuple[list[int], subprocess.CompletedProcess]:
+    """Instructions executed inside timing_host.c's timing_do_step and timing_get_real (doStep + getReal and all
+    they call), one count per run of the host, under valgrind --tool=callgrind: collection is on only inside those
+    two functions, and a profile is dumped after each run (timing_run_done)."""
+    with tempfile.TemporaryDirectory(prefix="vibrofmu-callgrind-") as tmp:
+        out = Path(tmp) / "callgrind.out"
+        proc = subprocess.run(["valgrind", "--tool=callgrind", "--collect-atstart=no",
+                               "--toggle-collect=timing_do_step", "--toggle-collect=timing_get_real",
+                               "--dump-after=timing_run_done", f"--callgrind-out-file={out}", *cmd],
+                              capture_output=True, text=True, env=env, timeout=3600)
+        if proc.returncode != 0:
+            raise RuntimeError(f"valgrind failed ({proc.returncode}): {proc.stderr.strip()[-500:]}")
+        dumps = sorted(Path(tmp).glob("callgrind.out.*"), key=lambda p: int(p.name.rsplit(".", 1)[1]))
+        counts = []
+        for dump in dumps:
+            totals = [line for line in dump.read_text().splitlines() if line.startswith(("totals:", "summary:"))]
+            counts.append(int(totals[0].split()[1]))
+    if len(counts) != runs:
+        raise RuntimeError(f"callgrind wrote {len(counts)} profiles for {runs} runs")
+    return counts, proc
 
 
 def fmpy_run(fmu: Path, unzip_dir: str, start: dict, stop: float, step: float, repeats: int) -> dict:
@@ -149,92 +224,233 @@ def closed_loop_reference(stop: float):
     return at
 
 
-def run_ladder(plant_fmu: Path, closed_loop_fmu: Path, stop: float = 200.0, repeats: int = 3,
+def _rotated(items: list, k: int) -> list:
+    return items[k % len(items):] + items[:k % len(items)]
+
+
+def _fmpy_once(fmu: Path, unzip_dir: str, start: dict, stop: float, step: float) -> dict:
+    run = fmpy_run(fmu, unzip_dir, start, stop, step, 1)
+    return {"loop": run["loop"], "init": run["init"], "outputs": run["outputs"], "t": run["t"], "x": run["x"]}
+
+
+def instruction_counts(host: Path, unzipped: dict, stop: float, intervals: tuple[float, ...], say) -> dict:
+    """Instructions per output of every rung at every interval: one valgrind process per FMU running all of its
+    rungs (timing_host's run specifications), so that the embedded Python starts once per FMU under valgrind."""
+    counts = {}
+    for which in dict.fromkeys(fmu for _, fmu, _ in RUNGS):
+        cells = [(name, start, interval) for name, fmu, start in RUNGS if fmu == which for interval in intervals]
+        cmd, env = host_command(host, Path(unzipped[which]), [(start, interval) for _, start, interval in cells],
+                                stop, 1)
+        started = time.perf_counter()
+        instructions, proc = callgrind_counts(cmd, env, len(cells))
+        records = parse_host_output(proc.stdout, len(cells))
+        for (name, _, interval), count, record in zip(cells, instructions, records):
+            counts[name, interval] = {"instructions": count, "outputs": record["outputs"],
+                                      "per_output": count / record["outputs"], "x": record["x"]}
+        say(f"ladder: instruction counts of the {which} FMU's rungs under callgrind "
+            f"({time.perf_counter() - started:.0f} s)")
+    return counts
+
+
+def run_ladder(plant_fmu: Path, closed_loop_fmu: Path, stop: float = 200.0, rounds: int = 3,
+               instructions: bool = True, instruction_intervals: tuple[float, ...] = INSTRUCTION_INTERVALS,
                progress=None) -> dict:
-    """Every rung in both hosts: the ladder's record for bench.json (see the module docstring)."""
+    """Every rung in every column, in interleaved rounds, and (valgrind permitting) its instruction count: the
+    ladder's record for bench.json (see the module docstring)."""
     say = progress or (lambda line: None)
     scene = Scene()
     exact = reference_solution(scene, Fidelity.EXACT, stop, rtol=REFERENCE_RTOL, atol=ATOL_PER_RTOL * REFERENCE_RTOL)
     references = {"plant": lambda t: exact(t)[0], "closed_loop": closed_loop_reference(stop)}
     fmus = {"plant": Path(plant_fmu), "closed_loop": Path(closed_loop_fmu)}
-    columns = [("C host", interval) for interval in C_INTERVALS] + [("FMPy", FMPY_INTERVAL)]
-    rungs = []
+    names = [name for name, _, _ in RUNGS]
+    spec = {name: (which, start) for name, which, start in RUNGS}
+    runs = {(name, column): [] for name in names for column in COLUMNS}
+    order = []
+    missing = valgrind_missing() if instructions else "not requested (--no-instructions)"
     with tempfile.TemporaryDirectory(prefix="vibrofmu-ladder-") as work:
         host = compile_timing_host(Path(work))
         unzipped = {name: extract(str(path), str(Path(work) / name)) for name, path in fmus.items()}
-        for name, which, start in RUNGS:
-            rung = {"rung": name, "fmu": which, "start_values": start, "columns": []}
-            for host_name, interval in columns:
-                if host_name == "C host":
-                    run = host_run(host, Path(unzipped[which]), start, stop, interval, repeats)
-                else:
-                    run = fmpy_run(fmus[which], unzipped[which], start, stop, interval, repeats)
-                error = float(np.max(np.abs(run["x"] - references[which](run["t"]))))
-                best = min(run["loop"])
-                rung["columns"].append({
-                    "host": host_name, "interval": interval, "outputs": run["outputs"],
-                    "cost_per_output_seconds": best / run["outputs"],
-                    "loop_seconds_runs": run["loop"], "instantiation_seconds_runs": run["init"],
-                    "instantiation_warm_seconds": min(run["init"][1:] or run["init"]),
-                    "linf_x": error})
-                say(f"ladder: {name}, {host_name} interval {interval:g}: {1e6 * best / run['outputs']:.3g} us per "
-                    f"output, max |x error| {error:.2e}")
-            rungs.append(rung)
-    base = {(c["host"], c["interval"]): c["cost_per_output_seconds"] for c in rungs[0]["columns"]}
+        began = time.perf_counter()
+        for r in range(rounds):  # every rung in every column once per round, each from a fresh instance
+            for column in COLUMNS:
+                host_name, interval = column
+                for name in _rotated(names, r):  # round r starts at rung r: no rung always runs first
+                    which, start = spec[name]
+                    order.append({"round": r + 1, "host": host_name, "interval": interval, "rung": name,
+                                  "started_seconds": time.perf_counter() - began})
+                    if host_name == "C host":
+                        run = host_run(host, Path(unzipped[which]), start, stop, interval, 1)
+                    else:
+                        run = _fmpy_once(fmus[which], unzipped[which], start, stop, interval)
+                    runs[name, column].append(run)
+            say(f"ladder: round {r + 1} of {rounds}: "
+                + ", ".join(f"{name} {1e6 * runs[name, COLUMNS[0]][-1]['loop'][0] / runs[name, COLUMNS[0]][-1]['outputs']:.3g} us"
+                            for name in names) + f" (C host, interval {COLUMNS[0][1]:g})")
+        counts = {}
+        if missing is None:
+            counts = instruction_counts(host, unzipped, stop, instruction_intervals, say)
+    rungs = []
+    for name in names:
+        which, start = spec[name]
+        rung = {"rung": name, "fmu": which, "start_values": start, "columns": []}
+        for column in COLUMNS:
+            cell = runs[name, column]
+            first = cell[0]
+            n = first["outputs"]
+            loops = [run["loop"][0] for run in cell]
+            error = float(np.max(np.abs(first["x"] - references[which](first["t"]))))
+            rung["columns"].append({
+                "host": column[0], "interval": column[1], "outputs": n,
+                "cost_per_output_seconds": min(loops) / n,
+                "cost_per_output_seconds_runs": [loop / n for loop in loops],
+                "loop_seconds_runs": loops, "instantiation_seconds_runs": [run["init"][0] for run in cell],
+                "repeatable": all(np.array_equal(run["x"], first["x"]) for run in cell),
+                "linf_x": error})
+        if counts:
+            rung["instructions"] = [{"host": "C host (callgrind)", "interval": interval,
+                                     "outputs": counts[name, interval]["outputs"],
+                                     "instructions": counts[name, interval]["instructions"],
+                                     "instructions_per_output": counts[name, interval]["per_output"],
+                                     "x_identical_to_timed_run": bool(np.array_equal(
+                                         counts[name, interval]["x"],
+                                         runs[name, ("C host", interval)][0]["x"]))
+                                     if ("C host", interval) in COLUMNS else None}
+                                    for interval in instruction_intervals]
+        rungs.append(rung)
+    base = rungs[0]
     for rung in rungs:
-        for column in rung["columns"]:
-            column["over_exact_f0"] = column["cost_per_output_seconds"] / base[column["host"], column["interval"]]
-    acceptance = [{"rung": r["rung"], "host": c["host"], "interval": c["interval"], "ratio": c["over_exact_f0"],
-                   "limit": LIMITS[r["rung"]], "met": c["over_exact_f0"] <= LIMITS[r["rung"]]}
+        for column, base_column in zip(rung["columns"], base["columns"]):
+            per_round = [a / b for a, b in zip(column["cost_per_output_seconds_runs"],
+                                               base_column["cost_per_output_seconds_runs"])]
+            column["over_exact_f0_per_round"] = per_round
+            column["over_exact_f0_median"] = float(np.median(per_round))
+            column["over_exact_f0_best"] = column["cost_per_output_seconds"] / base_column["cost_per_output_seconds"]
+        for count, base_count in zip(rung.get("instructions", []), base.get("instructions", [])):
+            count["over_exact_f0"] = count["instructions_per_output"] / base_count["instructions_per_output"]
+    acceptance = [{"rung": r["rung"], "host": c["host"], "interval": c["interval"],
+                   "ratio": c["over_exact_f0_median"], "ratio_best_over_best": c["over_exact_f0_best"],
+                   "ratios_per_round": c["over_exact_f0_per_round"], "limit": LIMITS[r["rung"]],
+                   "met": c["over_exact_f0_median"] <= LIMITS[r["rung"]]}
                   for r in rungs if r["rung"] in LIMITS for c in r["columns"]
-                  if (c["host"], c["interval"]) in (("C host", 0.1), ("FMPy", FMPY_INTERVAL))]
-    return {"stop_time": stop, "repeats": repeats, "scene": scene.as_dict(),
-            "timing": "cost per output = wall time of the doStep + getReal(x) loop / outputs, minimum over the runs "
-                      "(each from a fresh instance); instantiation = instantiate .. exitInitializationMode (the C "
-                      "host's first run also starts the embedded Python)",
+                  if (c["host"], c["interval"]) in ACCEPTANCE_COLUMNS]
+    acceptance_instructions = [{"rung": r["rung"], "interval": c["interval"], "ratio": c["over_exact_f0"],
+                                "limit": LIMITS[r["rung"]], "met": c["over_exact_f0"] <= LIMITS[r["rung"]]}
+                               for r in rungs if r["rung"] in LIMITS for c in r.get("instructions", [])]
+    return {"stop_time": stop, "rounds": rounds, "repeats": rounds, "scene": scene.as_dict(),
+            "columns": [{"host": h, "interval": i} for h, i in COLUMNS],
+            "timing": TIMING_NOTE, "acceptance_rule": ACCEPTANCE_NOTE, "order": order,
             "errors": f"max |x - x_ref| on the output grid; plant rungs against the exact model (DOP853 rtol "
                       f"{REFERENCE_RTOL:g}), the closed loop against itself in vibromodel at rtol "
                       f"{CLOSED_LOOP_REFERENCE_RTOL:g}",
-            "rungs": rungs, "acceptance": acceptance}
+            "instructions": {"measured": not missing, "reason": missing,
+                             "intervals": list(instruction_intervals) if not missing else [],
+                             "what": INSTRUCTIONS_NOTE},
+            "rungs": rungs, "acceptance": acceptance, "acceptance_instructions": acceptance_instructions}
 
 
 def ladder_lines(ladder: dict) -> list[str]:
-    """The ladder as a table and the acceptance ratios, for the command's output."""
+    """The ladder as a table (time, then instructions) and the acceptance ratios, for the command's output."""
     columns = [(c["host"], c["interval"]) for c in ladder["rungs"][0]["columns"]]
-    head = "  rung            " + "".join(f"{h} {i:g}".rjust(26) for h, i in columns)
-    lines = [f"speed-accuracy ladder (paper example, tau in [0, {ladder['stop_time']:g}], best of "
-             f"{ladder['repeats']}; us per output, x error):", head]
+    rounds = ladder.get("rounds", ladder.get("repeats"))
+    head = "  rung            " + "".join(f"{h} {i:g}".rjust(28) for h, i in columns)
+    lines = [f"speed-accuracy ladder (paper example, tau in [0, {ladder['stop_time']:g}], {rounds} interleaved "
+             f"rounds; per cell: best us per output, median over rounds of the ratio to exact f0, x error):", head]
     for rung in ladder["rungs"]:
-        cells = "".join(f"{1e6 * c['cost_per_output_seconds']:9.3g} us {c['over_exact_f0']:5.2g}x {c['linf_x']:7.1e}"
-                        .rjust(26) for c in rung["columns"])
+        cells = "".join(f"{1e6 * c['cost_per_output_seconds']:9.3g} us {c['over_exact_f0_median']:6.3g}x "
+                        f"{c['linf_x']:7.1e}".rjust(28) for c in rung["columns"])
         lines.append(f"  {rung['rung']:<16}{cells}")
+    info = ladder.get("instructions") or {}
+    if info.get("measured"):
+        intervals = info["intervals"]
+        lines.append("  instructions per output of doStep + getReal(x), C host under callgrind (deterministic), ratio "
+                     "to exact f0:")
+        lines.append("  rung            " + "".join(f"interval {i:g}".rjust(24) for i in intervals))
+        for rung in ladder["rungs"]:
+            cells = "".join(f"{c['instructions_per_output']:12.4g} {c['over_exact_f0']:8.3g}x".rjust(24)
+                            for c in rung["instructions"])
+            lines.append(f"  {rung['rung']:<16}{cells}")
+    elif info:
+        lines.append(f"  instructions per output: not measured: {info['reason']}")
     for a in ladder["acceptance"]:
-        lines.append(f"  {a['rung']} / exact f0 ({a['host']}, interval {a['interval']:g}): {a['ratio']:.3g} "
+        per_round = " ".join(f"{x:.3g}" for x in a["ratios_per_round"])
+        lines.append(f"  {a['rung']} / exact f0 ({a['host']}, interval {a['interval']:g}): {a['ratio']:.3g} median of "
+                     f"rounds [{per_round}], best/best {a['ratio_best_over_best']:.3g} (limit {a['limit']:g}: "
+                     f"{'met' if a['met'] else 'NOT met'})")
+    for a in ladder.get("acceptance_instructions", []):
+        lines.append(f"  {a['rung']} / exact f0 (instructions, interval {a['interval']:g}): {a['ratio']:.3g} "
                      f"(limit {a['limit']:g}: {'met' if a['met'] else 'NOT met'})")
     return lines
 
 
 def plot_ladder(path: Path, ladder: dict) -> None:
-    """Error of x against cost per output, one marker per rung, one panel per host and interval."""
+    """Error of x against cost per output, one marker per rung: the time columns in the top row; below, the
+    instruction counts per interval (when measured) and the ratios to exact f0 that the acceptance reads."""
     from . import export
 
     plt = export.plt
     columns = [(c["host"], c["interval"]) for c in ladder["rungs"][0]["columns"]]
-    fig, axes = plt.subplots(1, len(columns), figsize=(6 * len(columns), 5), squeeze=False)
+    info = ladder.get("instructions") or {}
+    intervals = info.get("intervals", []) if info.get("measured") else []
+    ncols = max(len(columns), len(intervals) + 1)
+    fig, axes = plt.subplots(2, ncols, figsize=(5.6 * ncols, 9.5), squeeze=False)
     markers = "osD^vP*X"
-    for ax, (host, interval) in zip(axes[0], columns):
-        for k, rung in enumerate(ladder["rungs"]):
-            c = next(c for c in rung["columns"] if (c["host"], c["interval"]) == (host, interval))
-            ax.loglog(1e6 * c["cost_per_output_seconds"], max(c["linf_x"], 1e-17), markers[k % len(markers)],
-                      ms=9, label=rung["rung"])
-            ax.annotate(rung["rung"], (1e6 * c["cost_per_output_seconds"], max(c["linf_x"], 1e-17)),
-                        textcoords="offset points", xytext=(6, 4), fontsize=8)
-        ax.set_xlabel("cost per output: doStep + getReal(x) [us]")
+    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+
+    def panel(ax, points, xlabel, title):
+        for k, (rung, x, y) in enumerate(points):
+            ax.loglog(x, max(y, 1e-17), markers[k % len(markers)], ms=9, color=colours[k % len(colours)], label=rung)
+            ax.annotate(rung, (x, max(y, 1e-17)), textcoords="offset points", xytext=(7, 3), fontsize=8)
+        ax.set_xlabel(xlabel)
         ax.set_ylabel("max |x - x_ref| on the output grid")
-        ax.set_title(f"{host}, output interval {interval:g}")
+        ax.set_title(title, fontsize=10)
         ax.grid(True, which="both", alpha=0.3)
-    axes[0][0].legend(fontsize=8)
-    fig.suptitle(f"Speed-accuracy ladder, paper example, tau in [0, {ladder['stop_time']:g}]: pick a rung")
+        lo, hi = ax.get_xlim()
+        ax.set_xlim(lo, hi * 4)  # room for the labels right of the markers
+
+    for ax, (host, interval) in zip(axes[0], columns):
+        points = []
+        for rung in ladder["rungs"]:
+            c = next(c for c in rung["columns"] if (c["host"], c["interval"]) == (host, interval))
+            points.append((rung["rung"], 1e6 * c["cost_per_output_seconds"], c["linf_x"]))
+        panel(ax, points, "cost per output: doStep + getReal(x) [us], best of the rounds",
+              f"time: {host}, output interval {interval:g}")
+    for ax in axes[0][len(columns):]:
+        ax.axis("off")
+    for ax, interval in zip(axes[1], intervals):
+        points = []
+        for rung in ladder["rungs"]:
+            c = next(c for c in rung["instructions"] if c["interval"] == interval)
+            points.append((rung["rung"], c["instructions_per_output"], c["linf_x"] if "linf_x" in c else
+                           next(col["linf_x"] for col in rung["columns"] if col["host"] == "C host"
+                                and col["interval"] == interval)))
+        panel(ax, points, "instructions per output: doStep + getReal(x) (callgrind)",
+              f"instructions: C host under valgrind, output interval {interval:g}")
+    ratio_ax = axes[1][len(intervals)]
+    names = [a["rung"] for a in ladder["acceptance"] if (a["host"], a["interval"]) == ("C host", 0.1)]
+    series = [(f"{h}, interval {i:g} (time, median of rounds)", [a["ratio"] for n in names for a in ladder["acceptance"]
+                                                                  if a["rung"] == n and (a["host"], a["interval"]) == (h, i)])
+              for h, i in dict.fromkeys((a["host"], a["interval"]) for a in ladder["acceptance"])]
+    for i in intervals:
+        series.append((f"instructions, interval {i:g}", [a["ratio"] for n in names
+                                                         for a in ladder.get("acceptance_instructions", [])
+                                                         if a["rung"] == n and a["interval"] == i]))
+    width = 0.8 / max(len(series), 1)
+    for k, (label, values) in enumerate(series):
+        if len(values) == len(names):
+            ratio_ax.bar([j + (k - (len(series) - 1) / 2) * width for j in range(len(names))], values, width,
+                         label=label)
+    ratio_ax.scatter(range(len(names)), [LIMITS[n] for n in names], marker="_", s=900, color="k", zorder=3,
+                     label="acceptance limit")
+    ratio_ax.set_yscale("log")
+    ratio_ax.set_xticks(range(len(names)), names, fontsize=8)
+    ratio_ax.set_ylabel("cost per output / exact f0's")
+    ratio_ax.set_title("ratios to exact f0 (the acceptance reads the time ones)", fontsize=10)
+    ratio_ax.grid(True, axis="y", which="both", alpha=0.3)
+    ratio_ax.legend(fontsize=7)
+    for ax in axes[1][len(intervals) + 1:]:
+        ax.axis("off")
+    fig.suptitle(f"Speed-accuracy ladder, paper example, tau in [0, {ladder['stop_time']:g}], "
+                 f"{ladder.get('rounds', ladder.get('repeats'))} interleaved rounds: pick a rung")
     fig.tight_layout()
-    fig.savefig(path, dpi=110, bbox_inches="tight")
+    fig.savefig(path, dpi=100, bbox_inches="tight")
     plt.close(fig)
