@@ -538,7 +538,7 @@ def bench_options(p):
     p.add_argument("--repeats", type=count, default=None, help="timed runs per case after the warm-up "
                                                                "(default: 3; --quick 1)")
     p.add_argument("--ladder-rounds", type=count, default=None,
-                   help="interleaved rounds of the speed-accuracy ladder (default: 3; --quick 2)")
+                   help="interleaved rounds of the speed-accuracy ladder (default: 3)")
     p.add_argument("--no-instructions", action="store_true",
                    help="skip the ladder's instruction counts (valgrind's callgrind, a few minutes)")
     p.add_argument("--fmu", default=None, help=FMU_HELP)

@@ -53,7 +53,8 @@ LIMITS = {"averaged f3": 0.5, "analytic f4": 0.5, "RK4 h = 0.01": 4.0, "closed l
 COLUMNS = tuple(("C host", interval) for interval in C_INTERVALS) + (("FMPy", FMPY_INTERVAL),)
 ACCEPTANCE_COLUMNS = (("C host", 0.1), ("FMPy", FMPY_INTERVAL))  # the issue's: C host at 0.1, FMPy at 1
 INSTRUCTION_INTERVALS = C_INTERVALS
-TIMING_NOTE = ("interleaved rounds: in each round every rung runs once in every column (C host 0.1, C host 1, "
+TIMING_NOTE = ("a warm-up round (round 0 in order, not kept: the first FMPy instance of a process pays for loading and "
+               "first calls), then interleaved rounds: in each round every rung runs once in every column (C host 0.1, C host 1, "
                "FMPy 1; within a column the rungs run back to back, round r starting at rung r), each from a fresh "
                "instance (the C host: a fresh process, whose instantiation also starts the embedded Python); "
                "cost per output = wall time of the doStep + getReal(x) loop / outputs; per cell all rounds are kept "
@@ -271,21 +272,23 @@ def run_ladder(plant_fmu: Path, closed_loop_fmu: Path, stop: float = 200.0, roun
         host = compile_timing_host(Path(work))
         unzipped = {name: extract(str(path), str(Path(work) / name)) for name, path in fmus.items()}
         began = time.perf_counter()
-        for r in range(rounds):  # every rung in every column once per round, each from a fresh instance
+        for r in range(rounds + 1):  # round 0: a warm-up, not kept; then every rung in every column once per round
             for column in COLUMNS:
                 host_name, interval = column
-                for name in _rotated(names, r):  # round r starts at rung r: no rung always runs first
+                for name in _rotated(names, max(r - 1, 0)):  # round r starts at rung r: no rung always runs first
                     which, start = spec[name]
-                    order.append({"round": r + 1, "host": host_name, "interval": interval, "rung": name,
+                    order.append({"round": r, "host": host_name, "interval": interval, "rung": name,
                                   "started_seconds": time.perf_counter() - began})
                     if host_name == "C host":
                         run = host_run(host, Path(unzipped[which]), start, stop, interval, 1)
                     else:
                         run = _fmpy_once(fmus[which], unzipped[which], start, stop, interval)
-                    runs[name, column].append(run)
-            say(f"ladder: round {r + 1} of {rounds}: "
-                + ", ".join(f"{name} {1e6 * runs[name, COLUMNS[0]][-1]['loop'][0] / runs[name, COLUMNS[0]][-1]['outputs']:.3g} us"
-                            for name in names) + f" (C host, interval {COLUMNS[0][1]:g})")
+                    if r > 0:
+                        runs[name, column].append(run)
+            if r > 0:
+                say(f"ladder: round {r} of {rounds}: " + ", ".join(
+                    f"{name} {1e6 * runs[name, COLUMNS[0]][-1]['loop'][0] / runs[name, COLUMNS[0]][-1]['outputs']:.3g} us"
+                    for name in names) + f" (C host, interval {COLUMNS[0][1]:g})")
         counts = {}
         if missing is None:
             counts = instruction_counts(host, unzipped, stop, instruction_intervals, say)
@@ -399,7 +402,9 @@ def plot_ladder(path: Path, ladder: dict) -> None:
     def panel(ax, points, xlabel, title):
         for k, (rung, x, y) in enumerate(points):
             ax.loglog(x, max(y, 1e-17), markers[k % len(markers)], ms=9, color=colours[k % len(colours)], label=rung)
-            ax.annotate(rung, (x, max(y, 1e-17)), textcoords="offset points", xytext=(7, 3), fontsize=8)
+            # labels above right; the second rung's (f1) below right: f0 and f1 share their error and nearly their cost
+            ax.annotate(rung, (x, max(y, 1e-17)), textcoords="offset points", xytext=(7, -12 if k == 1 else 4),
+                        fontsize=8)
         ax.set_xlabel(xlabel)
         ax.set_ylabel("max |x - x_ref| on the output grid")
         ax.set_title(title, fontsize=10)
@@ -442,11 +447,13 @@ def plot_ladder(path: Path, ladder: dict) -> None:
     ratio_ax.scatter(range(len(names)), [LIMITS[n] for n in names], marker="_", s=900, color="k", zorder=3,
                      label="acceptance limit")
     ratio_ax.set_yscale("log")
+    low, high = ratio_ax.get_ylim()
+    ratio_ax.set_ylim(low, high * 30)  # room for the legend above the bars
     ratio_ax.set_xticks(range(len(names)), names, fontsize=8)
     ratio_ax.set_ylabel("cost per output / exact f0's")
     ratio_ax.set_title("ratios to exact f0 (the acceptance reads the time ones)", fontsize=10)
     ratio_ax.grid(True, axis="y", which="both", alpha=0.3)
-    ratio_ax.legend(fontsize=7)
+    ratio_ax.legend(fontsize=7, loc="upper left")
     for ax in axes[1][len(intervals) + 1:]:
         ax.axis("off")
     fig.suptitle(f"Speed-accuracy ladder, paper example, tau in [0, {ladder['stop_time']:g}], "
