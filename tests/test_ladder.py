@@ -103,9 +103,8 @@ def test_instruction_count_is_exactly_proportional_to_the_outputs_or_valgrind_is
         ladder.callgrind_counts(cmd, None, 5)
 
 
-def test_rounds_interleave_every_rung_in_every_column(monkeypatch, tmp_path):
-    """run_ladder's order, with the runs replaced by stand-ins that record what ran (no FMU, no timing): each round
-    runs every rung once in every column before the next round starts, and round r starts at rung r."""
+def stand_in_runs(monkeypatch) -> list:
+    """Replace run_ladder's runs by stand-ins that record what ran (no FMU, no timing); returns that record."""
     ran = []
 
     def fake_run(name):
@@ -116,14 +115,22 @@ def test_rounds_interleave_every_rung_in_every_column(monkeypatch, tmp_path):
             n = len(ladder.communication_points(args[3], interval))
             t = np.array(ladder.communication_points(args[3], interval))
             cost = 1.0 + len(ran)  # a distinct loop time per run, to check the per-round ratios
-            return {"loop": [cost * n], "init": [0.0], "outputs": n, "t": t, "x": 0.04 * np.ones(n)}
+            cpu = 1.0 + (len(ran) % 7)  # and a distinct CPU time, not proportional to it
+            return {"loop": [cost * n], "cpu": [cpu * n], "init": [0.0], "outputs": n, "t": t, "x": 0.04 * np.ones(n)}
         return run
 
-    monkeypatch.setattr(ladder, "host_run", lambda host, unzip, start, stop, step, repeats:
-                        fake_run("C host")(host, unzip, start, stop, step))
+    monkeypatch.setattr(ladder, "host_runs", lambda host, unzip, specs, stop:
+                        [fake_run("C host")(host, unzip, start, stop, step) for start, step in specs])
     monkeypatch.setattr(ladder, "_fmpy_once", fake_run("FMPy"))
     monkeypatch.setattr(ladder, "compile_timing_host", lambda out: Path(out) / "host")
     monkeypatch.setattr(ladder, "extract", lambda fmu, out: out)
+    return ran
+
+
+def test_rounds_interleave_every_rung_in_every_column(monkeypatch):
+    """run_ladder's order, with stand-in runs: each round runs every rung once in every column before the next
+    round starts, and round r starts at rung r."""
+    ran = stand_in_runs(monkeypatch)
     record = ladder.run_ladder(Path("plant.fmu"), Path("closed_loop.fmu"), stop=1.0, rounds=3, instructions=False)
     names = [name for name, _, _ in ladder.RUNGS]
     columns = [(c["host"], c["interval"]) for c in record["columns"]]
@@ -151,6 +158,8 @@ def test_rounds_interleave_every_rung_in_every_column(monkeypatch, tmp_path):
             expected = [a / b for a, b in zip(c["cost_per_output_seconds_runs"], base["cost_per_output_seconds_runs"])]
             assert c["over_exact_f0_per_round"] == pytest.approx(expected, rel=1e-15)
             assert c["over_exact_f0_median"] == pytest.approx(sorted(expected)[1], rel=1e-15)
+            cpu = [a / b for a, b in zip(c["cpu_per_output_seconds_runs"], base["cpu_per_output_seconds_runs"])]
+            assert c["cpu_over_exact_f0_median"] == pytest.approx(sorted(cpu)[1], rel=1e-15)
             assert c["repeatable"]
     assert record["instructions"] == {"measured": False, "reason": "not requested (--no-instructions)",
                                       "intervals": [], "what": ladder.INSTRUCTIONS_NOTE}
@@ -160,6 +169,28 @@ def test_rounds_interleave_every_rung_in_every_column(monkeypatch, tmp_path):
     lines = ladder.ladder_lines(record)
     assert any("instructions per output: not measured: not requested" in line for line in lines)
     assert math.isfinite(record["acceptance"][0]["ratio_best_over_best"])
+
+
+def test_ladder_only_writes_bench_json_the_report_reads(plant_fmu, monkeypatch, tmp_path, capsys):
+    """`vibrofmu bench --ladder-only` (stand-in runs): bench.json has the machine and the ladder, the command prints
+    the ladder, and the report's speed block shows it."""
+    from vibrofmu import bench, build, report
+    from vibrofmu.cli import main
+
+    stand_in_runs(monkeypatch)
+    real = ladder.run_ladder
+    monkeypatch.setattr(ladder, "run_ladder", lambda plant, loop, **kw: real(plant, loop, **{**kw, "stop": 1.0}))
+    monkeypatch.setattr(build, "build_closed_loop", lambda out: Path(out) / "closed_loop.fmu")
+    code = main(["bench", "--ladder-only", "--no-instructions", "--fmu", str(plant_fmu),
+                 "--out", str(tmp_path / "out")])
+    assert code == 0
+    data = __import__("json").loads((tmp_path / "out" / "bench.json").read_text())
+    assert data["bench"]["ladder_only"] and "cases" not in data and data["ladder"]["rounds"] == bench.LADDER_ROUNDS
+    assert (tmp_path / "out" / "ladder.png").stat().st_size > 10000
+    printed = capsys.readouterr().out
+    assert "speed-accuracy ladder" in printed and "closed loop / exact f0 (C host, interval 0.1)" in printed
+    block = report.speed_block([tmp_path / "out"])
+    assert "`vibrofmu bench --ladder-only`" in block and "median of rounds" in block
 
 
 @pytest.mark.slow

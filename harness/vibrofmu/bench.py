@@ -615,6 +615,24 @@ def run_ladder_with_fmus(fmu: Path, closed_loop_fmu: Path | None, quick: bool, s
     return record
 
 
+def run_ladder_only(fmu: Path, out_dir: Path, quick: bool = False, progress: Callable[[str], None] | None = None,
+                    closed_loop_fmu: Path | None = None, ladder_rounds: int | None = None,
+                    instructions: bool = True) -> dict:
+    """Only the speed-accuracy ladder (`vibrofmu bench --ladder-only`, a few minutes): out_dir/bench.json with the
+    machine and "ladder", and out_dir/ladder.png; returns the JSON's content."""
+    started = time.perf_counter()
+    say = progress or (lambda line: None)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    summary = {"bench": {"quick": quick, "ladder_only": True, "scene": Scene().as_dict(), "fmu": str(fmu)},
+               "machine": machine_info()}
+    summary["ladder"] = run_ladder_with_fmus(Path(fmu), closed_loop_fmu, quick, say, ladder_rounds, instructions)
+    summary["machine"]["load_average_at_end"] = list(os.getloadavg()) if hasattr(os, "getloadavg") else None
+    summary["bench"]["seconds"] = time.perf_counter() - started
+    export.write_json(out_dir / "bench.json", summary)
+    ladder.plot_ladder(out_dir / "ladder.png", summary["ladder"])
+    return summary
+
+
 def progress_line(number: int, total: int, r: dict) -> str:
     head = f"[{number}/{total}] {r['method']}, {r['setting']}, interval {r['output_interval']:g}: "
     if r.get("errors") is None:
@@ -624,7 +642,9 @@ def progress_line(number: int, total: int, r: dict) -> str:
 
 
 def summary_lines(summary: dict) -> list[str]:
-    """What the command prints: the targets with their inputs."""
+    """What the command prints: the targets with their inputs, and the ladder (a --ladder-only run: the ladder)."""
+    if "targets" not in summary:
+        return ladder.ladder_lines(summary["ladder"])
     t = summary["targets"]
     lines = [f"targets ({t['note']}; L-infinity <= {t['threshold_linf_x']:g}, output interval "
              f"{t['output_interval']:g}):"]
