@@ -62,8 +62,8 @@ COLUMNS = tuple(("C host", interval) for interval in C_INTERVALS) + (("FMPy", FM
 ACCEPTANCE_COLUMNS = (("C host", 0.1), ("FMPy", FMPY_INTERVAL))  # the issue's: C host at 0.1, FMPy at 1
 INSTRUCTION_INTERVALS = C_INTERVALS
 TIMING_NOTE = ("a warm-up round (round 0 in order, not kept: the first FMPy instance of a process pays for loading and "
-               "first calls), then interleaved rounds: in each round every rung runs once in every column (C host 0.1, C host 1, "
-               "FMPy 1; within a column the rungs run back to back, round r starting at rung r), each from a fresh "
+               "first calls), then interleaved rounds: in each round every rung runs once in every column (C host "
+               "0.1, C host 1, FMPy 1; within a column the rungs run back to back, round r starting at rung r), each from a fresh "
                "instance (the C host runs consecutive rungs of one FMU in one process; the first instantiation in "
                "a process also starts the embedded Python); "
                "cost per output = wall time of the doStep + getReal(x) loop / outputs; per cell all rounds are kept "
@@ -306,7 +306,8 @@ def run_ladder(plant_fmu: Path, closed_loop_fmu: Path, stop: float = 200.0, roun
                 host_name, interval = column
                 # round r starts at rung r: no rung always runs first; consecutive rungs of one FMU form a group,
                 # which the C host runs in one process (a fresh instance each, one after the other)
-                groups = [list(g) for _, g in itertools.groupby(_rotated(names, max(r - 1, 0)), key=lambda n: spec[n][0])]
+                rotated = _rotated(names, max(r - 1, 0))
+                groups = [list(g) for _, g in itertools.groupby(rotated, key=lambda n: spec[n][0])]
                 for group in groups:
                     which = spec[group[0]][0]
                     started = time.perf_counter() - began
@@ -322,9 +323,10 @@ def run_ladder(plant_fmu: Path, closed_loop_fmu: Path, stop: float = 200.0, roun
                         for name, run in zip(group, results):
                             runs[name, column].append(run)
             if r > 0:
+                last = {name: runs[name, COLUMNS[0]][-1] for name in names}
                 say(f"ladder: round {r} of {rounds}: " + ", ".join(
-                    f"{name} {1e6 * runs[name, COLUMNS[0]][-1]['loop'][0] / runs[name, COLUMNS[0]][-1]['outputs']:.3g} us"
-                    for name in names) + f" (C host, interval {COLUMNS[0][1]:g})")
+                    f"{name} {1e6 * run['loop'][0] / run['outputs']:.3g} us" for name, run in last.items())
+                    + f" (C host, interval {COLUMNS[0][1]:g})")
         counts = {}
         if missing is None:
             counts = instruction_counts(host, unzipped, stop, instruction_intervals, say)
@@ -365,8 +367,8 @@ def run_ladder(plant_fmu: Path, closed_loop_fmu: Path, stop: float = 200.0, roun
             column["over_exact_f0_per_round"] = per_round
             column["over_exact_f0_median"] = float(np.median(per_round))
             column["over_exact_f0_best"] = column["cost_per_output_seconds"] / base_column["cost_per_output_seconds"]
-            column["cpu_over_exact_f0_median"] = float(np.median(
-                [a / b for a, b in zip(column["cpu_per_output_seconds_runs"], base_column["cpu_per_output_seconds_runs"])]))
+            cpu, base_cpu = column["cpu_per_output_seconds_runs"], base_column["cpu_per_output_seconds_runs"]
+            column["cpu_over_exact_f0_median"] = float(np.median([a / b for a, b in zip(cpu, base_cpu)]))
         for count, base_count in zip(rung.get("instructions", []), base.get("instructions", [])):
             count["over_exact_f0"] = count["instructions_per_output"] / base_count["instructions_per_output"]
     acceptance = [{"rung": r["rung"], "host": c["host"], "interval": c["interval"],
@@ -399,7 +401,8 @@ def ladder_lines(ladder: dict) -> list[str]:
     lines = [f"speed-accuracy ladder (paper example, tau in [0, {ladder['stop_time']:g}], {rounds} interleaved "
              f"rounds; per cell: best us per output, median over rounds of the ratio to exact f0, x error):", head]
     for rung in ladder["rungs"]:
-        cells = "".join(f"{1e6 * c['cost_per_output_seconds']:9.3g} us {c.get('over_exact_f0_median', c.get('over_exact_f0')):6.3g}x "
+        cells = "".join(f"{1e6 * c['cost_per_output_seconds']:9.3g} us "
+                        f"{c.get('over_exact_f0_median', c.get('over_exact_f0')):6.3g}x "
                         f"{c['linf_x']:7.1e}".rjust(28) for c in rung["columns"])
         lines.append(f"  {rung['rung']:<16}{cells}")
     info = ladder.get("instructions") or {}
@@ -470,23 +473,25 @@ def plot_ladder(path: Path, ladder: dict) -> None:
         points = []
         for rung in ladder["rungs"]:
             c = next(c for c in rung["instructions"] if c["interval"] == interval)
-            points.append((rung["rung"], c["instructions_per_output"], c["linf_x"] if "linf_x" in c else
-                           next(col["linf_x"] for col in rung["columns"] if col["host"] == "C host"
-                                and col["interval"] == interval)))
+            error = next(col["linf_x"] for col in rung["columns"] if (col["host"], col["interval"]) == ("C host", interval))
+            points.append((rung["rung"], c["instructions_per_output"], error))  # the timed C host run's error
         panel(ax, points, "instructions per output: doStep + getReal(x) (callgrind)",
               f"instructions: C host under valgrind, output interval {interval:g}")
     ratio_ax = axes[1][len(intervals)]
     names = [a["rung"] for a in ladder["acceptance"] if (a["host"], a["interval"]) == ("C host", 0.1)]
-    series = [(f"{h}, interval {i:g} (time, median of rounds)", [a["ratio"] for n in names for a in ladder["acceptance"]
-                                                                  if a["rung"] == n and (a["host"], a["interval"]) == (h, i)])
+
+    def ratios(rows, keep):
+        by_rung = {a["rung"]: a["ratio"] for a in rows if keep(a)}
+        return [by_rung.get(n) for n in names]
+
+    series = [(f"{h}, interval {i:g} (time, median of rounds)",
+               ratios(ladder["acceptance"], lambda a, h=h, i=i: (a["host"], a["interval"]) == (h, i)))
               for h, i in dict.fromkeys((a["host"], a["interval"]) for a in ladder["acceptance"])]
-    for i in intervals:
-        series.append((f"instructions, interval {i:g}", [a["ratio"] for n in names
-                                                         for a in ladder.get("acceptance_instructions", [])
-                                                         if a["rung"] == n and a["interval"] == i]))
+    series += [(f"instructions, interval {i:g}",
+                ratios(ladder.get("acceptance_instructions", []), lambda a, i=i: a["interval"] == i)) for i in intervals]
     width = 0.8 / max(len(series), 1)
     for k, (label, values) in enumerate(series):
-        if len(values) == len(names):
+        if None not in values:
             ratio_ax.bar([j + (k - (len(series) - 1) / 2) * width for j in range(len(names))], values, width,
                          label=label)
     ratio_ax.scatter(range(len(names)), [LIMITS[n] for n in names], marker="_", s=900, color="k", zorder=3,
