@@ -166,6 +166,9 @@ def test_rounds_interleave_every_rung_in_every_column(monkeypatch):
     assert all("instructions" not in rung for rung in record["rungs"])
     for a in record["acceptance"]:
         assert a["met"] == (a["ratio"] <= a["limit"]) and a["ratio"] == pytest.approx(np.median(a["ratios_per_round"]))
+        column = next(c for r in record["rungs"] if r["rung"] == a["rung"] for c in r["columns"]
+                      if (c["host"], c["interval"]) == (a["host"], a["interval"]))
+        assert a["ratio"] == column["cpu_over_exact_f0_median"] != column["over_exact_f0_median"]  # CPU, not wall
     lines = ladder.ladder_lines(record)
     assert any("instructions per output: not measured: not requested" in line for line in lines)
     assert math.isfinite(record["acceptance"][0]["ratio_best_over_best"])
@@ -190,7 +193,7 @@ def test_ladder_only_writes_bench_json_the_report_reads(plant_fmu, monkeypatch, 
     printed = capsys.readouterr().out
     assert "speed-accuracy ladder" in printed and "closed loop / exact f0 (C host, interval 0.1)" in printed
     block = report.speed_block([tmp_path / "out"])
-    assert "`vibrofmu bench --ladder-only`" in block and "median of rounds" in block
+    assert "`vibrofmu bench --ladder-only`" in block and "CPU" in block and "median of rounds" in block
 
 
 @pytest.mark.slow
