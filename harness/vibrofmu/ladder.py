@@ -328,8 +328,8 @@ def run_ladder(plant_fmu: Path, closed_loop_fmu: Path, stop: float = 200.0, roun
             if r > 0:
                 last = {name: runs[name, COLUMNS[0]][-1] for name in names}
                 say(f"ladder: round {r} of {rounds}: " + ", ".join(
-                    f"{name} {1e6 * run['loop'][0] / run['outputs']:.3g} us" for name, run in last.items())
-                    + f" (C host, interval {COLUMNS[0][1]:g})")
+                    f"{name} {1e6 * run['cpu'][0] / run['outputs']:.3g} us" for name, run in last.items())
+                    + f" (thread CPU per output, C host, interval {COLUMNS[0][1]:g})")
         counts = {}
         if missing is None:
             counts = instruction_counts(host, unzipped, stop, instruction_intervals, say)
