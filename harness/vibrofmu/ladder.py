@@ -513,7 +513,7 @@ def plot_ladder(path: Path, ladder: dict) -> None:
     ratio_ax.set_ylim(low, high * 30)  # room for the legend above the bars
     ratio_ax.set_xticks(range(len(names)), names, fontsize=8)
     ratio_ax.set_ylabel("cost per output / exact f0's")
-    ratio_ax.set_title("ratios to exact f0 (the acceptance reads the time ones)", fontsize=10)
+    ratio_ax.set_title("ratios to exact f0 (the acceptance reads the CPU-time ones)", fontsize=10)
     ratio_ax.grid(True, axis="y", which="both", alpha=0.3)
     ratio_ax.legend(fontsize=7, loc="upper left")
     for ax in axes[1][len(intervals) + 1:]:
