@@ -524,6 +524,17 @@ def run_bench(fmu: Path, out_dir: Path, quick: bool = False, repeats: int | None
               ladder_rounds: int | None = None, instructions: bool = True) -> dict:
     """Run every case and the speed-accuracy ladder (ladder.py; the closed-loop FMU is built when not given), write
     out_dir/bench.json, out_dir/work_precision.png and out_dir/ladder.png; return the JSON's content."""
+    if closed_loop_fmu is None:
+        # built first: a pythonfmu FMU run in this process imports the pythonfmu copy packed in its resources
+        # (without the builder's binaries), after which pythonfmu's builder in this process makes FMUs without
+        # binaries/linux64 ("has no binaries/linux64/HertzEAClosedLoop.so" after the cases)
+        from .build import build_closed_loop
+
+        with tempfile.TemporaryDirectory(prefix="vibrofmu-bench-loop-") as tmp:
+            say_first = progress or (lambda line: None)
+            say_first("building the closed-loop FMU for the ladder ...")
+            return run_bench(fmu, out_dir, quick, repeats, extreme_rows, progress, build_closed_loop(Path(tmp)),
+                             ladder_rounds, instructions)
     bench_started = time.perf_counter()
     say = progress or (lambda line: None)
     scene = Scene()
