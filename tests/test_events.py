@@ -115,7 +115,7 @@ def test_a_touch_that_stays_on_its_side_is_no_event():
 # 30-digit mpmath quadrature to 3e-13, i.e. 2e-3 rtol max|x| at rtol 1e-10). docs/events.md: every excursion deeper
 # than 10 rtol is located (the sweep there found all with depth >= 3.2 rtol, misses only at depth <= rtol, where the
 # dense output's own error is as large as the excursion). The error bound is issue 15's acceptance, 10 rtol max|x|:
-# the period is a smooth function of the energy (the potential is C^2 at the boundary, dT/dE = 0.62 at every depth),
+# the period is a smooth function of the energy (the potential is C^2 at the boundary, dT/dE = 0.61-0.64 at depths 1e-2 ... 1e-6),
 # so near grazing the error is the integrator's local error at the contact kink, which the error norm counts in full
 # there (integrate.py, the comment at ATOL_PER_RTOL); the 184-run sweep measured at most 1.84 (before: 15.2).
 GRAZE_DEPTHS = (1e-1, 1e-3, 1e-6, 1e-9, 1e-12)
@@ -184,13 +184,16 @@ WORST_CAMPAIGN_RTOL = 1.2296129547570618e-06
 
 
 def test_worst_campaign_run_is_the_unresolved_drive(library):
-    """With max_step resolving the 2 Omega drive (3 rad per step: the two failing steps had 5.2 and 6.9) the same
-    scene and rtol stay within issue 15's 100 rtol max|x| of the reference (solve_ivp at rtol 1e-12, itself
-    converged there: rtol 1e-13 changes it by 2e-6 rtol max|x|); at max_step = 0 (automatic) the error is 134."""
+    """The run within issue 15's 100 rtol max|x| of the reference (solve_ivp at rtol 1e-12, itself converged there:
+    rtol 1e-13 changes it by 2e-6 rtol max|x|), twice: with max_step resolving the 2 Omega drive (3 rad per step; the
+    two failing steps had 5.2 and 6.9), measured 0.10; and at max_step = 0 (automatic), measured 4.7 since the
+    kink-aware error norm: the run passes within g = 0.1 of the contact kink near tau = 1, the stricter norm there
+    changes the later step sequence and the two failing steps are no longer taken. The second is a regression check
+    of this scene, not a guarantee: estimates too low by such factors remain possible on other long smooth steps."""
     scene, rtol = WORST_CAMPAIGN_SCENE, WORST_CAMPAIGN_RTOL
     reference = reference_solution(scene, 0, 10.0, rtol=1e-12, atol=1e-14)
-    max_step = 3.0 / (2.0 * scene.Omega)
-    times, x, stop = run_plant(CompiledPlant(scene, Settings(rtol=rtol, max_step=max_step), library), 10.0, 0.1)
-    assert stop is None
-    x_ref = reference(times)[0]
-    assert np.max(np.abs(x - x_ref)) <= 100.0 * rtol * np.max(np.abs(x_ref))
+    for max_step in (3.0 / (2.0 * scene.Omega), 0.0):
+        times, x, stop = run_plant(CompiledPlant(scene, Settings(rtol=rtol, max_step=max_step), library), 10.0, 0.1)
+        assert stop is None
+        x_ref = reference(times)[0]
+        assert np.max(np.abs(x - x_ref)) <= 100.0 * rtol * np.max(np.abs(x_ref))
