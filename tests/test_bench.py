@@ -33,8 +33,10 @@ def quick(plant_fmu, tmp_path_factory):
     with pytest.MonkeyPatch.context() as mp, contextlib.redirect_stdout(stdout), contextlib.redirect_stderr(stderr):
         mp.setitem(sys.modules, "vibrofmu.extremes", extremes)
         mp.setattr(vibrofmu, "extremes", extremes, raising=False)
-        # without the instruction counts (minutes under valgrind: test_ladder.py checks them)
-        code = main(["bench", "--quick", "--no-instructions", "--fmu", str(plant_fmu), "--out", str(out)])
+        # without the instruction counts (minutes under valgrind: test_ladder.py checks them) and with two rounds
+        # instead of three (enough to check the rounds' structure; test_ladder.py checks three with stand-in runs)
+        code = main(["bench", "--quick", "--no-instructions", "--ladder-rounds", "2", "--fmu", str(plant_fmu),
+                     "--out", str(out)])
     assert code == 0, stderr.getvalue()
     return json.loads((out / "bench.json").read_text()), stdout.getvalue(), stderr.getvalue(), out
 
@@ -218,7 +220,7 @@ def test_ladder_has_every_rung_in_both_hosts_with_its_error_and_the_acceptance_r
     summary, stdout, _, out = quick
     ladder = summary["ladder"]
     assert ladder["quick"] and ladder["stop_time"] == bench.LADDER_QUICK_STOP
-    assert ladder["rounds"] == bench.LADDER_QUICK_ROUNDS
+    assert ladder["rounds"] == 2  # --ladder-rounds 2
     assert [r["rung"] for r in ladder["rungs"]] == [name for name, _, _ in ladder_module.RUNGS]
     columns = [("C host", 0.1), ("C host", 1.0), ("FMPy", 1.0)]
     assert [(c["host"], c["interval"]) for c in ladder["columns"]] == columns
