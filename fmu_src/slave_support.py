@@ -18,7 +18,7 @@ from pythonfmu.enums import Fmi2Initial, Fmi2Status
 from vibromodel import snapshot
 from vibromodel.control import ERRATA_INITIAL_ESTIMATES, ESTIMATE_NAMES, GAIN_NAMES, Gains, Law
 from vibromodel.integrate import IntegrationError
-from vibromodel.parameters import ParameterError, check_parameters, scene_names
+from vibromodel.parameters import NonFiniteOutput, ParameterError, check_finite, check_parameters, scene_names
 
 STATUS_OK, STATUS_ERROR = 0, 3
 # FMI 2.0 co-simulation states the slave tracks (the error state is the status shim's and `halted`'s).
@@ -39,10 +39,6 @@ def _number(value) -> bool:
 def _same(a, b) -> bool:
     """Equal as plain data, NaN equal to NaN (a host may give a NaN stop time or tolerance)."""
     return json.dumps(a, sort_keys=True) == json.dumps(b, sort_keys=True)
-
-
-class NonFiniteOutput(ArithmeticError):
-    """A model produced a non-finite output (never published)."""
 
 
 class StatusSlave(Fmi2Slave):
@@ -95,12 +91,12 @@ class StatusSlave(Fmi2Slave):
         """Publish outputs only when all are finite: an FMU never shows NaN with fmi2OK. A non-finite one raises
         NonFiniteOutput naming it (the caller's doStep or initialisation fails with fmi2Error); the outputs then
         keep their last finite values (written back: on the compiled plant the kernel wrote them already)."""
-        bad = next((name for name, value in values.items() if not math.isfinite(value)), None)
-        if bad is not None:
+        try:
+            check_finite(values)
+        except NonFiniteOutput:
             for name, value in self._published.items():
                 setattr(self, name, value)
-            raise NonFiniteOutput(f"output {bad} = {values[bad]!r} is not finite; the parameters are beyond "
-                                  "the model's numerical range")
+            raise
         for name, value in values.items():
             setattr(self, name, value)
         self._published = dict(values)
