@@ -359,13 +359,23 @@ class StatusSlave(Fmi2Slave):
     def get_string(self, vrs):
         return self._get_values(vrs, String, "fmi2GetString", "", str)
 
+    _describing = False  # to_xml is reading the start values (not the outputs of Initialization Mode)
+
     def to_xml(self, *args, **kwargs):
         """The model description: pythonfmu's builder reads the start values through the getters."""
-        phase, self.phase = self.phase, INITIALIZATION_MODE
+        phase, self.phase, self._describing = self.phase, INITIALIZATION_MODE, True
         try:
             return super().to_xml(*args, **kwargs)
         finally:
-            self.phase = phase
+            self.phase, self._describing = phase, False
+
+    def _initial_output(self, name):
+        """Output `name` in Initialization Mode, from the start values set so far (a subclass whose outputs follow
+        its parameters overrides this); raises ParameterError or NonFiniteOutput when it cannot be defined."""
+        value = getattr(self, name)
+        if isinstance(value, float):
+            check_finite({name: value})
+        return value
 
     def _get_values(self, vrs, kind, call, placeholder, convert):
         """The values of vrs; a refused one reads `placeholder` and the call ends in fmi2Error (the status shim
@@ -381,6 +391,14 @@ class StatusSlave(Fmi2Slave):
             elif self.phase == INSTANTIATED and var.name != "fmi_status":
                 refusal = (f"{call} of {var.name} is not allowed in the {INSTANTIATED} state (FMI 2.0 allows it from "
                            f"fmi2EnterInitializationMode on)")
+            elif self.phase == INITIALIZATION_MODE and var.causality == Fmi2Causality.output and not self._describing:
+                try:  # FMI 2.0: outputs in Initialization Mode follow the start values set so far
+                    values.append(convert(self._initial_output(var.name)))
+                    continue
+                except (ParameterError, NonFiniteOutput) as error:
+                    refusal = f"{call} of {var.name} in the {INITIALIZATION_MODE} state: {error}"
+                except Exception as error:  # never let an exception reach pythonfmu (fmi2Fatal)
+                    refusal = f"{call} of {var.name} in the {INITIALIZATION_MODE} state: {error!r}"
             else:
                 values.append(convert(var.getter()))
                 continue

@@ -165,6 +165,76 @@ def test_what_needs_python_is_refused_naming_the_pythonfmu_fmu(values, name, nat
     assert "pythonfmu FMU HertzEAOscillator.fmu" in errors[0]
 
 
+# Issue 15: outputs read in Initialization Mode follow the start values set so far (FMI 2.0). Start values, the
+# input U set in Initialization Mode (it does not act before the first doStep), and scenes that are refused.
+INIT_MODE_CASES = [
+    ({"x_start": -0.3, "v_start": 0.2}, None), ({"x_start": -0.3, "fidelity": 1}, None),
+    ({"x_start": 0.7, "v_start": -1.0, "fidelity": 2, "R": 0.6}, None),
+    ({"x_start": 0.1, "v_start": 0.3, "solver": 1}, 2.0),  # U is held from the first doStep on: a without it
+    ({"x_start": -1.6, "R": 3.0, "Delta": 0.5, "omega": 3.0}, None),  # out of contact at the start (x < -3/2)
+    ({"alpha": 1e4, "x_start": 1.0, "R": 0.7}, None),  # large electrostatic force
+    ({"x_start": -1.7}, None), ({"R": -1.0}, None), ({"mu": math.nan}, None),  # refused: the parameter named
+    ({"fidelity": 7}, None),
+]
+INIT_OUTPUTS = ["x", "v", "a", "F_contact", "F_electrostatic"]
+
+
+def _init_mode_outputs(fmu, unzipped, values, U):
+    """The outputs read in Initialization Mode before and after setting `values` (and U), then after
+    fmi2ExitInitializationMode: each read's status and values, and the messages."""
+    from fmpy.fmi1 import FMICallException
+
+    instance = FmuInstance(fmu, "i", unzip_dir=unzipped)
+    f, trace = instance.fmu, []
+
+    def read():
+        try:
+            trace.append((f.getReal(instance.value_references(INIT_OUTPUTS)),
+                          f.getBoolean(instance.value_references(["in_contact"]))))
+        except FMICallException as error:
+            trace.append(error.status)
+
+    f.setupExperiment(startTime=0.5, stopTime=10.0)
+    f.enterInitializationMode()
+    read()
+    instance.set(values)
+    if U is not None:
+        instance.set({"U": U})
+    read()
+    try:
+        f.exitInitializationMode()
+        trace.append("exited")
+    except FMICallException as error:
+        trace.append(error.status)
+    read()
+    messages = [m for m in instance.log.messages if not m.startswith("[ok]")]
+    instance.close()
+    return trace, messages
+
+
+@pytest.mark.parametrize("values,U", INIT_MODE_CASES, ids=[str(v) for v in INIT_MODE_CASES])
+def test_outputs_in_initialization_mode_follow_the_start_values(values, U, plant_fmu, plant_unzipped,
+                                                                 native_plant_fmu, native_unpacked):
+    """The compiled and pure-Python kernels and the native FMU give the same reads; x and v are the start values,
+    and the outputs read in Initialization Mode are, to the bit, those fmi2ExitInitializationMode publishes (the
+    same model at the same point); a refused scene gives fmi2Error naming the parameter."""
+    compiled = _init_mode_outputs(plant_fmu, plant_unzipped, values, U)
+    python = _init_mode_outputs(plant_fmu, plant_unzipped, {**values, "kernel": 1}, U)
+    native = _init_mode_outputs(native_plant_fmu, str(native_unpacked), values, U)
+    assert compiled == python == native
+    trace, messages = compiled
+    if trace[2] == "exited":
+        (reals, contact) = trace[1]
+        assert reals[:2] == [values.get("x_start", 0.04), values.get("v_start", 0.0)]
+        assert contact == [1 + 2 * reals[0] / 3 > 0]  # contact while the indentation 1 + 2x/3 is positive
+        assert trace[3] == trace[1] and trace[0] != trace[1]
+        assert messages == [m for m in messages if m.startswith("[warning]")]
+    else:
+        assert trace[1] == FMI2_ERROR
+        name = next(iter(values))
+        assert f"fmi2GetReal of x in the initialization mode state: parameter {name} = " in messages[0]
+
+
 PLANT_PROTOCOL = dict(input_name="U", start_a={}, start_b={"Delta": 1.2, "mu": 0.05, "R": 5.0}, fixed="mu")
 CONTROLLER_PROTOCOL = dict(input_name="x", start_a={"x": 0.03, "x_ref": 0.04},
                            start_b={"law": 1, "x": -0.02, "v": 0.01}, fixed="lambda1")

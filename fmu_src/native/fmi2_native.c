@@ -173,6 +173,29 @@ static int check_parameters(Instance *inst)
 }
 
 
+int native_rule_refusal(const State *s, const char *const names[], size_t n, char *why, size_t size)
+{
+    for (size_t r = 0; r < N_RULES; r++) {
+        const VibroRule *rule = &RULES[r];
+        int listed = 0, vr = parameter_index(rule->name);
+        for (size_t k = 0; k < n; k++) listed |= strcmp(names[k], rule->name) == 0;
+        if (!listed || vr < 0) continue;
+        if (rule->when != NULL) { /* Rule.applies: the condition's parameter must be among the names */
+            int other = parameter_index(rule->when), applies = 0, named = 0;
+            for (size_t k = 0; k < n; k++) named |= strcmp(names[k], rule->when) == 0;
+            for (int k = 0; named && other >= 0 && k < rule->n_when; k++)
+                if (s->value[other] == rule->when_values[k]) applies = 1;
+            if (!applies) continue;
+        }
+        if (obeys(rule, s->value[vr])) continue;
+        char text[64];
+        value_text(s, (fmi2ValueReference)vr, text, sizeof text);
+        snprintf(why, size, "parameter %s = %s: %s", rule->name, text, rule->text);
+        return 1;
+    }
+    return 0;
+}
+
 static fmi2Status settle(Instance *inst, int may_clear_error)
 {
     if (inst->s.value[VR_fmi_status] == FLAG_ERROR) {
@@ -319,6 +342,11 @@ static fmi2Status get_values(Instance *I, const fmi2ValueReference vr[], size_t 
         } else if (I->s.phase == PHASE_INSTANTIATED && vr[i] != VR_fmi_status) {
             native_error(I, "%s of %s is not allowed in the instantiated state (FMI 2.0 allows it from "
                          "fmi2EnterInitializationMode on)", call, VARIABLES[vr[i]].name);
+        } else if (I->s.phase == PHASE_INITIALIZATION_MODE && VARIABLES[vr[i]].causality == C_OUTPUT) {
+            char why[512]; /* StatusSlave._get_values: outputs follow the start values set so far */
+            if (model_initial_output(&I->s, vr[i], &out[i], why, sizeof why)) continue;
+            out[i] = 0.0;
+            native_error(I, "%s of %s in the initialization mode state: %s", call, VARIABLES[vr[i]].name, why);
         } else {
             out[i] = I->s.value[vr[i]];
             continue;

@@ -129,3 +129,11 @@ void model_do_step(Instance *inst, State *s, double t, double h)
     }
     copy_outputs(s);
 }
+
+/* Outputs in Initialization Mode: their start values (StatusSlave._initial_output). */
+int model_initial_output(const State *s, fmi2ValueReference vr, double *value, char *why, size_t size)
+{
+    (void)why; (void)size;
+    *value = s->value[vr];
+    return 1;
+}
