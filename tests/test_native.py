@@ -25,15 +25,10 @@ from fmpy import extract, read_model_description, simulate_fmu
 from fmpy.validation import validate_fmu
 
 from vibrofmu.doctor import compile_host, compile_windows_host, run_host
-from vibrofmu.native import build_native, series_probe_library
+from vibrofmu.native import series_probe_library
 from vibrofmu.run import FmuInstance, FmuLog, run_fmu
 
 FMI2_ERROR = 3
-
-
-@pytest.fixture(scope="module")
-def native_plant_fmu(plant_fmu, tmp_path_factory):
-    return build_native(plant_fmu, tmp_path_factory.mktemp("native"))
 
 
 @pytest.fixture(scope="module")
@@ -487,11 +482,6 @@ def test_win64_dll_under_wine_agrees_with_linux64(c_host, native_unpacked, tmp_p
 
 # ---- the native controller FMU ---------------------------------------------------------------------------
 
-@pytest.fixture(scope="module")
-def native_controller_fmu(controller_fmu, tmp_path_factory):
-    return build_native(controller_fmu, tmp_path_factory.mktemp("native_controller"))
-
-
 def test_controller_same_interface(controller_fmu, native_controller_fmu):
     assert _variables(native_controller_fmu)[0] == _variables(controller_fmu)[0]
     assert validate_fmu(str(native_controller_fmu)) == []
@@ -608,11 +598,6 @@ def test_no_invalid_memory_access(which, c_host, native_unpacked, native_control
 
 
 # ---- the closed loop (fmu_src/native/HertzEAClosedLoop/): the reference packed at build time ----------------
-
-@pytest.fixture(scope="module")
-def native_closed_loop_fmu(closed_loop_fmu, tmp_path_factory):
-    return build_native(closed_loop_fmu, tmp_path_factory.mktemp("native_closed_loop"))
-
 
 def test_closed_loop_same_interface_and_validate_is_silent(closed_loop_fmu, native_closed_loop_fmu):
     assert _variables(native_closed_loop_fmu)[0] == _variables(closed_loop_fmu)[0]

@@ -11,7 +11,6 @@ import pytest
 from fmpy.fmi1 import FMICallException
 
 from vibrofmu.kernel import kernel_library
-from vibrofmu.native import build_native
 from vibrofmu.run import FmuInstance
 from vibromodel.closedloop import ERRATA_SCENE, ClosedLoop, LoopSettings
 from vibromodel.compiled_loop import LOOP_OUTPUTS, CompiledClosedLoop, make_closed_loop
@@ -55,11 +54,6 @@ def test_compiled_closed_loop_names_the_non_finite_output_as_the_python_loop(sol
     assert _flat(compiled._outputs()) == before
 
 
-@pytest.fixture(scope="module")
-def native_controller(controller_fmu, tmp_path_factory):
-    return build_native(controller_fmu, tmp_path_factory.mktemp("native_controller_nonfinite"))
-
-
 def _controller_overflow(fmu, start):
     """A step of 1e300 (no stop time) with v = 1e8 drives the estimates' increment to infinity: the status of two
     steps, the outputs after each, the errors logged."""
@@ -83,12 +77,12 @@ def _controller_overflow(fmu, start):
     return trace, errors
 
 
-def test_controller_step_to_a_non_finite_output_fails_alike_in_every_path(controller_fmu, native_controller):
+def test_controller_step_to_a_non_finite_output_fails_alike_in_every_path(controller_fmu, native_controller_fmu):
     """Compiled (C fast path) and pure-Python kernels of the pythonfmu FMU and the native FMU: fmi2Error naming U,
     the outputs read afterwards equal to those before the step (the last finite ones)."""
     compiled = _controller_overflow(controller_fmu, {})
     python = _controller_overflow(controller_fmu, {"kernel": 1})
-    native = _controller_overflow(native_controller, {})
+    native = _controller_overflow(native_controller_fmu, {})
     trace, errors = python
     assert trace[1] == ERROR and trace[2] == trace[0] and trace[4] == trace[0]
     assert "NonFiniteOutput(\"output U = -inf is not finite" in errors[0]
