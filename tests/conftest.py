@@ -88,5 +88,8 @@ def _native_fixture(name):
 
 FMU_NAMES = ("plant", "controller", "closed_loop")
 native_plant_fmu, native_controller_fmu, native_closed_loop_fmu = map(_native_fixture, FMU_NAMES)
+NATIVE_NAMES = tuple(f"native_{name}" for name in FMU_NAMES)
+native_plant_unzipped, native_controller_unzipped, native_closed_loop_unzipped = map(_unzipped_fixture, NATIVE_NAMES)
+start_native_plant, start_native_controller, start_native_closed_loop = map(_starter_fixture, NATIVE_NAMES)
 plant_unzipped, controller_unzipped, closed_loop_unzipped = map(_unzipped_fixture, FMU_NAMES)
 start_plant, start_controller, start_closed_loop = map(_starter_fixture, FMU_NAMES)

@@ -39,7 +39,22 @@ struct Instance {
 typedef struct {
     char format[64];
     uint64_t size;
+    uint64_t checksum; /* state_checksum of the State's bytes */
 } StateHeader;
+
+/* FNV-1a (64 bit) of n bytes.  Each step (xor a byte, multiply by an odd constant modulo 2^64) is a bijection of
+   the running value, so a change confined to one byte -- every single-bit flip -- always changes the result; other
+   changes go unnoticed with probability about 2^-64.  Like the Python states' SHA-256 it detects accidents, not a
+   forger who recomputes it. */
+static uint64_t state_checksum(const unsigned char *bytes, size_t n)
+{
+    uint64_t h = 14695981039346656037ULL;
+    for (size_t i = 0; i < n; i++) {
+        h ^= bytes[i];
+        h *= 1099511628211ULL;
+    }
+    return h;
+}
 
 /* ---- logging ---- */
 
@@ -608,6 +623,7 @@ EXPORT fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate state, fmi
     memset(&header, 0, sizeof header);
     snprintf(header.format, sizeof header.format, "%s", STATE_FORMAT);
     header.size = sizeof(State);
+    header.checksum = state_checksum((const unsigned char *)state, sizeof(State));
     memcpy(bytes, &header, sizeof header);
     memcpy(bytes + sizeof header, state, sizeof(State));
     return fmi2OK;
@@ -623,9 +639,16 @@ EXPORT fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte bytes[
         return fmi2Error;
     }
     memcpy(&header, bytes, sizeof header);
-    if (strncmp(header.format, STATE_FORMAT, sizeof header.format) != 0 || header.size != sizeof(State)) {
+    char format[sizeof header.format] = {0}; /* every byte of the field: the name, then zeros */
+    snprintf(format, sizeof format, "%s", STATE_FORMAT);
+    if (memcmp(header.format, format, sizeof format) != 0 || header.size != sizeof(State)) {
         native_log(I, fmi2Error, "fmi2DeSerializeFMUstate refused: not a state of this FMU (format %.63s, "
                    "expected %s)", header.format, STATE_FORMAT);
+        return fmi2Error;
+    }
+    if (header.checksum != state_checksum((const unsigned char *)bytes + sizeof header, sizeof(State))) {
+        native_log(I, fmi2Error, "fmi2DeSerializeFMUstate refused: the state's checksum does not match its content "
+                   "(a damaged state)");
         return fmi2Error;
     }
     State *copy = *state != NULL ? (State *)*state : malloc(sizeof *copy);
