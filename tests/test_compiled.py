@@ -342,6 +342,19 @@ def test_tableau_header_is_generated_from_scipy():
     assert kernel.TABLEAU_HEADER.read_text() == kernel.tableau_header()
 
 
+def test_the_cached_library_is_keyed_by_the_compiler(monkeypatch, tmp_path):
+    """$CC is part of the cache key: a library compiled by one compiler is not reused for another."""
+    fake = tmp_path / "othercc"
+    fake.write_text("#!/bin/sh\nexit 1\n")
+    fake.chmod(0o755)
+    monkeypatch.delenv("CC", raising=False)
+    default = kernel.library_folder()
+    monkeypatch.setenv("CC", str(fake))
+    assert kernel.library_folder() != default
+    monkeypatch.setenv("CC", "no-such-compiler-here")  # no compiler: a key of its own, nothing cached under it
+    assert kernel.library_folder() not in (default,)
+
+
 def test_a_library_of_another_layout_is_refused(library, monkeypatch):
     folder = kernel.library_folder()
     assert load_library([folder])[0] is not None

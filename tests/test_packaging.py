@@ -2,6 +2,7 @@
 (descriptions, units, validation, file mode)."""
 import glob
 import os
+import shutil
 import stat
 import subprocess
 import sys
@@ -16,6 +17,20 @@ from fmpy.validation import validate_fmu
 from vibrofmu.run import run_fmu
 
 REPOSITORY = Path(__file__).resolve().parents[1]
+# what a fresh clone does not have: copied trees leave it out
+NOT_IN_A_CLONE = shutil.ignore_patterns(".git", ".venv", ".setuptools-build", "*.egg-info", "__pycache__", ".benchmarks",
+                                        ".pytest_cache")
+
+
+def build_wheel(tmp_path: Path) -> subprocess.CompletedProcess:
+    """`pip wheel` into tmp_path/dist from a copy of the checkout (without its ./build): setuptools builds in the
+    source tree (setup.py's build_base), so two wheel builds at once -- pytest-xdist workers, CI's Python
+    versions side by side -- must not share one tree."""
+    source = tmp_path / "source"
+    shutil.copytree(REPOSITORY, source, ignore=lambda folder, names: NOT_IN_A_CLONE(folder, names) | (
+        {"build"} if Path(folder) == REPOSITORY else set()))
+    return subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", "-w", str(tmp_path / "dist"),
+                           str(source)], capture_output=True, text=True, timeout=600)
 
 
 @pytest.fixture(scope="module")
@@ -65,8 +80,7 @@ def test_the_wheel_alone_builds_the_fmus(tmp_path):
     """The wheel's files suffice: unpacked, and imported without this checkout (python -S: no .pth files, so
     not the editable install; the dependencies from this venv's site-packages), `vibrofmu build` makes
     the three FMUs from the files in the wheel (a file the build reads that the wheel lacks fails here)."""
-    built = subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", "-w", str(tmp_path / "dist"),
-                            str(REPOSITORY)], capture_output=True, text=True, timeout=600)
+    built = build_wheel(tmp_path)
     assert built.returncode == 0, built.stderr
     site = tmp_path / "site"
     with zipfile.ZipFile(next((tmp_path / "dist").glob("*.whl"))) as wheel:
@@ -92,8 +106,7 @@ def test_wheel_installs_and_builds_anywhere(tmp_path):
     interpreter of the venv (default: this one), so CI runs the same test for 3.12 and 3.13."""
     python = os.environ.get("VIBROFMU_WHEEL_PYTHON", sys.executable)
     run = lambda cmd, cwd=tmp_path: subprocess.run(cmd, cwd=cwd, capture_output=True, text=True, timeout=1800)
-    wheel = run([sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", "-w", str(tmp_path / "dist"),
-                 str(REPOSITORY)])
+    wheel = build_wheel(tmp_path)
     assert wheel.returncode == 0, wheel.stderr
     venv = tmp_path / "venv"
     assert run([python, "-m", "venv", str(venv)]).returncode == 0

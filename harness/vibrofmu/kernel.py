@@ -51,8 +51,13 @@ def cache_dir() -> Path:
 
 
 def sources_digest() -> str:
-    """Hash of the kernel's sources and compiler command: the cached library's key."""
-    digest = hashlib.sha256(" ".join(GCC_COMMAND).encode())
+    """Hash of the kernel's sources and compiler command (with $CC, as compile_kernel runs it): the cached
+    library's key, so a library built by another compiler is not reused."""
+    try:
+        compiler = paths.c_compiler()
+    except paths.NoCompiler:  # then nothing is cached under this key, and compile_kernel says why
+        compiler = ["(no compiler)"]
+    digest = hashlib.sha256(" ".join([*compiler, *GCC_COMMAND[1:]]).encode())
     for path in (*kernel_sources(), *kernel_headers()):
         digest.update(path.name.encode())
         digest.update(path.read_bytes())
