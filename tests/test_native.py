@@ -511,6 +511,65 @@ def test_controller_parity(values, controller_fmu, native_controller_fmu):
     assert native.after_failure == python.after_failure
 
 
+def _input_bounds():
+    """(input, value, beyond the rule) at and just beyond each controller input's rule (vibromodel.parameters.RULES), and at and just
+    beyond 1e6, the edge of what the status shim's C fast path sets itself."""
+    from vibromodel.parameters import RULES
+
+    cases = []
+    for rule in (r for r in RULES if r.causality == "input"):
+        for value in (rule.high, math.nextafter(rule.high, math.inf), 1e6, math.nextafter(1e6, math.inf)):
+            cases.append((rule.name, value, value > rule.high))
+    return cases
+
+
+def _set_input(fmu, unzipped, start, name, value, in_initialization_mode):
+    """Set one controller input in Initialization Mode or step mode, step once; statuses, outputs, messages."""
+    from fmpy.fmi1 import FMICallException
+
+    instance = FmuInstance(fmu, "b", unzip_dir=unzipped)
+    f, trace = instance.fmu, []
+
+    def attempt(call):
+        try:
+            call()
+            trace.append("ok")
+        except FMICallException as error:
+            trace.append(error.status)
+
+    f.setupExperiment(startTime=0.0, stopTime=1.0)
+    f.enterInitializationMode()
+    instance.set(start)
+    if in_initialization_mode:
+        attempt(lambda: instance.set({name: value}))
+    attempt(f.exitInitializationMode)
+    if not in_initialization_mode:
+        attempt(lambda: instance.set({name: value}))
+    attempt(lambda: f.doStep(0.0, 0.1))
+    trace.append(f.getReal(instance.value_references(instance.output_names())))
+    messages = [m for m in instance.log.messages if not m.startswith("[ok]")]
+    instance.close()
+    return trace, messages
+
+
+@pytest.mark.parametrize("in_initialization_mode", [False, True], ids=["step mode", "initialization mode"])
+def test_controller_inputs_at_their_bounds_alike_on_every_path(in_initialization_mode, controller_fmu,
+                                                               controller_unzipped, native_controller_fmu, tmp_path):
+    """Issue 15: the C fast path (compiled kernel, step mode), the slave (pure-Python kernel, and every value the fast
+    path hands on) and the native FMU accept the same input values and refuse the same, naming the input."""
+    native_unzipped = extract(str(native_controller_fmu), str(tmp_path / "native"))
+    for name, value, beyond in _input_bounds():
+        results = [_set_input(fmu, unzipped, {**CONTROLLER_INPUTS, **start}, name, value, in_initialization_mode)
+                   for fmu, unzipped, start in ((controller_fmu, controller_unzipped, {}),
+                                                (controller_fmu, controller_unzipped, {"kernel": 1}),
+                                                (native_controller_fmu, native_unzipped, {}))]
+        assert results[0] == results[1] == results[2], (name, value)
+        trace, messages = results[0]
+        assert (FMI2_ERROR in trace) == beyond, (name, value, trace)
+        if beyond:
+            assert messages[0].startswith(f"[error] parameter {name} = {value!r}: must be"), messages[0]
+
+
 def _closed_by_hand(fmu, unzipped, steps=200):
     """The controller driven by inputs that change every step (a sine as the plant, a cosine as the
     reference), then a non-finite input: every output after every set and step, and the messages."""
