@@ -8,6 +8,7 @@ import pytest
 
 from vibrofmu import kernel
 from vibrofmu.campaigns import contact_loss_campaign, count_contact_losses, graze_reference, graze_scene, run_plant
+from vibrofmu.reference import reference_solution
 from vibromodel.compiled import CompiledPlant
 from vibromodel.integrate import Dop853, Rk4, TerminalEvent
 from vibromodel.models import affine_event
@@ -110,15 +111,16 @@ def test_a_touch_that_stays_on_its_side_is_no_event():
 
 # -- grazes against an independent reference ---------------------------------------------------------------------
 # Unforced, undamped (energy conserved): one excursion of `depth` below x = -3/2 per period, the reference from
-# quadrature and exact free flight (campaigns.graze_reference). docs/events.md: every excursion deeper than
-# 10 rtol is located (the sweep there found all with depth >= 3.2 rtol, and misses only at depth <= rtol, where
-# the dense output's own error is as large as the excursion). The error bound: DOP853's global error over the three
-# periods of tau <= 20 is a few rtol max|x| on deep excursions (measured <= 4.6); near grazing the period's
-# sensitivity to the energy, d(flight time)/d(depth) = sqrt(2/depth), amplifies it: the 184-run sweep of
-# docs/events.md (python -m vibrofmu.campaigns graze) measured at most 15.2 rtol max|x| where every excursion was
-# located, so 20 keeps that margin; where a shallow one (depth <= rtol) was missed, at most 23.8: bound 30.
+# quadrature and exact free flight (campaigns.graze_reference; its x_max, t_contact and contact phase agree with a
+# 30-digit mpmath quadrature to 3e-13, i.e. 2e-3 rtol max|x| at rtol 1e-10). docs/events.md: every excursion deeper
+# than 10 rtol is located (the sweep there found all with depth >= 3.2 rtol, misses only at depth <= rtol, where the
+# dense output's own error is as large as the excursion). The error bound is issue 15's acceptance, 10 rtol max|x|:
+# the period is a smooth function of the energy (the potential is C^2 at the boundary, dT/dE = 0.61-0.64 at depths 1e-2 ... 1e-6),
+# so near grazing the error is the integrator's local error at the contact kink, which the error norm counts in full
+# there (integrate.py, the comment at ATOL_PER_RTOL); the 184-run sweep measured at most 1.84 (before: 15.2).
 GRAZE_DEPTHS = (1e-1, 1e-3, 1e-6, 1e-9, 1e-12)
 GRAZE_RTOLS = (1e-6, 1e-8, 1e-10)
+GRAZE_BOUND = 10.0  # rtol max|x|, issue 15's acceptance
 
 
 @pytest.mark.parametrize("depth", GRAZE_DEPTHS)
@@ -129,12 +131,25 @@ def test_grazes_match_the_independent_reference(depth, library):
         plant = Plant(graze_scene(reference), Settings(rtol=rtol, kernel=1))
         times, x, exits = count_contact_losses(plant, stop_time, 0.1)
         x_ref = reference.x(times)
-        located = depth >= 10.0 * rtol
-        assert np.max(np.abs(x - x_ref)) <= (20.0 if located else 30.0) * rtol * np.max(np.abs(x_ref))
-        if located:
+        assert np.max(np.abs(x - x_ref)) <= GRAZE_BOUND * rtol * np.max(np.abs(x_ref))
+        if depth >= 10.0 * rtol:
             assert exits == reference.exits(stop_time) == 3
         compiled_run = run_plant(CompiledPlant(graze_scene(reference), Settings(rtol=rtol), library), stop_time, 0.1)
         assert compiled_run[1].tobytes() == x.tobytes()
+
+
+def test_worst_graze_of_the_sweep_is_within_the_acceptance_bound(library):
+    """The sweep's worst run before the kink-aware error norm: depth 10^-2.5, rtol 1e-8 gave 15.2 rtol max|x| (the
+    step starting at the third re-contact had a true local error 34 times its estimate). All three excursions are
+    located, the error is within GRAZE_BOUND, and the compiled kernel gives the same bits."""
+    reference = graze_reference(10.0 ** -2.5)
+    plant = Plant(graze_scene(reference), Settings(rtol=1e-8, kernel=1))
+    times, x, exits = count_contact_losses(plant, 20.0, 0.1)
+    x_ref = reference.x(times)
+    assert exits == reference.exits(20.0) == 3
+    assert np.max(np.abs(x - x_ref)) <= GRAZE_BOUND * 1e-8 * np.max(np.abs(x_ref))
+    compiled_run = run_plant(CompiledPlant(graze_scene(reference), Settings(rtol=1e-8), library), 20.0, 0.1)
+    assert compiled_run[1].tobytes() == x.tobytes()
 
 
 def test_graze_reference_period_is_the_quadratures():
@@ -155,3 +170,30 @@ def test_contact_loss_campaign_sample_has_no_halt(library):
     assert result.twin_mismatches == []
     assert result.runs == {"dop853": 200, "rk4": 200, "python": 20}
     assert result.errors_over_100 == 0 and result.worst_error <= 100.0
+
+
+# The campaign's worst completed run (seed 3, chunk 1, #72: 134 rtol max|x| at rtol 1.23e-6, docs/events.md). It never
+# leaves contact; the excess comes from two long steps (h 2 Omega = 5.2 and 6.9 rad of the gamma cos(2 Omega tau)
+# drive) whose true local errors were 29 and 73 times their estimates (with gamma = 0 the same steps are estimated
+# conservatively), and the dense output inside the second one multiplies the step-end error (11.6) by about 10.
+WORST_CAMPAIGN_SCENE = Scene(mu=0.17534537734078748, Delta=0.4825723641002341, omega=1.7839930805211193,
+                             Omega=2.97757448060958, alpha=0.04495698082072221, beta=0.021819321012593734,
+                             gamma=0.006706313281011708, R=5.803507089203329, x_start=-0.6071110791578956,
+                             v_start=-1.3978717100090192)
+WORST_CAMPAIGN_RTOL = 1.2296129547570618e-06
+
+
+def test_worst_campaign_run_is_the_unresolved_drive(library):
+    """The run within issue 15's 100 rtol max|x| of the reference (solve_ivp at rtol 1e-12, itself converged there:
+    rtol 1e-13 changes it by 2e-6 rtol max|x|), twice: with max_step resolving the 2 Omega drive (3 rad per step; the
+    two failing steps had 5.2 and 6.9), measured 0.10; and at max_step = 0 (automatic), measured 4.7 since the
+    kink-aware error norm: the run passes within g = 0.1 of the contact kink near tau = 1, the stricter norm there
+    changes the later step sequence and the two failing steps are no longer taken. The second is a regression check
+    of this scene, not a guarantee: estimates too low by such factors remain possible on other long smooth steps."""
+    scene, rtol = WORST_CAMPAIGN_SCENE, WORST_CAMPAIGN_RTOL
+    reference = reference_solution(scene, 0, 10.0, rtol=1e-12, atol=1e-14)
+    for max_step in (3.0 / (2.0 * scene.Omega), 0.0):
+        times, x, stop = run_plant(CompiledPlant(scene, Settings(rtol=rtol, max_step=max_step), library), 10.0, 0.1)
+        assert stop is None
+        x_ref = reference(times)[0]
+        assert np.max(np.abs(x - x_ref)) <= 100.0 * rtol * np.max(np.abs(x_ref))

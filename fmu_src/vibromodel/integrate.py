@@ -73,6 +73,13 @@ EXTRA_STAGES = tuple(zip(A_EXTRA, C_EXTRA))  # the three stages of the dense out
 
 SAFETY, MIN_FACTOR, MAX_FACTOR = 0.9, 0.2, 10.0
 ERROR_EXPONENT = -1.0 / 8.0  # error estimator of order 7
+# Error norm of a trial step: Hairer's combination h e5^2 / sqrt(e5^2 + 0.01 e3^2) estimates the 8th-order error as
+# the 5th-order estimate e5 times e5 / (0.1 e3) = O(h^2), which holds where the solution is smooth over a disk of
+# radius ~h around the step. Near a kink of the right-hand side (a non-terminal event: the contact force's g^(3/2)
+# puts a (t - t_kink)^(3/2) term in x'') all embedded solutions have errors of the same low order (h^2.5 in v), the
+# factor is not small, and the combination under-reports: measured 25-34 times on the steps that start at a
+# re-contact (docs/events.md).
+# On a step that crosses such an event or lies within one step of it (_near_kink) e3 gets weight 0: the error is e5.
 ATOL_PER_RTOL = 1e-2  # atol = 1e-2 rtol: the response is O(1e-2), so rtol alone would be too loose
 
 # Event location (docs/events.md). The dense output of a step is a polynomial of degree 7 in the step
@@ -257,9 +264,22 @@ class Dop853:
             n += len(sU)
         if not math.isfinite(e5 + e3):
             return x, v, stages, math.inf
-        if e5 == 0.0 and e3 == 0.0:
+        weight3 = 0.0 if self._near_kink(x, v, x_new, v_new, h) else 0.01  # the error norm's comment at ATOL_PER_RTOL
+        if e5 == 0.0 and weight3 * e3 == 0.0:
             return x_new, v_new, stages, 0.0
-        return x_new, v_new, stages, abs(h) * e5 / math.sqrt((e5 + 0.01 * e3) * n)
+        return x_new, v_new, stages, abs(h) * e5 / math.sqrt((e5 + weight3 * e3) * n)
+
+    def _near_kink(self, x, v, x_new, v_new, h):
+        """Whether a non-terminal event (a kink of the right-hand side) changes side over the step from (x, v) to
+        (x_new, v_new), or lies within one step of its ends: |g| <= h max(|g'|) at the nearer end."""
+        for event in self.events:
+            if event.terminal:
+                continue
+            c0, cx = event.affine
+            g0, g1 = c0 + cx * x, c0 + cx * x_new
+            if (g0 > 0.0) != (g1 > 0.0) or min(abs(g0), abs(g1)) <= h * max(abs(cx * v), abs(cx * v_new)):
+                return True
+        return False
 
     def _run_stages(self, t, x, v, U0, h, nodes, stages):
         """Append the stages of `nodes` ((row of A, c) pairs) from (t, x, v, U0) with step h to
