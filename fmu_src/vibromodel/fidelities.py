@@ -24,7 +24,9 @@ class FidelityEntry:
     open_loop(scene, settings, t0, stop_time, cache_dirs) -> (solution, notes): for a level whose doStep evaluates a
     precomputed solution (solution.state(t) -> (x, x', x'')) with U = 0; None for integrated levels.
     solution_in_snapshot: the solution holds state that FMU states must carry (it grows as the run advances).
-    check_settings(settings): raises ParameterError for settings only this level has (None: none)."""
+    check_settings(settings): raises ParameterError for settings only this level has (None: none).
+    work(solution) -> dict: what the set-up of an open-loop level did (table size, fit size...), for the bench.
+    uses_rtol: the level's result depends on Settings.rtol (every integrated level; fidelity 3's slow flow)."""
 
     level: Fidelity
     key: str
@@ -35,6 +37,13 @@ class FidelityEntry:
     open_loop: Callable | None = None
     solution_in_snapshot: bool = False
     check_settings: Callable | None = None
+    work: Callable | None = None
+    uses_rtol: bool = True
+
+    @property
+    def name(self) -> str:
+        """The description without its leading level number ("averaged slow flow")."""
+        return self.description.split(" ", 1)[1]
 
 
 def _averaged_solution(scene, settings, t0, stop_time, cache_dirs):
@@ -65,6 +74,15 @@ def _analytic_solution(scene, settings, t0, stop_time, cache_dirs):
     return solution, notes
 
 
+def _averaged_work(solution) -> dict:
+    return {"slow_flow_integration_seconds": solution.integration_seconds, "table_cells": len(solution.cells),
+            "table_spacing": solution.spacing}
+
+
+def _analytic_work(solution) -> dict:
+    return {"pieces": len(solution.pieces), "convergence_control_parameters": sum(len(c) for c in solution.C)}
+
+
 def _check_oafm(settings) -> None:
     settings.oafm.validate()
 
@@ -75,9 +93,9 @@ REGISTRY: dict[Fidelity, FidelityEntry] = {e.level: e for e in (
     FidelityEntry(Fidelity.POLYNOMIAL_PAPER, "polynomial-paper", "2 Eq. 7 printed coefficients",
                   lambda scene: PolynomialModel(scene, printed=True), True, 1),
     FidelityEntry(Fidelity.AVERAGED, "averaged", "3 averaged slow flow", ExactModel, False, None,
-                  open_loop=_averaged_solution, solution_in_snapshot=True),
+                  open_loop=_averaged_solution, solution_in_snapshot=True, work=_averaged_work),
     FidelityEntry(Fidelity.ANALYTIC, "analytic", "4 OAFM analytic", ExactModel, False, None,
-                  open_loop=_analytic_solution, check_settings=_check_oafm),
+                  open_loop=_analytic_solution, check_settings=_check_oafm, work=_analytic_work, uses_rtol=False),
 )}
 
 
@@ -92,6 +110,11 @@ def entry(fidelity: int) -> FidelityEntry:
 def keys() -> dict[str, int]:
     """Command-line names -> levels."""
     return {e.key: int(e.level) for e in REGISTRY.values()}
+
+
+def open_loop() -> tuple[Fidelity, ...]:
+    """The levels whose doStep evaluates a precomputed solution (approximations of Eq. 3 no setting refines)."""
+    return tuple(e.level for e in REGISTRY.values() if not e.integrated)
 
 
 def integrated() -> tuple[Fidelity, ...]:

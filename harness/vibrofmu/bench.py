@@ -28,6 +28,7 @@ from fmpy import extract
 from fmpy.fmi1 import FMICallException
 from scipy.integrate import solve_ivp
 
+from vibromodel import fidelities
 from vibromodel.integrate import ATOL_PER_RTOL, IntegrationError
 from vibromodel.models import Fidelity, make_model
 from vibromodel.parameters import ParameterError, Scene
@@ -61,15 +62,14 @@ SOLVE_IVP_METHODS = ("RK45", "DOP853", "LSODA")
 KERNEL_NAMES = {Kernel.COMPILED: "C kernel", Kernel.PYTHON: "Python"}
 KERNELS = tuple(KERNEL_NAMES)  # the FMU's adaptive cases run on both
 SOLVER_NAMES = {Solver.ADAPTIVE: "DOP853", Solver.RK4: "RK4"}
-APPROXIMATIONS = {Fidelity.AVERAGED: "averaged slow flow", Fidelity.ANALYTIC: "OAFM analytic"}
+# The levels of the fidelity registry: integrated ones run with every solver and setting; the open-loop ones
+# (approximations whose error is the model's) once with their defaults, labelled with the registry's name.
+INTEGRATED = fidelities.integrated()
+APPROXIMATIONS = {level: fidelities.entry(level).name for level in fidelities.open_loop()}
+# fidelity 2's own model error (~2e-8, the paper's printed coefficients) is above THRESHOLD: it cannot reach the
+# target, so the full bench gives it the decades only, not the target's half decades
+BELOW_TARGET = (Fidelity.POLYNOMIAL_PAPER,)
 
-# Reasons that say why a number is missing (the JSON carries them instead of the number).
-NFEV_NOTES = {
-    Fidelity.AVERAGED: "the slow flow is integrated by SciPy inside SlowFlowSolution, which keeps no evaluation "
-                       "count; each doStep is one table lookup and a reconstruction (see work)",
-    Fidelity.ANALYTIC: "closed form: each doStep evaluates the fitted OAFM solution once (no right-hand side); "
-                       "the fit's size is in work",
-}
 MODEL_ERROR_NOTE = ("fidelities 3 and 4 are approximations of Eq. 3: their error is the model error against the "
                     "exact reference, which their settings do not trade; fidelity 2 (the paper's printed "
                     "coefficients) has a model error of ~2e-8 on top of the solver's (linf_x_own_model: against a "
@@ -128,12 +128,12 @@ def make_plan(quick: bool, repeats: int | None = None) -> Plan:
         target = interval == TARGET_INTERVAL
         if quick:  # at interval 1: fidelity 0's DOP853, the approximations and the baselines only
             near = sorted(QUICK_DECADES + (QUICK_NEAR if target else ()), reverse=True)
-            rtols = {Fidelity.EXACT: near, Fidelity.POLYNOMIAL: (1e-6, 1e-8, 1e-10) if target else (),
-                     Fidelity.POLYNOMIAL_PAPER: (1e-6, 1e-8, 1e-10) if target else ()}
+            rtols = {level: near if level == Fidelity.EXACT else (1e-6, 1e-8, 1e-10) if target else ()
+                     for level in INTEGRATED}
             rk4_steps = {Fidelity.EXACT: QUICK_RK4_STEPS if target else ()}
         else:  # fidelity 1's model error (1e-12) lets it compete for the target too; fidelity 2's (2e-8) not
             near = sorted(DECADES + (HALF_DECADES if target else ()), reverse=True)
-            rtols = {Fidelity.EXACT: near, Fidelity.POLYNOMIAL: near, Fidelity.POLYNOMIAL_PAPER: DECADES}
+            rtols = {level: DECADES if level in BELOW_TARGET else near for level in INTEGRATED}
             rk4_steps = dict.fromkeys(rtols, RK4_STEPS)
         for fidelity in rtols:
             cases += [Case("fmu", interval, fidelity, Solver.ADAPTIVE, rtol, kernel=kernel)
@@ -240,16 +240,15 @@ def plant_direct(ctx: Context, settings: Settings, interval: float) -> dict:
     started = time.perf_counter()
     _, (x, _), plant = plant_run(ctx.scene, settings, ctx.plan.stop_time, interval)
     seconds = time.perf_counter() - started
-    record = {"seconds": seconds, "x": x, "nfev": None, "nfev_note": NFEV_NOTES.get(settings.fidelity), "work": {}}
+    record = {"seconds": seconds, "x": x, "nfev": None, "nfev_note": None, "work": {}}
     if plant.integrator is not None:
         record["nfev"] = plant.integrator.nfev
         record["work"] = {"integrator_steps": getattr(plant.integrator, "n_steps", None)}
-    elif settings.fidelity == Fidelity.AVERAGED:
-        record["work"] = {"slow_flow_integration_seconds": plant.solution.integration_seconds,
-                          "table_cells": len(plant.solution.cells), "table_spacing": plant.solution.spacing}
-    else:
-        record["work"] = {"pieces": len(plant.solution.pieces),
-                          "convergence_control_parameters": sum(len(c) for c in plant.solution.C),
+    else:  # an open-loop level: its set-up's work from the registry
+        level = fidelities.entry(settings.fidelity)
+        record["nfev_note"] = (f"{level.name}: each doStep evaluates the solution prepared at set-up (no right-hand "
+                               "side is stepped); the set-up's work is in work")
+        record["work"] = {**(level.work(plant.solution) if level.work else {}),
                           "initialisation": plant.notes[0] if plant.notes else None}
     return record
 
@@ -361,7 +360,7 @@ def case_record(ctx: Context, case: Case) -> dict:
         solver, max_step = case.method, None
     elif approximation:  # fidelity 3: its slow flow's tolerance; fidelity 4: a closed form
         solver, max_step = None, None
-        rtol = case.settings().rtol if case.fidelity == Fidelity.AVERAGED else None
+        rtol = case.settings().rtol if fidelities.entry(case.fidelity).uses_rtol else None
     record = {"method": case.label, "setting": case.setting, "kind": case.kind, "fidelity": case.fidelity,
               "solver": solver, "kernel": case.kernel, "rtol": rtol, "max_step": max_step,
               "output_interval": case.interval, "stop_time": ctx.plan.stop_time, "output_points": n + 1,
@@ -521,9 +520,21 @@ def build_references(scene: Scene, stop_time: float, fidelities) -> tuple[dict, 
 
 def run_bench(fmu: Path, out_dir: Path, quick: bool = False, repeats: int | None = None,
               extreme_rows: Callable[[bool], list[dict]] | None = None,
-              progress: Callable[[str], None] | None = None, closed_loop_fmu: Path | None = None) -> dict:
+              progress: Callable[[str], None] | None = None, closed_loop_fmu: Path | None = None,
+              ladder_rounds: int | None = None, instructions: bool = True) -> dict:
     """Run every case and the speed-accuracy ladder (ladder.py; the closed-loop FMU is built when not given), write
     out_dir/bench.json, out_dir/work_precision.png and out_dir/ladder.png; return the JSON's content."""
+    if closed_loop_fmu is None:
+        # built first: a pythonfmu FMU run in this process imports the pythonfmu copy packed in its resources
+        # (without the builder's binaries), after which pythonfmu's builder in this process makes FMUs without
+        # binaries/linux64 ("has no binaries/linux64/HertzEAClosedLoop.so" after the cases)
+        from .build import build_closed_loop
+
+        with tempfile.TemporaryDirectory(prefix="vibrofmu-bench-loop-") as tmp:
+            say_first = progress or (lambda line: None)
+            say_first("building the closed-loop FMU for the ladder ...")
+            return run_bench(fmu, out_dir, quick, repeats, extreme_rows, progress, build_closed_loop(Path(tmp)),
+                             ladder_rounds, instructions)
     bench_started = time.perf_counter()
     say = progress or (lambda line: None)
     scene = Scene()
@@ -564,7 +575,7 @@ def run_bench(fmu: Path, out_dir: Path, quick: bool = False, repeats: int | None
                              "extract_seconds for the unpacking"}
     extremes = extreme_rows(quick) if extreme_rows is not None else []
     say("speed-accuracy ladder (C host and FMPy) ...")
-    ladder_record = run_ladder_with_fmus(fmu, closed_loop_fmu, quick, say)
+    ladder_record = run_ladder_with_fmus(fmu, closed_loop_fmu, quick, say, ladder_rounds, instructions)
     summary = {
         "bench": {"quick": quick, "stop_time": plan.stop_time, "repeats": plan.repeats, "threshold": THRESHOLD,
                   "output_intervals": list(INTERVALS), "scene": scene.as_dict(), "fmu": str(fmu),
@@ -591,20 +602,46 @@ def run_bench(fmu: Path, out_dir: Path, quick: bool = False, repeats: int | None
     return summary
 
 
-LADDER_QUICK_STOP, LADDER_QUICK_REPEATS = 50.0, 1  # --quick: a shorter ladder, one timed run per rung
+LADDER_QUICK_STOP, LADDER_QUICK_ROUNDS = 50.0, 3  # --quick: a shorter ladder; 3 rounds for a median of 3
+LADDER_ROUNDS = 3  # the issue's "best of 3"
+LADDER_QUICK_INSTRUCTION_INTERVALS = (0.1,)
 
 
-def run_ladder_with_fmus(fmu: Path, closed_loop_fmu: Path | None, quick: bool, say) -> dict:
-    """The ladder on tau in [0, 200] (issue 13), best of FULL_REPEATS; --quick: [0, 50], one run."""
-    stop, repeats = (LADDER_QUICK_STOP, LADDER_QUICK_REPEATS) if quick else (QUICK_STOP, FULL_REPEATS)
+def run_ladder_with_fmus(fmu: Path, closed_loop_fmu: Path | None, quick: bool, say, rounds: int | None = None,
+                         instructions: bool = True) -> dict:
+    """The ladder on tau in [0, 200] (issue 13) in LADDER_ROUNDS interleaved rounds, instruction counts at
+    intervals 0.1 and 1; --quick: [0, 50], instructions at 0.1 only."""
+    stop = LADDER_QUICK_STOP if quick else QUICK_STOP
+    if rounds is None:
+        rounds = LADDER_QUICK_ROUNDS if quick else LADDER_ROUNDS
+    intervals = LADDER_QUICK_INSTRUCTION_INTERVALS if quick else ladder.INSTRUCTION_INTERVALS
     with tempfile.TemporaryDirectory(prefix="vibrofmu-bench-loop-") as tmp:
         if closed_loop_fmu is None:
             from .build import build_closed_loop
 
             closed_loop_fmu = build_closed_loop(Path(tmp))
-        record = ladder.run_ladder(fmu, closed_loop_fmu, stop=stop, repeats=repeats, progress=say)
+        record = ladder.run_ladder(fmu, closed_loop_fmu, stop=stop, rounds=rounds, instructions=instructions,
+                                   instruction_intervals=intervals, progress=say)
     record["quick"] = quick
     return record
+
+
+def run_ladder_only(fmu: Path, out_dir: Path, quick: bool = False, progress: Callable[[str], None] | None = None,
+                    closed_loop_fmu: Path | None = None, ladder_rounds: int | None = None,
+                    instructions: bool = True) -> dict:
+    """Only the speed-accuracy ladder (`vibrofmu bench --ladder-only`, a few minutes): out_dir/bench.json with the
+    machine and "ladder", and out_dir/ladder.png; returns the JSON's content."""
+    started = time.perf_counter()
+    say = progress or (lambda line: None)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    summary = {"bench": {"quick": quick, "ladder_only": True, "scene": Scene().as_dict(), "fmu": str(fmu)},
+               "machine": machine_info()}
+    summary["ladder"] = run_ladder_with_fmus(Path(fmu), closed_loop_fmu, quick, say, ladder_rounds, instructions)
+    summary["machine"]["load_average_at_end"] = list(os.getloadavg()) if hasattr(os, "getloadavg") else None
+    summary["bench"]["seconds"] = time.perf_counter() - started
+    export.write_json(out_dir / "bench.json", summary)
+    ladder.plot_ladder(out_dir / "ladder.png", summary["ladder"])
+    return summary
 
 
 def progress_line(number: int, total: int, r: dict) -> str:
@@ -616,7 +653,9 @@ def progress_line(number: int, total: int, r: dict) -> str:
 
 
 def summary_lines(summary: dict) -> list[str]:
-    """What the command prints: the targets with their inputs."""
+    """What the command prints: the targets with their inputs, and the ladder (a --ladder-only run: the ladder)."""
+    if "targets" not in summary:
+        return ladder.ladder_lines(summary["ladder"])
     t = summary["targets"]
     lines = [f"targets ({t['note']}; L-infinity <= {t['threshold_linf_x']:g}, output interval "
              f"{t['output_interval']:g}):"]
@@ -645,7 +684,7 @@ def summary_lines(summary: dict) -> list[str]:
 
 # ---- plot ----------------------------------------------------------------------------------------------------
 
-FIDELITY_COLOURS = ("tab:blue", "tab:green", "tab:orange", "tab:brown", "tab:pink")
+FIDELITY_COLOURS = ("tab:blue", "tab:green", "tab:orange", "tab:brown", "tab:pink", "tab:red", "tab:purple")
 BASELINE_COLOURS = {"RK45": "tab:gray", "DOP853": "tab:olive", "LSODA": "tab:cyan"}
 
 
@@ -656,7 +695,7 @@ def line_style(r: dict) -> dict:
         return {"color": "k", "ls": ":", "marker": "*"}
     if r["kind"] == "solve_ivp":
         return {"color": BASELINE_COLOURS.get(r["solver"], "tab:purple"), "ls": "--", "marker": "v"}
-    style = {"color": FIDELITY_COLOURS[r["fidelity"]], "ls": "-", "marker": "o"}
+    style = {"color": FIDELITY_COLOURS[r["fidelity"] % len(FIDELITY_COLOURS)], "ls": "-", "marker": "o"}
     if r["solver"] == "RK4":
         style.update(ls="-.", marker="s")
     elif r["kernel"] == 1:

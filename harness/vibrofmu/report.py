@@ -267,7 +267,9 @@ def speed_block(sources: list[Path]) -> str | None:
             machine = data.get("machine", {})
             load = machine.get("load_average_at_start")
             when = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime(bench_file.stat().st_mtime))
-            lines.append(f"- `vibrofmu bench{' --quick' if data.get('bench', {}).get('quick') else ''}` ({when}, "
+            flags = "".join(flag for flag, key in ((" --quick", "quick"), (" --ladder-only", "ladder_only"))
+                            if data.get("bench", {}).get(key))
+            lines.append(f"- `vibrofmu bench{flags}` ({when}, "
                          f"{machine.get('cpu_count', '?')} CPUs"
                          + (f", load average {load[0]:.1f} at its start" if load else "") + "):")
             lines += [f"  {line}" for line in bench.summary_lines(data)]

@@ -46,6 +46,37 @@ def cmd_study(args) -> int:
         return 2
 
 
+def cusp_test(client, spec, store, fmu_digest, out: Path) -> list[dict]:
+    """The two-start bistability test (study.cusp) at every grid point where the sweeps ended apart, one Dask
+    task per point; the results also go to DIR/cusp_test.json."""
+    import numpy as np
+    from distributed import as_completed
+
+    from .. import export
+    from .cusp import run_test_point, test_points
+    from .scheduling import STOP, Progress
+
+    table = store.load()
+    data = {name: np.asarray(table.column(name).to_pylist()) for name in table.column_names}
+    points = test_points(spec, data)
+    progress = Progress(len(points), 0, "cusp test")
+    futures = client.map(run_test_point, [spec.as_dict()] * len(points), [fmu_digest] * len(points), points,
+                         pure=False)
+    tests = []
+    try:
+        for future in as_completed(futures):
+            if STOP.is_set():
+                client.cancel(futures)
+                raise KeyboardInterrupt
+            tests.append(future.result())
+            progress.update(1)
+    finally:
+        progress.close()
+    tests.sort(key=lambda t: (t["Delta_index"], t["omega_index"]))
+    export.write_json(out / "cusp_test.json", tests)
+    return tests
+
+
 def _run(args) -> int:
     import hashlib
     import json
@@ -87,7 +118,7 @@ def _run(args) -> int:
     except KeyboardInterrupt:
         print("interrupted while starting the cluster: nothing computed", file=sys.stderr)
         return 130
-    interrupted, run = False, {}
+    interrupted, run, tests = False, {}, None
     try:
         workers = len(client.scheduler_info(n_workers=-1)["workers"])
     except Exception:  # noqa: BLE001 - only for the summary
@@ -98,6 +129,9 @@ def _run(args) -> int:
             client.register_plugin(plugin)
         with stop_on_sigint():
             run = execute(client, spec, cases, store, fmu_digest, progress)
+            if spec.kind == "response-map" and spec.settings.get("cusp_test"):
+                progress.close()
+                tests = cusp_test(client, spec, store, fmu_digest, out)
     except KeyboardInterrupt:
         interrupted = True
     finally:
@@ -119,7 +153,7 @@ def _run(args) -> int:
     if run:
         summary["projection_64_workers"] = analysis.projection(run, 64)
     if not interrupted and table is not None:
-        result = analysis.analyse(spec, table)
+        result = analysis.analyse(spec, table, tests)
         summary.update(result["summary"])
         plots.plot(spec, table, result, out)
     export.write_json(out / "summary.json", summary)

@@ -5,8 +5,9 @@ numbers, and the throughput projection.
   are bistable where the up and down sweeps settle on different branches (sweep.hysteresis_jumps' rule,
   with BRANCHES_APART).
   Points nearer a slow-flow fold than stability.sweep_tolerance (one omega step + the ghost margin of the
-  longest wait) are not compared. The cusp: the smallest Delta with two folds, by bisection (slow flow), and
-  the first Delta row with a bistable point (runs).
+  longest wait) are not compared. The cusp: the smallest Delta with two folds, by bisection (slow flow), the
+  first Delta row with a bistable point (runs), and the estimates of study.cusp (extrapolation of the bistable
+  bands of the runs and of the slow flow; the two-start test's bracket when it ran).
 - basins: which stable steady state each initial state reaches, against the averaged model's run from it
   (cases.predicted_attractor); the predicted boundary is the stable manifold of the slow flow's saddle,
   traced backwards in (A, B) and mapped to (x0, v0) by the averaged model's reconstruction of x, x'.
@@ -68,13 +69,13 @@ def _usable(table) -> np.ndarray:
     return ~(table["pull_in"] | table["failed"])
 
 
-def analyse(spec: Spec, table) -> dict:
+def analyse(spec: Spec, table, tests: list[dict] | None = None) -> dict:
     data = {name: np.asarray(table.column(name).to_pylist()) for name in table.column_names}
     if spec.kind == "monte-carlo":
         return monte_carlo(spec, data)
     if spec.kind == "basins":
         return basins(spec, data)
-    return response_map(spec, data)
+    return response_map(spec, data, tests)
 
 
 # --- monte-carlo -------------------------------------------------------------------------------------
@@ -230,7 +231,7 @@ def slow_flow_cusp(scene, lo: float, hi: float, iterations: int = 30) -> dict | 
     return {"Delta": hi, "omega": 0.5 * (folds[0].omega + folds[-1].omega), "bracket": [lo, hi]}
 
 
-def response_map(spec: Spec, d: dict) -> dict:
+def response_map(spec: Spec, d: dict, tests: list[dict] | None = None) -> dict:
     scene = spec.base_scene()
     deltas = np.array(spec.axis("Delta"))
     omega_e = av.averaged(scene).omega_e
@@ -249,12 +250,16 @@ def response_map(spec: Spec, d: dict) -> dict:
     step = float(omegas[1] - omegas[0]) if n_w > 1 else math.nan
     folds = slow_flow_folds(scene, deltas)
     predicted = np.zeros((n_d, n_w), bool)
+    predicted_jump = np.full((n_d, n_w), np.nan)  # slow flow: r of the high stable state - r of the low one
     near = np.zeros((n_d, n_w), bool)
     jumps = []
     for j, delta in enumerate(deltas):
         model = av.averaged(scene.with_values(Delta=float(delta)))
         for i, omega in enumerate(omegas):
-            predicted[j, i] = sum(s.stable for s in av.steady_states(model.flow(float(omega)), model.r_max)) >= 2
+            stable = [s.r for s in av.steady_states(model.flow(float(omega)), model.r_max) if s.stable]
+            predicted[j, i] = len(stable) >= 2
+            if predicted[j, i]:
+                predicted_jump[j, i] = max(stable) - min(stable)
             near[j, i] = any(abs(omega - f.omega) <= sweep_tolerance(model, f, step) for f in folds[j])
         up = Sweep("up", [SweepPoint(float(w), float(r["up"][j, i]), 0.0, bool(settled["up"][j, i]), 0, (0, 0))
                           for i, w in enumerate(omegas)])
@@ -273,6 +278,25 @@ def response_map(spec: Spec, d: dict) -> dict:
         run_cusp = {"Delta_bracket": [float(deltas[first - 1]) if first > 0 else None, float(deltas[first])],
                     "omega": float(0.5 * (where.min() + where.max())),
                     "first_bistable_Delta": float(deltas[first])}
+    from . import cusp as cusp_module
+
+    extrapolation = {
+        "runs_sweeps": cusp_module.extrapolate(cusp_module.band_rows(deltas, omegas, measured, np.abs(r["up"] - r["down"]))),
+        "slow_flow_same_grid": cusp_module.extrapolate(cusp_module.band_rows(deltas, omegas, predicted, predicted_jump)),
+        "slow_flow_exact_folds": cusp_module.extrapolate(
+            [{"Delta": float(delta), "width": f[-1].omega - f[0].omega, "centre": 0.5 * (f[0].omega + f[-1].omega),
+              "jump": math.nan} for delta, f in zip(deltas, folds) if len(f) >= 2], use_jump=False),
+        "method": "width^(2/3) and jump^2 linear in Delta over the rows with >= "
+                  f"{cusp_module.MIN_POINTS} bistable grid points; zero = Delta_c (least squares, delta-method "
+                  "standard error); omega_c = the band centres' line at Delta_c",
+    }
+    test = None
+    if tests is not None:
+        test = cusp_module.test_summary(tests, deltas, omegas)
+        test_mask = test.pop("_mask")
+        extrapolation["runs_two_start_test"] = test.pop("extrapolation")
+    else:
+        test_mask = None
     cusp_comparison = None
     if cusp and run_cusp:
         lo, hi = run_cusp["Delta_bracket"]
@@ -287,11 +311,14 @@ def response_map(spec: Spec, d: dict) -> dict:
                       "excluded_near_folds": int((near & both).sum()), "excluded_unsettled": int((~both).sum()),
                       "margin": "one omega step + the ghost margin of a MAX_PERIODS wait (stability.sweep_tolerance) "
                                 "around each slow-flow fold at that Delta"},
-        "cusp": {"slow_flow": cusp, "runs": run_cusp, "comparison": cusp_comparison},
+        "cusp": {"slow_flow": cusp, "runs": run_cusp, "comparison": cusp_comparison,
+                 "extrapolation": extrapolation, "two_start_test": test,
+                 "two_start_points": tests},
         "jumps": jumps,
     }
     return {"summary": summary, "r": r, "measured": measured, "predicted": predicted, "near": near,
-            "omegas": omegas, "deltas": deltas, "folds": folds, "cusp": cusp, "run_cusp": run_cusp}
+            "omegas": omegas, "deltas": deltas, "folds": folds, "cusp": cusp, "run_cusp": run_cusp,
+            "extrapolation": extrapolation, "test_mask": test_mask, "test": test}
 
 
 def headline(summary: dict) -> str:
@@ -301,4 +328,30 @@ def headline(summary: dict) -> str:
     if agreement:
         text += (f"; agreement with the averaged prediction {agreement.get('fraction', math.nan):.3f} "
                  f"({agreement.get('agreeing')}/{agreement.get('compared')})")
+    cusp = summary.get("cusp")
+    if cusp:
+        text += "\n" + cusp_headline(cusp)
     return text
+
+
+def cusp_headline(cusp: dict) -> str:
+    """The cusp estimates, one per line: slow flow, the extrapolations, the two-start test's bracket."""
+    lines = []
+    if cusp.get("slow_flow"):
+        lines.append(f"cusp, slow flow (bisection on the folds): Delta = {cusp['slow_flow']['Delta']:.6f}, "
+                     f"omega = {cusp['slow_flow']['omega']:.6f}")
+    labels = {"slow_flow_exact_folds": "slow flow, extrapolated from its folds",
+              "slow_flow_same_grid": "slow flow, extrapolated on the grid",
+              "runs_sweeps": "runs, extrapolated from the sweeps",
+              "runs_two_start_test": "runs, extrapolated from the two-start test"}
+    for key, label in labels.items():
+        e = (cusp.get("extrapolation") or {}).get(key)
+        if e:
+            lines.append(f"cusp, {label} ({len(e['rows'])} rows): Delta = {e['Delta']:.6f} +- {e['Delta_stderr']:.6f}, "
+                         f"omega = {e['omega']:.6f} +- {e['omega_stderr']:.6f}")
+    test = cusp.get("two_start_test")
+    if test:
+        lo, hi = test["Delta_bracket"] or (None, None)
+        lines.append(f"cusp, runs, two-start test ({test['points_tested']} points, {test['verdicts']}): "
+                     f"Delta in [{lo}, {hi}]")
+    return "\n".join(lines)

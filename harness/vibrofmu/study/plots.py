@@ -100,6 +100,9 @@ def response_map(result: dict, path: Path) -> Path:
     cmap = matplotlib.colors.ListedColormap(["white", "C1", "C0", "C2"])
     axes[2].imshow(code, origin="lower", extent=extent, aspect="auto", cmap=cmap, vmin=-0.5, vmax=3.5,
                    interpolation="nearest")
+    if result.get("test_mask") is not None:
+        kept = np.argwhere(result["test_mask"])
+        axes[2].plot(omegas[kept[:, 1]], deltas[kept[:, 0]], "k+", ms=5, label="bistable by the two-start test")
     near = np.argwhere(result["near"])
     axes[2].plot(omegas[near[:, 1]], deltas[near[:, 0]], ".", color="0.5", ms=3, label="within the fold margin")
     for label, colour in (("bistable: runs only", "C1"), ("bistable: slow flow only", "C0"), ("bistable: both", "C2")):
@@ -117,11 +120,18 @@ def response_map(result: dict, path: Path) -> Path:
         if result["run_cusp"]:
             ax.plot(result["run_cusp"]["omega"], result["run_cusp"]["first_bistable_Delta"], "mP", ms=9,
                     label="first bistable row (runs)")
+        extrapolation = result.get("extrapolation") or {}
+        for key, style, label in (("runs_sweeps", "ms", "cusp extrapolated (runs' sweeps)"),
+                                  ("runs_two_start_test", "kD", "cusp extrapolated (two-start test)")):
+            e = extrapolation.get(key)
+            if e:
+                ax.errorbar(e["omega"], e["Delta"], xerr=e["omega_stderr"], yerr=e["Delta_stderr"], fmt=style,
+                            ms=6, mfc="none", capsize=3, label=label)
         ax.set_xlabel("omega")
         ax.set_xlim(extent[0], extent[1])
         ax.set_ylim(extent[2], extent[3])
     axes[0].set_ylabel("Delta")
-    axes[2].legend(fontsize=7, loc="upper left")
+    axes[2].legend(fontsize=7, loc="lower left")
     agreement = result["summary"]["agreement"]
     fig.suptitle(f"response map: bistability agreement {agreement['fraction']:.3f} "
                  f"({agreement['agreeing']}/{agreement['compared']} points off the folds' margin)")

@@ -6,11 +6,13 @@ they arrive.
 - The FMU reaches the workers through a worker plugin (FmuFile) holding its bytes: the scheduler installs it
   on every worker, also on a worker that joins or is restarted after a crash, and no shared file system is
   needed.
+- Warm-up: every worker imports the study's modules and makes its engine first (warm_up, via client.run),
+  outside the timed part: a fixed cost per worker that would dilute the measured speed-up.
 - Batches: the scheduler's cost per task c_s is measured first (OVERHEAD_PROBE_TASKS empty tasks); one
-  case per worker then runs alone (the pilot: it warms the workers and measures the cost per case c_w);
-  the rest go in batches of b cases, the smallest b with c_s / (b c_w) <= 5 % and b / c_s >= W / c_w (the
-  scheduler keeps W workers busy), but small enough that every worker gets at least BATCHES_PER_WORKER
-  batches (balance at the end).
+  case per worker then runs (the pilot: it measures the cost per case c_w); when the
+  first pilot case is back the rest go out in batches, largest first (guided_batches), none smaller than b,
+  the smallest b with c_s / (b c_w) <= 5 % and b / c_s >= W / c_w (the scheduler keeps W workers busy), but
+  small enough that every worker gets at least BATCHES_PER_WORKER batches (balance at the end).
 - Worker loss: Dask re-runs the tasks of a lost worker on the others (its Nanny restarts it); a batch's
   rows are written once, when its result reaches the client, and Store.write drops cases already on disk.
 """
@@ -88,6 +90,20 @@ def run_batch(spec_dict: dict, fmu_digest: str | None, cases: list[dict]) -> lis
     return rows
 
 
+def warm_up(spec_dict: dict, fmu_digest: str | None) -> float:
+    """Run on every worker before the study (client.run): import the study's modules and make the worker's
+    engine (unpack the FMU or load the kernel), so that the pilot measures a case, not the imports, and the
+    speed-up from 1 to W workers is not diluted by this fixed per-worker cost. Returns its seconds."""
+    started = time.perf_counter()
+    from .cases import run_case  # noqa: F401 - the import is the point
+    from .engines import engine_for
+
+    spec = Spec(**spec_dict)
+    if spec.engine == "core" or fmu_digest in _FMU_BYTES:
+        engine_for(spec.engine, _FMU_BYTES.get(fmu_digest) if fmu_digest else None)
+    return time.perf_counter() - started
+
+
 def quiet_dask() -> None:
     for name in ("distributed", "distributed.nanny", "distributed.scheduler", "distributed.worker",
                  "distributed.core", "distributed.comm", "tornado"):
@@ -145,8 +161,22 @@ def needed_batch(c_s: float, c_w: float, workers: int) -> int:
 
 
 def batch_size(c_s: float, c_w: float, remaining: int, workers: int) -> int:
+    """The smallest batch size: needed_batch, but no more than a BATCHES_PER_WORKER-th of each worker's share."""
     balance = max(1, remaining // (BATCHES_PER_WORKER * workers))
     return max(1, min(needed_batch(c_s, c_w, workers), balance))
+
+
+def guided_batches(n: int, smallest: int, workers: int) -> list[int]:
+    """Batch sizes for n cases, largest first (guided self-scheduling): each batch takes a
+    BATCHES_PER_WORKER * workers-th of the cases still left, but at least `smallest`. Few, large batches at the
+    start keep the client's work per batch (a Parquet part, a progress update, a scheduler round trip) small; the
+    small ones at the end let the workers finish together (the idle tail is about one small batch)."""
+    sizes, left = [], n
+    while left > 0:
+        size = min(left, max(smallest, math.ceil(left / (BATCHES_PER_WORKER * workers))))
+        sizes.append(size)
+        left -= size
+    return sizes
 
 
 class Progress:
@@ -168,40 +198,63 @@ class Progress:
 def execute(client, spec: Spec, cases: list[dict], store, fmu_digest: str | None, progress: Progress) -> dict:
     """Run every case not on disk; write each batch's rows as it arrives. Returns the run's measurements."""
     n_workers = max(1, len(client.scheduler_info(n_workers=-1)["workers"]))
-    c_s = scheduler_cost(client)
     spec_dict = spec.as_dict()
+    warm = time.perf_counter()
+    try:
+        warm_ups = client.run(warm_up, spec_dict, fmu_digest)
+    except Exception:  # noqa: BLE001 - a worker lost meanwhile: it warms up in its first task instead
+        warm_ups = {}
+    warm = time.perf_counter() - warm
+    c_s = scheduler_cost(client)
     todo = [case for case in cases if case["case"] not in store.written]
     started = time.perf_counter()
     tally = {"cases": 0, "cost": 0.0}
     failures = []
 
-    def collect(futures):
-        for future in as_completed(futures):
-            if STOP.is_set():  # Ctrl-C (stop_on_sigint): stop after the batch in hand, keep what is written
-                client.cancel(futures)
-                raise KeyboardInterrupt
-            try:
-                rows = future.result()
-            except Exception as error:  # a batch that failed (e.g. its worker died too often): not written
-                failures.append(f"{type(error).__name__}: {error}")
-                continue
-            tally["cases"] += len({row["case"] for row in rows})
-            tally["cost"] += sum(row["cost_s"] for row in rows)
-            progress.update(store.write(rows))
-
+    # the pilot: one case per worker; as soon as the first one is back (its cost is c_w), the rest go out in
+    # batches while the other pilot cases still run (no worker waits for the slowest pilot case)
     pilot, rest = todo[:n_workers], todo[n_workers:]
-    collect(client.map(run_batch, [spec_dict] * len(pilot), [fmu_digest] * len(pilot), [[c] for c in pilot],
-                       pure=False))
-    c_w = tally["cost"] / tally["cases"] if tally["cases"] else 0.0
-    b = batch_size(c_s, c_w, len(rest), n_workers)
-    batches = [rest[i:i + b] for i in range(0, len(rest), b)]
-    collect(client.map(run_batch, [spec_dict] * len(batches), [fmu_digest] * len(batches), batches, pure=False))
+    futures = client.map(run_batch, [spec_dict] * len(pilot), [fmu_digest] * len(pilot), [[c] for c in pilot],
+                         pure=False)
+    pending = as_completed(futures)
+    plan = {"b": 1, "sizes": []}
+
+    def submit_rest():
+        c_w = tally["cost"] / tally["cases"] if tally["cases"] else 0.0
+        plan["c_w"] = c_w
+        plan["b"] = b = batch_size(c_s, c_w, len(rest), n_workers)
+        plan["sizes"] = sizes = guided_batches(len(rest), b, n_workers)
+        starts = [sum(sizes[:k]) for k in range(len(sizes))]
+        batches = [rest[start:start + size] for start, size in zip(starts, sizes)]
+        more = client.map(run_batch, [spec_dict] * len(batches), [fmu_digest] * len(batches), batches, pure=False)
+        futures.extend(more)
+        pending.update(more)
+
+    submitted = not rest  # (no pilot means no cases at all)
+    for future in pending:
+        if STOP.is_set():  # Ctrl-C (stop_on_sigint): stop after the batch in hand, keep what is written
+            client.cancel(futures)
+            raise KeyboardInterrupt
+        try:
+            rows = future.result()
+        except Exception as error:  # a batch that failed (e.g. its worker died too often): not written
+            failures.append(f"{type(error).__name__}: {error}")
+            rows = []
+        tally["cases"] += len({row["case"] for row in rows})
+        tally["cost"] += sum(row["cost_s"] for row in rows)
+        progress.update(store.write(rows))
+        if not submitted:
+            submitted = True
+            submit_rest()
+    b, c_w = plan["b"], plan.get("c_w", 0.0)
+    batches = plan["sizes"]
     wall = time.perf_counter() - started
     done = tally["cases"]
     per_case = tally["cost"] / done if done else math.nan
     return {"workers": n_workers, "scheduler_s_per_task": c_s, "pilot_case_cost_s": c_w, "batch_size": b,
-            "batches": len(batches) + len(pilot),
+            "batches": len(batches) + len(pilot), "batch_sizes": batches,
             "expected_overhead_fraction": c_s / (b * c_w) if c_w else math.nan,
+            "warm_up_wall_s": warm, "warm_up_s_per_worker": sorted(warm_ups.values()),
             "compute_wall_s": wall, "case_cost_s_mean": per_case, "case_cost_s_sum": tally["cost"],
             # every worker-second not spent inside a case, per case: scheduling, transfers, writing, the
             # pilot's wait and the idle tail

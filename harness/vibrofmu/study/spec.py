@@ -57,6 +57,8 @@ class Spec:
     def digest(self) -> str:
         """Identifies what the cases are (the engine is not part of it: both give the same rows)."""
         content = {k: v for k, v in self.as_dict().items() if k != "engine"}
+        # the cusp test runs after the cases and is not stored with them: it does not change what they are
+        content["settings"] = {k: v for k, v in self.settings.items() if not k.startswith("cusp_test")}
         return hashlib.sha256(json.dumps(content, sort_keys=True).encode()).hexdigest()[:16]
 
 
@@ -79,7 +81,7 @@ QUICK = {
     "monte-carlo": dict(settings={"samples": 40}),
 }
 GRID_AXES = {"response-map": ("omega_offset", "Delta"), "basins": ("x0", "v0"), "monte-carlo": ()}
-SETTING_NAMES = {"response-map": (), "basins": ("sigma",), "monte-carlo": ("samples", "seed")}
+SETTING_NAMES = {"response-map": ("cusp_test", "cusp_test_periods"), "basins": ("sigma",), "monte-carlo": ("samples", "seed")}
 
 
 def _merge(spec: Spec, table: dict) -> None:
@@ -162,6 +164,12 @@ def check(spec: Spec) -> None:
             raise SpecError(f"grid axis {name} = {axis!r}: empty grid (hi < lo)")
     if kind == "response-map" and spec.grid["Delta"][0] < 0:
         raise SpecError(f"grid axis Delta = {spec.grid['Delta']!r}: Delta must be >= 0")
+    if kind == "response-map":
+        if spec.settings.get("cusp_test", 0) not in (0, 1):
+            raise SpecError(f"setting cusp_test = {spec.settings['cusp_test']!r}: must be 0 or 1")
+        periods = spec.settings.get("cusp_test_periods", 1)
+        if periods != int(periods) or periods < 1:
+            raise SpecError(f"setting cusp_test_periods = {periods!r}: must be a whole number >= 1")
     if kind == "monte-carlo":
         samples = spec.settings["samples"]
         if samples != int(samples) or samples < 1:
