@@ -9,6 +9,7 @@ the kernel's memory: the status shim's fast path (fast_path.py) steps it and rea
 Python, so the output and input variables below are properties on that memory.
 """
 from pathlib import Path
+from types import SimpleNamespace
 
 from pythonfmu import Boolean, DefaultExperiment, Fmi2Causality, Fmi2Variability, Integer, Real
 from pythonfmu.enums import Fmi2Initial
@@ -18,8 +19,9 @@ from slave_support import StatusSlave
 from vibromodel.analytic import OafmSettings
 from vibromodel.compiled import CompiledPlant, load_library
 from vibromodel.compiled_open_loop import CompiledOpenLoopPlant
-from vibromodel.parameters import Scene, scene_names
-from vibromodel.plant import DEFAULT_EXPERIMENT, Settings, make_plant
+from vibromodel.fidelities import entry
+from vibromodel.parameters import Scene, check_finite, check_parameters, scene_names, validate
+from vibromodel.plant import DEFAULT_EXPERIMENT, Plant, Settings, make_plant
 
 OUTPUTS = ("x", "v", "a", "F_contact", "F_electrostatic")
 
@@ -124,6 +126,31 @@ class HertzEAOscillator(fast_path.FastPathSwitch, StatusSlave):
             references = {var.name: vr for vr, var in self.vars.items()}
             fast_path.attach(self._shim, self._kernel, {references[name]: i for i, name in enumerate(OUTPUTS)},
                              {references["in_contact"]: 0})
+
+    def _start(self):
+        """exitInitializationMode: the first outputs are those at the start time without input (U = 0: no step has
+        held an input yet; the pure-Python plant and the native FMU do the same); U is held from the first doStep."""
+        U, self.U = self.U, 0.0
+        try:
+            super()._start()
+        finally:
+            self.U = U
+
+    def _initial_output(self, name):
+        """Outputs in Initialization Mode (FMI 2.0: computed from the start values set so far): x = x_start,
+        v = v_start, a and the forces of the fidelity's model at the start time with U = 0, as exitInitializationMode
+        will publish them (fidelities 3 and 4: Eq. 3 at the start state; their solution replaces them at exit).
+        ParameterError when the scene breaks a rule (the parameter named)."""
+        values = self._parameter_values()
+        check_parameters({key: values[key] for key in ("fidelity", *scene_names())})
+        scene = Scene(**{key: float(values[key]) for key in scene_names()})
+        validate(scene)
+        plant = SimpleNamespace(model=entry(int(values["fidelity"])).model(scene), U=0.0)
+        out = Plant.outputs_at(plant, float(self.start_time), scene.x_start, scene.v_start)  # one implementation
+        value = getattr(out, name)
+        if name != "in_contact":
+            check_finite({name: value})
+        return value
 
     def do_step(self, current_time, step_size):
         return self._guarded_step(

@@ -18,7 +18,7 @@ from pythonfmu.enums import Fmi2Initial, Fmi2Status
 from vibromodel import snapshot
 from vibromodel.control import ERRATA_INITIAL_ESTIMATES, ESTIMATE_NAMES, GAIN_NAMES, Gains, Law
 from vibromodel.integrate import IntegrationError
-from vibromodel.parameters import ParameterError, check_parameters, scene_names
+from vibromodel.parameters import NonFiniteOutput, ParameterError, check_finite, check_parameters, scene_names
 
 STATUS_OK, STATUS_ERROR = 0, 3
 # FMI 2.0 co-simulation states the slave tracks (the error state is the status shim's and `halted`'s).
@@ -39,10 +39,6 @@ def _number(value) -> bool:
 def _same(a, b) -> bool:
     """Equal as plain data, NaN equal to NaN (a host may give a NaN stop time or tolerance)."""
     return json.dumps(a, sort_keys=True) == json.dumps(b, sort_keys=True)
-
-
-class NonFiniteOutput(ArithmeticError):
-    """A model produced a non-finite output (never published)."""
 
 
 class StatusSlave(Fmi2Slave):
@@ -95,12 +91,12 @@ class StatusSlave(Fmi2Slave):
         """Publish outputs only when all are finite: an FMU never shows NaN with fmi2OK. A non-finite one raises
         NonFiniteOutput naming it (the caller's doStep or initialisation fails with fmi2Error); the outputs then
         keep their last finite values (written back: on the compiled plant the kernel wrote them already)."""
-        bad = next((name for name, value in values.items() if not math.isfinite(value)), None)
-        if bad is not None:
+        try:
+            check_finite(values)
+        except NonFiniteOutput:
             for name, value in self._published.items():
                 setattr(self, name, value)
-            raise NonFiniteOutput(f"output {bad} = {values[bad]!r} is not finite; the parameters are beyond "
-                                  "the model's numerical range")
+            raise
         for name, value in values.items():
             setattr(self, name, value)
         self._published = dict(values)
@@ -363,13 +359,23 @@ class StatusSlave(Fmi2Slave):
     def get_string(self, vrs):
         return self._get_values(vrs, String, "fmi2GetString", "", str)
 
+    _describing = False  # to_xml is reading the start values (not the outputs of Initialization Mode)
+
     def to_xml(self, *args, **kwargs):
         """The model description: pythonfmu's builder reads the start values through the getters."""
-        phase, self.phase = self.phase, INITIALIZATION_MODE
+        phase, self.phase, self._describing = self.phase, INITIALIZATION_MODE, True
         try:
             return super().to_xml(*args, **kwargs)
         finally:
-            self.phase = phase
+            self.phase, self._describing = phase, False
+
+    def _initial_output(self, name):
+        """Output `name` in Initialization Mode, from the start values set so far (a subclass whose outputs follow
+        its parameters overrides this); raises ParameterError or NonFiniteOutput when it cannot be defined."""
+        value = getattr(self, name)
+        if isinstance(value, float):
+            check_finite({name: value})
+        return value
 
     def _get_values(self, vrs, kind, call, placeholder, convert):
         """The values of vrs; a refused one reads `placeholder` and the call ends in fmi2Error (the status shim
@@ -385,6 +391,14 @@ class StatusSlave(Fmi2Slave):
             elif self.phase == INSTANTIATED and var.name != "fmi_status":
                 refusal = (f"{call} of {var.name} is not allowed in the {INSTANTIATED} state (FMI 2.0 allows it from "
                            f"fmi2EnterInitializationMode on)")
+            elif self.phase == INITIALIZATION_MODE and var.causality == Fmi2Causality.output and not self._describing:
+                try:  # FMI 2.0: outputs in Initialization Mode follow the start values set so far
+                    values.append(convert(self._initial_output(var.name)))
+                    continue
+                except (ParameterError, NonFiniteOutput) as error:
+                    refusal = f"{call} of {var.name} in the {INITIALIZATION_MODE} state: {error}"
+                except Exception as error:  # never let an exception reach pythonfmu (fmi2Fatal)
+                    refusal = f"{call} of {var.name} in the {INITIALIZATION_MODE} state: {error!r}"
             else:
                 values.append(convert(var.getter()))
                 continue

@@ -73,6 +73,23 @@ def _starter_fixture(name):
     return starter
 
 
+def _native_fixture(name):
+    """native_<name>_fmu: the native FMU (fmu_src/native/) built once per session from the pythonfmu one (shared by
+    tests/test_native.py, test_fuzz.py and test_robust_nonfinite.py)."""
+
+    @pytest.fixture(scope="session", name=f"native_{name}_fmu")
+    def native(request, tmp_path_factory):
+        from vibrofmu.native import build_native
+
+        return build_native(request.getfixturevalue(f"{name}_fmu"), tmp_path_factory.mktemp(f"native_{name}"))
+
+    return native
+
+
 FMU_NAMES = ("plant", "controller", "closed_loop")
+native_plant_fmu, native_controller_fmu, native_closed_loop_fmu = map(_native_fixture, FMU_NAMES)
+NATIVE_NAMES = tuple(f"native_{name}" for name in FMU_NAMES)
+native_plant_unzipped, native_controller_unzipped, native_closed_loop_unzipped = map(_unzipped_fixture, NATIVE_NAMES)
+start_native_plant, start_native_controller, start_native_closed_loop = map(_starter_fixture, NATIVE_NAMES)
 plant_unzipped, controller_unzipped, closed_loop_unzipped = map(_unzipped_fixture, FMU_NAMES)
 start_plant, start_controller, start_closed_loop = map(_starter_fixture, FMU_NAMES)

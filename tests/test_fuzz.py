@@ -144,6 +144,7 @@ class Case:
         self.outputs = outputs
         self.t = 0.0
         self.failed = False  # an fmi2Error happened: from now on the shim refuses most calls
+        self.initialising = False  # in Initialization Mode: outputs follow the start values set so far
 
     def call(self, name, *args, expect=()):
         """Call fmu.name(*args); check the properties; return the status."""
@@ -162,17 +163,31 @@ class Case:
             self.failed = True
         else:
             assert not errors, (name, args, errors)
+        if name == "enterInitializationMode":
+            self.initialising = status != ERROR
+        elif name == "exitInitializationMode":
+            self.initialising = False
         if name != "setupExperiment":  # FMI 2.0: no getters in the instantiated state
             self._check_outputs(name, args, status)
         return status
 
     def _check_outputs(self, name, args, status):
         """After every call, failed ones included: the outputs read with fmi2OK are finite; a getter may fail
-        (fmi2Error, with a message) only after a failed call, never with fmi2Fatal."""
+        (fmi2Error, with a message) only after a failed call, or in Initialization Mode when a parameter set so far
+        breaks its rule (the message names it: the output cannot be defined), never with fmi2Fatal."""
+        log = self.instance.log.messages
+        before = len(log)
         try:
             outputs = self.instance.fmu.getReal(self.instance.value_references(self.outputs))
         except FMICallException as error:
-            assert status == ERROR and error.status == ERROR, (name, args, status, error.status)
+            assert error.status == ERROR, (name, args, status, error.status)
+            if status != ERROR:
+                assert self.initialising and not self.failed, (name, args, status)
+                errors = [m for m in log[before:] if m.startswith("[error]")]
+                assert errors and all(" in the initialization mode state: " in m for m in errors), errors
+                match = MESSAGE.search(errors[0])
+                assert match and match.group(1) in self.variables, errors[0]
+                self.failed = True
             return
         assert all(map(math.isfinite, outputs)), (name, args, status, outputs)
 
@@ -231,10 +246,28 @@ def run_case(fmu, unzipped, variables, outputs, step_names, tolerance, values, a
         case.instance.close()
 
 
+# The other paths with fewer cases (the same properties; the default suite stays short): the pure-Python kernel of
+# each pythonfmu FMU (kernel = 1) and the native FMUs (fmu_src/native/). The pure-Python closed loop steps 11 states
+# in Python: fewest cases.
+VARIANTS = {"compiled": None, "kernel1": {"plant": 100, "controller": 80, "closed_loop": 40},
+            "native": {"plant": 200, "controller": 120, "closed_loop": 100}}
+
+
+@pytest.mark.parametrize("variant", VARIANTS)
 @pytest.mark.parametrize("which", FMUS)
-def test_fuzz_bad_input_never_escapes_and_always_explains(request, which, tmp_path):
-    fmu, unzipped = request.getfixturevalue(f"{which}_fmu"), request.getfixturevalue(f"{which}_unzipped")
+def test_fuzz_bad_input_never_escapes_and_always_explains(request, which, variant, tmp_path):
     outputs, step_names, values_strategy, actions_strategy, min_cases = FMUS[which]
+    if variant == "native":
+        from fmpy import extract
+
+        fmu = request.getfixturevalue(f"native_{which}_fmu")
+        unzipped = extract(str(fmu), str(tmp_path / "unzipped"))
+    else:
+        fmu, unzipped = request.getfixturevalue(f"{which}_fmu"), request.getfixturevalue(f"{which}_unzipped")
+    if variant == "kernel1":
+        values_strategy = values_strategy.map(lambda values: {**values, "kernel": 1})
+    if VARIANTS[variant] is not None:
+        min_cases = VARIANTS[variant][which]
     set_hypothesis_home_dir(tmp_path / "hypothesis")  # its caches too go to a temporary folder
     variables = {v.name: v.type for v in read_model_description(str(fmu)).modelVariables}
     cases = []
@@ -248,5 +281,5 @@ def test_fuzz_bad_input_never_escapes_and_always_explains(request, which, tmp_pa
 
     started = time.perf_counter()
     fuzz()
-    print(f"\nfuzz {which}: {len(cases)} cases in {time.perf_counter() - started:.1f} s")
+    print(f"\nfuzz {which} {variant}: {len(cases)} cases in {time.perf_counter() - started:.1f} s")
     assert len(cases) >= min_cases

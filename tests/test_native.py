@@ -25,15 +25,10 @@ from fmpy import extract, read_model_description, simulate_fmu
 from fmpy.validation import validate_fmu
 
 from vibrofmu.doctor import compile_host, compile_windows_host, run_host
-from vibrofmu.native import build_native, series_probe_library
+from vibrofmu.native import series_probe_library
 from vibrofmu.run import FmuInstance, FmuLog, run_fmu
 
 FMI2_ERROR = 3
-
-
-@pytest.fixture(scope="module")
-def native_plant_fmu(plant_fmu, tmp_path_factory):
-    return build_native(plant_fmu, tmp_path_factory.mktemp("native"))
 
 
 @pytest.fixture(scope="module")
@@ -163,6 +158,76 @@ def test_what_needs_python_is_refused_naming_the_pythonfmu_fmu(values, name, nat
     errors = [m for m in result.log if m.startswith("[error]") and "not allowed after an error" not in m]
     assert len(errors) == 1 and f"parameter {name} = {values[name]}" in errors[0]
     assert "pythonfmu FMU HertzEAOscillator.fmu" in errors[0]
+
+
+# Issue 15: outputs read in Initialization Mode follow the start values set so far (FMI 2.0). Start values, the
+# input U set in Initialization Mode (it does not act before the first doStep), and scenes that are refused.
+INIT_MODE_CASES = [
+    ({"x_start": -0.3, "v_start": 0.2}, None), ({"x_start": -0.3, "fidelity": 1}, None),
+    ({"x_start": 0.7, "v_start": -1.0, "fidelity": 2, "R": 0.6}, None),
+    ({"x_start": 0.1, "v_start": 0.3, "solver": 1}, 2.0),  # U is held from the first doStep on: a without it
+    ({"x_start": -1.6, "R": 3.0, "Delta": 0.5, "omega": 3.0}, None),  # out of contact at the start (x < -3/2)
+    ({"alpha": 1e4, "x_start": 1.0, "R": 0.7}, None),  # large electrostatic force
+    ({"x_start": -1.7}, None), ({"R": -1.0}, None), ({"mu": math.nan}, None),  # refused: the parameter named
+    ({"fidelity": 7}, None),
+]
+INIT_OUTPUTS = ["x", "v", "a", "F_contact", "F_electrostatic"]
+
+
+def _init_mode_outputs(fmu, unzipped, values, U):
+    """The outputs read in Initialization Mode before and after setting `values` (and U), then after
+    fmi2ExitInitializationMode: each read's status and values, and the messages."""
+    from fmpy.fmi1 import FMICallException
+
+    instance = FmuInstance(fmu, "i", unzip_dir=unzipped)
+    f, trace = instance.fmu, []
+
+    def read():
+        try:
+            trace.append((f.getReal(instance.value_references(INIT_OUTPUTS)),
+                          f.getBoolean(instance.value_references(["in_contact"]))))
+        except FMICallException as error:
+            trace.append(error.status)
+
+    f.setupExperiment(startTime=0.5, stopTime=10.0)
+    f.enterInitializationMode()
+    read()
+    instance.set(values)
+    if U is not None:
+        instance.set({"U": U})
+    read()
+    try:
+        f.exitInitializationMode()
+        trace.append("exited")
+    except FMICallException as error:
+        trace.append(error.status)
+    read()
+    messages = [m for m in instance.log.messages if not m.startswith("[ok]")]
+    instance.close()
+    return trace, messages
+
+
+@pytest.mark.parametrize("values,U", INIT_MODE_CASES, ids=[str(v) for v in INIT_MODE_CASES])
+def test_outputs_in_initialization_mode_follow_the_start_values(values, U, plant_fmu, plant_unzipped,
+                                                                 native_plant_fmu, native_unpacked):
+    """The compiled and pure-Python kernels and the native FMU give the same reads; x and v are the start values,
+    and the outputs read in Initialization Mode are, to the bit, those fmi2ExitInitializationMode publishes (the
+    same model at the same point); a refused scene gives fmi2Error naming the parameter."""
+    compiled = _init_mode_outputs(plant_fmu, plant_unzipped, values, U)
+    python = _init_mode_outputs(plant_fmu, plant_unzipped, {**values, "kernel": 1}, U)
+    native = _init_mode_outputs(native_plant_fmu, str(native_unpacked), values, U)
+    assert compiled == python == native
+    trace, messages = compiled
+    if trace[2] == "exited":
+        (reals, contact) = trace[1]
+        assert reals[:2] == [values.get("x_start", 0.04), values.get("v_start", 0.0)]
+        assert contact == [1 + 2 * reals[0] / 3 > 0]  # contact while the indentation 1 + 2x/3 is positive
+        assert trace[3] == trace[1] and trace[0] != trace[1]
+        assert messages == [m for m in messages if m.startswith("[warning]")]
+    else:
+        assert trace[1] == FMI2_ERROR
+        name = next(iter(values))
+        assert f"fmi2GetReal of x in the initialization mode state: parameter {name} = " in messages[0]
 
 
 PLANT_PROTOCOL = dict(input_name="U", start_a={}, start_b={"Delta": 1.2, "mu": 0.05, "R": 5.0}, fixed="mu")
@@ -417,11 +482,6 @@ def test_win64_dll_under_wine_agrees_with_linux64(c_host, native_unpacked, tmp_p
 
 # ---- the native controller FMU ---------------------------------------------------------------------------
 
-@pytest.fixture(scope="module")
-def native_controller_fmu(controller_fmu, tmp_path_factory):
-    return build_native(controller_fmu, tmp_path_factory.mktemp("native_controller"))
-
-
 def test_controller_same_interface(controller_fmu, native_controller_fmu):
     assert _variables(native_controller_fmu)[0] == _variables(controller_fmu)[0]
     assert validate_fmu(str(native_controller_fmu)) == []
@@ -449,6 +509,65 @@ def test_controller_parity(values, controller_fmu, native_controller_fmu):
     for name in python.outputs:
         np.testing.assert_array_equal(native.outputs[name], python.outputs[name], err_msg=name)
     assert native.after_failure == python.after_failure
+
+
+def _input_bounds():
+    """(input, value, beyond the rule) at and just beyond each controller input's rule (vibromodel.parameters.RULES), and at and just
+    beyond 1e6, the edge of what the status shim's C fast path sets itself."""
+    from vibromodel.parameters import RULES
+
+    cases = []
+    for rule in (r for r in RULES if r.causality == "input"):
+        for value in (rule.high, math.nextafter(rule.high, math.inf), 1e6, math.nextafter(1e6, math.inf)):
+            cases.append((rule.name, value, value > rule.high))
+    return cases
+
+
+def _set_input(fmu, unzipped, start, name, value, in_initialization_mode):
+    """Set one controller input in Initialization Mode or step mode, step once; statuses, outputs, messages."""
+    from fmpy.fmi1 import FMICallException
+
+    instance = FmuInstance(fmu, "b", unzip_dir=unzipped)
+    f, trace = instance.fmu, []
+
+    def attempt(call):
+        try:
+            call()
+            trace.append("ok")
+        except FMICallException as error:
+            trace.append(error.status)
+
+    f.setupExperiment(startTime=0.0, stopTime=1.0)
+    f.enterInitializationMode()
+    instance.set(start)
+    if in_initialization_mode:
+        attempt(lambda: instance.set({name: value}))
+    attempt(f.exitInitializationMode)
+    if not in_initialization_mode:
+        attempt(lambda: instance.set({name: value}))
+    attempt(lambda: f.doStep(0.0, 0.1))
+    trace.append(f.getReal(instance.value_references(instance.output_names())))
+    messages = [m for m in instance.log.messages if not m.startswith("[ok]")]
+    instance.close()
+    return trace, messages
+
+
+@pytest.mark.parametrize("in_initialization_mode", [False, True], ids=["step mode", "initialization mode"])
+def test_controller_inputs_at_their_bounds_alike_on_every_path(in_initialization_mode, controller_fmu,
+                                                               controller_unzipped, native_controller_fmu, tmp_path):
+    """Issue 15: the C fast path (compiled kernel, step mode), the slave (pure-Python kernel, and every value the fast
+    path hands on) and the native FMU accept the same input values and refuse the same, naming the input."""
+    native_unzipped = extract(str(native_controller_fmu), str(tmp_path / "native"))
+    for name, value, beyond in _input_bounds():
+        results = [_set_input(fmu, unzipped, {**CONTROLLER_INPUTS, **start}, name, value, in_initialization_mode)
+                   for fmu, unzipped, start in ((controller_fmu, controller_unzipped, {}),
+                                                (controller_fmu, controller_unzipped, {"kernel": 1}),
+                                                (native_controller_fmu, native_unzipped, {}))]
+        assert results[0] == results[1] == results[2], (name, value)
+        trace, messages = results[0]
+        assert (FMI2_ERROR in trace) == beyond, (name, value, trace)
+        if beyond:
+            assert messages[0].startswith(f"[error] parameter {name} = {value!r}: must be"), messages[0]
 
 
 def _closed_by_hand(fmu, unzipped, steps=200):
@@ -538,11 +657,6 @@ def test_no_invalid_memory_access(which, c_host, native_unpacked, native_control
 
 
 # ---- the closed loop (fmu_src/native/HertzEAClosedLoop/): the reference packed at build time ----------------
-
-@pytest.fixture(scope="module")
-def native_closed_loop_fmu(closed_loop_fmu, tmp_path_factory):
-    return build_native(closed_loop_fmu, tmp_path_factory.mktemp("native_closed_loop"))
-
 
 def test_closed_loop_same_interface_and_validate_is_silent(closed_loop_fmu, native_closed_loop_fmu):
     assert _variables(native_closed_loop_fmu)[0] == _variables(closed_loop_fmu)[0]

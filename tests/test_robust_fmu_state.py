@@ -30,13 +30,17 @@ SUBJECTS = {  # starter fixture, start values, inputs set before each step (name
                    ["U", "e1", "e2", "V", "mu_hat", "gamma_hat"]),
     "closed_loop": ("start_closed_loop", {"reference": 1}, {}, ["x", "v", "U", "V", "mu_hat"]),
 }
+# The native FMUs (fmu_src/native/): their state is the C structure's bytes after a header with a format name and
+# a checksum (FNV-1a, which notices every change confined to one byte); the same subjects.
+NATIVE_SUBJECTS = {f"native_{name}": (f"start_native_{starter.removeprefix('start_')}", *rest)
+                   for name, (starter, *rest) in SUBJECTS.items() if name != "plant_kernel1"}
 
 
 class Subject:
     """One initialised instance, a serialized state after BEFORE steps, and the outputs after AFTER more."""
 
     def __init__(self, request, which, **extra):
-        starter, values, self.inputs, outputs = SUBJECTS[which]
+        starter, values, self.inputs, outputs = {**SUBJECTS, **NATIVE_SUBJECTS}[which]
         self.instance = request.getfixturevalue(starter)(**{**values, **extra})
         self.refs = self.instance.value_references(outputs)
         for k in range(BEFORE):
@@ -270,6 +274,34 @@ def test_forged_bit_flip_sample_never_crashes(subject):
     fmi2Fatal or a crash (try_restore asserts the status)."""
     counts = flip_campaign(subject, 40, seed=16, resigned=True)
     assert sum(counts.values()) == 40
+
+
+@pytest.mark.parametrize("which", NATIVE_SUBJECTS)
+def test_native_bit_flip_sample_is_always_refused(request, which):
+    """The native FMUs' states: 60 flips each anywhere in the bytes, all refused (the checksum; before it, a flip
+    was restored as it came)."""
+    made = Subject(request, which)
+    try:
+        assert flip_campaign(made, 60, seed=15) == {"refused": 60, "same": 0, "different": 0}
+        assert "checksum does not match" in " ".join(made.instance.log.errors())
+    finally:
+        made.close()
+
+
+@pytest.mark.slow
+def test_native_bit_flip_campaign(request, capsys):
+    """>= 10,000 single-bit flips over the native FMUs' serialized states: 0 accepted, 0 crashes."""
+    totals = {}
+    for which in NATIVE_SUBJECTS:
+        made = Subject(request, which)
+        try:
+            totals[which] = flip_campaign(made, 3400, seed=1502)
+        finally:
+            made.close()
+    with capsys.disabled():
+        print(f"\nnative bit flips: {totals}")
+    assert sum(sum(c.values()) for c in totals.values()) >= 10_000
+    assert all(c["different"] == 0 and c["same"] == 0 for c in totals.values())
 
 
 @pytest.mark.slow

@@ -13,7 +13,7 @@ from vibrofmu.build import FMU_SRC
 from vibrofmu.doctor import host_environment
 
 SOURCE = Path(__file__).parent / "c_host" / "instance_cycles.c"
-FMUS = ("plant", "controller", "closed_loop")
+FMUS = ("plant", "controller", "closed_loop", "native_plant", "native_controller", "native_closed_loop")
 
 
 @pytest.fixture(scope="module")

@@ -92,8 +92,16 @@ int vl_publish(VlLoop *l)
     }
     int fault = vl_outputs_at(l, l->t, y, out);
     if (fault) return raise_fault(l, fault, l->t, y);
-    for (int i = 0; i < VL_OUTPUTS; i++)  /* StatusSlave._set_finite */
-        if (!isfinite(out[i])) return VL_OK;
+    static const char *const names[VL_OUTPUTS] = {"x", "v", "x_ref", "U", "e1", "e2", "V", "V_rate",
+        "V_rate_promised", "mu_hat", "a1_hat", "a2_hat", "a3_hat", "a4_hat", "a5_hat", "Delta_hat", "beta_hat",
+        "gamma_hat"};  /* LOOP_OUTPUTS */
+    for (int i = 0; i < VL_OUTPUTS; i++) {  /* StatusSlave._set_finite: NonFiniteOutput, the outputs kept */
+        if (isfinite(out[i])) continue;
+        char text[VL_MESSAGE];
+        snprintf(text, sizeof text, "NonFiniteOutput: output %s = %s is not finite; the parameters are beyond the "
+                 "model's numerical range", names[i], isnan(out[i]) ? "nan" : out[i] > 0 ? "inf" : "-inf");
+        return set_error(l, VL_RAISED, l->t, y, text);
+    }
     memcpy(l->out, out, sizeof out);
     return VL_OK;
 }

@@ -190,7 +190,7 @@ double vc_promised_rate(const VcController *c, double e1, double e2)
 }
 
 /* AdaptiveLyapunovController._publish at time t with estimates theta_hat, into out[] (all computed first) */
-static int outputs(const VcController *c, double t, const double *theta_hat, double *out)
+int vc_outputs(const VcController *c, double t, const double *theta_hat, double *out)
 {
     const double *ref = c->in + 2;
     double e1, e2;
@@ -203,19 +203,20 @@ static int outputs(const VcController *c, double t, const double *theta_hat, dou
     return VC_OK;
 }
 
-/* StatusSlave._set_finite: publish only when every output is finite */
-static void publish_finite(VcController *c, const double *out)
+/* StatusSlave._set_finite: the first non-finite output's index, or -1 */
+int vc_non_finite(const double *out)
 {
     for (int i = 0; i < VC_OUTPUTS; i++)
-        if (!isfinite(out[i])) return;
-    memcpy(c->out, out, sizeof c->out);
+        if (!isfinite(out[i])) return i;
+    return -1;
 }
 
 int vc_publish(VcController *c)
 {
     double out[VC_OUTPUTS];
-    if (outputs(c, c->t, c->theta_hat, out)) return VC_RAISED;
-    publish_finite(c, out);
+    if (vc_outputs(c, c->t, c->theta_hat, out)) return VC_RAISED;
+    if (vc_non_finite(out) >= 0) return VC_NON_FINITE;
+    memcpy(c->out, out, sizeof c->out);
     return VC_OK;
 }
 
@@ -239,10 +240,11 @@ int vc_do_step(VcController *c, double t, double h)
     double inc[VC_N], theta_hat[VC_N], out[VC_OUTPUTS];
     if (vc_increment(c, t, h, c->in[0], c->in[1], c->in + 2, inc)) return VC_RAISED;
     for (int i = 0; i < VC_N; i++) theta_hat[i] = c->theta_hat[i] + inc[i];
-    if (outputs(c, t + h, theta_hat, out)) return VC_RAISED;
+    if (vc_outputs(c, t + h, theta_hat, out)) return VC_RAISED;
+    if (vc_non_finite(out) >= 0) return VC_NON_FINITE;
     memcpy(c->theta_hat, theta_hat, sizeof theta_hat);
     c->t = t + h;
-    publish_finite(c, out);
+    memcpy(c->out, out, sizeof c->out);
     return VC_OK;
 }
 

@@ -29,7 +29,8 @@ enum {
     VC_BAD_STEP = 1,     /* communicationStepSize not finite or <= 0 (nothing changed) */
     VC_BAD_INPUT = 2,    /* an input is not finite (nothing changed) */
     VC_BAD_TIME = 4,     /* currentCommunicationPoint is not the controller's time (nothing changed) */
-    VC_RAISED = 7        /* a trigonometric function of an infinite argument (Python: ValueError; nothing changed) */
+    VC_RAISED = 7        /* a trigonometric function of an infinite argument (Python: ValueError; nothing changed) */,
+    VC_NON_FINITE = 8    /* an output would not be finite (Python: NonFiniteOutput; nothing changed) */
 };
 
 /* The regressor's time functions: cos(w_delta t) * delta_sign, sin(w_beta t), cos(w_gamma t) (control.Regressor). */
@@ -79,13 +80,19 @@ double vc_lyapunov_rate(const VcController *c, double x, double v, double accel,
 /* The V' the law promises (Controller.promised_rate). */
 double vc_promised_rate(const VcController *c, double e1, double e2);
 
+/* The controller FMU's outputs U, e1, e2, V, theta^ at t with estimates theta_hat and the inputs in[] into out[]
+   (AdaptiveLyapunovController._publish); 0 or VC_RAISED. */
+int vc_outputs(const VcController *c, double t, const double *theta_hat, double *out);
+/* Index of the first non-finite of out[0..VC_OUTPUTS-1], or -1. */
+int vc_non_finite(const double *out);
 /* The controller FMU: out[] from the inputs and estimates at t (AdaptiveLyapunovController._publish), written only
-   when all are finite; 0 or VC_RAISED (nothing written). */
+   when all are finite; 0, VC_RAISED or VC_NON_FINITE (nothing written). */
 int vc_publish(VcController *c);
 /* HeldInputEstimator.advance: theta^ += the exact increment with x, v, ref held, t = t + h; 0 or VC_RAISED
    (nothing changed). */
 int vc_advance(VcController *c, double t, double h, double x, double v, const double *ref);
-/* One doStep: pre-checks, theta^ += the exact increment with the inputs held, t += h, publish. 0 or a code. */
+/* One doStep: pre-checks, theta^ += the exact increment with the inputs held, t += h, publish. 0 or a code
+   (VC_NON_FINITE: an output would not be finite; nothing changed). */
 int vc_do_step(VcController *c, double t, double h);
 
 #endif

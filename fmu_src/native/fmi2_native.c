@@ -39,7 +39,22 @@ struct Instance {
 typedef struct {
     char format[64];
     uint64_t size;
+    uint64_t checksum; /* state_checksum of the State's bytes */
 } StateHeader;
+
+/* FNV-1a (64 bit) of n bytes.  Each step (xor a byte, multiply by an odd constant modulo 2^64) is a bijection of
+   the running value, so a change confined to one byte -- every single-bit flip -- always changes the result; other
+   changes go unnoticed with probability about 2^-64.  Like the Python states' SHA-256 it detects accidents, not a
+   forger who recomputes it. */
+static uint64_t state_checksum(const unsigned char *bytes, size_t n)
+{
+    uint64_t h = 14695981039346656037ULL;
+    for (size_t i = 0; i < n; i++) {
+        h ^= bytes[i];
+        h *= 1099511628211ULL;
+    }
+    return h;
+}
 
 /* ---- logging ---- */
 
@@ -172,6 +187,29 @@ static int check_parameters(Instance *inst)
     return 1;
 }
 
+
+int native_rule_refusal(const State *s, const char *const names[], size_t n, char *why, size_t size)
+{
+    for (size_t r = 0; r < N_RULES; r++) {
+        const VibroRule *rule = &RULES[r];
+        int listed = 0, vr = parameter_index(rule->name);
+        for (size_t k = 0; k < n; k++) listed |= strcmp(names[k], rule->name) == 0;
+        if (!listed || vr < 0) continue;
+        if (rule->when != NULL) { /* Rule.applies: the condition's parameter must be among the names */
+            int other = parameter_index(rule->when), applies = 0, named = 0;
+            for (size_t k = 0; k < n; k++) named |= strcmp(names[k], rule->when) == 0;
+            for (int k = 0; named && other >= 0 && k < rule->n_when; k++)
+                if (s->value[other] == rule->when_values[k]) applies = 1;
+            if (!applies) continue;
+        }
+        if (obeys(rule, s->value[vr])) continue;
+        char text[64];
+        value_text(s, (fmi2ValueReference)vr, text, sizeof text);
+        snprintf(why, size, "parameter %s = %s: %s", rule->name, text, rule->text);
+        return 1;
+    }
+    return 0;
+}
 
 static fmi2Status settle(Instance *inst, int may_clear_error)
 {
@@ -319,6 +357,11 @@ static fmi2Status get_values(Instance *I, const fmi2ValueReference vr[], size_t 
         } else if (I->s.phase == PHASE_INSTANTIATED && vr[i] != VR_fmi_status) {
             native_error(I, "%s of %s is not allowed in the instantiated state (FMI 2.0 allows it from "
                          "fmi2EnterInitializationMode on)", call, VARIABLES[vr[i]].name);
+        } else if (I->s.phase == PHASE_INITIALIZATION_MODE && VARIABLES[vr[i]].causality == C_OUTPUT) {
+            char why[512]; /* StatusSlave._get_values: outputs follow the start values set so far */
+            if (model_initial_output(&I->s, vr[i], &out[i], why, sizeof why)) continue;
+            out[i] = 0.0;
+            native_error(I, "%s of %s in the initialization mode state: %s", call, VARIABLES[vr[i]].name, why);
         } else {
             out[i] = I->s.value[vr[i]];
             continue;
@@ -580,6 +623,7 @@ EXPORT fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate state, fmi
     memset(&header, 0, sizeof header);
     snprintf(header.format, sizeof header.format, "%s", STATE_FORMAT);
     header.size = sizeof(State);
+    header.checksum = state_checksum((const unsigned char *)state, sizeof(State));
     memcpy(bytes, &header, sizeof header);
     memcpy(bytes + sizeof header, state, sizeof(State));
     return fmi2OK;
@@ -595,9 +639,16 @@ EXPORT fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte bytes[
         return fmi2Error;
     }
     memcpy(&header, bytes, sizeof header);
-    if (strncmp(header.format, STATE_FORMAT, sizeof header.format) != 0 || header.size != sizeof(State)) {
+    char format[sizeof header.format] = {0}; /* every byte of the field: the name, then zeros */
+    snprintf(format, sizeof format, "%s", STATE_FORMAT);
+    if (memcmp(header.format, format, sizeof format) != 0 || header.size != sizeof(State)) {
         native_log(I, fmi2Error, "fmi2DeSerializeFMUstate refused: not a state of this FMU (format %.63s, "
                    "expected %s)", header.format, STATE_FORMAT);
+        return fmi2Error;
+    }
+    if (header.checksum != state_checksum((const unsigned char *)bytes + sizeof header, sizeof(State))) {
+        native_log(I, fmi2Error, "fmi2DeSerializeFMUstate refused: the state's checksum does not match its content "
+                   "(a damaged state)");
         return fmi2Error;
     }
     State *copy = *state != NULL ? (State *)*state : malloc(sizeof *copy);

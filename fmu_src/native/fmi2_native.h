@@ -74,5 +74,11 @@ void model_initialise(Instance *inst, State *s);
 void model_input_set(Instance *inst, State *s, fmi2ValueReference vr);
 /* fmi2DoStep from t over h (s->halted is 0); failures through native_error / native_halt. */
 void model_do_step(Instance *inst, State *s, double t, double h);
+/* fmi2GetXXX of output vr in Initialization Mode (FMI 2.0: from the start values set so far): 1 and *value, or 0
+   and why it cannot be defined in `why` (a ParameterError's or exception's text). */
+int model_initial_output(const State *s, fmi2ValueReference vr, double *value, char *why, size_t size);
+/* The first rule of the table (rules.h, in its order) that one of `names`' values breaks: 1 and its ParameterError
+   text "parameter NAME = VALUE: reason" in `why`, else 0 (vibromodel.parameters.check_parameters on those names). */
+int native_rule_refusal(const State *s, const char *const names[], size_t n, char *why, size_t size);
 
 #endif

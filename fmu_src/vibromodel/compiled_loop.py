@@ -18,10 +18,10 @@ import numpy as np
 from .compiled import check_structure
 from .control import ESTIMATE_NAMES, Controller, Gains, validate_estimates, validate_law
 from .fidelities import entry
-from .parameters import ParameterError, Scene, validate
+from .parameters import NonFiniteOutput, ParameterError, Scene, check_finite, validate
 from .plant import TIME_TOLERANCE
 
-VC_OK, VC_BAD_STEP, VC_BAD_INPUT, VC_BAD_TIME, VC_RAISED = 0, 1, 2, 4, 7
+VC_OK, VC_BAD_STEP, VC_BAD_INPUT, VC_BAD_TIME, VC_RAISED, VC_NON_FINITE = 0, 1, 2, 4, 7, 8
 N = 9
 CONTROLLER_INPUTS = ("x", "v", "x_ref", "v_ref", "a_ref")
 CONTROLLER_OUTPUTS = ("U", "e1", "e2", "V", *ESTIMATE_NAMES)
@@ -68,6 +68,7 @@ def declare(library) -> str | None:
         "vc_advance": (status, [address, d, d, d, d, doubles]),
         "vc_publish": (status, [address]),
         "vc_do_step": (status, [address, d, d]),
+        "vc_outputs": (status, [address, d, doubles, doubles]),
     }
     try:
         for name, (restype, argtypes) in signatures.items():
@@ -138,8 +139,14 @@ class CompiledEstimator:
         raise_from(self._library.vc_advance(self.address, t, h, x, v, (_double * 3)(*ref)))
 
     def publish(self) -> None:
-        """The FMU's outputs U, e1, e2, V, estimates from the inputs at t (written only when all finite)."""
-        raise_from(self._library.vc_publish(self.address))
+        """The FMU's outputs U, e1, e2, V, estimates from the inputs at t (written only when all finite; else
+        NonFiniteOutput naming the first that is not, as StatusSlave._set_finite)."""
+        code = self._library.vc_publish(self.address)
+        if code == VC_NON_FINITE:
+            out = (_double * len(CONTROLLER_OUTPUTS))()
+            raise_from(self._library.vc_outputs(self.address, self._c.t, self._c.theta_hat, out))
+            check_finite(dict(zip(CONTROLLER_OUTPUTS, out)))
+        raise_from(code)
 
     # -- the FMU's variables in the structure, and what the C fast path needs ------------------------------
     @staticmethod
@@ -417,6 +424,9 @@ class CompiledClosedLoop:
         kind, _, text = message.partition(": ")
         if code == VL_RAISED and kind in RAISED_TYPES:
             raise RAISED_TYPES[kind](text)
+        if code == VL_RAISED and kind == "NonFiniteOutput":  # "output <name> = <value> is not finite; ..."
+            name, _, rest = text.removeprefix("output ").partition(" = ")
+            raise NonFiniteOutput(name, float(rest.partition(" ")[0]))
         if code == VL_RAISED and kind == "OverflowError":
             number, _, reason = text.partition(" ")
             raise OverflowError(int(number), reason)

@@ -36,6 +36,22 @@ class ParameterError(ValueError):
         super().__init__(f"parameter {name} = {value!r}: {reason}")
 
 
+class NonFiniteOutput(ArithmeticError):
+    """A model produced a non-finite output (never published with fmi2OK): names the output and its value."""
+
+    def __init__(self, name: str, value: float):
+        self.name, self.value = name, value
+        super().__init__(f"output {name} = {value!r} is not finite; the parameters are beyond the model's "
+                         "numerical range")
+
+
+def check_finite(values: dict) -> None:
+    """Raise NonFiniteOutput for the first of `values` (output name -> value) that is not finite."""
+    for name, value in values.items():
+        if not math.isfinite(value):
+            raise NonFiniteOutput(name, float(value))  # a plain float: numpy scalars would print as np.float64(inf)
+
+
 @dataclass(frozen=True)
 class Scene:
     """Dimensionless parameters of Eq. 3 and the initial state x(0), x'(0)."""

@@ -5,7 +5,7 @@
 #include "controller.h"
 
 #define MODEL_IDENTIFIER "AdaptiveLyapunovController"
-#define STATE_FORMAT "AdaptiveLyapunovController native state 1"
+#define STATE_FORMAT "AdaptiveLyapunovController native state 2"
 
 typedef struct {
     int64_t built;    /* the controller below is set up (after a successful fmi2ExitInitializationMode) */

@@ -41,14 +41,34 @@ static void fill(State *s)
     for (int i = 0; i < VC_OUTPUTS; i++) c->out[i] = s->value[OUTPUT_VRS[i]];
 }
 
+/* The Python exception of a vc_publish that failed with `code`: ValueError('math domain error') (VC_RAISED) or
+   StatusSlave._set_finite's NonFiniteOutput naming the first non-finite output (VC_NON_FINITE). */
+static void publish_failure(const VcController *c, int code, char *what, size_t size)
+{
+    double out[VC_OUTPUTS];
+    int bad = code == VC_NON_FINITE && vc_outputs(c, c->t, c->theta_hat, out) == VC_OK ? vc_non_finite(out) : -1;
+    if (bad < 0) {
+        snprintf(what, size, "ValueError('math domain error')");
+        return;
+    }
+    char value[64], message[256];
+    native_repr(out[bad], value, sizeof value);
+    snprintf(message, sizeof message, "NonFiniteOutput: output %s = %s is not finite; the parameters are beyond the "
+             "model's numerical range", VARIABLES[OUTPUT_VRS[bad]].name, value);
+    py_exception_repr(message, what, size);
+}
+
 void model_initialise(Instance *inst, State *s)
 {
     /* every check of make_estimator and control.Controller is a rule of the table, checked before (the scene's
        electrode check has x_start = 0 here, the controller having no initial state) */
     fill(s);
     s->model.built = 1;
-    if (vc_publish(&s->model.c) != VC_OK) {
-        native_halt(inst, "initialisation failed: ValueError('math domain error')");
+    int code = vc_publish(&s->model.c);
+    if (code != VC_OK) {
+        char what[400];
+        publish_failure(&s->model.c, code, what, sizeof what);
+        native_halt(inst, "initialisation failed: %s", what);
         return;
     }
     copy_outputs(s);
@@ -60,10 +80,12 @@ void model_input_set(Instance *inst, State *s, fmi2ValueReference vr)
     if (!s->model.built) return;
     copy_inputs(s);
     if (s->halted) return;
-    if (vc_publish(&s->model.c) != VC_OK) {
-        char value[64];
+    int code = vc_publish(&s->model.c);
+    if (code != VC_OK) {
+        char value[64], what[400];
         native_repr(s->value[vr], value, sizeof value);
-        native_halt(inst, "input %s = %s: ValueError('math domain error')", VARIABLES[vr].name, value);
+        publish_failure(&s->model.c, code, what, sizeof what);
+        native_halt(inst, "input %s = %s: %s", VARIABLES[vr].name, value, what);
         return;
     }
     copy_outputs(s);
@@ -92,10 +114,26 @@ void model_do_step(Instance *inst, State *s, double t, double h)
             return;
         }
     /* HeldInputEstimator.advance, then _publish (vc_do_step does both, the way the fast path runs it) */
-    if (vc_advance(c, t, h, c->in[0], c->in[1], c->in + 2) != VC_OK || vc_publish(c) != VC_OK) {
+    int code = vc_advance(c, t, h, c->in[0], c->in[1], c->in + 2);
+    if (code == VC_OK) code = vc_publish(c);
+    if (code != VC_OK) {
+        char what[400];
         native_repr(t, a, sizeof a);
-        native_halt(inst, "doStep failed at tau = %s: ValueError('math domain error')", a);
+        publish_failure(c, code, what, sizeof what);
+        if (code == VC_NON_FINITE) /* StatusSlave._guarded_step: an ArithmeticError */
+            native_halt(inst, "simulation stopped: floating-point failure after tau = %s (%s); the parameters are "
+                        "beyond the model's numerical range", a, what);
+        else
+            native_halt(inst, "doStep failed at tau = %s: %s", a, what);
         return;
     }
     copy_outputs(s);
+}
+
+/* Outputs in Initialization Mode: their start values (StatusSlave._initial_output). */
+int model_initial_output(const State *s, fmi2ValueReference vr, double *value, char *why, size_t size)
+{
+    (void)why; (void)size;
+    *value = s->value[vr];
+    return 1;
 }

@@ -95,7 +95,7 @@ static void publish(State *s)
 }
 
 /* The pending error as the Python slave reports it (CompiledClosedLoop._raise_pending, StatusSlave). */
-static void report_pending(Instance *inst, State *s, const char *what_failed)
+static void report_pending(Instance *inst, State *s, const char *what_failed, const char *t_failed)
 {
     VlLoop *l = &s->model.loop;
     char message[VL_MESSAGE + 64], what[VL_MESSAGE + 64];
@@ -109,7 +109,13 @@ static void report_pending(Instance *inst, State *s, const char *what_failed)
         return;
     }
     py_exception_repr(message, what, sizeof what);
-    native_halt(inst, "%s: %s", what_failed, what);
+    if (t_failed != NULL && (strncmp(message, "ZeroDivisionError:", 18) == 0 ||
+                             strncmp(message, "OverflowError:", 14) == 0 || strncmp(message, "NonFiniteOutput:", 16) == 0))
+        /* StatusSlave._guarded_step: an ArithmeticError */
+        native_halt(inst, "simulation stopped: floating-point failure after tau = %s (%s); the parameters are beyond "
+                    "the model's numerical range", t_failed, what);
+    else
+        native_halt(inst, "%s: %s", what_failed, what);
 }
 
 void model_initialise(Instance *inst, State *s)
@@ -159,7 +165,7 @@ void model_initialise(Instance *inst, State *s)
     for (int i = 0; i < VC_N; i++) y0[2 + i] = s->value[ESTIMATE_START_VRS[i]];
     native_log(inst, fmi2OK, "%s; compiled closed loop on the native FMU (no Python)", PACKED_REFERENCES[reference].note);
     if (vl_init(l, s->start_time, y0) != VL_OK) {
-        report_pending(inst, s, "initialisation failed");
+        report_pending(inst, s, "initialisation failed", NULL);
         return;
     }
     for (int i = 0; i < VL_OUTPUTS; i++)
@@ -205,5 +211,13 @@ void model_do_step(Instance *inst, State *s, double t, double h)
     native_repr(t, a, sizeof a);
     char what[96];
     snprintf(what, sizeof what, "doStep failed at tau = %s", a);
-    report_pending(inst, s, what);
+    report_pending(inst, s, what, a);
+}
+
+/* Outputs in Initialization Mode: their start values (StatusSlave._initial_output). */
+int model_initial_output(const State *s, fmi2ValueReference vr, double *value, char *why, size_t size)
+{
+    (void)why; (void)size;
+    *value = s->value[vr];
+    return 1;
 }

@@ -14,6 +14,7 @@
 
 #include "fmi2_native.h"
 #include "plant_setup.h"
+#include "pyfloat.h"
 #include "pytext.h"
 #include "rules.h"
 #include "scene_checks.h"
@@ -223,4 +224,51 @@ void model_do_step(Instance *inst, State *s, double t, double h)
                     "the model's numerical range", a, what);
     else
         native_halt(inst, "doStep failed at tau = %s: %s", a, what);
+}
+
+/* HertzEAOscillator._initial_output: x = x_start, v = v_start, a and the forces of the fidelity's model at the start
+   time with U = 0 (fidelities 3 and 4: Eq. 3, the exact model), in_contact from x_start; the scene's rules and
+   electrode gaps first (check_parameters on fidelity and the scene, then validate). */
+int model_initial_output(const State *s, fmi2ValueReference vr, double *value, char *why, size_t size)
+{
+    static const char *const NAMES[] = {"fidelity", "mu", "Delta", "omega", "Omega", "alpha", "beta", "gamma", "R",
+                                        "x_start", "v_start"}; /* scene_names() */
+    char reason[256], text[64];
+    if (native_rule_refusal(s, NAMES, sizeof NAMES / sizeof NAMES[0], why, size)) return 0;
+    const double x = s->value[VR_x_start], v = s->value[VR_v_start], t = s->start_time;
+    if (!vibro_gaps_check(x, s->value[VR_R], reason, sizeof reason)) {
+        native_repr(x, text, sizeof text);
+        snprintf(why, size, "parameter x_start = %s: %s", text, reason);
+        return 0;
+    }
+    const int fidelity = (int)s->value[VR_fidelity];
+    VkModel m;
+    memset(&m, 0, sizeof m);
+    native_plant_model(&m, s, fidelity >= 3 ? 0 : fidelity);
+    double out[5] = {x, v, 0.0, 0.0, 0.0};
+    int fault = vm_forces(&m, t, x, &out[3], &out[4]);
+    if (!fault) out[2] = vm_accel(&m, t, x, v, 0.0, &fault);
+    if (fault) {
+        char message[128];
+        py_fault_text(fault, message, sizeof message);
+        py_exception_repr(message, why, size);
+        return 0;
+    }
+    if (vr == VR_in_contact) {
+        *value = vm_contact_indentation(x) > 0.0;
+        return 1;
+    }
+    for (int i = 0; i < 5; i++) {
+        if (OUTPUT_VRS[i] != vr) continue;
+        if (!isfinite(out[i])) {
+            native_repr(out[i], text, sizeof text);
+            snprintf(why, size, "output %s = %s is not finite; the parameters are beyond the model's numerical range",
+                     OUTPUT_NAMES[i], text);
+            return 0;
+        }
+        *value = out[i];
+        return 1;
+    }
+    *value = s->value[vr];
+    return 1;
 }
