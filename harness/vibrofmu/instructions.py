@@ -2,7 +2,7 @@
 
 Wall time on a shared machine varies by a factor ~1.6 between runs; the number of instructions executed is
 deterministic. This module runs the ladder's C timing host (timing_host.c, one repeat) under
-`valgrind --tool=callgrind` with collection switched on only inside fmi2DoStep and fmi2GetReal, so the count is
+`valgrind --tool=callgrind` with collection switched on only inside its doStep and getReal calls, so the count is
 the work of the output loop (doStep + getReal(x)) and nothing of instantiation or initialisation; divided by
 the number of outputs it is the instruction cost per output.
 
@@ -15,60 +15,38 @@ from __future__ import annotations
 
 import argparse
 import re
-import shutil
 import subprocess
 import sys
 import tempfile
 from pathlib import Path
 
-from fmpy import extract, read_model_description
+from fmpy import extract
 
-from .doctor import host_environment
-from .ladder import RUNGS, compile_timing_host
+from . import paths
+from .ladder import RUNGS, callgrind_counts, compile_timing_host, host_command, valgrind_missing
 
-COUNTED = ("fmi2DoStep", "fmi2GetReal")
 FMU_FILES = {"plant": "HertzEAOscillator.fmu", "closed_loop": "HertzEAClosedLoop.fmu"}
-
-
-def _host_command(host: Path, unzip_dir: Path, start: dict, stop: float, interval: float) -> tuple[list[str], dict]:
-    md = read_model_description(str(unzip_dir))
-    variables = {v.name: v for v in md.modelVariables}
-    library = Path(unzip_dir) / "binaries" / "linux64" / f"{md.coSimulation.modelIdentifier}.so"
-    arguments = [("i" if variables[name].type == "Integer" else "r") + f"{variables[name].valueReference}={value!r}"
-                 for name, value in start.items()]
-    cmd = [str(host), str(library), (Path(unzip_dir) / "resources").as_uri(), md.guid, repr(stop), repr(interval),
-           "1", str(variables["x"].valueReference), *arguments]
-    return cmd, host_environment(Path(unzip_dir) / "resources")
 
 
 def count_instructions(fmu_unzip_dir, start_values: dict, stop: float, interval: float,
                        host: Path | None = None) -> float:
-    """Instructions executed inside fmi2DoStep + fmi2GetReal(x) per output, for one run of the FMU unpacked in
+    """Instructions executed inside doStep + getReal(x) per output, for one run of the FMU unpacked in
     fmu_unzip_dir from 0 to stop at this output interval with these start values (names as in the ladder's
-    RUNGS), in the ladder's C timing host under callgrind. host: a compiled timing host (default: compiled
-    here). Raises RuntimeError when valgrind is missing or the run fails."""
-    import os
-
-    if shutil.which("valgrind") is None:
-        raise RuntimeError("valgrind is not installed (apt-get install valgrind)")
+    RUNGS), in the ladder's C timing host under callgrind (ladder.callgrind_counts: the same count as the
+    ladder's instruction column). host: a compiled timing host (default: compiled here). Raises RuntimeError
+    when valgrind is missing or the run fails."""
+    missing = valgrind_missing()
+    if missing:
+        raise RuntimeError(missing)
     with tempfile.TemporaryDirectory(prefix="vibrofmu-instr-") as work:
         if host is None:
             host = compile_timing_host(Path(work))
-        cmd, env = _host_command(Path(host), Path(fmu_unzip_dir), start_values, stop, interval)
-        out = Path(work) / "callgrind.out"
-        valgrind = ["valgrind", "--tool=callgrind", f"--callgrind-out-file={out}", "--collect-atstart=no",
-                    *[f"--toggle-collect={name}" for name in COUNTED]]
-        proc = subprocess.run(valgrind + cmd, capture_output=True, text=True, env={**os.environ, **env},
-                              timeout=3600)
-        if proc.returncode != 0:
-            own = [line for line in proc.stderr.splitlines() if line and not line.startswith("==")]
-            raise RuntimeError(f"timing host under callgrind failed ({proc.returncode}): {' | '.join(own)[-500:]}")
-        outputs = [int(line.split()[2]) for line in proc.stdout.splitlines() if line.startswith("loop ")]
-        text = out.read_text()
-        match = re.search(r"^(?:summary|totals):\s+(\d+)", text, re.MULTILINE)
-        if not outputs or match is None:
-            raise RuntimeError("no loop line from the timing host or no total in callgrind's output")
-        return int(match.group(1)) / outputs[0]
+        cmd, env = host_command(Path(host), Path(fmu_unzip_dir), [(start_values, interval)], stop, 1)
+        (count,), proc = callgrind_counts(cmd, env, 1)
+    outputs = [int(line.split()[2]) for line in proc.stdout.splitlines() if line.startswith("loop ")]
+    if not outputs:
+        raise RuntimeError("no loop line from the timing host")
+    return count / outputs[0]
 
 
 # The kernel floor of exact f0: Plant.do_step in C (vk_run), without the FMI layer, for this tree's kernel or the
@@ -121,7 +99,7 @@ def count_kernel_floor(tree: Path, python: Path, stop: float, interval: float) -
         env = {**os.environ, "PYTHONPATH": f"{Path(tree) / 'fmu_src'}{os.pathsep}{Path(tree) / 'harness'}"}
         subprocess.run([str(python), "-c", _FLOOR_SETUP, str(work)], check=True, env=env, cwd=tree)
         (work / "driver.c").write_text(_FLOOR_DRIVER)
-        subprocess.run(["gcc", "-O2", "-o", str(work / "driver"), str(work / "driver.c"), "-ldl"], check=True)
+        subprocess.run([*paths.c_compiler(), "-O2", "-o", str(work / "driver"), str(work / "driver.c"), "-ldl"], check=True)
         out = work / "callgrind.out"
         proc = subprocess.run(["valgrind", "--tool=callgrind", f"--callgrind-out-file={out}", "--collect-atstart=no",
                                "--toggle-collect=vk_run", str(work / "driver"), str(work / "vibrokernel.so"),
