@@ -1,4 +1,4 @@
-"""FMI 2.0 co-simulation slave of the adaptive Lyapunov controller alone (DESIGN.md contract, ERRATA §3.5).
+"""FMI 2.0 co-simulation slave of the adaptive Lyapunov controller alone (docs/fmu-reference.md contract, docs/model.md, Adaptive controller).
 
 Inputs x, v (plant) and x_ref, v_ref, a_ref (reference x~, x~', x~''); outputs U, e1, e2, V and the nine
 estimates. U, e1, e2 and V are algebraic in the inputs (direct feedthrough): they are recomputed whenever an

@@ -1,4 +1,4 @@
-"""FMI 2.0 co-simulation slave of plant + adaptive controller + reference in one FMU (DESIGN.md contract):
+"""FMI 2.0 co-simulation slave of plant + adaptive controller + reference in one FMU (the contract in docs/fmu-reference.md):
 FMI variables <-> vibromodel.closedloop.ClosedLoop. The plant, the nine estimates and the reference are
 integrated together by the plant's integrators (adaptive DOP853 or RK4, `solver`).
 No physics here; the FMI error handling and the FMU state are slave_support.StatusSlave's; the state's model

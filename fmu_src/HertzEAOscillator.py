@@ -1,4 +1,4 @@
-"""FMI 2.0 co-simulation slave of the plant (DESIGN.md contract): FMI variables <-> vibromodel.Plant.
+"""FMI 2.0 co-simulation slave of the plant (the contract in docs/fmu-reference.md): FMI variables <-> vibromodel.Plant.
 
 No physics here; the FMI error handling, the rules for setting variables and the FMU state are
 slave_support.StatusSlave's. The state's model part is the plant's snapshot (integrator included); the

@@ -6,7 +6,7 @@ from vibromodel.parameters import Scene
 from vibrofmu.compare import errors
 from vibrofmu.reference import reference_solution
 
-# DESIGN.md "Numbers to know": x(tau) of the exact model, DOP853 rtol 1e-12.
+# The reference numbers: x(tau) of the exact model, DOP853 rtol 1e-12.
 DESIGN_X = {10: -2.2669940936e-2, 25: 1.0510760461e-2, 50: 1.0985866228e-3, 100: -3.8776875257e-3,
             200: -6.5704670300e-3}
 
@@ -23,7 +23,7 @@ def max_error(run, reference):
 
 def test_reference_reproduces_the_design_numbers(reference):
     x = reference(np.array(list(DESIGN_X)))[0]
-    # DESIGN.md prints 11 significant digits: rounding <= 5e-13 for |x| < 0.1; DOP853 at rtol 1e-12
+    # the reference numbers have 11 significant digits: rounding <= 5e-13 for |x| < 0.1; DOP853 at rtol 1e-12
     # differs from rtol 1e-13 by 2.6e-13 on this run (both are references of that accuracy)
     np.testing.assert_allclose(x, list(DESIGN_X.values()), rtol=0, atol=5e-13 + 2.6e-13 * 2)
 
@@ -31,7 +31,7 @@ def test_reference_reproduces_the_design_numbers(reference):
 def test_adaptive_rtol_1e10_is_within_1e9_of_the_reference(run_plant, reference):
     run = run_plant(rtol=1e-10)
     assert max_error(run, reference) <= 1e-9
-    # the demo's table: the FMU agrees with DESIGN.md's numbers to 1e-10
+    # the demo's table: the FMU agrees with the reference numbers to 1e-10
     for tau, x_design in DESIGN_X.items():
         assert abs(run.outputs["x"][int(round(tau / 0.1))] - x_design) <= 1e-10, tau
 

@@ -1,4 +1,4 @@
-"""Averaged slow flow (ERRATA §3.4): moments, coefficients, backbone, steady states, stability, paper mode."""
+"""Averaged slow flow (docs/model.md, Averaging and slow flow): moments, coefficients, backbone, steady states, stability, paper mode."""
 import math
 
 import numpy as np
@@ -11,7 +11,7 @@ from vibromodel import averaging_printed as printed
 from vibromodel import forces
 from vibromodel.parameters import Scene
 
-STRONG = Scene(mu=0.002)  # ERRATA §3.4(f): mu = 0.002, Delta = 0.0007, the rest as the paper example
+STRONG = Scene(mu=0.002)  # docs/model.md, Averaging and slow flow: mu = 0.002, Delta = 0.0007, the rest as the paper example
 EPS = np.finfo(float).eps
 
 
@@ -57,7 +57,7 @@ def test_averaged_coefficients_equal_the_period_average_of_the_polynomial_model(
 def test_paper_example_numbers_of_errata():
     model = av.averaged(Scene())
     A, eq = model.eq.A, model.eq
-    assert A[0] == pytest.approx(-1.99997e-4, abs=5e-10)  # ERRATA table row (50): Gamma = -1.99997e-4
+    assert A[0] == pytest.approx(-1.99997e-4, abs=5e-10)  # corrected table row (50): Gamma = -1.99997e-4
     assert A[1] == pytest.approx(0.99706667, abs=5e-9)  # A1 = 0.99706667
     # row (58): k1 - A1 = 6.68e-5 and sqrt(k1) - sqrt(A1) = 3.34e-5, 3 digits; ours, 6.6750e-5, sits on the
     # rounding edge of the first, so one unit of the last digit is allowed there
@@ -93,7 +93,7 @@ def test_lindstedt_backbone_matches_the_exact_free_oscillation_frequency():
     omega, a = free_oscillation(eq.k, 0.305)
     shift = omega - math.sqrt(eq.k[1])  # the backbone: omega = omega_e + kappa(a)
     lindstedt, first_order = (av.backbone(eq, kind).kappa(a) for kind in av.BACKBONES)
-    # ERRATA §3.4(c): 1.9e-7 with the Lindstedt kappa (the next term, O(r^6), is not modelled),
+    # docs/model.md, Averaging and slow flow: 1.9e-7 with the Lindstedt kappa (the next term, O(r^6), is not modelled),
     # 1.1e-3 with the strict first-order kappa
     assert abs(lindstedt - shift) < 5e-7
     assert abs(first_order - shift) > 1e-3
@@ -107,7 +107,7 @@ def errata_branches():
 
 def test_three_branches_at_sigma_minus_0_0024_as_in_errata():
     flow, states = errata_branches()
-    assert [round(s.r, 5) for s in states] == [0.16628, 0.30374, 0.35107]  # ERRATA §3.4(f) table
+    assert [round(s.r, 5) for s in states] == [0.16628, 0.30374, 0.35107]  # docs/model.md, Averaging and slow flow table
     assert [s.kind for s in states] == ["stable focus", "saddle", "stable focus"]
     rho = sorted(m.real for m in states[1].multipliers(flow.omega))
     assert rho == pytest.approx([0.98533, 1.00217], abs=5e-6)  # exp(lambda T) column, 5 digits
@@ -124,7 +124,7 @@ def test_steady_states_are_equilibria_and_the_jacobian_is_right(index):
                            - np.array(flow.rhs(s.A - h * e[0], s.B - h * e[1]))) / (2 * h)
                           for e in ((1, 0), (0, 1))])
     np.testing.assert_allclose(J, fd, atol=1e-9)
-    assert np.trace(J) == pytest.approx(-flow.mu, abs=8 * EPS)  # ERRATA §3.4(e): tr J = -mu
+    assert np.trace(J) == pytest.approx(-flow.mu, abs=8 * EPS)  # docs/model.md, Averaging and slow flow: tr J = -mu
     assert np.linalg.det(J) == pytest.approx(s.det, rel=1e-9)
     np.testing.assert_allclose(sorted(np.linalg.eigvals(J), key=lambda z: (z.real, z.imag)),
                                sorted(s.eigenvalues, key=lambda z: (z.real, z.imag)), atol=1e-12)
@@ -142,7 +142,7 @@ def test_folds_bound_the_three_branch_interval():
 
 
 def test_peak_amplitude_by_backbone_as_in_errata():
-    """ERRATA §3.4 table: 0.3389 (correct kappa), 0.1733 (strict first order), 0.2884 (paper's coefficients)."""
+    """docs/model.md, Averaging and slow flow table: 0.3389 (correct kappa), 0.1733 (strict first order), 0.2884 (paper's coefficients)."""
     eq = av.equilibrium(STRONG)
     paper = printed.printed_backbone(eq.A[3], eq.A[5], eq.A[1])  # Eqs 59-60 with the correct A_k
     peaks = []
@@ -154,7 +154,7 @@ def test_peak_amplitude_by_backbone_as_in_errata():
 
 def test_paper_subcase_1a_lambdas_contradict_its_D():
     check = printed.subcase_1a_check()
-    # Eq. 71 with the printed mu and D gives -4.7808e-4 and -5.2192e-4 (ERRATA table, §5.2 1.a) ...
+    # Eq. 71 with the printed mu and D gives -4.7808e-4 and -5.2192e-4 (the corrected table, §5.2 1.a) ...
     assert check["lambda_from_eq71"] == pytest.approx([-4.7808e-4, -5.2192e-4], abs=5e-9)
     # ... while the printed pair has neither the sum -mu nor the product (mu^2 - D)/4 that Eq. 67 demands
     assert abs(check["sum_printed"] - check["sum_required"]) > 0.1 * check["mu"]

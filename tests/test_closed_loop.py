@@ -1,5 +1,5 @@
 """Acceptance 1, 2, 5 of issue 5 on build/HertzEAClosedLoop.fmu and AdaptiveLyapunovController.fmu under FMPy:
-the ERRATA §3.5 setup (paper example plant, exact Eq. 3, x(0) = 0.06, x'(0) = 0.01, wrong initial estimates,
+the docs/model.md, Adaptive controller setup (paper example plant, exact Eq. 3, x(0) = 0.06, x'(0) = 0.01, wrong initial estimates,
 reference x0 + X_f cos(w t - psi)), rtol 1e-10, tau in [0, 200], outputs every 0.1."""
 import math
 
@@ -32,13 +32,13 @@ def test_both_fmus_validate_without_messages(closed_loop_fmu, controller_fmu):
 def test_acceptance_1_paper_corrected_errata_setup(loop):
     """V never rises between outputs (the integrator's error in V over one output interval is ~rtol*V = 1e-12,
     so 1e-12 is the test's own threshold); V' - Eq. 85 <= 1e-8 (it is lambda2 e2 times the Eq. 3 - Eq. 7 series
-    remainder, ~1e-12); V(0) and V(200) as in ERRATA §3.5's table (5 digits printed there)."""
+    remainder, ~1e-12); V(0) and V(200) as in docs/model.md, Adaptive controller's table (5 digits printed there)."""
     t, o = loop()
     assert np.max(np.diff(o["V"])) <= 1e-12
     assert np.max(np.abs(o["V_rate"] - o["V_rate_promised"])) <= 1e-8
     assert o["V"][0] == pytest.approx(1.01333e-2, rel=1e-5)
     assert o["V"][-1] == pytest.approx(8.4134e-3, rel=1e-5)
-    # |e1| < 1e-4 for tau > 100 does NOT hold with ERRATA's gains (lambda1 = 4, c = 2): e1 settles to a forced
+    # |e1| < 1e-4 for tau > 100 does NOT hold with the corrected gains (lambda1 = 4, c = 2): e1 settles to a forced
     # oscillation driven by -phi^T theta~ (the estimates converge far too slowly to remove it):
     # e1'' + c e1' + c^2 e1 = -phi^T theta~, |phi^T theta~| ~ |mu~ x~'| + |a1~ x~| ~ 7e-4 at w ~ 1, so
     # |e1| ~ 7e-4/|c^2 - w^2 + i c w| = 7e-4/3.6 = 1.9e-4. Asserted here so that the finding stays measured.
@@ -55,7 +55,7 @@ def test_acceptance_1_e1_below_1e_4_with_lambda1_16(loop):
 
 
 def test_damped_law_keeps_its_promise(loop):
-    """ERRATA's better variant: V' = -lambda1 c e1^2 - lambda2 k e2^2; V(200) = 8.4061e-3 (ERRATA §3.5)."""
+    """the corrected better variant: V' = -lambda1 c e1^2 - lambda2 k e2^2; V(200) = 8.4061e-3 (docs/model.md, Adaptive controller)."""
     t, o = loop(law=1)
     assert np.max(np.diff(o["V"])) <= 1e-12
     assert np.max(np.abs(o["V_rate"] - o["V_rate_promised"])) <= 1e-8
@@ -63,7 +63,7 @@ def test_damped_law_keeps_its_promise(loop):
 
 
 def test_acceptance_2_paper_literal_lets_v_rise(loop):
-    """Erratum (ERRATA §3.5): with Eq. 78 and 81 as printed, V rises 1.0133e-2 -> 1.1308e-2 and V' - Eq. 85
+    """Erratum (docs/model.md, Adaptive controller): with Eq. 78 and 81 as printed, V rises 1.0133e-2 -> 1.1308e-2 and V' - Eq. 85
     reaches 2.3e-4."""
     t, o = loop(law=2)
     assert np.max(np.diff(o["V"])) > 1e-6

@@ -63,7 +63,7 @@ def test_equal_to_rounding_with_every_reference(solver, kind):
 
 
 def test_fmu_fast_path_equals_the_python_fmu(closed_loop_fmu):
-    """The FMU at its defaults (exact model, DOP853, ERRATA reference), tau in [0, 20]: every doStep on the fast
+    """The FMU at its defaults (exact model, DOP853, corrected paper reference), tau in [0, 20]: every doStep on the fast
     path (no Python), outputs equal to the pure-Python FMU within the rounding tolerance above."""
     runs = {kernel: run_fmu(closed_loop_fmu, {"kernel": kernel}, 20.0, H) for kernel in (0, 1)}
     assert all(run.completed for run in runs.values())

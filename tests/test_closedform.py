@@ -1,4 +1,4 @@
-"""Closed forms of the OAFM (ERRATA §3.3) against numerical integration of their defining ODEs and SymPy."""
+"""Closed forms of the OAFM (docs/model.md, OAFM analytic solution) against numerical integration of their defining ODEs and SymPy."""
 import numpy as np
 import pytest
 import sympy as sp
@@ -109,7 +109,7 @@ def test_operator_must_be_oscillatory():
 
 
 def test_general_closed_form_sympy():
-    """ERRATA §3.3: the general closed form and the resonant one solve L[x] = g with zero initial values."""
+    """docs/model.md, OAFM analytic solution: the general closed form and the resonant one solve L[x] = g with zero initial values."""
     s, mu, p, kk, n, C, S = sp.symbols("tau mu p k n C S", positive=True)
     a1 = p**2 + mu**2 / 4
     sigma, nu = kk * mu, n * p

@@ -20,7 +20,7 @@ STATES = [(rng.uniform(0, 50), rng.uniform(-0.1, 0.1), rng.uniform(-0.1, 0.1)) f
 
 @pytest.mark.parametrize("t,x,v", STATES)
 def test_regressor_times_theta_is_eq7_and_eq3(t, x, v):
-    """ERRATA §3.5: phi^T theta + U is Eq. 73 = Eq. 7 (corrected a_i). Against PolynomialModel the only difference
+    """docs/model.md, Adaptive controller: phi^T theta + U is Eq. 73 = Eq. 7 (corrected a_i). Against PolynomialModel the only difference
     is rounding (terms <= 1 in size: 1e-15). Against the exact Eq. 3 it is the series remainder at |x| <= 0.1:
     G1: 7x^6/11664 <= 6e-10, gamma/beta * 7u^6 (u = 2x/3) <= 2e-10, alpha G2's x^7 term smaller: bound 1e-9."""
     phi_theta = float(Regressor(SCENE)(t, x, v) @ true_theta(SCENE))

@@ -1,10 +1,10 @@
 """Acceptance 4: parameter estimates with and without persistent excitation (in-process closed loop, exact
-Eq. 3 plant, rtol 1e-8, paper-corrected law, lambda1 = 4, the other gains 1, ERRATA's wrong initial estimates).
+Eq. 3 plant, rtol 1e-8, paper-corrected law, lambda1 = 4, the other gains 1, the corrected wrong initial estimates).
 
-Persistent excitation: reference = ERRATA's x0 + X_f cos(w t - psi) plus three tones 0.2 cos 0.37t,
+Persistent excitation: reference = the corrected x0 + X_f cos(w t - psi) plus three tones 0.2 cos 0.37t,
 0.15 cos 1.53t, 0.1 cos 2.71t (tracking.MULTITONE_TONES): frequencies incommensurate with each other and with
 w, Omega, 2 Omega, so the nine regressor components are linearly independent along the trajectory.
-Without it (ERRATA's reference alone: one frequency, amplitude 7e-3) the estimates barely move but stay bounded.
+Without it (the corrected reference alone: one frequency, amplitude 7e-3) the estimates barely move but stay bounded.
 """
 import numpy as np
 import pytest
@@ -65,7 +65,7 @@ def correlation_eigenvalues(G):
 
 
 def test_excitation_level():
-    """G = <phi phi^T> along the reference. ERRATA's reference (amplitude 7e-3): min eig G 6e-25, and even after
+    """G = <phi phi^T> along the reference. the corrected reference (amplitude 7e-3): min eig G 6e-25, and even after
     normalising each column the a1..a5 block is nearly singular (min eig 5e-4). Multitone: min eig G 2.3e-7,
     normalised min eig 1.1e-2 (weak direction a3 - 0.7 a5 - 0.37 a1: x, x^3, x^5 are 0.9-correlated)."""
     G_errata = regressor_gram(ERRATA_SCENE, ReferenceSettings())

@@ -14,12 +14,12 @@ def difference(a, b):
 
 
 def test_exact_and_corrected_polynomial_agree_to_1e11(runs):
-    # ERRATA §4: 1.07e-12 (series truncation at |x| <= 0.04); each run carries ~3e-13 integration error
+    # docs/model.md, The paper's example reproduced: 1.07e-12 (series truncation at |x| <= 0.04); each run carries ~3e-13 integration error
     assert difference(runs[0], runs[1]) <= 1e-11
 
 
 def test_printed_coefficients_differ_by_about_2e8(runs):
-    # ERRATA §4: 2.27e-8, caused by the printed a3, a4, a5
+    # docs/model.md, The paper's example reproduced: 2.27e-8, caused by the printed a3, a4, a5
     d = difference(runs[0], runs[2])
     assert 1.5e-8 <= d <= 3.0e-8, d
 

@@ -1,4 +1,4 @@
-"""Fidelity 3: the averaged slow flow integrated in time and x reconstructed (ERRATA §3.4), model and FMU."""
+"""Fidelity 3: the averaged slow flow integrated in time and x reconstructed (docs/model.md, Averaging and slow flow), model and FMU."""
 import math
 
 import numpy as np

@@ -1,4 +1,4 @@
-"""The plant FMU's FMI contract (DESIGN.md): validation, variable names, start values."""
+"""The plant FMU's FMI contract (docs/fmu-reference.md): validation, variable names, start values."""
 import math
 
 from fmpy import read_model_description

@@ -1,4 +1,4 @@
-"""Series (5) and coefficients (8) against SymPy Taylor expansions and ERRATA's explicit formulas."""
+"""Series (5) and coefficients (8) against SymPy Taylor expansions and the corrected explicit formulas."""
 import math
 
 import pytest
@@ -31,7 +31,7 @@ def test_g2_g3_are_taylor_series_of_the_electrostatic_terms(R):
 @pytest.mark.parametrize("R", R_VALUES)
 def test_coefficients_match_errata_formulas(R):
     alpha, gamma = 0.003, 0.0007
-    expected = (  # ERRATA §3.2, Eq. 8 corrected
+    expected = (  # docs/model.md, Series and polynomial model, Eq. 8 corrected
         -gamma,
         1 - 8 * alpha / (3 * R) - 4 * gamma / (3 * R),
         1 / 6 - 4 * gamma / (3 * R**2),

@@ -25,7 +25,7 @@ def harmonic(paper_reference):
 
 
 def test_paper_numbers_reproduced(paper_reference):
-    """ERRATA §4, pinned to +-10 %: a regression in either direction shows."""
+    """docs/model.md, The paper's example reproduced, pinned to +-10 %: a regression in either direction shows."""
     paper = paper_reproduction(Scene(), paper_reference)
     assert paper["printed_eq30"]["error_0_50"] == pytest.approx(2.0e-3, rel=0.1)
     assert paper["printed_eq30"]["x0"] == 0.04

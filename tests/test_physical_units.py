@@ -1,4 +1,4 @@
-"""Physical units (ERRATA §3.1): the dimensional Eq. 1 + 2, integrated in SI units, matches
+"""Physical units (docs/model.md, Scaling): the dimensional Eq. 1 + 2, integrated in SI units, matches
 z = z_s (1 + 2x/3), t = tau/omega0 of the dimensionless run."""
 import math
 
@@ -23,7 +23,7 @@ def test_mapping_formulas():
     p = physical_example()
     scene = p.to_scene(z_start=p.z_s * (1 + 2 * 0.04 / 3), zdot_start=0.0)
     assert math.isclose(p.z_s, 1e-4, rel_tol=1e-12)
-    assert math.isclose(p.omega0**2, 1.5 * p.k / p.m * p.z_s**0.5, rel_tol=1e-12)  # ERRATA (4): z_s^(1/2)
+    assert math.isclose(p.omega0**2, 1.5 * p.k / p.m * p.z_s**0.5, rel_tol=1e-12)  # corrected Eq. (4): z_s^(1/2)
     assert math.isclose(scene.mu, 0.1, rel_tol=1e-12)
     assert math.isclose(scene.R, 1.0, rel_tol=1e-12)
     assert math.isclose(scene.x_start, 0.04, rel_tol=1e-12)

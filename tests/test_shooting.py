@@ -9,10 +9,10 @@ from vibromodel.averaging import equilibrium
 from vibromodel.parameters import Scene
 from vibrofmu import shooting as sh
 
-STRONG = Scene(mu=0.002, Delta=0.0007)  # the strongly nonlinear scene of ERRATA §3.4(f), issue 4
+STRONG = Scene(mu=0.002, Delta=0.0007)  # the strongly nonlinear scene of docs/model.md, Averaging and slow flow, issue 4
 OMEGA_E = equilibrium(STRONG).omega_e  # sqrt(k1) of the averaged model (lead's averaging.py)
 
-# ERRATA §3.4(f) at sigma = omega - omega_e = -0.0024: shooting column r, multipliers of the saddle.
+# docs/model.md, Averaging and slow flow at sigma = omega - omega_e = -0.0024: shooting column r, multipliers of the saddle.
 ERRATA_SIGMA = -0.0024
 ERRATA_R = (0.16638, 0.30329, 0.35092)
 ERRATA_SADDLE_MULTIPLIERS = (0.98532, 1.00217)
@@ -20,7 +20,7 @@ ERRATA_KINDS = ("stable", "saddle", "stable")
 
 
 def slow_flow_guess(model, omega, r, branch):
-    """z0 of y = A cos + B sin on the slow-flow curve (ERRATA §3.4(d)) at amplitude ~r; branch -1: below
+    """z0 of y = A cos + B sin on the slow-flow curve (docs/model.md, Averaging and slow flow) at amplitude ~r; branch -1: below
     the backbone (nu < 0), +1: above. Only a Newton starting point."""
     s = model.scene
     nu = branch * math.sqrt(s.Delta**2 / (4 * omega**2 * r**2) - s.mu**2 / 4)
@@ -153,7 +153,7 @@ def test_small_forcing_gives_the_linear_response(omega):
 
 
 def test_errata_table_is_the_polynomial_model_to_the_printed_digits():
-    """ERRATA §3.4(f) shooting column, reproduced with g = sum a_k x^k (Eq. 7, corrected a_k, AC averaged):
+    """docs/model.md, Averaging and slow flow shooting column, reproduced with g = sum a_k x^k (Eq. 7, corrected a_k, AC averaged):
     the table's numbers come from that degree-5 model. Tolerance: half a unit of the 5th decimal (5e-6)
     plus the Newton error (1e-10 / sigma_min(M - I) ~ 1e-10 / 2e-3 = 5e-8)."""
     orbits = errata_orbits(sh.PeriodicModel(STRONG, polynomial=True))
@@ -165,7 +165,7 @@ def test_errata_table_is_the_polynomial_model_to_the_printed_digits():
 
 def test_errata_table_with_the_exact_forces():
     """Eq. 3's forces instead of their degree-5 series move the backbone by delta_omega <= |g - g5|(r)/(2r)
-    ~ 6e-4 r^5 / 2 = 7e-7 at r = 0.3 (first neglected term of G1, ERRATA §3.2). The middle branch has
+    ~ 6e-4 r^5 / 2 = 7e-7 at r = 0.3 (first neglected term of G1, docs/model.md, Series and polynomial model). The middle branch has
     |dr/domega| ~ 220 there (measured by shooting at omega + 1e-5), so r moves by up to 1.6e-4 (measured 8e-5);
     the outer branches and the multipliers (|drho/domega| ~ 2) far less. Tolerances: 2e-4 on r, 1e-5 on
     the multipliers (rounding 5e-6 + 1.4e-6)."""
@@ -194,7 +194,7 @@ def test_continuation_finds_two_folds_where_a_multiplier_crosses_one(strong_bran
     for fold in fr.folds:
         assert fold.omega == pytest.approx(fold.omega_multiplier, abs=1e-10)
         assert np.min(np.abs(fold.orbit.multipliers - 1.0)) < 1e-6
-    # ERRATA §3.4(f): three orbits at sigma = -0.0024, so the folds bracket it
+    # docs/model.md, Averaging and slow flow: three orbits at sigma = -0.0024, so the folds bracket it
     sigma_folds = sorted(f.omega - OMEGA_E for f in fr.folds)
     assert sigma_folds[0] < ERRATA_SIGMA < sigma_folds[1]
     changes = np.flatnonzero(fr.stable[1:] != fr.stable[:-1])
@@ -214,7 +214,7 @@ def test_continuation_branch_is_consistent(strong_branch):
 
 
 def test_peak_amplitude_of_errata(strong_branch):
-    """ERRATA §3.4(f) peak-amplitude table: shooting r = 0.3387 at sigma = -0.002 (upper branch, past both
+    """docs/model.md, Averaging and slow flow peak-amplitude table: shooting r = 0.3387 at sigma = -0.002 (upper branch, past both
     folds). The orbit there is shot from the nearest branch point; tolerance: rounding 5e-5 + truncation
     (upper branch, < 2e-5 as above)."""
     fr = strong_branch

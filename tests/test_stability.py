@@ -47,7 +47,7 @@ def test_fold_frequencies_of_slow_flow_and_continuation_agree(strong_study):
     omega_e = strong_study["model"].omega_e
     for row in rows:
         sigma = row["slow_flow"] - omega_e
-        # the slow flow's detuning (w^2 - k1)/(2w) differs from w - w_e by sigma^2/(2w) (ERRATA §3.4(c)); the
+        # the slow flow's detuning (w^2 - k1)/(2w) differs from w - w_e by sigma^2/(2w) (docs/model.md, Averaging and slow flow); the
         # Lindstedt backbone itself is good to ~2e-7 (test_averaging): twice the first plus the second
         assert abs(row["continuation_minus_slow_flow"]) <= 2 * sigma**2 / 2 + 2e-7
 

@@ -40,7 +40,7 @@ typedef struct {
 
 typedef struct {
     /* ---- constants (control.Controller) ---- */
-    double g3[6];                    /* series G3 of ERRATA §3.2 */
+    double g3[6];                    /* series G3 of docs/model.md, Series and polynomial model */
     VcRegressor phi, phi_update;     /* the control's regressor and the update law's */
     double theta[VC_N];              /* true theta (for V) */
     double l1, l2, Lambda[VC_N], adaptation[VC_N], c, k_damping;

@@ -4,7 +4,7 @@
  * The slow flow (A, B) is tabulated at set-up (Python) as cubic Hermite cells on a uniform grid of spacing
  * g^-1 from t0: cell i holds a0..a3, b0..b3 with A(t) = a0 + s (a1 + s (a2 + s a3)), s = (t - t0) g - i in
  * [0, 1] (and the same for B); A' = g (a1 + s (2 a2 + 3 s a3)), A'' = g^2 (2 a2 + 6 s a3).
- * The reconstruction (ERRATA §3.4, Eq. 46 for psi):
+ * The reconstruction (docs/model.md, Averaging and slow flow, Eq. 46 for psi):
  *     p = A cos wt + B sin wt,  q = A sin wt - B cos wt,
  *     x = x_e + p + h (p^2 - q^2) - m (A^2 + B^2) + P sin Wt + Q cos 2Wt,
  * with h = k2/(6 k1), m = k2/(2 k1), P = -beta/W^2, Q = gamma/(4 W^2); v and a are its exact first and second

@@ -1,6 +1,6 @@
 /*
  * series.c -- vibromodel/forces.py's series_g1, series_g1_printed, series_g2, series_g3, coefficients and
- * coefficients_printed (the series (5) and a0..a5 of Eq. 7/8, ERRATA §3.2) in C for the native FMUs, the
+ * coefficients_printed (the series (5) and a0..a5 of Eq. 7/8, docs/model.md, Series and polynomial model) in C for the native FMUs, the
  * same operations in the same order so that they give the same bits (tests/test_native.py checks it).
  * The Python module stays the one the pythonfmu FMUs and the harness use; this is its compiled twin for an
  * FMU without Python.

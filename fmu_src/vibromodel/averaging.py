@@ -1,11 +1,11 @@
-"""Averaging, slow flow and local stability of the primary resonance (ERRATA §3.4; replaces PAPER Eqs 45-72).
+"""Averaging, slow flow and local stability of the primary resonance (docs/model.md, Averaging and slow flow; replaces PAPER Eqs 45-72).
 
 Chain: fast AC moments m_j, q_j -> averaged coefficients A_k -> static equilibrium x_e and the shifted
 coefficients k_j -> backbone kappa(r) -> slow flow for (A, B) -> steady states at a forcing frequency,
 their Jacobian, eigenvalues and type -> fold (jump) frequencies.
 
 The averaged equation is valid for Omega >> sqrt(a1) with Omega away from omega, 2 omega and omega/2,
-and weak nonlinearity at the amplitude r (ERRATA §3.4(a), (b)): `validity_notes` says where a scene
+and weak nonlinearity at the amplitude r (docs/model.md, Averaging and slow flow, (b)): `validity_notes` says where a scene
 leaves that range; nothing is refused.
 
 scipy is imported inside the functions that use it: at module level its import would be most of the
@@ -31,7 +31,7 @@ FOLD_DET_TOLERANCE = 1e-12  # |det J| below this times its scale counts as a fol
 # --- (a) fast/slow split -------------------------------------------------------------------------
 
 def fast_moments(beta: float, gamma: float, Omega: float) -> tuple[tuple[float, ...], tuple[float, ...]]:
-    """m_j = <psi^j> and q_j = <(beta sin Omega t - gamma cos 2 Omega t) psi^j>, j = 0..5 (ERRATA §3.4(a)).
+    """m_j = <psi^j> and q_j = <(beta sin Omega t - gamma cos 2 Omega t) psi^j>, j = 0..5 (docs/model.md, Averaging and slow flow).
 
     psi = -beta sin(Omega t)/Omega^2 + gamma cos(2 Omega t)/(4 Omega^2) is the fast AC response (Eq. 46).
     """
@@ -53,7 +53,7 @@ def fast_moments(beta: float, gamma: float, Omega: float) -> tuple[tuple[float, 
 
 
 def averaged_coefficients(scene: Scene) -> tuple[float, ...]:
-    """A_0..A_5 of the slow equation X'' + mu X' + sum A_k X^k = Delta cos(omega t) (ERRATA §3.4(a)).
+    """A_0..A_5 of the slow equation X'' + mu X' + sum A_k X^k = Delta cos(omega t) (docs/model.md, Averaging and slow flow).
 
     A_k = sum_{n>=k} C(n,k) a_n m_{n-k} - sum_{n>=k+1} C(n,k) f_n q_{n-k}; a_n of Eq. 8 (a_0 = -gamma),
     f_n of G3 (Eq. 5).
@@ -71,7 +71,7 @@ def averaged_coefficients(scene: Scene) -> tuple[float, ...]:
 @dataclass(frozen=True)
 class Equilibrium:
     """x_e, the averaged A_k, and k_j = sum_{n>=j} C(n,j) A_n x_e^(n-j) (k_0 = 0): y = x - x_e obeys
-    y'' + mu y' + k1 y + ... + k5 y^5 = Delta cos(omega t) (ERRATA §3.4(b))."""
+    y'' + mu y' + k1 y + ... + k5 y^5 = Delta cos(omega t) (docs/model.md, Averaging and slow flow)."""
 
     x_e: float
     A: tuple[float, ...]
@@ -88,7 +88,7 @@ def shifted(A, x_e: float) -> tuple[float, ...]:
 
 
 def equilibrium(scene: Scene) -> Equilibrium:
-    """Root x_e of sum A_k x^k near -Gamma/A_1, by Newton's method (ERRATA §3.4(b))."""
+    """Root x_e of sum A_k x^k near -Gamma/A_1, by Newton's method (docs/model.md, Averaging and slow flow)."""
     A = averaged_coefficients(scene)
     x = -A[0] / A[1]
     for _ in range(50):
@@ -109,7 +109,7 @@ BACKBONES = ("lindstedt", "first-order")
 
 @dataclass(frozen=True)
 class Backbone:
-    """kappa(r) = kappa2 r^2 + kappa4 r^4: amplitude-dependent frequency shift (ERRATA §3.4(c))."""
+    """kappa(r) = kappa2 r^2 + kappa4 r^4: amplitude-dependent frequency shift (docs/model.md, Averaging and slow flow)."""
 
     kappa2: float
     kappa4: float
@@ -125,7 +125,7 @@ class Backbone:
 
 
 def backbone(eq: Equilibrium, kind: str = "lindstedt") -> Backbone:
-    """Strict first order: 3k3/(8 w_e), 5k5/(16 w_e). Lindstedt (k2 not small): ERRATA §3.4(c)."""
+    """Strict first order: 3k3/(8 w_e), 5k5/(16 w_e). Lindstedt (k2 not small): docs/model.md, Averaging and slow flow."""
     _, k1, k2, k3, k4, k5 = eq.k
     if kind == "first-order":
         w = math.sqrt(k1)
@@ -140,7 +140,7 @@ def backbone(eq: Equilibrium, kind: str = "lindstedt") -> Backbone:
 
 @dataclass(frozen=True)
 class SlowFlow:
-    """A' = -mu/2 A - nu(r) B, B' = -mu/2 B + nu(r) A + Delta/(2 omega) (ERRATA §3.4(c)), tau-time.
+    """A' = -mu/2 A - nu(r) B, B' = -mu/2 B + nu(r) A + Delta/(2 omega) (docs/model.md, Averaging and slow flow), tau-time.
 
     y = x - x_e ~ A cos(omega t) + B sin(omega t); nu(r) = detuning - kappa(r), with the detuning
     (omega^2 - k1)/(2 omega) ~ omega - omega_e and the drive Delta/(2 omega).
@@ -162,7 +162,7 @@ class SlowFlow:
         return -half_mu * A - nu * B, -half_mu * B + nu * A + self.drive
 
     def jacobian(self, A: float, B: float) -> np.ndarray:
-        """ERRATA §3.4(e)."""
+        """docs/model.md, Averaging and slow flow."""
         r = math.hypot(A, B)
         nu, half_mu = self.nu(r), 0.5 * self.mu
         g = self.backbone.slope(r) / r if r > 0.0 else 0.0  # kappa'(r)/r, finite as r -> 0
@@ -172,7 +172,7 @@ class SlowFlow:
 
 @dataclass(frozen=True)
 class Averaged:
-    """The averaged model of a scene (ERRATA §3.4): its equilibrium, backbone, and slow flow at any omega."""
+    """The averaged model of a scene (docs/model.md, Averaging and slow flow): its equilibrium, backbone, and slow flow at any omega."""
 
     scene: Scene
     eq: Equilibrium
@@ -203,7 +203,7 @@ def averaged(scene: Scene, kind: str = "lindstedt") -> Averaged:
 
 @dataclass(frozen=True)
 class SteadyState:
-    """An equilibrium (A, B) of the slow flow = a T-periodic vibration of amplitude r (ERRATA §3.4(d)-(f))."""
+    """An equilibrium (A, B) of the slow flow = a T-periodic vibration of amplitude r (docs/model.md, Averaging and slow flow-(f))."""
 
     A: float
     B: float
@@ -214,7 +214,7 @@ class SteadyState:
     kind: str
 
     def multipliers(self, omega: float) -> tuple[complex, complex]:
-        """exp(lambda T), T = 2 pi/omega: the Floquet multipliers to O(epsilon) (ERRATA §3.4(f))."""
+        """exp(lambda T), T = 2 pi/omega: the Floquet multipliers to O(epsilon) (docs/model.md, Averaging and slow flow)."""
         T = 2.0 * math.pi / omega
         return tuple(cmath.exp(lam * T) for lam in self.eigenvalues)
 
@@ -224,7 +224,7 @@ class SteadyState:
 
 
 def classify(mu: float, det: float, discriminant: float, scale: float) -> str:
-    """Type of an equilibrium from tr J = -mu and det J (ERRATA §3.4(e), §5.1 corrected)."""
+    """Type of an equilibrium from tr J = -mu and det J (docs/model.md, Averaging and slow flow, §5.1 corrected)."""
     if abs(det) <= FOLD_DET_TOLERANCE * scale:
         return "fold"
     if det < 0.0:
@@ -239,7 +239,7 @@ def steady_state(flow: SlowFlow, r: float) -> SteadyState:
     """The equilibrium of amplitude r (a root of the frequency-response equation) with its stability."""
     nu, mu, d = flow.nu(r), flow.mu, flow.drive
     denominator = mu * mu + 4 * nu * nu
-    A, B = -4 * nu * d / denominator, 2 * mu * d / denominator  # ERRATA §3.4(d)
+    A, B = -4 * nu * d / denominator, 2 * mu * d / denominator  # docs/model.md, Averaging and slow flow
     r_kappa = r * flow.backbone.slope(r)
     det = mu * mu / 4 + nu * (nu - r_kappa)
     discriminant = nu * (r_kappa - nu)  # (lambda + mu/2)^2
@@ -250,7 +250,7 @@ def steady_state(flow: SlowFlow, r: float) -> SteadyState:
 
 
 def response_polynomial(flow: SlowFlow) -> np.ndarray:
-    """Coefficients (ascending in u = r^2) of u (mu^2/4 + nu(u)^2) - drive^2 (ERRATA §3.4(d))."""
+    """Coefficients (ascending in u = r^2) of u (mu^2/4 + nu(u)^2) - drive^2 (docs/model.md, Averaging and slow flow)."""
     nu = np.array([flow.detuning, -flow.backbone.kappa2, -flow.backbone.kappa4])
     inner = P.polyadd([flow.mu**2 / 4], P.polymul(nu, nu))
     return P.polysub(P.polymul([0.0, 1.0], inner), [flow.drive**2])
@@ -286,7 +286,7 @@ def steady_states(flow: SlowFlow, r_max: float = math.inf) -> list[SteadyState]:
 
 def frequency_on_curve(model, r: float, side: int) -> float | None:
     """omega at which amplitude r is a steady state, left (side = -1, nu < 0) or right (+1) of the
-    backbone: detuning(omega) = kappa(r) + side sqrt(drive(omega)^2/r^2 - mu^2/4) (ERRATA §3.4(d)).
+    backbone: detuning(omega) = kappa(r) + side sqrt(drive(omega)^2/r^2 - mu^2/4) (docs/model.md, Averaging and slow flow).
 
     model: anything with omega_e and flow(omega) (the corrected `Averaged` or the printed one).
     """
@@ -318,7 +318,7 @@ class Fold:
 
 
 def folds(model, samples: int = 2000) -> list[Fold]:
-    """Saddle-node points (det J = 0, d omega/dr = 0) of the frequency-response curve (ERRATA §3.4(e)).
+    """Saddle-node points (det J = 0, d omega/dr = 0) of the frequency-response curve (docs/model.md, Averaging and slow flow).
 
     The curve is traced by amplitude r on both sides of the backbone up to the peak (or the model's
     r_max); det J changes sign at a fold, which is located there by Brent's method.
@@ -345,7 +345,7 @@ def folds(model, samples: int = 2000) -> list[Fold]:
 
 
 def validity_notes(model: Averaged) -> list[str]:
-    """Where the scene leaves the averaging's range of validity (ERRATA §3.4(a), (b)); empty if inside."""
+    """Where the scene leaves the averaging's range of validity (docs/model.md, Averaging and slow flow, (b)); empty if inside."""
     s, w = model.scene, model.omega_e
     notes = []
     if s.beta or s.gamma:

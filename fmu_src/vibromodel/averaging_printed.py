@@ -1,7 +1,7 @@
 """PAPER §5 exactly as printed (Eqs 50, 58, 59-60, 68, 71, §5.1, §5.2): only to reproduce the paper and
-show how it differs from ERRATA §3.4, which `averaging` implements.
+show how it differs from docs/model.md, Averaging and slow flow, which `averaging` implements.
 
-What is wrong here (ERRATA table, rows (50), (56)-(60), (67)-(71), §5.1, §5.2): Gamma has the wrong sign
+What is wrong here (the paper's errata (docs/model.md), rows (50), (56)-(60), (67)-(71), §5.1, §5.2): Gamma has the wrong sign
 and Omega^4 for Omega^8; the cubic backbone term is 4x too large, the quintic 8x, the dominant
 quadratic (k2^2) contribution is missing; tr J is -mu, not mu; §5.1 has no saddle case; the printed
 lambdas of Subcase 1.a contradict the printed D.
@@ -30,7 +30,7 @@ def printed_coefficients(scene: Scene) -> tuple[float, ...]:
 
 
 def printed_theta(Gamma: float, A: tuple[float, ...], a1: float) -> float:
-    """theta of Eq. 58 (ERRATA: the odd-Gamma terms have the wrong sign)."""
+    """theta of Eq. 58 (corrected: the odd-Gamma terms have the wrong sign)."""
     return (2 * Gamma * A[2] / a1**1.5 + 3 * Gamma**2 * A[3] / a1**2.5 + 4 * Gamma**3 * A[4] / a1**3.5
             + 5 * Gamma**4 * A[5] / a1**4.5)
 

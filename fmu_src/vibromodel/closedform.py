@@ -1,4 +1,4 @@
-"""Closed forms for the OAFM: sums of damped harmonics and the responses of L (ERRATA §3.3).
+"""Closed forms for the OAFM: sums of damped harmonics and the responses of L (docs/model.md, OAFM analytic solution).
 
 A `Terms` object is f(s) = sum_j s^m_j e^(-sigma_j s) (a_j cos nu_j s + b_j sin nu_j s), m_j in {0, 1}.
 The set is closed under d/ds, so x, x' and x'' of an analytic solution are all exact closed forms.
@@ -97,7 +97,7 @@ class LinearOperator:
         return Terms.of([(0, 0.5 * self.c, q, y0, (v0 + 0.5 * self.c * y0) / q)])
 
     def response(self, sigma: float, nu: float, C: float = 1.0, S: float = 0.0) -> Terms:
-        """L[y] = e^(-sigma s)(C cos nu s + S sin nu s), y(0) = y'(0) = 0 (ERRATA §3.3, sigma = k mu, nu = n p)."""
+        """L[y] = e^(-sigma s)(C cos nu s + S sin nu s), y(0) = y'(0) = 0 (docs/model.md, OAFM analytic solution, sigma = k mu, nu = n p)."""
         c, k, q = self.c, self.k, self.q
         P_r = k + sigma * sigma - c * sigma - nu * nu
         P_i = nu * (c - 2.0 * sigma)

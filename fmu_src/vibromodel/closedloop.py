@@ -23,7 +23,7 @@ from .plant import INTEGRATOR_REBUILT, RK4_DEFAULT_STEP, TIME_TOLERANCE, Setting
 from .snapshot import plain_attributes, restore_attributes
 from .tracking import ReferenceSettings, make_reference
 
-# ERRATA §3.5 simulation: the plant starts at x(0) = 0.06, x'(0) = 0.01, off the reference.
+# docs/model.md, Adaptive controller simulation: the plant starts at x(0) = 0.06, x'(0) = 0.01, off the reference.
 ERRATA_SCENE = Scene(x_start=0.06, v_start=0.01)
 PLANT_FIDELITIES = integrated()  # the registry's levels that integrate Eq. 3 or 7 (0, 1, 2)
 # What a snapshot leaves out: built by the constructor (_stage is a cache of the last stage's control U).

@@ -1,18 +1,18 @@
-"""Adaptive Lyapunov tracking controller (ERRATA §3.5, replaces PAPER Eqs 73-85).
+"""Adaptive Lyapunov tracking controller (docs/model.md, Adaptive controller, replaces PAPER Eqs 73-85).
 
 Plant (Eq. 73 = Eq. 7 with U): x1' = x2, x2' = phi^T theta + U with
 theta = (mu, a1, ..., a5, Delta, beta, gamma) and the regressor
 phi = (-x2, -x1, -x1^2, ..., -x1^5, cos w t, G3(x1) sin W t, 1 - G3(x1) cos 2W t).
 Errors (Eq. 74): e1 = x1 - x~, e2 = x2 - x~' + c e1, c = sqrt(lambda1/lambda2) (Eq. 84).
-Lyapunov function (Eq. 76, with the gamma term of ERRATA (75)-(76)):
+Lyapunov function (Eq. 76, with the gamma term of corrected Eq. (75)-(76)):
 V = (lambda1 e1^2 + lambda2 e2^2 + theta~^T Lambda theta~)/2, theta~ = theta^ - theta, Lambda = diag(lambda3..11).
 
 Laws:
 - paper-corrected: U = -phi^T theta^ + x~'' - c e2, theta^' = lambda2 Lambda^-1 phi e2 => V' = -lambda1^(3/2) lambda2^(-1/2) e1^2 (Eq. 85).
-- damped (ERRATA "better variant"): U as above - k e2 => V' = -lambda1 c e1^2 - lambda2 k e2^2. (ERRATA's extra
+- damped (the corrected "better variant"): U as above - k e2 => V' = -lambda1 c e1^2 - lambda2 k e2^2. (the corrected extra
   term (c^2 - lambda1/lambda2) e1 vanishes here because c is always Eq. 84's.)
 - paper-literal: Eq. 78 and 81 as printed: U uses the true Delta instead of its estimate, and the update law
-  of Delta^ reads -(lambda2/lambda9) e2 cos tau, that of gamma^ has cos W tau. V rises (ERRATA §3.5 table).
+  of Delta^ reads -(lambda2/lambda9) e2 cos tau, that of gamma^ has cos W tau. V rises (docs/model.md, Adaptive controller table).
 """
 from __future__ import annotations
 
@@ -30,7 +30,7 @@ from .snapshot import plain_attributes, restore_attributes
 THETA_NAMES = ("mu", "a1", "a2", "a3", "a4", "a5", "Delta", "beta", "gamma")
 ESTIMATE_NAMES = tuple(f"{name}_hat" for name in THETA_NAMES)
 GAIN_NAMES = tuple(f"lambda{i}" for i in range(1, 12))
-# ERRATA §3.5 simulation: lambda1 = 4, lambda2 = 1, lambda3..11 = 1 (c = 2), wrong initial estimates.
+# docs/model.md, Adaptive controller simulation: lambda1 = 4, lambda2 = 1, lambda3..11 = 1 (c = 2), wrong initial estimates.
 DEFAULT_LAMBDAS = (4.0,) + (1.0,) * 10
 ERRATA_INITIAL_ESTIMATES = (0.05, 0.9, 0.1, 0.0, 0.0, 0.0, 0.001, 0.0, 0.001)
 DELTA, GAMMA = THETA_NAMES.index("Delta"), THETA_NAMES.index("gamma")
@@ -96,7 +96,7 @@ def true_theta(scene: Scene) -> np.ndarray:
 
 
 class Regressor:
-    """phi(x1, x2, t) of Eq. 73 (ERRATA §3.5). `delta_frequency`, `delta_sign`, `gamma_frequency` select the
+    """phi(x1, x2, t) of Eq. 73 (docs/model.md, Adaptive controller). `delta_frequency`, `delta_sign`, `gamma_frequency` select the
     time functions of the Delta and gamma components: (omega, +1, 2 Omega) correct, (1, -1, Omega) Eq. 81 as printed.
     Each component is (factor of x1, x2) * (1, cos or sin of a frequency): `integral` integrates it exactly in
     time with x1, x2 held."""
@@ -169,7 +169,7 @@ class Controller:
         return e1, v - ref[1] + self.c * e1
 
     def control(self, t: float, x: float, v: float, ref, theta_hat) -> float:
-        """U = -phi^T theta^ + x~'' - c e2 (ERRATA §3.5; Eq. 78 corrected), - k e2 for the damped law;
+        """U = -phi^T theta^ + x~'' - c e2 (docs/model.md, Adaptive controller; Eq. 78 corrected), - k e2 for the damped law;
         Eq. 78 as printed (paper-literal) has the true Delta in place of Delta^."""
         _, e2 = self.errors(x, v, ref)
         phi = self.phi(t, x, v)
@@ -182,7 +182,7 @@ class Controller:
         return U
 
     def rates(self, t: float, x: float, v: float, ref) -> np.ndarray:
-        """theta^' = lambda2 Lambda^-1 phi e2 (ERRATA §3.5 update laws; Eq. 81 as printed for paper-literal)."""
+        """theta^' = lambda2 Lambda^-1 phi e2 (docs/model.md, Adaptive controller update laws; Eq. 81 as printed for paper-literal)."""
         _, e2 = self.errors(x, v, ref)
         return self.adaptation * self.phi_update(t, x, v) * e2
 
@@ -208,7 +208,7 @@ class Controller:
 
     def promised_rate(self, e1: float, e2: float) -> float:
         """The V' the law promises: Eq. 85 -lambda1^(3/2) lambda2^(-1/2) e1^2 (paper-corrected and, as claimed by
-        the paper, paper-literal); -lambda1 c e1^2 - lambda2 k e2^2 for the damped law (ERRATA §3.5)."""
+        the paper, paper-literal); -lambda1 c e1^2 - lambda2 k e2^2 for the damped law (docs/model.md, Adaptive controller)."""
         if self.law is Law.DAMPED:
             return -self.l1 * self.c * e1 * e1 - self.l2 * self.gains.k_damping * e2 * e2
         return self.promised_e1 * e1 * e1

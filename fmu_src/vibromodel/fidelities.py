@@ -47,14 +47,14 @@ class FidelityEntry:
 
 
 def _averaged_solution(scene, settings, t0, stop_time, cache_dirs):
-    """Fidelity 3: the averaged slow flow integrated with large steps (ERRATA §3.4)."""
+    """Fidelity 3: the averaged slow flow integrated with large steps (docs/model.md, Averaging and slow flow)."""
     from .averaging import averaged, validity_notes  # only fidelity 3 loads the slow flow
     from .slowflow import SlowFlowSolution
 
     model = averaged(scene)
     solution = SlowFlowSolution(model, t0, scene.x_start, scene.v_start, settings.rtol, settings.max_step or math.inf,
                                 stop_time, bounded=True)  # a window of the table at a time (slowflow.WINDOW)
-    notes = [f"averaged slow flow (ERRATA §3.4, {model.backbone.kind} backbone): x_e = {model.eq.x_e:.6g}, omega_e = "
+    notes = [f"averaged slow flow (docs/model.md, Averaging and slow flow, {model.backbone.kind} backbone): x_e = {model.eq.x_e:.6g}, omega_e = "
              f"{model.omega_e:.8g}, table spacing {solution.spacing:.3g}"]
     return solution, notes + [f"outside the averaging's validity: {note}" for note in validity_notes(model)]
 

@@ -1,4 +1,4 @@
-"""Forces of Eq. 3 and their series (5), coefficients a0..a5 of Eq. 8 (ERRATA §3.2).
+"""Forces of Eq. 3 and their series (5), coefficients a0..a5 of Eq. 8 (docs/model.md, Series and polynomial model).
 
 Scalar functions on Python floats: they sit on the integrators' hot path.
 """
@@ -39,7 +39,7 @@ def horner(coefficients, x: float) -> float:
     return value
 
 
-# Series (5), corrected (ERRATA §3.2): coefficients of x^0 .. x^5.
+# Series (5), corrected (docs/model.md, Series and polynomial model): coefficients of x^0 .. x^5.
 def series_g1() -> tuple[float, ...]:
     """G1 ~ (1 + 2x/3)^(3/2); contains no R."""
     return (1.0, 1.0, 1.0 / 6.0, -1.0 / 54.0, 1.0 / 216.0, -1.0 / 648.0)

@@ -1,4 +1,4 @@
-"""OAFM (PAPER §3, ERRATA §3.3): x~ = x0 + sum C_i y_i on two domains, optimal C_i by least squares.
+"""OAFM (PAPER §3, docs/model.md, OAFM analytic solution): x~ = x0 + sum C_i y_i on two domains, optimal C_i by least squares.
 
 On each domain [start, end] the local time is s = tau - start. A `Basis` holds the initial
 approximation x0 (it carries the domain's initial state) and the first-iteration functions y_i with

@@ -1,11 +1,11 @@
 """Named OAFM basis families: each gives a transient-domain and a steady-domain `Basis`.
 
-`paper`: the paper's ansatz with the corrections of ERRATA §3.3 — Eq. 15 + Eq. 29 on [0, tau*]
+`paper`: the paper's ansatz with the corrections of docs/model.md, OAFM analytic solution — Eq. 15 + Eq. 29 on [0, tau*]
 (C1..C4), Eq. 33 + Eq. 35 on tau > tau* (C5..C7, L = x'' + p*^2 x with p*^2 = a1).
 
 `harmonic`: ours. L = x'' + mu x' + a1 x (Eq. 11) on both domains; x0 is the linear response of L to
 the linear forcing of Eq. 7 (gamma + Delta cos w tau + beta sin W tau - gamma cos 2W tau) from the
-domain's initial state, so x0 already holds the forced vibration the paper's x0 lacks (ERRATA §4).
+domain's initial state, so x0 already holds the forced vibration the paper's x0 lacks (docs/model.md, The paper's example reproduced).
 The y_i answer forcings e^(-m mu s/2)(cos | sin)(nu s) for every combination
 nu = |i q + j omega + k Omega| with i + |j| + |k| <= order and decay index m = i, i+2, ..., <= order:
 the harmonics a polynomial nonlinearity makes of a decaying free vibration (frequency q, decay
@@ -41,7 +41,7 @@ def linear_forcing(scene: Scene, start: float) -> list[tuple[float, float, float
 
 def eq11_operator(scene: Scene) -> LinearOperator:
     """L[x] = x'' + mu x' + a1 x (Eq. 11). Raises ParameterError unless it oscillates (a1 > mu^2/4), which
-    the analytic solutions built on it (OAFM, the ERRATA reference) need."""
+    the analytic solutions built on it (OAFM, the corrected reference) need."""
     a1 = coefficients(scene.alpha, scene.gamma, scene.R)[1]
     if not a1 > 0.25 * scene.mu**2:
         raise ParameterError("alpha", scene.alpha, f"a1 = 1 - 8 alpha/(3R) - 4 gamma/(3R) = {a1:.6g} must exceed "
@@ -92,7 +92,7 @@ def harmonic_basis(scene: Scene, start: float, x_init: float, v_init: float, ord
     return Basis(f"harmonic order {order}", L, x0, x0_forcing, tuple(functions), tuple(forcings), tuple(labels))
 
 
-# ---------------------------------------------------------------- paper (ERRATA §3.3)
+# ---------------------------------------------------------------- paper (docs/model.md, OAFM analytic solution)
 
 def paper_transient_basis(scene: Scene, start: float, x_init: float, v_init: float, order: int = 0) -> Basis:
     """Eq. 15 for x0 (L[x0] = gamma) and Eq. 29 for x1, with M1..M4 of Eq. 25 corrected.

@@ -2,7 +2,7 @@
 
 Eq. 30 with M1..M4 of Eq. 25 as printed (wrong signs in M2, M3; misplaced e^(-mu tau) in the M3 term),
 C1..C4 of Eq. 37 on [0, tau*]; Eq. 33 (without 1/p*) + Eq. 35 (without 1/(8 p*^2) ...) with C5..C7 and
-p* = 0.988 of Eq. 38 beyond. ERRATA §3.3 and §4 list what is wrong; `oafm_bases.paper_*` is the corrected
+p* = 0.988 of Eq. 38 beyond. docs/model.md, OAFM analytic solution; The paper's example reproduced list what is wrong; `oafm_bases.paper_*` is the corrected
 form of the same ansatz.
 """
 from __future__ import annotations
@@ -20,7 +20,7 @@ TAU_STAR, P_STAR = 50.0, 0.988  # Eq. 37, 38
 
 
 def printed_m(scene: Scene, C) -> tuple[float, float, float, float]:
-    """M1..M4 of Eq. 25 as printed (ERRATA: M2 and M3 have the wrong sign of the mu p term)."""
+    """M1..M4 of Eq. 25 as printed (corrected: M2 and M3 have the wrong sign of the mu p term)."""
     L = eq11_operator(scene)
     a1, mu, p = L.k, scene.mu, L.q
     C1, C2, C3, C4 = C

@@ -1,6 +1,6 @@
-"""Scene (dimensionless parameters + initial state), validation, physical units (ERRATA §3.1).
+"""Scene (dimensionless parameters + initial state), validation, physical units (docs/model.md, Scaling).
 
-Every formula here is the corrected one of ERRATA.md, not the printed one of PAPER.md.
+Every formula here is the corrected one (docs/model.md), not the one printed in the paper.
 """
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import math
 import sys
 from dataclasses import asdict, dataclass, fields, replace
 
-# Paper example (PAPER §4, ERRATA §4): delta*epsilon is the detuning of omega from sqrt(a1).
+# Paper example (PAPER §4, docs/model.md, The paper's example reproduced): delta*epsilon is the detuning of omega from sqrt(a1).
 PAPER_DETUNING = 0.02 * 0.01
 
 # Forcing frequencies beyond this (times the natural frequency) are refused.
@@ -205,14 +205,14 @@ RULES: tuple[Rule, ...] = (
          reason=f"end of the transient domain, inside the fit (at most {MAX_FIT_SPAN:g})"),
     Rule("oafm_tau_end", 0.0, MAX_FIT_SPAN, low_inclusive=False, automatic=0.0,
          reason=f"end of the fit: its memory and set-up time grow with its span (1e4: 19 s, 635 MB)"),
-    # the controller (ERRATA §3.5) and the closed loop's reference
+    # the controller (docs/model.md, Adaptive controller) and the closed loop's reference
     Rule("law", 0, 2, reason="0 paper-corrected, 1 damped, 2 paper-literal", integer=True),
     *(Rule(f"lambda{i}", GAIN_MIN, GAIN_MAX, reason=_GAIN) for i in range(1, 12)),
     Rule("k_damping", GAIN_MIN, GAIN_MAX, reason="the damped law's e2 gain, bounded as the Lyapunov weights"),
     *(Rule(f"{name}_hat_start", -MAX_ESTIMATE, MAX_ESTIMATE,
            reason=f"initial estimate: beyond {MAX_ESTIMATE:g} the Lyapunov function overflows")
       for name in ("mu", "a1", "a2", "a3", "a4", "a5", "Delta", "beta", "gamma")),  # control.THETA_NAMES
-    Rule("reference", 0, 2, reason="0 OAFM, 1 ERRATA §3.5 harmonic, 2 harmonic + tones", integer=True),
+    Rule("reference", 0, 2, reason="0 OAFM, 1 docs/model.md, Adaptive controller harmonic, 2 harmonic + tones", integer=True),
     Rule("x_ref_start", -1.5 * R_MAX, 1.5 * R_MAX, reason="the reference's initial x: inside the electrodes"),
     Rule("v_ref_start", -MAX_SCALE, MAX_SCALE, reason=f"the reference's initial speed: {_RATE}"),
     # the controller's inputs: the plant's state and the reference (a doStep and V are polynomials of degree <= 5
@@ -285,7 +285,7 @@ def validate_max_step(max_step: float) -> None:
 
 
 def consistency_warning(scene: Scene) -> str | None:
-    """ERRATA §3.1: physically beta^2 = 8 alpha gamma; say so when a set violates it."""
+    """docs/model.md, Scaling: physically beta^2 = 8 alpha gamma; say so when a set violates it."""
     lhs, rhs = scene.beta**2, 8.0 * scene.alpha * scene.gamma
     if abs(lhs - rhs) > 1e-6 * max(lhs, rhs, 1e-300):
         return (f"beta^2 = {lhs:.3g} but 8*alpha*gamma = {rhs:.3g}: no pair of bias and AC voltages gives this "
@@ -297,7 +297,7 @@ def consistency_warning(scene: Scene) -> str | None:
 
 @dataclass(frozen=True)
 class PhysicalParameters:
-    """SI parameters of Eq. 1 + 2 with the electrode geometry of ERRATA §3.1.
+    """SI parameters of Eq. 1 + 2 with the electrode geometry of docs/model.md, Scaling.
 
     m [kg], c [N s/m], k [N/m^1.5] (Hertz), N [N] static load, Delta [-] load ratio,
     C0 = eps0*S [F m], d [m] upper electrode position, V_bias, V_AC [V], nu1, nu2 [rad/s].
@@ -322,13 +322,13 @@ class PhysicalParameters:
 
     @property
     def omega0(self) -> float:
-        return math.sqrt(1.5 * self.k / self.m * math.sqrt(self.z_s))  # ERRATA (4): z_s^(1/2)
+        return math.sqrt(1.5 * self.k / self.m * math.sqrt(self.z_s))  # corrected Eq. (4): z_s^(1/2)
 
     def to_scene(self, z_start: float, zdot_start: float) -> Scene:
-        """Map to the dimensionless set of Eq. 3 (ERRATA §3.1) with the initial state."""
+        """Map to the dimensionless set of Eq. 3 (docs/model.md, Scaling) with the initial state."""
         z_s, w0 = self.z_s, self.omega0
         R = self.d / z_s - 1.0  # d = z_s (1 + R)
-        scale = self.k * R**2 * z_s**3.5  # ERRATA (4): z_s^(7/2)
+        scale = self.k * R**2 * z_s**3.5  # corrected Eq. (4): z_s^(7/2)
         return Scene(
             mu=self.c / (self.m * w0),
             Delta=self.Delta,

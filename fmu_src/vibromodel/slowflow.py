@@ -1,4 +1,4 @@
-"""Fidelity 3: the averaged slow flow integrated in time, and x reconstructed from it (ERRATA §3.4).
+"""Fidelity 3: the averaged slow flow integrated in time, and x reconstructed from it (docs/model.md, Averaging and slow flow).
 
 x ~ x_e + A(t) cos(omega t) + B(t) sin(omega t) + y2 + psi(t), with (A, B) from the slow flow, y2 the
 second-order harmonics of the quadratic stiffness and psi the fast AC response (Eq. 46). The slow flow is integrated with large steps (DOP853, SciPy) and tabulated as

@@ -1,9 +1,9 @@
 """Reference trajectories x~(t) for the tracking controller, each with x~' and x~'' in closed form.
 
 - OAFM: the analytic solution of the scene from the reference's own initial state (plant fidelity 4).
-- ERRATA: x~ = x0 (Eq. 15) + X_f cos(w t - psi), the §3.5 simulation's reference: x0 solves L[x0] = gamma,
+- ERRATA (the corrected paper reference): x~ = x0 (Eq. 15) + X_f cos(w t - psi), the §3.5 simulation's reference: x0 solves L[x0] = gamma,
   L = x'' + mu x' + a1 x (Eq. 11), and X_f cos(w t - psi) is L's steady response to Delta cos w t.
-- MULTITONE: ERRATA's reference plus extra tones sum A_k cos(nu_k t): a persistently exciting reference.
+- MULTITONE: the corrected reference plus extra tones sum A_k cos(nu_k t): a persistently exciting reference.
 
 All are `AnalyticSolution`s (sums of damped harmonics), so state(t) gives (x~, x~', x~'').
 
@@ -42,7 +42,7 @@ class ReferenceKind(IntEnum):
 @dataclass(frozen=True)
 class ReferenceSettings:
     kind: int = ReferenceKind.ERRATA
-    x_start: float = 0.04  # x~(0) of the free part (ERRATA §3.5: A = 0.04)
+    x_start: float = 0.04  # x~(0) of the free part (docs/model.md, Adaptive controller: A = 0.04)
     v_start: float = 0.0
 
     def validate(self) -> None:
@@ -84,7 +84,7 @@ def make_reference(scene: Scene, settings: ReferenceSettings, t0: float = 0.0, s
 
 
 def reference_terms(scene: Scene, settings: ReferenceSettings) -> Terms:
-    """x~ of the closed-form references (ERRATA, MULTITONE) as Terms."""
+    """x~ of the closed-form references (ERRATA = the corrected paper reference, MULTITONE) as Terms."""
     settings.validate()
     if settings.kind == ReferenceKind.OAFM:
         raise ParameterError("reference", settings.kind, "the OAFM reference is not a closed form")

@@ -17,7 +17,7 @@ from . import export
 from .cosim import CosimScene, run_cosim
 from .run import run_fmu
 
-TOLERANCE = 1e-10  # rtol of the plant's integrator (ERRATA §3.5 simulation)
+TOLERANCE = 1e-10  # rtol of the plant's integrator (docs/model.md, Adaptive controller simulation)
 STUDY_STEPS = (0.5, 0.2, 0.1, 0.05, 0.02)
 STUDY_EVERY = 1.0  # errors are compared at tau = 0, 1, 2, ...: a multiple of every H of the study
 ROLES = ("reference", "plant", "controller")  # FMU names the study maps onto the monolithic FMU's parameters

@@ -391,7 +391,7 @@ def tolerance_extreme(fmu, rtol: float) -> dict:
     """rtol 1e-15 and 1e-1 on the paper example (tau = 200, interval 0.1).
 
     1e-15: runs at MIN_RTOL = 2.2e-14 with the clamp warning in the log (fmi2Warning); error against the rtol 1e-13
-    reference within 1e-11 (DESIGN.md's numbers come from rtol 1e-12 and its error on this run is 2.6e-13 against
+    reference within 1e-11 (the reference numbers come from rtol 1e-12 and its error on this run is 2.6e-13 against
     rtol 1e-13: 1e-11 is tight enough to show the run is as accurate as the reference, not 1e-8 as by default).
     1e-1 (atol 1e-3): completes; every output finite; bounded: max|x| <= 1.5 max|x_ref| and x inside the gaps
     (no spurious growth or pull-in); its error, measured, is a fraction of the response (what rtol 0.1 promises).

@@ -89,7 +89,7 @@ def convergence_study(scene: Scene, settings: OafmSettings, reference, orders) -
 
 
 def paper_reproduction(scene: Scene, reference) -> dict:
-    """ERRATA §4's table: the printed formulas and constants, and what the paper's basis can do at best."""
+    """docs/model.md, The paper's example reproduced's table: the printed formulas and constants, and what the paper's basis can do at best."""
     if scene != Scene():
         return {"note": "the printed C1..C7 belong to the paper's example; not evaluated for this scene"}
     printed = printed_solution(scene)

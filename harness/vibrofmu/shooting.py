@@ -1,13 +1,13 @@
 """Ground truth for the steady vibrations of Eq. 3: periodic orbits by shooting, continued in omega (issue 4).
 
-Model. Eq. 3 (ERRATA §3.1) with U = 0, written as x'' + mu x' + g(x) = Delta cos(omega tau) with the
+Model. Eq. 3 (docs/model.md, Scaling) with U = 0, written as x'' + mu x' + g(x) = Delta cos(omega tau) with the
 restoring force g(x) = H(x) - 1 - F_em(x). The AC part of F_em, (beta sin Omega tau - gamma cos 2 Omega tau)
 (1-u)^-2, has the frequencies Omega and 2 Omega, which are not commensurate with omega: Eq. 3 then has no
 T-periodic orbit at all. Shooting therefore uses the AC drive at its mean gamma (forces.electrostatic_mean).
 What that drops is the fast response psi = O(beta/Omega^2) = 2.5e-5 and its averaged feedback on the slow
-motion, m2, q1 of ERRATA §3.4(a) = O(beta^2/Omega^2) ~ 1e-9 in the stiffness (far below the 5 digits of
+motion, m2, q1 of docs/model.md, Averaging and slow flow = O(beta^2/Omega^2) ~ 1e-9 in the stiffness (far below the 5 digits of
 the §3.4(f) table); with beta = gamma = 0 the model is Eq. 3 exactly. PeriodicModel(polynomial=True) shoots
-the degree-5 Eq. 7 instead (corrected a_k): ERRATA §3.4(f)'s shooting column was computed with that model.
+the degree-5 Eq. 7 instead (corrected a_k): docs/model.md, Averaging and slow flow's shooting column was computed with that model.
 
 Time is rescaled, s = omega tau, so the period is 2 pi for every omega:
     dx/ds = v/omega,   dv/ds = (Delta cos s - mu v - g(x))/omega,   v = dx/dtau.
@@ -51,7 +51,7 @@ class PeriodicModel:
     """x'' + mu x' + g(x) = Delta cos(omega tau): the T-periodic part of the plant that is shot.
 
     exact (default): g(x) = H(x) - 1 - F_em,mean(x), Eq. 3 with the AC drive at its mean (module doc).
-    polynomial: g(x) = sum a_k x^k with the corrected a0..a5 of Eq. 7 (ERRATA §3.2), the degree-5
+    polynomial: g(x) = sum a_k x^k with the corrected a0..a5 of Eq. 7 (docs/model.md, Series and polynomial model), the degree-5
     truncation the averaged slow flow (§3.4(a)) starts from.
     """
 
@@ -73,7 +73,7 @@ class PeriodicModel:
     def equilibrium(self) -> tuple[float, float]:
         """(x_e, k1): root of g next to x = 0 (Newton from 0; g(0) = -gamma is small) and k1 = g'(x_e).
 
-        omega_e = sqrt(k1) is the small-amplitude resonance (ERRATA §3.4(b) without the O(1e-9)
+        omega_e = sqrt(k1) is the small-amplitude resonance (docs/model.md, Averaging and slow flow without the O(1e-9)
         vibrational corrections of the AC part).
         """
         g, g_x = self.restoring()
@@ -179,7 +179,7 @@ def period_map(model: PeriodicModel, z0, omega: float, rtol: float = RTOL) -> Pe
 
 @dataclass
 class Orbit:
-    """A T-periodic orbit of Eq. 3 and its Floquet data (ERRATA §3.4(f))."""
+    """A T-periodic orbit of Eq. 3 and its Floquet data (docs/model.md, Averaging and slow flow)."""
 
     omega: float
     z0: np.ndarray  # (x, x') at tau = 0 (phase of Delta cos omega tau)

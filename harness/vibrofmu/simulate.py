@@ -35,7 +35,7 @@ def plant_run(scene: Scene, settings: Settings, stop_time: float, interval: floa
 
 
 def start_values(scene: Scene, settings: Settings) -> dict:
-    """FMU start values (DESIGN.md names) of a scene and settings."""
+    """FMU start values (the names in docs/fmu-reference.md) of a scene and settings."""
     oafm = settings.oafm
     return {**scene.as_dict(), "fidelity": settings.fidelity, "solver": settings.solver, "rtol": settings.rtol,
             "max_step": settings.max_step, "oafm_order": oafm.order, "tau_star": oafm.tau_star,

@@ -2,7 +2,7 @@
 far the averaged prediction can be trusted (issue 4).
 
 Three independent methods on one frequency grid:
-- the averaged slow flow (vibromodel.averaging, ERRATA §3.4): every branch, its type, the fold frequencies;
+- the averaged slow flow (vibromodel.averaging, docs/model.md, Averaging and slow flow): every branch, its type, the fold frequencies;
 - shooting with Floquet multipliers (shooting.py): each slow-flow steady state is shot from its own
   prediction, and the branch is continued by pseudo-arclength through the folds;
 - brute-force FMU sweeps up and down in omega (sweep.py): the measured amplitudes and jumps.
@@ -221,7 +221,7 @@ def fidelity3_check(fmu, scene: Scene, stop_time: float = 400.0, interval: float
 
 
 def paper_mode(scene: Scene, omega: float) -> dict:
-    """PAPER §5 as printed at omega, next to the corrected result (ERRATA §3.4)."""
+    """PAPER §5 as printed at omega, next to the corrected result (docs/model.md, Averaging and slow flow)."""
     model = av.averaged(scene)
     printed = printed_averaged(scene)
     flow, printed_flow = model.flow(omega), printed.flow(omega)

@@ -3,7 +3,7 @@ from the previous point's end state, each run until the transient has decayed.
 
 Settling criterion (stated in every result): the complex first-harmonic coefficient c (amplitude and
 phase: the slow-flow point A - iB) is measured over windows of WINDOW_PERIODS forcing periods. Near a
-steady state c - c* ~ e^(lambda t) with Re lambda = -mu/2 for a focus (tr J = -mu; ERRATA §3.4(e)), so
+steady state c - c* ~ e^(lambda t) with Re lambda = -mu/2 for a focus (tr J = -mu; docs/model.md, Averaging and slow flow), so
 the step between two windows bounds what is left: |c_w - c_(w-1)| / (1 - e^(-mu T_w/2)) <=
 SETTLE_TOLERANCE * |c_w|. The complex c is used, not |c|: on a slow spiral |c| can stand still while c
 moves. Close to a fold the slow eigenvalue tends to 0 and the bound is optimistic. A point that does

@@ -130,7 +130,7 @@ def branch_of(A: float, B: float, stable: list) -> int:
 
 
 def settling_rate(scene: Scene) -> float:
-    """The slowest decay rate -Re lambda over the slow flow's stable steady states at the scene (ERRATA §3.4(e)),
+    """The slowest decay rate -Re lambda over the slow flow's stable steady states at the scene (docs/model.md, Averaging and slow flow),
     at least mu/20: mu/2 at a focus, less at a node near a fold, where the settling bound of sweep.py with
     mu/2 would stop a run while a transient of several per cent is left (seen at Delta = 0.0004 in the
     response map: 7 % off). The floor keeps the wait at a fold finite (MAX_PERIODS caps it anyway)."""

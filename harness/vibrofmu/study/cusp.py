@@ -120,7 +120,7 @@ def extrapolate(rows: list[dict], use_jump: bool = True) -> dict | None:
 # --- 2. the two-start bistability test --------------------------------------------------------------------
 
 def slowest_rate(scene) -> float:
-    """-Re lambda of the slowest-decaying eigenvalue over the slow flow's stable steady states (ERRATA §3.4(e))."""
+    """-Re lambda of the slowest-decaying eigenvalue over the slow flow's stable steady states (docs/model.md, Averaging and slow flow)."""
     model = av.averaged(scene)
     rates = [min(-lam.real for lam in s.eigenvalues) for s in av.steady_states(model.flow(), model.r_max) if s.stable]
     return min(rates, default=scene.mu / 2)
