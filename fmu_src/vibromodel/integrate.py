@@ -124,6 +124,19 @@ def _dot(coefficients, values):
     return total
 
 
+def _tableau_dot(coefficients, values):
+    """_dot without the terms whose coefficient is zero (38 of DOP853's 120 stage coefficients, rows of A and B):
+    the same value whenever the skipped values are finite, as the sum starts at +0.0 and so is never -0.0, and
+    c * k = +-0.0 then leaves it unchanged. Used by the stages of systems with extra states (the closed loop), as
+    the C twin (core/dop853.c stages_of) skips the same terms there; the plant's stages and the error and
+    dense-output sums keep _dot (skipping there costs the C loop more than it saves)."""
+    total = 0.0
+    for c, k in zip(coefficients, values):
+        if c != 0.0:
+            total += c * k
+    return total
+
+
 def _norm(values):
     """math.hypot(*values): the same function as the C twin's py_hypot (CPython's vector_norm)."""
     return math.hypot(*values)
@@ -290,12 +303,13 @@ class Dop853:
         accel, rates = self.accel, self.rates
         kx, kv, kU = stages
         U = U0
+        dot = _dot if rates is None else _tableau_dot  # the C twin's choice (core/dop853.c stages_of: n > 2)
         for row, c in nodes:
             ts = t + c * h
-            xs = x + h * _dot(row, kx)
-            vs = v + h * _dot(row, kv)
+            xs = x + h * dot(row, kx)
+            vs = v + h * dot(row, kv)
             if rates is not None:
-                U = U0 + h * _dot(row, kU)
+                U = U0 + h * dot(row, kU)
                 dU = rates(ts, xs, vs, U)
             a = accel(ts, xs, vs, U)
             if rates is not None:
