@@ -12,15 +12,34 @@
 #include "plant.h"
 #include "pyfloat.h"
 
+/* The reference x~ at t into ref[0..2] and, where the reference computes it too, the control regressor's
+   cos(w_delta t) into *cos_delta (then returned non-NULL): when x~ is one piece from 0 with a frequency base equal
+   to w_delta (the corrected reference: its forced response at omega), its cos(b (t - 0)) is the same angle. */
+static const double *reference_at(const VlLoop *l, double t, double *ref, double *cos_delta)
+{
+    const OeSolution *S = &l->reference;
+    if (S->n_pieces == 1 && S->pieces[0].start == 0.0) {
+        const OePiece *P = &S->pieces[0];
+        for (int64_t j = 0; j < P->n_freq_bases; j++) {
+            if (P->freq_base[j] == l->controller.phi.w_delta) {
+                oe_state_cos(S, t, ref, j, cos_delta);
+                return cos_delta;
+            }
+        }
+    }
+    oe_state(S, t, ref);
+    return NULL;
+}
+
 /* ClosedLoop._rates then ClosedLoop._accel at one stage: f = (v, x'', theta^'), U computed once for both;
    a fault (pyfloat.h) where Python raises. */
 static int loop_rhs(void *context, double t, const double *y, double *f)
 {
     const VlLoop *l = context;
-    double ref[3], U, time[3];
+    double ref[3], U, time[3], cos_delta;
     int fault = FAULT_NONE;
-    oe_state(&l->reference, t, ref);
-    if (vc_control_rates(&l->controller, t, y[0], y[1], ref, y + 2, &U, f + 2, time))
+    const double *shared = reference_at(l, t, ref, &cos_delta);
+    if (vc_control_rates(&l->controller, t, y[0], y[1], ref, y + 2, &U, f + 2, time, shared))
         return FAULT_MATH_DOMAIN;  /* math.cos/sin of an infinity */
     /* the model's drive terms have the same time functions as the control regressor (the same products of the
        same frequencies and t): evaluated once */
@@ -33,10 +52,10 @@ static int loop_rhs(void *context, double t, const double *y, double *f)
 int vl_outputs_at(const VlLoop *l, double t, const double *y, double *out)
 {
     const VcController *c = &l->controller;
-    double ref[3], U, e1, e2, rates[VC_N], time[3];
+    double ref[3], U, e1, e2, rates[VC_N], time[3], cos_delta;
     int fault = FAULT_NONE;
-    oe_state(&l->reference, t, ref);
-    if (vc_control_rates(c, t, y[0], y[1], ref, y + 2, &U, rates, time)) return FAULT_MATH_DOMAIN;
+    const double *shared = reference_at(l, t, ref, &cos_delta);
+    if (vc_control_rates(c, t, y[0], y[1], ref, y + 2, &U, rates, time, shared)) return FAULT_MATH_DOMAIN;
     vc_errors(c, y[0], y[1], ref, &e1, &e2);
     VmDrive drive = {time[0], time[1], time[2]};  /* as in loop_rhs */
     double a = vm_accel_driven(&l->model, t, &drive, y[0], y[1], U, &fault);

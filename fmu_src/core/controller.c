@@ -48,13 +48,19 @@ static int trig_integral(int sine, double nu, double t, double h, double *value)
     return VC_OK;
 }
 
-/* Regressor.__call__; time != NULL: its time functions cos(w_delta t), sin(w_beta t), cos(w_gamma t) too */
+/* Regressor.__call__; time != NULL: its time functions cos(w_delta t), sin(w_beta t), cos(w_gamma t) too;
+   cos_delta != NULL: cos(w_delta t) as the caller computed it (math.cos's value, from the same angle) */
 static int regressor(const VcController *c, const VcRegressor *r, double t, double x1, double x2, double *phi,
-                     double *time)
+                     double *time, const double *cos_delta)
 {
     double G3 = horner6(c->g3, x1), x1_2 = x1 * x1, cd, sb, cg;
-    if (trig(0, r->w_delta * t, &cd) || trig(1, r->w_beta * t, &sb) || trig(0, r->w_gamma * t, &cg))
+    if (cos_delta != NULL) {
+        if (isinf(r->w_delta * t)) return VC_RAISED;  /* math.cos's ValueError */
+        cd = *cos_delta;
+    } else if (trig(0, r->w_delta * t, &cd)) {
         return VC_RAISED;
+    }
+    if (trig(1, r->w_beta * t, &sb) || trig(0, r->w_gamma * t, &cg)) return VC_RAISED;
     if (time != NULL) {
         time[0] = cd;
         time[1] = sb;
@@ -116,7 +122,7 @@ int vc_control(const VcController *c, double t, double x, double v, const double
 {
     double e1, e2, phi[VC_N];
     vc_errors(c, x, v, ref, &e1, &e2);
-    if (regressor(c, &c->phi, t, x, v, phi, NULL)) return VC_RAISED;
+    if (regressor(c, &c->phi, t, x, v, phi, NULL, NULL)) return VC_RAISED;
     *U = control(c, phi, e2, ref, theta_hat);
     return VC_OK;
 }
@@ -124,15 +130,15 @@ int vc_control(const VcController *c, double t, double x, double v, const double
 /* vc_control and vc_rates together: the same values, with the regressor evaluated once where both laws use the
    same one (all but paper-literal) */
 int vc_control_rates(const VcController *c, double t, double x, double v, const double *ref, const double *theta_hat,
-                     double *U, double *rates, double *time)
+                     double *U, double *rates, double *time, const double *cos_delta)
 {
     double e1, e2, phi[VC_N], phi_update[VC_N];
     vc_errors(c, x, v, ref, &e1, &e2);
-    if (regressor(c, &c->phi, t, x, v, phi, time)) return VC_RAISED;
+    if (regressor(c, &c->phi, t, x, v, phi, time, cos_delta)) return VC_RAISED;
     *U = control(c, phi, e2, ref, theta_hat);
     const double *update = phi;
     if (c->law == 2) {
-        if (regressor(c, &c->phi_update, t, x, v, phi_update, NULL)) return VC_RAISED;
+        if (regressor(c, &c->phi_update, t, x, v, phi_update, NULL, NULL)) return VC_RAISED;
         update = phi_update;
     }
     for (int i = 0; i < VC_N; i++) rates[i] = c->adaptation[i] * update[i] * e2;
@@ -144,7 +150,7 @@ int vc_rates(const VcController *c, double t, double x, double v, const double *
 {
     double e1, e2, phi[VC_N];
     vc_errors(c, x, v, ref, &e1, &e2);
-    if (regressor(c, &c->phi_update, t, x, v, phi, NULL)) return VC_RAISED;
+    if (regressor(c, &c->phi_update, t, x, v, phi, NULL, NULL)) return VC_RAISED;
     for (int i = 0; i < VC_N; i++) rates[i] = c->adaptation[i] * phi[i] * e2;
     return VC_OK;
 }

@@ -67,9 +67,10 @@ int vc_control(const VcController *c, double t, double x, double v, const double
 /* theta^' (Controller.rates); 0 or VC_RAISED. */
 int vc_rates(const VcController *c, double t, double x, double v, const double *ref, double *rates);
 /* vc_control and vc_rates in one call (the regressor evaluated once where the laws share it); time != NULL: the
-   control regressor's time functions cos(omega t), sin(Omega t), cos(2 Omega t) into time[0..2]. 0 or VC_RAISED. */
+   control regressor's time functions cos(omega t), sin(Omega t), cos(2 Omega t) into time[0..2]; cos_delta != NULL:
+   the control regressor's cos(w_delta t), already computed by the caller from the same angle. 0 or VC_RAISED. */
 int vc_control_rates(const VcController *c, double t, double x, double v, const double *ref, const double *theta_hat,
-                     double *U, double *rates, double *time);
+                     double *U, double *rates, double *time, const double *cos_delta);
 /* theta^(t + h) - theta^(t) with x, v, ref held (Controller.increment, exact integral); 0 or VC_RAISED. */
 int vc_increment(const VcController *c, double t, double h, double x, double v, const double *ref, double *inc);
 /* V of Eq. 76. */

@@ -63,13 +63,15 @@ static void bases(const OePiece *P, int64_t piece, double s, OeCache *C, double 
     }
 }
 
-static void piece_state(const OePiece *P, int64_t piece, double s, OeCache *cache, double *xva)
+static void piece_state(const OePiece *P, int64_t piece, double s, OeCache *cache, double *xva, int64_t base,
+                        double *base_cos)
 {
     double wre[OE_ITEMS], wim[OE_ITEMS], D[OE_ITEMS];
     double fre[OE_BASES], fim[OE_BASES], e[OE_BASES], inverse[OE_BASES];
     bases(P, piece, s, cache, fre, fim, e, inverse);
     for (int64_t j = 0; j < P->n_freq_bases; j++) {  /* F_j^n = F_j^(n-1) F_j: angle addition */
         double c = fre[j], sn = fim[j], *re = wre + P->freq_zero[j], *im = wim + P->freq_zero[j];
+        if (j == base && base_cos != NULL) *base_cos = c;
         re[0] = 1.0;
         im[0] = 0.0;
         for (int64_t n = 1; n <= P->freq_top[j]; n++) {
@@ -150,11 +152,17 @@ static int64_t piece_of(const OeSolution *S, double tau)
 void oe_state(const OeSolution *S, double tau, double *xva)
 {
     int64_t i = piece_of(S, tau);
-    piece_state(&S->pieces[i], i, tau - S->pieces[i].start, NULL, xva);
+    piece_state(&S->pieces[i], i, tau - S->pieces[i].start, NULL, xva, 0, NULL);
+}
+
+void oe_state_cos(const OeSolution *S, double tau, double *xva, int64_t base, double *base_cos)
+{
+    int64_t i = piece_of(S, tau);
+    piece_state(&S->pieces[i], i, tau - S->pieces[i].start, NULL, xva, base, base_cos);
 }
 
 void oe_step(OeSolution *S, double tau, double *xva)
 {
     int64_t i = piece_of(S, tau);
-    piece_state(&S->pieces[i], i, tau - S->pieces[i].start, &S->cache, xva);
+    piece_state(&S->pieces[i], i, tau - S->pieces[i].start, &S->cache, xva, 0, NULL);
 }
