@@ -109,9 +109,13 @@ void vc_errors(const VcController *c, double x, double v, const double *ref, dou
 static double control(const VcController *c, const double *phi, double e2, const double *ref, const double *theta_hat)
 {
     double th[VC_N];
-    memcpy(th, theta_hat, sizeof th);
-    if (c->law == 2) th[DELTA] = c->true_delta;
-    double u = -dot(phi, th) + ref[2] - c->c * e2;
+    const double *estimates = theta_hat;
+    if (c->law == 2) {  /* a copy only where one estimate is replaced */
+        memcpy(th, theta_hat, sizeof th);
+        th[DELTA] = c->true_delta;
+        estimates = th;
+    }
+    double u = -dot(phi, estimates) + ref[2] - c->c * e2;
     if (c->law == 1) u -= c->k_damping * e2;
     return u;
 }
