@@ -1,8 +1,9 @@
 """Speed-up of a study from 1 to 2 local workers, measured by one command:
 
-    python -m vibrofmu.study.scaling [--kind monte-carlo] [--engine core] [--set NAME=VALUE]... [--order 1,2,2,1]
+    python -m vibrofmu.study.scaling [--kind monte-carlo] [--engine fmu] [--set NAME=VALUE]... [--order 1,2,2,1]
 
-runs the same small study (default: monte-carlo on the core at mu = 0.02, 120 samples: ~0.1 s a case) once
+runs the same study (default: monte-carlo through the FMU at mu = 0.02, 600 samples: ~15 ms a case and ~10 s
+of work for one idle worker -- a study much smaller than that measures the fixed costs, not the scaling) once
 per entry of --order, each in a fresh folder and a fresh LocalCluster, and prints for each run the compute
 wall time (first task to last result, summary.json run.compute_wall_s), the mean cost per case, the overhead
 per case (worker-seconds not spent in a case, per case) and the scheduler's cost per task; then the speed-up
@@ -21,7 +22,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-DEFAULT_SETS = ["mu=0.02", "samples=120"]
+DEFAULT_SETS = ["mu=0.02", "samples=600"]
 
 
 def run_once(kind: str, engine: str, workers: int, sets: list[str], out: Path) -> dict:
@@ -39,7 +40,7 @@ def run_once(kind: str, engine: str, workers: int, sets: list[str], out: Path) -
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m vibrofmu.study.scaling", description=__doc__.split("\n\n")[0])
     parser.add_argument("--kind", default="monte-carlo", choices=["monte-carlo", "basins", "response-map"])
-    parser.add_argument("--engine", default="core", choices=["core", "fmu"])
+    parser.add_argument("--engine", default="fmu", choices=["core", "fmu"])
     parser.add_argument("--set", action="append", default=None, metavar="NAME=VALUE",
                         help=f"study settings (default: {' '.join(DEFAULT_SETS)})")
     parser.add_argument("--order", default="1,2,2,1", help="worker counts, run in this order (default 1,2,2,1)")
