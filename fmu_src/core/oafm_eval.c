@@ -7,68 +7,22 @@
 
 typedef double v2 __attribute__((vector_size(16)));  /* (x, x') */
 
-/* F_j(s) into (fre, fim), E_j(s) and 1/E_j(s) into (e, inverse): directly or, with a cache that allows it, by
-   one product with the same at the step h. */
-static void bases(const OePiece *P, int64_t piece, double s, OeCache *C, double *fre, double *fim, double *e,
-                  double *inverse)
+/* F_j(s) into (fre, fim), E_j(s) and 1/E_j(s) into (e, inverse), evaluated directly. */
+static void bases(const OePiece *P, double s, double *fre, double *fim, double *e, double *inverse)
 {
-    double h = C ? s - C->s : 0.0, slack = OE_STEP_SLACK * 2.220446049250313e-16 * fabs(s);
-    int same = C && C->piece == piece && h > 0.0;
-    if (same && C->count >= 1 && C->count < OE_RESYNC && C->rotation_h > 0.0 && fabs(h - C->rotation_h) <= slack) {
-        for (int64_t j = 0; j < P->n_freq_bases; j++) {
-            double r = C->fre[j] * C->rre[j] - C->fim[j] * C->rim[j];
-            fim[j] = C->fre[j] * C->rim[j] + C->fim[j] * C->rre[j];
-            fre[j] = r;
-        }
-        for (int64_t j = 0; j < P->n_decay_bases; j++) {
-            e[j] = C->e[j] * C->re[j];
-            inverse[j] = C->inverse[j] * C->rinverse[j];
-        }
-        C->count++;
-    } else {
-        for (int64_t j = 0; j < P->n_freq_bases; j++) sincos(P->freq_base[j] * s, &fim[j], &fre[j]);
-        for (int64_t j = 0; j < P->n_decay_bases; j++) {
-            e[j] = P->decay_top[j] > 0 ? exp(-P->decay_base[j] * s) : 1.0;
-            inverse[j] = P->decay_bottom[j] > 0 ? exp(P->decay_base[j] * s) : 1.0;
-        }
-        if (C) {
-            if (!same) C->rotation_h = C->seen_h = 0.0;
-            else if (!(C->rotation_h > 0.0 && fabs(h - C->rotation_h) <= slack)) {
-                if (fabs(h - C->seen_h) <= slack) {  /* the second step of this size: its rotations */
-                    C->rotation_h = h;
-                    for (int64_t j = 0; j < P->n_freq_bases; j++) sincos(P->freq_base[j] * h, &C->rim[j], &C->rre[j]);
-                    for (int64_t j = 0; j < P->n_decay_bases; j++) {
-                        C->re[j] = exp(-P->decay_base[j] * h);
-                        C->rinverse[j] = exp(P->decay_base[j] * h);
-                    }
-                } else {
-                    C->rotation_h = 0.0;
-                    C->seen_h = h;
-                }
-            }
-            C->count = 1;
-        }
-    }
-    if (C) {
-        C->piece = piece;
-        C->s = s;
-        for (int64_t j = 0; j < P->n_freq_bases; j++) {
-            C->fre[j] = fre[j];
-            C->fim[j] = fim[j];
-        }
-        for (int64_t j = 0; j < P->n_decay_bases; j++) {
-            C->e[j] = e[j];
-            C->inverse[j] = inverse[j];
-        }
+    for (int64_t j = 0; j < P->n_freq_bases; j++) sincos(P->freq_base[j] * s, &fim[j], &fre[j]);
+    for (int64_t j = 0; j < P->n_decay_bases; j++) {
+        e[j] = P->decay_top[j] > 0 ? exp(-P->decay_base[j] * s) : 1.0;
+        inverse[j] = P->decay_bottom[j] > 0 ? exp(P->decay_base[j] * s) : 1.0;
     }
 }
 
-static void piece_state(const OePiece *P, int64_t piece, double s, OeCache *cache, double *xva, int64_t base,
-                        double *base_cos)
+/* Every item at local time s into (wre, wim) and D: the bases directly, then their powers and the chain rows;
+   base_cos != NULL: cos(b_base s) as computed (sincos) into it. */
+static void items(const OePiece *P, double s, double *wre, double *wim, double *D, int64_t base, double *base_cos)
 {
-    double wre[OE_ITEMS], wim[OE_ITEMS], D[OE_ITEMS];
     double fre[OE_BASES], fim[OE_BASES], e[OE_BASES], inverse[OE_BASES];
-    bases(P, piece, s, cache, fre, fim, e, inverse);
+    bases(P, s, fre, fim, e, inverse);
     for (int64_t j = 0; j < P->n_freq_bases; j++) {  /* F_j^n = F_j^(n-1) F_j: angle addition */
         double c = fre[j], sn = fim[j], *re = wre + P->freq_zero[j], *im = wim + P->freq_zero[j];
         if (j == base && base_cos != NULL) *base_cos = c;
@@ -96,6 +50,65 @@ static void piece_state(const OePiece *P, int64_t piece, double s, OeCache *cach
     for (int64_t r = 0, g = P->n_decay_table; r < P->n_decay_rows; r++, g++) {  /* D = D[parent] E^(sign n) */
         const int64_t *chain = P->decay_chain + 4 * r;
         D[g] = D[chain[0]] * D[P->decay_zero[chain[1]] + chain[3] * chain[2]];
+    }
+}
+
+/* The items at s into the cache: by one product with the items at the step h where the cache allows it (W(s) =
+   W(s - h) W(h), D(s) = D(s - h) D(h)), else directly, setting up the items at h at the second step of a size. */
+static void cached_items(const OePiece *P, int64_t piece, double s, OeCache *C)
+{
+    double h = s - C->s, slack = OE_STEP_SLACK * 2.220446049250313e-16 * fabs(s);
+    int same = C->piece == piece && h > 0.0;
+    int64_t nw = P->n_freq_table + P->n_freq_rows, nd = P->n_decay_table + P->n_decay_rows;
+    if (same && C->count >= 1 && C->count < OE_RESYNC && C->rotation_h > 0.0 && fabs(h - C->rotation_h) <= slack) {
+        int64_t i = 0;
+        for (; i + 1 < nw; i += 2) {  /* two items per SSE2 operation, the same IEEE operations as the tail's */
+            v2 wr, wi, rr, ri;
+            memcpy(&wr, C->wre + i, sizeof wr);
+            memcpy(&wi, C->wim + i, sizeof wi);
+            memcpy(&rr, C->rwre + i, sizeof rr);
+            memcpy(&ri, C->rwim + i, sizeof ri);
+            v2 re = wr * rr - wi * ri, im = wr * ri + wi * rr;
+            memcpy(C->wre + i, &re, sizeof re);
+            memcpy(C->wim + i, &im, sizeof im);
+        }
+        for (; i < nw; i++) {
+            double r = C->wre[i] * C->rwre[i] - C->wim[i] * C->rwim[i];
+            C->wim[i] = C->wre[i] * C->rwim[i] + C->wim[i] * C->rwre[i];
+            C->wre[i] = r;
+        }
+        for (i = 0; i < nd; i++) C->D[i] *= C->rD[i];
+        C->count++;
+    } else {
+        items(P, s, C->wre, C->wim, C->D, 0, NULL);
+        if (!same) C->rotation_h = C->seen_h = 0.0;
+        else if (!(C->rotation_h > 0.0 && fabs(h - C->rotation_h) <= slack)) {
+            if (fabs(h - C->seen_h) <= slack) {  /* the second step of this size: the items at h */
+                C->rotation_h = h;
+                items(P, h, C->rwre, C->rwim, C->rD, 0, NULL);
+            } else {
+                C->rotation_h = 0.0;
+                C->seen_h = h;
+            }
+        }
+        C->count = 1;
+    }
+    C->piece = piece;
+    C->s = s;
+}
+
+static void piece_state(const OePiece *P, int64_t piece, double s, OeCache *cache, double *xva, int64_t base,
+                        double *base_cos)
+{
+    double local_wre[OE_ITEMS], local_wim[OE_ITEMS], local_D[OE_ITEMS];
+    const double *wre = local_wre, *wim = local_wim, *D = local_D;
+    if (cache) {
+        cached_items(P, piece, s, cache);
+        wre = cache->wre;
+        wim = cache->wim;
+        D = cache->D;
+    } else {
+        items(P, s, local_wre, local_wim, local_D, base, base_cos);
     }
     /* Re sum c W over each group, times its D (and s): (x, x') as a 2-vector (GCC/Clang vector extension: one
        SSE2 operation on x86-64) and x'' alone, even and odd terms in two chains of adds */

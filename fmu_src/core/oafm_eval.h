@@ -44,22 +44,23 @@ typedef struct {
     const double *term_coefficient;    /* [n_terms][6]: Re c of x, x', Im c of x, x', Re, Im c of x'' */
 } OePiece;
 
-/* Stepping through time with a constant step h (a host's communication steps), the bases need no cos, sin, exp
-   at all: F_j(s + h) = F_j(s) F_j(h), E_j(s + h) = E_j(s) E_j(h) (angle addition in time), with F_j(h), E_j(h)
-   computed once per step size.  Every OE_RESYNC-th step, at a new piece or step size, or after any other call,
-   the bases are evaluated directly again, so that rounding accumulates over fewer than OE_RESYNC products.  A
-   step counts as "the same h" when it differs from it by at most OE_STEP_SLACK ulps of s (a host's times n h
-   differ by such roundings); the phase this ignores is in the error bound of compiled_open_loop.py. */
+/* Stepping through time with a constant step h (a host's communication steps), the items need no cos, sin, exp
+   and no powers or chain rows at all: W(s + h) = W(s) W(h), D(s + h) = D(s) D(h) (angle addition in time, one
+   product per item), with the items at h, W(h) and D(h), built once per step size.  Every OE_RESYNC-th step, at a
+   new piece or step size, or after any other call, the items are evaluated directly again, so that rounding
+   accumulates over fewer than OE_RESYNC products.  A step counts as "the same h" when it differs from it by at
+   most OE_STEP_SLACK ulps of s (a host's times n h differ by such roundings); the phase this ignores is in the
+   error bound of compiled_open_loop.py. */
 #define OE_RESYNC 16
 #define OE_STEP_SLACK 4.0
 
 typedef struct {
-    int64_t piece;                     /* the piece the bases belong to; -1: none */
-    int64_t count;                     /* steps since the bases were evaluated directly (1 = just now) */
+    int64_t piece;                     /* the piece the items belong to; -1: none */
+    int64_t count;                     /* steps since the items were evaluated directly (1 = just now) */
     double s;                          /* their local time */
     double rotation_h, seen_h;         /* the step of the rotations (0: none); the last step seen */
-    double fre[OE_BASES], fim[OE_BASES], e[OE_BASES], inverse[OE_BASES];  /* F_j(s), E_j(s), 1/E_j(s) */
-    double rre[OE_BASES], rim[OE_BASES], re[OE_BASES], rinverse[OE_BASES];  /* the same at h */
+    double wre[OE_ITEMS], wim[OE_ITEMS], D[OE_ITEMS];     /* the items W and D at s */
+    double rwre[OE_ITEMS], rwim[OE_ITEMS], rD[OE_ITEMS];  /* the same at h */
 } OeCache;
 
 typedef struct {
@@ -73,7 +74,7 @@ void oe_state(const OeSolution *solution, double tau, double *xva);
 /* oe_state, and into *base_cos the cosine of frequency base `base` of the piece at tau, cos(b_base (tau - start)),
    as the evaluation computed it (sincos): for a caller that needs the same cosine (closedloop.c) */
 void oe_state_cos(const OeSolution *solution, double tau, double *xva, int64_t base, double *base_cos);
-/* The same for the next output of a run: the bases by recurrence in time where the cache allows it. */
+/* The same for the next output of a run: the items by recurrence in time where the cache allows it. */
 void oe_step(OeSolution *solution, double tau, double *xva);
 
 #endif

@@ -56,7 +56,7 @@ class OePiece(ctypes.Structure):
 
 class OeCache(ctypes.Structure):
     _fields_ = [("piece", _i), ("count", _i), ("s", _d), ("rotation_h", _d), ("seen_h", _d)] + \
-               [(name, _d * OE_BASES) for name in ("fre", "fim", "e", "inverse", "rre", "rim", "re", "rinverse")]
+               [(name, _d * OE_ITEMS) for name in ("wre", "wim", "D", "rwre", "rwim", "rD")]
 
 
 class OeSolution(ctypes.Structure):
@@ -292,12 +292,14 @@ def recurrence_error_bound(terms: dict, s: float, stepped: bool = True) -> float
     Per term k with magnitude m_k = |c_k| e^(-sigma_k s) s^p_k (largest over x, x', x''), in units of eps:
       - C, the bases evaluated directly: the argument b_j s is rounded (|b_j s|) and cos, sin, exp err by <= 1 ulp:
         |b_j s| + 1 per base;
-      - C, the bases stepped in time (oe_step, stepped=True): up to OE_RESYNC - 1 products with the base at the step
-        h since the last direct evaluation, each adding 3 (a complex product, <= sqrt(5) eps: Brent, Percival &
-        Zimmermann 2007) + 1 (the step's cos, sin) + |b_j h| <= |b_j s| (its argument) + the step mismatch the cache
-        accepts, OE_STEP_SLACK ulps of s, i.e. OE_STEP_SLACK |b_j s|;
       - a base's phase or relative error is multiplied by |n_j| in its power n_j, and each of the |n_j| products
         of the powers and the products combining the bases adds 3, plus 3 for the coefficient, the decay and s;
+      - C, the items stepped in time (oe_step, stepped=True): up to OE_RESYNC - 1 products with the term's items at
+        the step h, W(h) and D(h), since the last direct evaluation, each adding 3 + 1 (the complex product W W(h),
+        <= sqrt(5) eps: Brent, Percival & Zimmermann 2007, and the real product D D(h)) + the error of W(h) D(h)
+        themselves, built like the items at s: 3 per power product (3 sum_j |n_j|) and, per base, |n_j| times
+        (1 (the step's cos, sin, exp) + |b_j h| <= |b_j s| (its argument)) + the step mismatch the cache accepts,
+        OE_STEP_SLACK ulps of s, which turns the phase of base j by OE_STEP_SLACK |b_j s| eps per step;
       - the combination differs from the rate by |sum n_j b_j - nu_k| (the rounding of the rates themselves):
         that times s;
       - Python: its argument s * rate is rounded (|nu_k s| + |sigma_k s|) and exp, cos, sin err by 1 ulp each (2);
@@ -312,9 +314,12 @@ def recurrence_error_bound(terms: dict, s: float, stepped: bool = True) -> float
         direct = b * s + 1.0
         if not stepped:
             return direct
-        return direct + (OE_RESYNC - 1) * (4.0 + b * s * (1.0 + OE_STEP_SLACK))
+        return direct + (OE_RESYNC - 1) * (1.0 + b * s * (1.0 + OE_STEP_SLACK))
 
-    multiplications = 3.0 * (decay_n.sum(axis=1) + freq_n.sum(axis=1) + 3.0)
+    powers = decay_n.sum(axis=1) + freq_n.sum(axis=1)
+    multiplications = 3.0 * (powers + 3.0)
+    if stepped:  # the item products W W(h), D D(h) and the power products of W(h), D(h), once per step
+        multiplications = multiplications + (OE_RESYNC - 1) * (4.0 + 3.0 * powers)
     bases = freq_n @ per_base(fb) + decay_n @ per_base(db)
     mismatch = (np.abs(terms["freq_n"] @ terms["freq_bases"] - nu)
                 + np.abs(terms["decay_n"] @ terms["decay_bases"] - sigma)) * s / EPS
@@ -471,8 +476,7 @@ class CompiledOpenLoopPlant:
         self._plant.plant.plant_t = self.python.t
         if analytic:
             restored = OeCache.from_buffer_copy(cache)
-            values = [getattr(restored, name)[j] for name in ("fre", "fim", "e", "inverse", "rre", "rim", "re",
-                                                                "rinverse") for j in range(OE_BASES)]
+            values = [v for name in ("wre", "wim", "D", "rwre", "rwim", "rD") for v in getattr(restored, name)]
             sane = -1 <= restored.piece < self._plant.oafm.n_pieces and 0 <= restored.count <= OE_RESYNC and \
                 all(map(math.isfinite, [restored.s, restored.rotation_h, restored.seen_h, *values]))
             self._plant.oafm.cache = restored if sane else OeCache(piece=-1)  # else: evaluate directly next
