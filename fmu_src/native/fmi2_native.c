@@ -106,6 +106,14 @@ void native_halt(Instance *inst, const char *format, ...)
     native_error(inst, "%s", inst->s.halt_message);
 }
 
+void native_halt_parameter(Instance *inst, const char *name, double value, int integer, const char *reason)
+{
+    char text[64];
+    if (integer) snprintf(text, sizeof text, "%d", (int)value);
+    else native_repr(value, text, sizeof text);
+    native_halt(inst, "parameter %s = %s: %s", name, text, reason);
+}
+
 int native_logging_on(const Instance *inst) { return inst->logging_on; }
 State *native_state(Instance *inst) { return &inst->s; }
 

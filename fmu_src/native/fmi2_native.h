@@ -60,6 +60,8 @@ void native_log(Instance *inst, fmi2Status status, const char *format, ...);
 void native_error(Instance *inst, const char *format, ...);
 /* an error after which doStep refuses (StatusSlave._halt) */
 void native_halt(Instance *inst, const char *format, ...);
+/* native_halt with ParameterError's text: "parameter NAME = repr(value): reason" (integer: the value as %d) */
+void native_halt_parameter(Instance *inst, const char *name, double value, int integer, const char *reason);
 int native_logging_on(const Instance *inst);
 State *native_state(Instance *inst);
 

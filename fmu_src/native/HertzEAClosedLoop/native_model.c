@@ -33,13 +33,6 @@ void model_instantiate(State *s) { memset(&s->model, 0, sizeof s->model); }
 
 void model_input_set(Instance *inst, State *s, fmi2ValueReference vr) { (void)inst; (void)s; (void)vr; }
 
-static void halt_parameter(Instance *inst, const char *name, double value, int integer, const char *reason)
-{
-    char text[64];
-    if (integer) snprintf(text, sizeof text, "%d", (int)value);
-    else native_repr(value, text, sizeof text);
-    native_halt(inst, "parameter %s = %s: %s", name, text, reason);
-}
 
 /* The loop's reference from the packed table (its pointers are this library's constants). */
 static void point_reference(State *s)
@@ -66,7 +59,7 @@ static int find_reference(Instance *inst, const State *s)
     if (same_kind == NULL) {
         snprintf(reason, sizeof reason, "the native FMU carries no set-up of this reference (it needs Python); %s",
                  PYTHONFMU_ALTERNATIVE);
-        halt_parameter(inst, "reference", s->value[VR_reference], 1, reason);
+        native_halt_parameter(inst, "reference", s->value[VR_reference], 1, reason);
         return -1;
     }
     char packed[64];
@@ -74,7 +67,7 @@ static int find_reference(Instance *inst, const State *s)
         native_repr(same_kind->start_time, packed, sizeof packed);
         snprintf(reason, sizeof reason, "the native FMU carries the reference set up for start time %s only (another "
                  "needs Python); %s", packed, PYTHONFMU_ALTERNATIVE);
-        halt_parameter(inst, "startTime", s->start_time, 0, reason);
+        native_halt_parameter(inst, "startTime", s->start_time, 0, reason);
         return -1;
     }
     for (int j = 0; j < same_kind->n_depends; j++) {
@@ -83,7 +76,7 @@ static int find_reference(Instance *inst, const State *s)
         native_repr(same_kind->values[j], packed, sizeof packed);
         snprintf(reason, sizeof reason, "the native FMU carries the reference set up for %s = %s only (another value "
                  "needs Python); %s", VARIABLES[vr].name, packed, PYTHONFMU_ALTERNATIVE);
-        halt_parameter(inst, VARIABLES[vr].name, s->value[vr], VARIABLES[vr].type != T_REAL, reason);
+        native_halt_parameter(inst, VARIABLES[vr].name, s->value[vr], VARIABLES[vr].type != T_REAL, reason);
         return -1;
     }
     return -1;
@@ -125,7 +118,7 @@ void model_initialise(Instance *inst, State *s)
     /* ClosedLoop.__init__: validate(scene) (the table, then the electrode gaps), checked_settings, loop.validate
        (the table), the plant's fidelity, the model, the controller, the reference, the integrator */
     if (!vibro_gaps_check(s->value[VR_x_start], s->value[VR_R], reason, sizeof reason)) {
-        halt_parameter(inst, "x_start", s->value[VR_x_start], 0, reason);
+        native_halt_parameter(inst, "x_start", s->value[VR_x_start], 0, reason);
         return;
     }
     const int fidelity = (int)s->value[VR_fidelity], solver = (int)s->value[VR_solver];
@@ -143,7 +136,7 @@ void model_initialise(Instance *inst, State *s)
     }
     if (solver == 1) native_rk4_drive_warnings(inst, s, max_step != 0.0 ? max_step : RULE_RK4_DEFAULT_STEP);
     if (fidelity != 0 && fidelity != 1 && fidelity != 2) {
-        halt_parameter(inst, "fidelity", fidelity, 1, "the closed loop's plant must be 0, 1 or 2");
+        native_halt_parameter(inst, "fidelity", fidelity, 1, "the closed loop's plant must be 0, 1 or 2");
         return;
     }
     const int reference = find_reference(inst, s);

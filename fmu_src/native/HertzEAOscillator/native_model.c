@@ -31,29 +31,20 @@ void model_input_set(Instance *inst, State *s, fmi2ValueReference vr) { (void)in
 
 /* ---- parameter checks (vibromodel.parameters.validate, plant.Settings.validate, OafmSettings.validate) ---- */
 
-/* ParameterError text: "parameter NAME = repr(value): reason" */
-static void halt_parameter(Instance *inst, const char *name, double value, int integer, const char *reason)
-{
-    char text[64];
-    if (integer) snprintf(text, sizeof text, "%d", (int)value);
-    else native_repr(value, text, sizeof text);
-    native_halt(inst, "parameter %s = %s: %s", name, text, reason);
-}
-
 /* After the table of rules (checked before this model starts, fmi2_native.c): the checks vibromodel makes in
    code, in its order (parameters.validate's electrode gaps, OafmSettings.validate's tau_star < oafm_tau_end). */
 static int valid(Instance *inst, const State *s)
 {
     char reason[256];
     if (!vibro_gaps_check(s->value[VR_x_start], s->value[VR_R], reason, sizeof reason)) {
-        halt_parameter(inst, "x_start", s->value[VR_x_start], 0, reason);
+        native_halt_parameter(inst, "x_start", s->value[VR_x_start], 0, reason);
         return 0;
     }
     if (s->value[VR_fidelity] == 4) {
         const double tau_star = s->value[VR_tau_star], tau_end = s->value[VR_oafm_tau_end];
         if (tau_end != 0.0 && tau_star != 0.0 && tau_end <= tau_star) {
             snprintf(reason, sizeof reason, "must exceed tau_star = %g", tau_star);
-            halt_parameter(inst, "oafm_tau_end", tau_end, 0, reason);
+            native_halt_parameter(inst, "oafm_tau_end", tau_end, 0, reason);
             return 0;
         }
     }
@@ -104,7 +95,7 @@ void model_initialise(Instance *inst, State *s)
     if (!valid(inst, s)) return;
     const int fidelity = (int)s->value[VR_fidelity], solver = (int)s->value[VR_solver];
     if (fidelity == 3 || fidelity == 4) {
-        halt_parameter(inst, "fidelity", fidelity, 1, fidelity == 3
+        native_halt_parameter(inst, "fidelity", fidelity, 1, fidelity == 3
             ? "the native FMU cannot tabulate the averaged slow flow (fidelity 3 needs Python); " PYTHONFMU_ALTERNATIVE
             : "the native FMU cannot fit the OAFM solution (fidelity 4 needs Python); " PYTHONFMU_ALTERNATIVE);
         return;
