@@ -14,6 +14,7 @@ CLOCK_THREAD_CPUTIME_ID, the fast path runs in that thread; FMPy: time.thread_ti
 from __future__ import annotations
 
 import argparse
+import sys
 import tempfile
 from pathlib import Path
 
@@ -56,6 +57,10 @@ def main(argv=None) -> int:
     parser.add_argument("--reference", type=int, default=None, help="the closed loop's reference (0 OAFM, 1, 2)")
     parser.add_argument("--clock", choices=("wall", "cpu"), default="wall", help="the clock of both hosts' loops")
     args = parser.parse_args(argv)
+    missing = [str(args.build_dir / file) for file in FMUS.values() if not (args.build_dir / file).is_file()]
+    if missing:
+        print(f"error: {', '.join(missing)} not found (run `vibrofmu build --out-dir {args.build_dir}`)", file=sys.stderr)
+        return 2
     for what, plant, loop in measure(args.build_dir, args.repeats, args.kernel, args.reference, args.clock):
         print(f"{what:26s} plant f0 {plant * 1e6:8.2f} us  closed loop {loop * 1e6:9.2f} us  ratio {loop / plant:7.2f}")
     return 0
