@@ -102,15 +102,16 @@ def resign(data: bytes, change) -> bytes:
 
 def test_a_state_carries_version_and_checksum_and_round_trips(subject):
     header, _, payload = subject.data.partition(b"\n")
-    assert header == b"vibrofmu-state 1 " + hashlib.sha256(payload).hexdigest().encode()
+    assert header == b"vibrofmu-state %d " % snapshot.VERSION + hashlib.sha256(payload).hexdigest().encode()
     assert subject.try_restore(subject.data) == "same"
 
 
 def test_another_version_or_a_changed_byte_is_refused(subject):
     header, _, payload = subject.data.partition(b"\n")
-    other_version = header.replace(b"vibrofmu-state 1 ", b"vibrofmu-state 2 ") + b"\n" + payload
-    assert subject.try_restore(other_version) == "refused"
-    assert "version '2'" in subject.instance.log.errors()[-1]
+    other = snapshot.VERSION + 1
+    other_version = header.replace(b"vibrofmu-state %d " % snapshot.VERSION, b"vibrofmu-state %d " % other)
+    assert subject.try_restore(other_version + b"\n" + payload) == "refused"
+    assert f"version '{other}'" in subject.instance.log.errors()[-1]
     middle = len(header) + 1 + len(payload) // 2
     changed = subject.data[:middle] + bytes([subject.data[middle] ^ 0x01]) + subject.data[middle + 1:]
     assert subject.try_restore(changed) == "refused"
@@ -258,7 +259,7 @@ def flip_campaign(subject, flips, seed, resigned=False):
             flipped = bytearray(payload)
             flipped[bit // 8] ^= 1 << (bit % 8)
             flipped = bytes(flipped)
-            data = b"vibrofmu-state 1 " + hashlib.sha256(flipped).hexdigest().encode() + b"\n" + flipped
+            data = b"vibrofmu-state %d " % snapshot.VERSION + hashlib.sha256(flipped).hexdigest().encode() + b"\n" + flipped
         counts[subject.try_restore(data)] += 1
     return counts
 

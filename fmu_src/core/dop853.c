@@ -24,11 +24,34 @@
 #define EVENT_MAX_DEPTH DOP_EVENT_MAX_DEPTH
 #define EVENT_SCREEN 2.0
 
-/* The stages of one step: k[component][stage], stages 0..n-1 */
+/* The stages of one step: k[stage][component], stages 0..n-1 (stage-major, as Dop853.k) */
 typedef struct {
-    double k[DOP_MAX_DIM][DOP_STAGES];
+    double k[DOP_STAGES][DOP_MAX_DIM];
     int n;
 } Stages;
+
+/* Two components per SSE2 operation (GCC/Clang vector extension).  Each lane does the scalar code's IEEE operation
+   on its own component (no contraction: -ffp-contract=off), so every sum has the same terms in the same order as
+   integrate.py's per-component loops: the same bits, fewer instructions. */
+typedef double v2 __attribute__((vector_size(16)));
+
+static inline __attribute__((always_inline)) v2 load2(const double *p)
+{
+    v2 v;
+    memcpy(&v, p, sizeof v);
+    return v;
+}
+
+static inline __attribute__((always_inline)) void store2(double *p, v2 v) { memcpy(p, &v, sizeof v); }
+
+/* sum[i] += a * x[i], i < n */
+static inline __attribute__((always_inline)) void axpy(double *sum, double a, const double *x, int n)
+{
+    int i = 0;
+    v2 av = {a, a};
+    for (; i + 1 < n; i += 2) store2(sum + i, load2(sum + i) + av * load2(x + i));
+    if (i < n) sum[i] += a * x[i];
+}
 
 int dop_report(DopReport *r, int n, int code, double t, const double *y, const char *format, ...)
 {
@@ -50,12 +73,13 @@ static int raise_fault(const Dop853 *s, DopReport *r, int fault)
     return dop_report(r, s->n, DOP_RAISED, s->t, s->y, "%s", text);
 }
 
-/* integrate._dot over the first m stages of one component: sum of c[j] * k[j], left to right from 0 */
-static double dot(const double *c, int m, const double *k)
+/* integrate._dot over the first m stages, for every component i < n at once: out[i] = sum of c[j] * k[j][i], left
+   to right from 0 (every term, zero coefficients included) */
+static inline __attribute__((always_inline)) void dots(const double *c, int m, const double (*k)[DOP_MAX_DIM], int n,
+                                                       double *out)
 {
-    double sum = 0.0;
-    for (int j = 0; j < m; j++) sum += c[j] * k[j];
-    return sum;
+    for (int i = 0; i < n; i++) out[i] = 0.0;
+    for (int j = 0; j < m; j++) axpy(out, c[j], k[j], n);
 }
 
 double dop_event_g(const Dop853 *s, int i, const double *y)
@@ -90,25 +114,24 @@ static inline __attribute__((always_inline)) int stages_of(DopRhs rhs, void *ctx
                                                            double h, int first, int last, Stages *k, double *y_last,
                                                            int n)
 {
-    double ys[DOP_MAX_DIM], f[DOP_MAX_DIM];
+    double ys[DOP_MAX_DIM];
     for (int st = first; st <= last; st++) {
         const double *row = st == DOP_N_STAGES ? DOP_B : DOP_A[st];
         double c = st == DOP_N_STAGES ? 1.0 : DOP_C[st];
         double ts = t + c * h;
         int m = st < k->n ? st : k->n;
-        double sum[DOP_MAX_DIM];  /* dot(row, m, k->k[i]) for every i at once: each sum in the same order */
+        double sum[DOP_MAX_DIM];  /* integrate._tableau_dot for every component at once: each sum in the same order */
         for (int i = 0; i < n; i++) sum[i] = 0.0;
         for (int j = 0; j < m; j++) {
             double a = row[j];
             /* integrate._tableau_dot: with extra states (n > 2) the zero coefficients (38 of 120) are skipped; the
                plant's two components keep every term (the test would cost about what it saves) */
             if (n != 2 && a == 0.0) continue;
-            for (int i = 0; i < n; i++) sum[i] += a * k->k[i][j];
+            axpy(sum, a, k->k[j], n);
         }
         for (int i = 0; i < n; i++) ys[i] = y[i] + h * sum[i];
-        int fault = rhs(ctx, ts, ys, f);
+        int fault = rhs(ctx, ts, ys, k->k[k->n]);  /* the derivative straight into its stage row */
         if (fault) return fault;
-        for (int i = 0; i < n; i++) k->k[i][k->n] = f[i];
         k->n += 1;
         memcpy(y_last, ys, sizeof(double) * (size_t)n);
     }
@@ -129,8 +152,7 @@ static int run_stages(const Dop853 *s, DopRhs rhs, void *ctx, double t, const do
    s->f) to y_new (rate: the last stage), or lies within one step of its ends: |g| <= h max(|g'|) at the nearer end */
 static int near_kink(const Dop853 *s, const double *y, const double *y_new, const Stages *k, double h)
 {
-    double f_new[DOP_MAX_DIM];
-    for (int m = 0; m < s->n; m++) f_new[m] = k->k[m][DOP_N_STAGES];
+    const double *f_new = k->k[DOP_N_STAGES];
     for (int i = 0; i < s->n_events; i++) {
         if (s->events[i].terminal) continue;
         double g0 = dop_event_g(s, i, y), g1 = dop_event_g(s, i, y_new);
@@ -138,6 +160,22 @@ static int near_kink(const Dop853 *s, const double *y, const double *y_new, cons
         if ((g0 > 0.0) != (g1 > 0.0) || py_min(fabs(g0), fabs(g1)) <= h * rate) return 1;
     }
     return 0;
+}
+
+/* the error estimates' sums, dot(E5, 13, .) and dot(E3, 13, .) of every component, with n a constant where it is
+   the plant's or the closed loop's (as run_stages) */
+static void error_dots(const Stages *k, int n, double *d5, double *d3)
+{
+    if (n == 2) {
+        dots(DOP_E5, DOP_N_STAGES + 1, k->k, 2, d5);
+        dots(DOP_E3, DOP_N_STAGES + 1, k->k, 2, d3);
+    } else if (n == 11) {
+        dots(DOP_E5, DOP_N_STAGES + 1, k->k, 11, d5);
+        dots(DOP_E3, DOP_N_STAGES + 1, k->k, 11, d3);
+    } else {
+        dots(DOP_E5, DOP_N_STAGES + 1, k->k, n, d5);
+        dots(DOP_E3, DOP_N_STAGES + 1, k->k, n, d3);
+    }
 }
 
 /* Dop853._trial: one step of size h from (t, y) with derivative s->f. Stages into k, new state into y_new;
@@ -148,7 +186,7 @@ static int trial(Dop853 *s, DopRhs rhs, void *ctx, double t, const double *y, do
 {
     int n = (int)s->n, fault = FAULT_NONE;
     double scale[DOP_MAX_DIM];
-    for (int i = 0; i < n; i++) k->k[i][0] = s->f[i];
+    memcpy(k->k[0], s->f, sizeof(double) * (size_t)n);
     k->n = 1;
     if (run_stages(s, rhs, ctx, t, y, h, 1, DOP_N_STAGES, k, y_new) != FAULT_NONE) {
         s->nfev += k->n;  /* Python: self.nfev += len(stages[1]) */
@@ -158,14 +196,15 @@ static int trial(Dop853 *s, DopRhs rhs, void *ctx, double t, const double *y, do
     }
     s->nfev += DOP_N_STAGES;
     for (int i = 0; i < n; i++) scale[i] = s->atol + s->rtol * py_max(fabs(y[i]), fabs(y_new[i]));
-    double e5 = 0.0, e3 = 0.0;
+    double e5 = 0.0, e3 = 0.0, d5[DOP_MAX_DIM], d3[DOP_MAX_DIM];
+    error_dots(k, n, d5, d3);
     for (int i = 0; i < n; i++) {
-        double term = py_square(dot(DOP_E5, DOP_N_STAGES + 1, k->k[i]) / scale[i], &fault);
+        double term = py_square(d5[i] / scale[i], &fault);
         if (fault) return fault;
         e5 += term;
     }
     for (int i = 0; i < n; i++) {
-        double term = py_square(dot(DOP_E3, DOP_N_STAGES + 1, k->k[i]) / scale[i], &fault);
+        double term = py_square(d3[i] / scale[i], &fault);
         if (fault) return fault;
         e3 += term;
     }
@@ -188,15 +227,21 @@ static void accept(Dop853 *s, double t, const double *y, double h, const double 
     memcpy(s->y_old, y, bytes);
     memcpy(s->f_old, s->f, bytes);
     s->has_old = 1;
-    for (int i = 0; i < s->n; i++) {
-        memcpy(s->k[i], k->k[i], sizeof(double) * (size_t)k->n);
-        s->f[i] = k->k[i][k->n - 1];
-    }
+    for (int j = 0; j < k->n; j++) memcpy(s->k[j], k->k[j], bytes);
+    memcpy(s->f, k->k[k->n - 1], bytes);
     s->n_stages = k->n;
     s->dense_ready = 0;
     s->t = t + h;
     memcpy(s->y, y_new, bytes);
     s->n_steps += 1;
+}
+
+/* dots() with n a constant where it is the plant's or the closed loop's (as run_stages) */
+static void dense_dot(const double *c, int m, const Stages *k, int n, double *out)
+{
+    if (n == 2) dots(c, m, k->k, 2, out);
+    else if (n == 11) dots(c, m, k->k, 11, out);
+    else dots(c, m, k->k, n, out);
 }
 
 /* Dop853._build_dense: coefficients of scipy's Dop853DenseOutput from three extra stages (uncounted unless
@@ -207,30 +252,47 @@ static int build_dense(Dop853 *s, DopRhs rhs, void *ctx)
     int n = (int)s->n;
     double h = s->t - s->t_old, y_last[DOP_MAX_DIM];
     k.n = (int)s->n_stages;
-    for (int i = 0; i < n; i++) memcpy(k.k[i], s->k[i], sizeof(double) * (size_t)k.n);
+    for (int j = 0; j < k.n; j++) memcpy(k.k[j], s->k[j], sizeof(double) * (size_t)n);
     int fault = run_stages(s, rhs, ctx, s->t_old, s->y_old, h, DOP_N_STAGES + 1, DOP_STAGES - 1, &k, y_last);
     if (fault) return fault;
     s->nfev += DOP_STAGES - DOP_N_STAGES - 1;
     for (int i = 0; i < n; i++) {
         double dy = s->y[i] - s->y_old[i];
-        s->dense[i][0] = dy;
-        s->dense[i][1] = h * s->f_old[i] - dy;
-        s->dense[i][2] = 2.0 * dy - h * (s->f[i] + s->f_old[i]);
-        for (int row = 0; row < 4; row++) s->dense[i][3 + row] = h * dot(DOP_D[row], k.n, k.k[i]);
+        s->dense[0][i] = dy;
+        s->dense[1][i] = h * s->f_old[i] - dy;
+        s->dense[2][i] = 2.0 * dy - h * (s->f[i] + s->f_old[i]);
+    }
+    for (int row = 0; row < 4; row++) {
+        double sum[DOP_MAX_DIM];
+        dense_dot(DOP_D[row], k.n, &k, n, sum);
+        for (int i = 0; i < n; i++) s->dense[3 + row][i] = h * sum[i];
     }
     s->dense_ready = 1;
     return FAULT_NONE;
 }
 
-/* integrate._evaluate: dense output increment of component i at the fraction f of the step */
-static double evaluate(const Dop853 *s, int i, double f)
+/* y_old + integrate._evaluate for every component: the dense output at the fraction f of the step into y */
+static void interpolate(const Dop853 *s, double f, int n, double *y)
 {
-    double y = 0.0;
-    for (int j = DOP_DENSE - 1; j >= 0; j--) {
-        y += s->dense[i][j];
-        y *= (DOP_DENSE - 1 - j) % 2 == 0 ? f : 1.0 - f;
+    double g = 1.0 - f;
+    v2 fv = {f, f}, gv = {g, g};
+    int i = 0;
+    for (; i + 1 < n; i += 2) {
+        v2 acc = {0.0, 0.0};
+        for (int j = DOP_DENSE - 1; j >= 0; j--) {
+            acc += load2(s->dense[j] + i);
+            acc *= (DOP_DENSE - 1 - j) % 2 == 0 ? fv : gv;
+        }
+        store2(y + i, load2(s->y_old + i) + acc);
     }
-    return y;
+    for (; i < n; i++) {
+        double acc = 0.0;
+        for (int j = DOP_DENSE - 1; j >= 0; j--) {
+            acc += s->dense[j][i];
+            acc *= (DOP_DENSE - 1 - j) % 2 == 0 ? f : g;
+        }
+        y[i] = s->y_old[i] + acc;
+    }
 }
 
 /* Dop853.value_at (with _interpolant) */
@@ -251,7 +313,7 @@ int dop_value_at(Dop853 *s, DopRhs rhs, void *ctx, double t, double *y, DopRepor
         if (fault) return raise_fault(s, r, fault);
     }
     double f = (t - s->t_old) / (s->t - s->t_old);  /* the step has a length: t_old < t */
-    for (int i = 0; i < n; i++) y[i] = s->y_old[i] + evaluate(s, i, f);
+    interpolate(s, f, n, y);
     return DOP_OK;
 }
 
@@ -397,9 +459,7 @@ static int first_zero(Dop853 *s, DopRhs rhs, void *ctx, int i, int *found, doubl
     }
     double G[DOP_DENSE];
     for (int j = 0; j < DOP_DENSE; j++) {
-        double column[DOP_MAX_DIM];
-        for (int m = 0; m < s->n; m++) column[m] = s->dense[m][j];
-        G[j] = event_linear(s, i, column);
+        G[j] = event_linear(s, i, s->dense[j]);
     }
     Piece stack[EVENT_MAX_DEPTH + 2];
     int top = 0;

@@ -67,8 +67,9 @@ typedef struct {
     double t, h;                               /* h <= 0: first step not chosen yet */
     double y[DOP_MAX_DIM], f[DOP_MAX_DIM];
     double t_old, y_old[DOP_MAX_DIM], f_old[DOP_MAX_DIM];  /* the last step, valid when has_old */
-    double k[DOP_MAX_DIM][DOP_STAGES];         /* the last step's stages: k[component][stage], n_stages */
-    double dense[DOP_MAX_DIM][DOP_DENSE];      /* its dense output per component, valid when dense_ready */
+    double k[DOP_STAGES][DOP_MAX_DIM];         /* the last step's stages: k[stage][component], n_stages */
+    double dense[DOP_DENSE][DOP_MAX_DIM];      /* its dense output, dense[coefficient][component], valid when
+                                                  dense_ready */
     double stop_t, stop_y[DOP_MAX_DIM];        /* the terminal event reached (stopped = its index + 1) */
     int64_t has_old, n_stages, dense_ready, stopped;
     int64_t side[DOP_MAX_EVENTS];              /* non-terminal events: 1 while g > 0 */

@@ -57,7 +57,7 @@ class Dop853State(ctypes.Structure):
         *_ints("n", "n_events"), *_doubles("rtol", "atol", "max_step", "step_budget"),
         ("events", DopEvent * DOP_MAX_EVENTS),
         *_doubles("t", "h"), ("y", _vector), ("f", _vector), ("t_old", _double), ("y_old", _vector), ("f_old", _vector),
-        ("k", (_double * DOP_STAGES) * DOP_MAX_DIM), ("dense", (_double * DOP_DENSE) * DOP_MAX_DIM), ("stop_t", _double), ("stop_y", _vector),
+        ("k", (_double * DOP_MAX_DIM) * DOP_STAGES), ("dense", (_double * DOP_MAX_DIM) * DOP_DENSE), ("stop_t", _double), ("stop_y", _vector),
         *_ints("has_old", "n_stages", "dense_ready", "stopped"), ("side", _int * DOP_MAX_EVENTS),
         *_ints("nfev", "n_steps"),
     ]

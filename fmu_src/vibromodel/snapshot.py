@@ -146,7 +146,8 @@ def _untag(mapping: dict):
     return mapping
 
 
-MAGIC, VERSION = b"vibrofmu-state", 1  # the header of serialized states; VERSION changes with the layout
+MAGIC, VERSION = b"vibrofmu-state", 2  # the header of serialized states; VERSION changes with the layout
+# (2: the compiled DOP853 stores its stages and dense output stage-major, k[stage][component])
 
 
 def to_bytes(snapshot) -> bytes:

@@ -5,7 +5,7 @@
 #include "closedloop.h"  /* fmu_src/core: the compiled closed loop */
 
 #define MODEL_IDENTIFIER "HertzEAClosedLoop"
-#define STATE_FORMAT "HertzEAClosedLoop native state 2"
+#define STATE_FORMAT "HertzEAClosedLoop native state 3"
 
 typedef struct {
     int64_t built;      /* the loop below is set up (after a successful fmi2ExitInitializationMode) */

@@ -5,7 +5,7 @@
 #include "plant.h"  /* fmu_src/core: the compiled plant */
 
 #define MODEL_IDENTIFIER "HertzEAOscillator"
-#define STATE_FORMAT "HertzEAOscillator native state 2"
+#define STATE_FORMAT "HertzEAOscillator native state 3"
 
 typedef struct {
     int64_t built;  /* the kernel below is set up (after a successful fmi2ExitInitializationMode) */
