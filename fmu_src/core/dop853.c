@@ -44,13 +44,37 @@ static inline __attribute__((always_inline)) v2 load2(const double *p)
 
 static inline __attribute__((always_inline)) void store2(double *p, v2 v) { memcpy(p, &v, sizeof v); }
 
-/* sum[i] += a * x[i], i < n */
-static inline __attribute__((always_inline)) void axpy(double *sum, double a, const double *x, int n)
+/* out[i] = sum of row[j] * k[j][i] over j < m, left to right from 0.0, for every component i < n at once (with
+   skip_zero, the terms of zero coefficients left out).  The sums live in registers while the stages stream by when
+   n is a constant (the callers' n == 2 and n == 11 branches: the component loops unroll). */
+static inline __attribute__((always_inline)) void combine(const double *row, int m, const Stages *k, int n,
+                                                          int skip_zero, double *out)
+{
+    v2 acc[DOP_MAX_DIM / 2] = {{0.0, 0.0}};  /* every pair +0.0, as the scalar sums start */
+    double tail = 0.0;
+    int pairs = n / 2;
+    for (int j = 0; j < m; j++) {
+        double a = row[j];
+        if (skip_zero && a == 0.0) continue;
+        v2 av = {a, a};
+#pragma GCC unroll 8
+        for (int p = 0; p < pairs; p++) acc[p] += av * load2(k->k[j] + 2 * p);
+        if (n & 1) tail += a * k->k[j][n - 1];
+    }
+#pragma GCC unroll 8
+    for (int p = 0; p < pairs; p++) store2(out + 2 * p, acc[p]);
+    if (n & 1) out[n - 1] = tail;
+}
+
+/* out[i] = y[i] + h * sum[i], i < n */
+static inline __attribute__((always_inline)) void step_from(const double *y, double h, const double *sum, int n,
+                                                            double *out)
 {
     int i = 0;
-    v2 av = {a, a};
-    for (; i + 1 < n; i += 2) store2(sum + i, load2(sum + i) + av * load2(x + i));
-    if (i < n) sum[i] += a * x[i];
+    v2 hv = {h, h};
+#pragma GCC unroll 8
+    for (; i + 1 < n; i += 2) store2(out + i, load2(y + i) + hv * load2(sum + i));
+    if (i < n) out[i] = y[i] + h * sum[i];
 }
 
 int dop_report(DopReport *r, int n, int code, double t, const double *y, const char *format, ...)
@@ -75,11 +99,9 @@ static int raise_fault(const Dop853 *s, DopReport *r, int fault)
 
 /* integrate._dot over the first m stages, for every component i < n at once: out[i] = sum of c[j] * k[j][i], left
    to right from 0 (every term, zero coefficients included) */
-static inline __attribute__((always_inline)) void dots(const double *c, int m, const double (*k)[DOP_MAX_DIM], int n,
-                                                       double *out)
+static inline __attribute__((always_inline)) void dots(const double *c, int m, const Stages *k, int n, double *out)
 {
-    for (int i = 0; i < n; i++) out[i] = 0.0;
-    for (int j = 0; j < m; j++) axpy(out, c[j], k[j], n);
+    combine(c, m, k, n, 0, out);
 }
 
 double dop_event_g(const Dop853 *s, int i, const double *y)
@@ -121,15 +143,10 @@ static inline __attribute__((always_inline)) int stages_of(DopRhs rhs, void *ctx
         double ts = t + c * h;
         int m = st < k->n ? st : k->n;
         double sum[DOP_MAX_DIM];  /* integrate._tableau_dot for every component at once: each sum in the same order */
-        for (int i = 0; i < n; i++) sum[i] = 0.0;
-        for (int j = 0; j < m; j++) {
-            double a = row[j];
-            /* integrate._tableau_dot: with extra states (n > 2) the zero coefficients (38 of 120) are skipped; the
-               plant's two components keep every term (the test would cost about what it saves) */
-            if (n != 2 && a == 0.0) continue;
-            axpy(sum, a, k->k[j], n);
-        }
-        for (int i = 0; i < n; i++) ys[i] = y[i] + h * sum[i];
+        /* integrate._tableau_dot: with extra states (n > 2) the zero coefficients (38 of 120) are skipped; the
+           plant's two components keep every term (the test would cost about what it saves) */
+        combine(row, m, k, n, n != 2, sum);
+        step_from(y, h, sum, n, ys);
         int fault = rhs(ctx, ts, ys, k->k[k->n]);  /* the derivative straight into its stage row */
         if (fault) return fault;
         k->n += 1;
@@ -167,14 +184,14 @@ static int near_kink(const Dop853 *s, const double *y, const double *y_new, cons
 static void error_dots(const Stages *k, int n, double *d5, double *d3)
 {
     if (n == 2) {
-        dots(DOP_E5, DOP_N_STAGES + 1, k->k, 2, d5);
-        dots(DOP_E3, DOP_N_STAGES + 1, k->k, 2, d3);
+        dots(DOP_E5, DOP_N_STAGES + 1, k, 2, d5);
+        dots(DOP_E3, DOP_N_STAGES + 1, k, 2, d3);
     } else if (n == 11) {
-        dots(DOP_E5, DOP_N_STAGES + 1, k->k, 11, d5);
-        dots(DOP_E3, DOP_N_STAGES + 1, k->k, 11, d3);
+        dots(DOP_E5, DOP_N_STAGES + 1, k, 11, d5);
+        dots(DOP_E3, DOP_N_STAGES + 1, k, 11, d3);
     } else {
-        dots(DOP_E5, DOP_N_STAGES + 1, k->k, n, d5);
-        dots(DOP_E3, DOP_N_STAGES + 1, k->k, n, d3);
+        dots(DOP_E5, DOP_N_STAGES + 1, k, n, d5);
+        dots(DOP_E3, DOP_N_STAGES + 1, k, n, d3);
     }
 }
 
@@ -239,9 +256,9 @@ static void accept(Dop853 *s, double t, const double *y, double h, const double 
 /* dots() with n a constant where it is the plant's or the closed loop's (as run_stages) */
 static void dense_dot(const double *c, int m, const Stages *k, int n, double *out)
 {
-    if (n == 2) dots(c, m, k->k, 2, out);
-    else if (n == 11) dots(c, m, k->k, 11, out);
-    else dots(c, m, k->k, n, out);
+    if (n == 2) dots(c, m, k, 2, out);
+    else if (n == 11) dots(c, m, k, 11, out);
+    else dots(c, m, k, n, out);
 }
 
 /* Dop853._build_dense: coefficients of scipy's Dop853DenseOutput from three extra stages (uncounted unless
