@@ -97,6 +97,36 @@ static void cached_items(const OePiece *P, int64_t piece, double s, OeCache *C)
     C->s = s;
 }
 
+/* Whether every item of the piece is 1 or a base itself (no chain rows, no power above 1): the closed loop's
+   reference (one forced response and one decaying free response) is such a piece. */
+static int plain_items(const OePiece *P)
+{
+    if (P->n_freq_rows != 0 || P->n_decay_rows != 0) return 0;
+    for (int64_t j = 0; j < P->n_freq_bases; j++)
+        if (P->freq_top[j] > 1) return 0;
+    for (int64_t j = 0; j < P->n_decay_bases; j++)
+        if (P->decay_top[j] > 1 || P->decay_bottom[j] != 0) return 0;
+    return 1;
+}
+
+/* items() of a plain_items piece: the same values (F^0 = 1, F^1 = F, E^0 = 1, E^1 = E), without the power and
+   chain loops */
+static void plain(const OePiece *P, double s, double *wre, double *wim, double *D, int64_t base, double *base_cos)
+{
+    for (int64_t j = 0; j < P->n_freq_bases; j++) {
+        int64_t z = P->freq_zero[j];
+        wre[z] = 1.0;
+        wim[z] = 0.0;
+        if (P->freq_top[j] > 0) sincos(P->freq_base[j] * s, &wim[z + 1], &wre[z + 1]);
+        if (j == base && base_cos != NULL) *base_cos = P->freq_top[j] > 0 ? wre[z + 1] : cos(P->freq_base[j] * s);
+    }
+    for (int64_t j = 0; j < P->n_decay_bases; j++) {
+        int64_t z = P->decay_zero[j];
+        D[z] = 1.0;
+        if (P->decay_top[j] > 0) D[z + 1] = exp(-P->decay_base[j] * s);
+    }
+}
+
 static void piece_state(const OePiece *P, int64_t piece, double s, OeCache *cache, double *xva, int64_t base,
                         double *base_cos)
 {
@@ -107,6 +137,8 @@ static void piece_state(const OePiece *P, int64_t piece, double s, OeCache *cach
         wre = cache->wre;
         wim = cache->wim;
         D = cache->D;
+    } else if (plain_items(P)) {
+        plain(P, s, local_wre, local_wim, local_D, base, base_cos);
     } else {
         items(P, s, local_wre, local_wim, local_D, base, base_cos);
     }
