@@ -172,6 +172,17 @@ def test_rounds_interleave_every_rung_in_every_column(monkeypatch):
     lines = ladder.ladder_lines(record)
     assert any("instructions per output: not measured: not requested" in line for line in lines)
     assert math.isfinite(record["acceptance"][0]["ratio_best_over_best"])
+    # FMPy's own cost: per rung, FMPy's CPU minus the C host's at the same interval, paired by round, median
+    (floor,) = record["fmpy_floor"]
+    fmpy, c_host = list(ladder.COLUMNS).index(("FMPy", 1.0)), list(ladder.COLUMNS).index(("C host", 1.0))
+    for rung in record["rungs"]:
+        own = [a - b for a, b in zip(rung["columns"][fmpy]["cpu_per_output_seconds_runs"],
+                                     rung["columns"][c_host]["cpu_per_output_seconds_runs"])]
+        assert floor["fmpy_own_per_output_seconds"][rung["rung"]] == pytest.approx(sorted(own)[1], rel=1e-15)
+    assert floor["floor_seconds"] == min(floor["fmpy_own_per_output_seconds"].values())
+    f0 = sorted(record["rungs"][0]["columns"][fmpy]["cpu_per_output_seconds_runs"])[1]
+    assert floor["lowest_reachable_ratio"] == pytest.approx(floor["floor_seconds"] / f0, rel=1e-15)
+    assert any(line.startswith("  FMPy's own cost per output at interval 1") for line in lines)
 
 
 def test_ladder_only_writes_bench_json_the_report_reads(plant_fmu, monkeypatch, tmp_path, capsys):

@@ -81,6 +81,11 @@ ACCEPTANCE_NOTE = ("the acceptance reads the median over rounds of the per-round
                    "wall = CPU. On an idle machine the two agree (the loop runs in the calling thread, no other "
                    "thread works for it). The wall-time ratios (median per round and best/best) are reported beside "
                    "it.")
+FLOOR_NOTE = ("FMPy's own cost per output: a rung's thread CPU time per output under FMPy minus the same rung's in the C "
+              "host at the same interval, paired round by round (the same FMU binary and doStep/getReal calls; what "
+              "remains is FMPy's Python wrappers and ctypes), median over rounds; the floor is its smallest value "
+              "over the rungs. No rung can cost less than that floor under FMPy, so no rung's ratio to exact f0 can "
+              "go below floor / (exact f0's cost under FMPy) while exact f0 costs what it does.")
 INSTRUCTIONS_NOTE = ("instructions executed in doStep + getReal(x) and everything they call, divided by the outputs: "
                      "the C host under valgrind --tool=callgrind --collect-atstart=no --toggle-collect=timing_do_step "
                      "--toggle-collect=timing_get_real (timing_host.c's wrappers of fmi2DoStep and fmi2GetReal), one "
@@ -393,7 +398,28 @@ def run_ladder(plant_fmu: Path, closed_loop_fmu: Path, stop: float = 200.0, roun
             "instructions": {"measured": not missing, "reason": missing,
                              "intervals": list(instruction_intervals) if not missing else [],
                              "what": INSTRUCTIONS_NOTE},
-            "rungs": rungs, "acceptance": acceptance, "acceptance_instructions": acceptance_instructions}
+            "rungs": rungs, "acceptance": acceptance, "acceptance_instructions": acceptance_instructions,
+            "fmpy_floor": fmpy_floor(rungs)}
+
+
+def fmpy_floor(rungs: list[dict]) -> list[dict]:
+    """Per FMPy column with a C host column at the same interval: FMPy's own cost per output of every rung (FLOOR_NOTE),
+    the floor (the smallest over the rungs) and the lowest ratio to exact f0 any rung can then reach."""
+    floors = []
+    for index, (host, interval) in enumerate(COLUMNS):
+        if host != "FMPy" or ("C host", interval) not in COLUMNS:
+            continue
+        c_index = COLUMNS.index(("C host", interval))
+        own = {}
+        for rung in rungs:
+            fmpy, c = rung["columns"][index], rung["columns"][c_index]
+            own[rung["rung"]] = float(np.median([a - b for a, b in zip(fmpy["cpu_per_output_seconds_runs"],
+                                                                       c["cpu_per_output_seconds_runs"])]))
+        base = float(np.median(rungs[0]["columns"][index]["cpu_per_output_seconds_runs"]))
+        floor = min(own.values())
+        floors.append({"interval": interval, "fmpy_own_per_output_seconds": own, "floor_seconds": floor,
+                       "exact_f0_seconds": base, "lowest_reachable_ratio": floor / base, "what": FLOOR_NOTE})
+    return floors
 
 
 def ladder_lines(ladder: dict) -> list[str]:
@@ -442,6 +468,12 @@ def ladder_lines(ladder: dict) -> list[str]:
     for a in ladder.get("acceptance_instructions", []):
         lines.append(f"  {a['rung']} / exact f0 (instructions, interval {a['interval']:g}): {a['ratio']:.3g} "
                      f"(limit {a['limit']:g}: {'met' if a['met'] else 'NOT met'})")
+    for f in ladder.get("fmpy_floor", []):
+        own = ", ".join(f"{name} {1e6 * value:.3g}" for name, value in f["fmpy_own_per_output_seconds"].items())
+        lines.append(f"  FMPy's own cost per output at interval {f['interval']:g} (FMPy - C host, thread CPU, median of "
+                     f"rounds; us): {own}; floor {1e6 * f['floor_seconds']:.3g} us against exact f0's "
+                     f"{1e6 * f['exact_f0_seconds']:.3g} us under FMPy: no rung can go below "
+                     f"{f['lowest_reachable_ratio']:.3g} x exact f0 there")
     return lines
 
 
