@@ -47,9 +47,10 @@ MODEL_FILES = {
 }
 # IEEE double arithmetic as written (the kernel's bit identity with Python): no FMA contraction, no fast-math.
 C_FLAGS = ("-std=c11", "-O2", "-ffp-contract=off", "-Wall", "-Wextra")
-LINUX_COMMAND = ("gcc", *C_FLAGS, "-fPIC", "-shared", "-fvisibility=hidden")
+# -flto: one optimisation unit across the model, solver and FMI files (as the pythonfmu FMUs' kernel, kernel.py)
+LINUX_COMMAND = ("gcc", *C_FLAGS, "-fPIC", "-shared", "-fvisibility=hidden", "-flto")
 # __USE_MINGW_ANSI_STDIO: C99 printf (inf, %zu, %g as glibc) instead of msvcrt's.
-WIN64_COMMAND = ("x86_64-w64-mingw32-gcc", *C_FLAGS, "-shared", "-static-libgcc", "-D__USE_MINGW_ANSI_STDIO=1")
+WIN64_COMMAND = ("x86_64-w64-mingw32-gcc", *C_FLAGS, "-shared", "-static-libgcc", "-D__USE_MINGW_ANSI_STDIO=1", "-flto")
 
 _TYPES = {"Real": "T_REAL", "Integer": "T_INTEGER", "Boolean": "T_BOOLEAN"}
 _CAUSALITIES = {"parameter": "C_PARAMETER", "input": "C_INPUT", "output": "C_OUTPUT", "local": "C_LOCAL"}
@@ -322,7 +323,8 @@ def series_probe_library(out_dir: Path):
     import ctypes
 
     out = Path(out_dir) / "series.so"
-    cmd = [*LINUX_COMMAND[:-1], "-o", str(out), str(NATIVE_SRC / "series.c"), "-lm"]  # symbols visible
+    cmd = [*(part for part in LINUX_COMMAND if part != "-fvisibility=hidden"), "-o", str(out),
+           str(NATIVE_SRC / "series.c"), "-lm"]  # symbols visible
     proc = subprocess.run(cmd, capture_output=True, text=True)
     if proc.returncode != 0:
         raise RuntimeError(f"compiling series.c failed ({' '.join(cmd)}):\n{proc.stderr}")
