@@ -9,7 +9,8 @@ the number of outputs it is the instruction cost per output.
     python -m vibrofmu.instructions [--build DIR] [--stop 200] [--interval 0.1 --interval 1]
 
 prints the ladder's rungs on the native FMUs of DIR/native (default build/native), plus the pythonfmu FMUs of
-DIR where they run in the C host. Needs valgrind.
+DIR where they run in the C host (--pythonfmu), plus the plant FMU of an older checkout's build folder
+(--old-build OLD/build: the same rungs, where that FMU has them; "is exact f0 slower than before?"). Needs valgrind.
 """
 from __future__ import annotations
 
@@ -29,11 +30,12 @@ FMU_FILES = {"plant": "HertzEAOscillator.fmu", "closed_loop": "HertzEAClosedLoop
 
 
 def count_instructions(fmu_unzip_dir, start_values: dict, stop: float, interval: float,
-                       host: Path | None = None) -> float:
+                       host: Path | None = None, environment: dict | None = None) -> float:
     """Instructions executed inside doStep + getReal(x) per output, for one run of the FMU unpacked in
     fmu_unzip_dir from 0 to stop at this output interval with these start values (names as in the ladder's
     RUNGS), in the ladder's C timing host under callgrind (ladder.callgrind_counts: the same count as the
-    ladder's instruction column). host: a compiled timing host (default: compiled here). Raises RuntimeError
+    ladder's instruction column). host: a compiled timing host (default: compiled here); environment: variables set
+    over the host's (legacy_environment() for an FMU built by an older checkout). Raises RuntimeError
     when valgrind is missing or the run fails."""
     missing = valgrind_missing()
     if missing:
@@ -42,7 +44,7 @@ def count_instructions(fmu_unzip_dir, start_values: dict, stop: float, interval:
         if host is None:
             host = compile_timing_host(Path(work))
         cmd, env = host_command(Path(host), Path(fmu_unzip_dir), [(start_values, interval)], stop, 1)
-        (count,), proc = callgrind_counts(cmd, env, 1)
+        (count,), proc = callgrind_counts(cmd, {**env, **(environment or {})}, 1)
     outputs = [int(line.split()[2]) for line in proc.stdout.splitlines() if line.startswith("loop ")]
     if not outputs:
         raise RuntimeError("no loop line from the timing host")
@@ -110,6 +112,15 @@ def count_kernel_floor(tree: Path, python: Path, stop: float, interval: float) -
         return int(match.group(1)) / n
 
 
+def legacy_environment() -> dict:
+    """What a pythonfmu FMU built by a checkout before the drop-in FMUs (issue 14) needs in a C host: this Python's
+    libpython loaded first, its home and its site-packages (that checkout's `vibrofmu doctor FMU` printed these)."""
+    import sysconfig
+
+    library = Path(sysconfig.get_config_var("LIBDIR")) / sysconfig.get_config_var("INSTSONAME")
+    return {"LD_PRELOAD": str(library), "PYTHONHOME": sys.base_prefix, "PYTHONPATH": sysconfig.get_paths()["purelib"]}
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="python -m vibrofmu.instructions", description=__doc__.split("\n\n")[0])
     parser.add_argument("--build", type=Path, default=Path("build"), help="folder with the built FMUs")
@@ -117,6 +128,9 @@ def main(argv=None) -> int:
     parser.add_argument("--interval", type=float, action="append", help="output interval (repeatable)")
     parser.add_argument("--pythonfmu", action="store_true", help="also the pythonfmu FMUs (slow under valgrind)")
     parser.add_argument("--rung", action="append", help="only these rungs (names as in the ladder)")
+    parser.add_argument("--old-build", type=Path, metavar="DIR", action="append",
+                        help="also the plant FMU in DIR built by an older checkout (pythonfmu, run with "
+                             "legacy_environment(); repeatable)")
     parser.add_argument("--floor", type=Path, metavar="TREE", action="append",
                         help="instead: exact f0's kernel floor (vk_run) of this checkout, with its .venv (repeatable)")
     args = parser.parse_args(argv)
@@ -128,28 +142,30 @@ def main(argv=None) -> int:
                       for i in intervals]
             print(f"{str(tree):40s} " + " ".join(f"{c:16.0f}" for c in counts), flush=True)
         return 0
-    kinds = [("native", args.build / "native")] + ([("pythonfmu", args.build)] if args.pythonfmu else [])
+    kinds = [("native", args.build / "native", None)] + ([("pythonfmu", args.build, None)] if args.pythonfmu else [])
+    kinds += [(f"old {folder}", folder, legacy_environment()) for folder in args.old_build or []]
     with tempfile.TemporaryDirectory(prefix="vibrofmu-instr-") as work:
         host = compile_timing_host(Path(work))
-        print(f"{'FMU':10s} {'rung':16s} " + " ".join(f"{'interval ' + format(i, 'g'):>16s}" for i in intervals))
-        for kind, folder in kinds:
+        width = max(len(kind) for kind, _, _ in kinds)
+        print(f"{'FMU':{width}s} {'rung':16s} " + " ".join(f"{'interval ' + format(i, 'g'):>16s}" for i in intervals))
+        for number, (kind, folder, environment) in enumerate(kinds):
             unzipped = {}
             for name, start_values, which in [(n, s, w) for n, w, s in RUNGS]:
-                if args.rung and name not in args.rung:
+                if args.rung and name not in args.rung or environment is not None and which != "plant":
                     continue
                 fmu = folder / FMU_FILES[which]
                 if not fmu.is_file():
                     print(f"error: {fmu} not found (run `vibrofmu build`)", file=sys.stderr)
                     return 2
                 if which not in unzipped:
-                    unzipped[which] = extract(str(fmu), str(Path(work) / f"{kind}-{which}"))
+                    unzipped[which] = extract(str(fmu), str(Path(work) / f"{number}-{which}"))
                 try:
-                    counts = [f"{count_instructions(unzipped[which], start_values, args.stop, i, host):16.0f}"
+                    counts = [f"{count_instructions(unzipped[which], start_values, args.stop, i, host, environment):16.0f}"
                               for i in intervals]
                 except RuntimeError as error:  # e.g. fidelities 3 and 4 need the pythonfmu FMU
                     counts = [f"{'n/a':>16s}"] * len(intervals)
                     print(f"{kind} {name}: {str(error)[:300]}", file=sys.stderr)
-                print(f"{kind:10s} {name:16s} " + " ".join(counts), flush=True)
+                print(f"{kind:{width}s} {name:16s} " + " ".join(counts), flush=True)
     return 0
 
 
