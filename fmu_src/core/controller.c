@@ -11,7 +11,7 @@
 enum { DELTA = 6 };  /* index of Delta in theta (control.DELTA) */
 
 /* forces.horner: sum c_k x^k from the highest power down */
-static double horner6(const double *c, double x)
+static inline double horner6(const double *c, double x)
 {
     double value = 0.0;
     for (int k = 5; k >= 0; k--) value = value * x + c[k];
@@ -19,7 +19,7 @@ static double horner6(const double *c, double x)
 }
 
 /* control._dot: sum a_i b_i left to right from 0 */
-static double dot(const double *a, const double *b)
+static inline double dot(const double *a, const double *b)
 {
     double total = 0.0;
     for (int i = 0; i < VC_N; i++) total += a[i] * b[i];
@@ -27,7 +27,7 @@ static double dot(const double *a, const double *b)
 }
 
 /* math.cos / math.sin: ValueError for an infinite argument */
-static int trig(int sine, double x, double *value)
+static inline int trig(int sine, double x, double *value)
 {
     if (isinf(x)) return VC_RAISED;
     *value = sine ? sin(x) : cos(x);
@@ -50,8 +50,9 @@ static int trig_integral(int sine, double nu, double t, double h, double *value)
 
 /* Regressor.__call__; time != NULL: its time functions cos(w_delta t), sin(w_beta t), cos(w_gamma t) too;
    cos_delta != NULL: cos(w_delta t) as the caller computed it (math.cos's value, from the same angle) */
-static int regressor(const VcController *c, const VcRegressor *r, double t, double x1, double x2, double *phi,
-                     double *time, const double *cos_delta)
+static inline __attribute__((always_inline)) int regressor(const VcController *c, const VcRegressor *r, double t,
+                                                           double x1, double x2, double *phi, double *time,
+                                                           const double *cos_delta)
 {
     double G3 = horner6(c->g3, x1), x1_2 = x1 * x1, cd, sb, cg;
     if (cos_delta != NULL) {
@@ -106,7 +107,8 @@ void vc_errors(const VcController *c, double x, double v, const double *ref, dou
 }
 
 /* Controller.control from the regressor phi and e2 */
-static double control(const VcController *c, const double *phi, double e2, const double *ref, const double *theta_hat)
+static inline __attribute__((always_inline)) double control(const VcController *c, const double *phi, double e2,
+                                                            const double *ref, const double *theta_hat)
 {
     double th[VC_N];
     const double *estimates = theta_hat;
