@@ -540,6 +540,9 @@ def plot_ladder(path: Path, ladder: dict) -> None:
                          label=label)
     ratio_ax.scatter(range(len(names)), [LIMITS[n] for n in names], marker="_", s=900, color="k", zorder=3,
                      label="acceptance limit")
+    for floor in ladder.get("fmpy_floor", []):  # no rung's FMPy ratio can go below it (FLOOR_NOTE)
+        ratio_ax.axhline(floor["lowest_reachable_ratio"], color="0.4", ls="--", lw=1,
+                         label=f"FMPy, interval {floor['interval']:g}: lowest reachable ratio (FMPy's own cost)")
     ratio_ax.set_yscale("log")
     low, high = ratio_ax.get_ylim()
     ratio_ax.set_ylim(low, high * 30)  # room for the legend above the bars
