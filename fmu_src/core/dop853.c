@@ -98,10 +98,13 @@ static int raise_fault(const Dop853 *s, DopReport *r, int fault)
 }
 
 /* integrate._dot over the first m stages, for every component i < n at once: out[i] = sum of c[j] * k[j][i], left
-   to right from 0 (every term, zero coefficients included) */
+   to right from 0 (every term, zero coefficients included); n a constant where it is the plant's (2) or the closed
+   loop's (11), as in run_stages */
 static inline __attribute__((always_inline)) void dots(const double *c, int m, const Stages *k, int n, double *out)
 {
-    combine(c, m, k, n, 0, out);
+    if (n == 2) combine(c, m, k, 2, 0, out);
+    else if (n == 11) combine(c, m, k, 11, 0, out);
+    else combine(c, m, k, n, 0, out);
 }
 
 double dop_event_g(const Dop853 *s, int i, const double *y)
@@ -179,22 +182,6 @@ static int near_kink(const Dop853 *s, const double *y, const double *y_new, cons
     return 0;
 }
 
-/* the error estimates' sums, dot(E5, 13, .) and dot(E3, 13, .) of every component, with n a constant where it is
-   the plant's or the closed loop's (as run_stages) */
-static void error_dots(const Stages *k, int n, double *d5, double *d3)
-{
-    if (n == 2) {
-        dots(DOP_E5, DOP_N_STAGES + 1, k, 2, d5);
-        dots(DOP_E3, DOP_N_STAGES + 1, k, 2, d3);
-    } else if (n == 11) {
-        dots(DOP_E5, DOP_N_STAGES + 1, k, 11, d5);
-        dots(DOP_E3, DOP_N_STAGES + 1, k, 11, d3);
-    } else {
-        dots(DOP_E5, DOP_N_STAGES + 1, k, n, d5);
-        dots(DOP_E3, DOP_N_STAGES + 1, k, n, d3);
-    }
-}
-
 /* Dop853._trial: one step of size h from (t, y) with derivative s->f. Stages into k, new state into y_new;
  * *error is the scaled error norm, inf when a stage raised (caught, as Python's try) or the error is not
  * finite. Returns a fault that Python would not catch (an overflowing square, a zero divisor). */
@@ -214,7 +201,8 @@ static int trial(Dop853 *s, DopRhs rhs, void *ctx, double t, const double *y, do
     s->nfev += DOP_N_STAGES;
     for (int i = 0; i < n; i++) scale[i] = s->atol + s->rtol * py_max(fabs(y[i]), fabs(y_new[i]));
     double e5 = 0.0, e3 = 0.0, d5[DOP_MAX_DIM], d3[DOP_MAX_DIM];
-    error_dots(k, n, d5, d3);
+    dots(DOP_E5, DOP_N_STAGES + 1, k, n, d5);
+    dots(DOP_E3, DOP_N_STAGES + 1, k, n, d3);
     for (int i = 0; i < n; i++) {
         double term = py_square(d5[i] / scale[i], &fault);
         if (fault) return fault;
@@ -253,14 +241,6 @@ static void accept(Dop853 *s, double t, const double *y, double h, const double 
     s->n_steps += 1;
 }
 
-/* dots() with n a constant where it is the plant's or the closed loop's (as run_stages) */
-static void dense_dot(const double *c, int m, const Stages *k, int n, double *out)
-{
-    if (n == 2) dots(c, m, k, 2, out);
-    else if (n == 11) dots(c, m, k, 11, out);
-    else dots(c, m, k, n, out);
-}
-
 /* Dop853._build_dense: coefficients of scipy's Dop853DenseOutput from three extra stages (uncounted unless
  * all three succeed). */
 static int build_dense(Dop853 *s, DopRhs rhs, void *ctx)
@@ -281,7 +261,7 @@ static int build_dense(Dop853 *s, DopRhs rhs, void *ctx)
     }
     for (int row = 0; row < 4; row++) {
         double sum[DOP_MAX_DIM];
-        dense_dot(DOP_D[row], k.n, &k, n, sum);
+        dots(DOP_D[row], k.n, &k, n, sum);
         for (int i = 0; i < n; i++) s->dense[3 + row][i] = h * sum[i];
     }
     s->dense_ready = 1;
