@@ -38,7 +38,7 @@ setup(
     packages=[*find_packages("fmu_src"), *find_packages("harness"), "vibrofmu.fmu_src", "vibrofmu.c_host"],
     package_dir={"vibromodel": "fmu_src/vibromodel", "vibrofmu": "harness/vibrofmu",
                  "vibrofmu.fmu_src": "fmu_src", "vibrofmu.c_host": "tests/c_host"},
-    package_data={"vibrofmu": ["scenes/**/*", "*.c", "*.h"], "vibrofmu.fmu_src": C_FILES, "vibrofmu.c_host": C_FILES},
+    package_data={"vibrofmu.hosts": ["scenes/**/*"], "vibrofmu.speed": ["*.c", "*.h"], "vibrofmu.fmu_src": C_FILES, "vibrofmu.c_host": C_FILES},
     exclude_package_data={"vibrofmu.fmu_src": ["vibromodel/**"]},  # vibromodel is installed as a package
     cmdclass={"build_py": FreshBuildPy},
     options={"build": {"build_base": BUILD_BASE}},

@@ -2,7 +2,7 @@
  * fmi2_status_shim.c -- FMI 2.0 co-simulation wrapper around a pythonfmu
  * 0.7.0 library, giving Python slaves a way to return fmi2Error.
  *
- * Layout inside the FMU (done by harness/vibrofmu/shim.py):
+ * Layout inside the FMU (done by harness/vibrofmu/fmus/shim.py):
  *   binaries/linux64/<id>.so            this shim (with pyloader.c)
  *   binaries/linux64/<id>_pythonfmu.so  pythonfmu's original library
  *   resources/python_env.txt            the Python it needs (pythonenv.py)

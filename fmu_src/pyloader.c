@@ -8,7 +8,7 @@
  *
  *   1. Python already in the process (a Python host, or another FMU loaded it): it is used as it is.
  *   2. Otherwise the environment recorded at build time is read: the FMU's resources/python_env.txt
- *      (written by harness/vibrofmu/pythonenv.py), or the file $VIBROFMU_PYTHON_ENV names instead (for
+ *      (written by harness/vibrofmu/fmus/pythonenv.py), or the file $VIBROFMU_PYTHON_ENV names instead (for
  *      another machine; `vibrofmu doctor --env-file` writes one).  Lines "key=value":
  *        python_version  major.minor of the Python the FMU was built with (e.g. 3.11)
  *        libpython       the shared library to load

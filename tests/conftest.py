@@ -9,8 +9,8 @@ import pytest
 
 os.environ["VIBROFMU_CACHE_DIR"] = tempfile.mkdtemp(prefix="vibrofmu-test-cache-")
 
-from vibrofmu.build import build_closed_loop, build_controller, build_plant
-from vibrofmu.run import run_fmu
+from vibrofmu.fmus.build import build_closed_loop, build_controller, build_plant
+from vibrofmu.hosts.run import run_fmu
 
 
 @pytest.fixture(scope="session")
@@ -56,7 +56,7 @@ def _starter_fixture(name):
 
     @pytest.fixture(scope="session", name=f"start_{name}")
     def starter(request):
-        from vibrofmu.run import FmuInstance
+        from vibrofmu.hosts.run import FmuInstance
 
         fmu, unzipped = request.getfixturevalue(f"{name}_fmu"), request.getfixturevalue(f"{name}_unzipped")
 
@@ -79,7 +79,7 @@ def _native_fixture(name):
 
     @pytest.fixture(scope="session", name=f"native_{name}_fmu")
     def native(request, tmp_path_factory):
-        from vibrofmu.native import build_native
+        from vibrofmu.fmus.native import build_native
 
         return build_native(request.getfixturevalue(f"{name}_fmu"), tmp_path_factory.mktemp(f"native_{name}"))
 

@@ -3,8 +3,8 @@ import numpy as np
 import pytest
 
 from vibromodel.parameters import Scene
-from vibrofmu.compare import errors
-from vibrofmu.reference import reference_solution
+from vibrofmu.analyses.compare import errors
+from vibrofmu.analyses.reference import reference_solution
 
 # The reference numbers: x(tau) of the exact model, DOP853 rtol 1e-12.
 DESIGN_X = {10: -2.2669940936e-2, 25: 1.0510760461e-2, 50: 1.0985866228e-3, 100: -3.8776875257e-3,
@@ -52,7 +52,7 @@ def test_rk4_error_falls_with_order_four(run_plant, reference):
 
 
 def test_setup_experiment_tolerance_takes_precedence(plant_fmu, reference):
-    from vibrofmu.run import run_fmu
+    from vibrofmu.hosts.run import run_fmu
 
     loose = run_fmu(plant_fmu, {"rtol": 1e-4}, 200.0, 0.1, tolerance=1e-10)
     assert max_error(loose, reference) <= 1e-9

@@ -7,7 +7,7 @@ import pytest
 from fmpy.fmi1 import FMICallException
 
 from vibrofmu.cli import main
-from vibrofmu.run import FmuInstance, run_fmu
+from vibrofmu.hosts.run import FmuInstance, run_fmu
 
 BAD_PARAMETERS = [
     ("R", 0.0), ("R", -1.0), ("x_start", 1.5), ("x_start", 2.0), ("x_start", -1.5), ("rtol", 0.0),

@@ -12,10 +12,10 @@ import numpy as np
 import pytest
 
 import vibrofmu
-from vibrofmu import bench
-from vibrofmu import ladder as ladder_module
+from vibrofmu.speed import bench
+from vibrofmu.speed import ladder as ladder_module
 from vibrofmu.cli import main
-from vibrofmu.reference import reference_solution
+from vibrofmu.analyses.reference import reference_solution
 from vibromodel.parameters import Scene
 from vibromodel.plant import Plant, Settings
 
@@ -24,14 +24,14 @@ STAND_IN_ROWS = [{"name": "stand-in extreme row"}]
 
 @pytest.fixture(scope="module")
 def quick(plant_fmu, tmp_path_factory):
-    """(bench.json, stdout, out dir) of `vibrofmu bench --quick`, with a stand-in vibrofmu.extremes (the real
+    """(bench.json, stdout, out dir) of `vibrofmu bench --quick`, with a stand-in vibrofmu.analyses.extremes (the real
     module has its own tests; this keeps the run short and checks the rows are passed through)."""
     out = tmp_path_factory.mktemp("bench")
-    extremes = types.ModuleType("vibrofmu.extremes")
+    extremes = types.ModuleType("vibrofmu.analyses.extremes")
     extremes.extreme_rows = lambda quick, fmu: [{**row, "quick": quick, "fmu": str(fmu)} for row in STAND_IN_ROWS]
     stdout, stderr = io.StringIO(), io.StringIO()
     with pytest.MonkeyPatch.context() as mp, contextlib.redirect_stdout(stdout), contextlib.redirect_stderr(stderr):
-        mp.setitem(sys.modules, "vibrofmu.extremes", extremes)
+        mp.setitem(sys.modules, "vibrofmu.analyses.extremes", extremes)
         mp.setattr(vibrofmu, "extremes", extremes, raising=False)
         # without the instruction counts (minutes under valgrind: test_ladder.py checks them) and with two rounds
         # instead of three (enough to check the rounds' structure; test_ladder.py checks three with stand-in runs)

@@ -14,7 +14,7 @@ import pytest
 from fmpy import extract, simulate_fmu
 
 from vibrofmu.cli import main
-from vibrofmu.doctor import compile_host, host_environment, run_host
+from vibrofmu.hosts.doctor import compile_host, host_environment, run_host
 
 VALGRIND_SUPPRESSIONS = Path(__file__).parent / "c_host" / "valgrind.supp"
 FMI2_ERROR = 3

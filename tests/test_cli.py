@@ -8,7 +8,7 @@ from vibrofmu.cli import main
 
 
 def test_simulate_with_compare_writes_all_results(tmp_path, plant_fmu, capsys):
-    from vibrofmu import simulate
+    from vibrofmu.analyses import simulate
 
     simulate._NOTED.clear()  # the note is printed once per process: forget earlier tests' runs
     out = tmp_path / "run"
@@ -45,7 +45,7 @@ def test_simulate_reports_an_early_stop(tmp_path, plant_fmu, capsys):
 
 
 def test_the_beta_note_is_printed_once_per_process(tmp_path, plant_fmu, capsys):
-    from vibrofmu import simulate
+    from vibrofmu.analyses import simulate
 
     simulate._NOTED.clear()
     for run in ("a", "b"):

@@ -9,7 +9,7 @@ from fmpy.fmi1 import FMICallException
 from fmpy.validation import validate_fmu
 
 from test_bad_input import initialise
-from vibrofmu.run import run_fmu
+from vibrofmu.hosts.run import run_fmu
 
 STOP, H, RTOL = 200.0, 0.1, 1e-10
 

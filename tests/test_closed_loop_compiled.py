@@ -6,8 +6,8 @@ import math
 import numpy as np
 import pytest
 
-from vibrofmu.kernel import kernel_library
-from vibrofmu.run import FmuInstance, run_fmu
+from vibrofmu.fmus.kernel import kernel_library
+from vibrofmu.hosts.run import FmuInstance, run_fmu
 from vibromodel.closedloop import ERRATA_SCENE, ClosedLoop, LoopSettings
 from vibromodel.compiled_loop import CompiledClosedLoop, make_closed_loop
 from vibromodel.control import Law

@@ -9,7 +9,7 @@ import subprocess
 import numpy as np
 import pytest
 
-from vibrofmu import kernel
+from vibrofmu.fmus import kernel
 from vibromodel import compiled, plant as plant_module, settings as settings_module
 from vibromodel.compiled import CompiledPlant, load_library
 from vibromodel.integrate import IntegrationError, TerminalEvent

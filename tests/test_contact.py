@@ -3,8 +3,8 @@ import numpy as np
 import pytest
 
 from vibromodel.parameters import Scene
-from vibrofmu.compare import errors
-from vibrofmu.reference import reference_solution
+from vibrofmu.analyses.compare import errors
+from vibrofmu.analyses.reference import reference_solution
 
 # Energy v^2/2 + (3/5)((1+2x/3)^(5/2) - 1) - x at x = -1.3, v = -0.8 exceeds its value 0.9 at the
 # contact edge x = -1.5, so the mass flies free. R = 2 keeps the lower electrode (x = -3) away.

@@ -1,4 +1,4 @@
-"""Acceptance 3: the three-FMU co-simulation (harness/vibrofmu/scenes/closed_loop.toml: reference = plant FMU at
+"""Acceptance 3: the three-FMU co-simulation (harness/vibrofmu/hosts/scenes/closed_loop.toml: reference = plant FMU at
 fidelity 4, plant at fidelity 0, controller) converges to the monolithic HertzEAClosedLoop.fmu (same parameters,
 OAFM reference) as H falls, with order 1 (zero-order hold); Gauss-Seidel vs Jacobi; scene-file errors."""
 import json
@@ -6,9 +6,9 @@ import math
 
 import pytest
 
-from vibrofmu.closed_loop import STUDY_STEPS, convergence_study
+from vibrofmu.analyses.closed_loop import STUDY_STEPS, convergence_study
 from vibrofmu.cli import DEFAULT_SCENE
-from vibrofmu.cosim import SceneError, load_scene, run_cosim
+from vibrofmu.hosts.cosim import SceneError, load_scene, run_cosim
 
 
 @pytest.fixture(scope="module")

@@ -6,9 +6,9 @@ import math
 import numpy as np
 import pytest
 
-from vibrofmu import kernel
-from vibrofmu.campaigns import contact_loss_campaign, count_contact_losses, graze_reference, graze_scene, run_plant
-from vibrofmu.reference import reference_solution
+from vibrofmu.fmus import kernel
+from vibrofmu.analyses.campaigns import contact_loss_campaign, count_contact_losses, graze_reference, graze_scene, run_plant
+from vibrofmu.analyses.reference import reference_solution
 from vibromodel.compiled import CompiledPlant
 from vibromodel.integrate import Dop853, Rk4, TerminalEvent
 from vibromodel.models import affine_event

@@ -1,4 +1,4 @@
-"""Numerical stability at the extremes (issue 6): each extreme of vibrofmu.extremes as a test of its row's
+"""Numerical stability at the extremes (issue 6): each extreme of vibrofmu.analyses.extremes as a test of its row's
 outcome, plus the pieces it rests on (rtol clamp, RK4's response to a fast drive, RK4's pull-in location).
 
 The two long runs have a quick default version and the issue's full length under @pytest.mark.slow:
@@ -12,8 +12,8 @@ import re
 
 import pytest
 
-from vibrofmu import extremes as ex
-from vibrofmu.run import run_fmu
+from vibrofmu.analyses import extremes as ex
+from vibrofmu.hosts.run import run_fmu
 from vibromodel.integrate import RK4_DRIVE_ERROR, RK4_DRIVE_THETA, IntegrationError, Rk4, TerminalEvent, rk4_drive_gains
 from vibromodel.models import Event
 from vibromodel.parameters import MIN_RTOL, ParameterError, Scene, clamp_tolerance, validate

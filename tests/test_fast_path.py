@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from vibrofmu.run import FmuInstance, run_fmu
+from vibrofmu.hosts.run import FmuInstance, run_fmu
 
 SCENES = {
     "paper example": {},

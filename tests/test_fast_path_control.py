@@ -8,8 +8,8 @@ import math
 import numpy as np
 import pytest
 
-from vibrofmu.kernel import kernel_library
-from vibrofmu.run import FmuInstance
+from vibrofmu.fmus.kernel import kernel_library
+from vibrofmu.hosts.run import FmuInstance
 from vibromodel.closedloop import ERRATA_SCENE
 from vibromodel.compiled_loop import CompiledEstimator, declare
 from vibromodel.control import ERRATA_INITIAL_ESTIMATES, ESTIMATE_NAMES, Gains, HeldInputEstimator, Law

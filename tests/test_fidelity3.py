@@ -9,8 +9,8 @@ from vibromodel import slowflow
 from vibromodel.averaging import averaged
 from vibromodel.parameters import ParameterError, Scene
 from vibromodel.plant import Plant, Settings
-from vibrofmu.reference import reference_solution
-from vibrofmu.stability import fidelity3_check
+from vibrofmu.analyses.reference import reference_solution
+from vibrofmu.analyses.stability import fidelity3_check
 
 EPS = np.finfo(float).eps
 

@@ -8,8 +8,8 @@ from vibromodel.analytic import OafmSettings, covering, solve
 from vibromodel.compiled_open_loop import OafmProgram, oafm_hints
 from vibromodel.parameters import Scene
 from vibrofmu.cli import main
-from vibrofmu.oafm_study import fmu_check
-from vibrofmu.run import run_fmu
+from vibrofmu.analyses.oafm_study import fmu_check
+from vibrofmu.hosts.run import run_fmu
 
 
 def test_default_scene_uses_the_packed_fit_and_matches_the_harness(run_plant):

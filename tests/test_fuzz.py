@@ -21,7 +21,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from hypothesis.configuration import set_hypothesis_home_dir
 
-from vibrofmu.run import FmuInstance
+from vibrofmu.hosts.run import FmuInstance
 from vibromodel.closedloop import ERRATA_SCENE
 from vibromodel.control import ERRATA_INITIAL_ESTIMATES, ESTIMATE_NAMES, GAIN_NAMES, Gains
 from vibromodel.parameters import Scene

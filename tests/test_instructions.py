@@ -1,9 +1,9 @@
-"""vibrofmu.instructions: the environment an FMU built by an older checkout needs in the C host."""
+"""vibrofmu.speed.instructions: the environment an FMU built by an older checkout needs in the C host."""
 import os
 import sys
 from pathlib import Path
 
-from vibrofmu.instructions import legacy_environment
+from vibrofmu.speed.instructions import legacy_environment
 
 
 def test_legacy_environment_names_this_pythons_shared_library_home_and_packages():

@@ -9,7 +9,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from vibrofmu import ladder, paths
+from vibrofmu.speed import ladder
+
+from vibrofmu import paths
 
 # A stand-in FMU: every fmi2DoStep runs the same fixed loop (WORK iterations) and x = t, so that every doStep
 # + getReal pair executes exactly the same instructions: a count that is right must be proportional to the
@@ -188,7 +190,9 @@ def test_rounds_interleave_every_rung_in_every_column(monkeypatch):
 def test_ladder_only_writes_bench_json_the_report_reads(plant_fmu, monkeypatch, tmp_path, capsys):
     """`vibrofmu bench --ladder-only` (stand-in runs): bench.json has the machine and the ladder, the command prints
     the ladder, and the report's speed block shows it."""
-    from vibrofmu import bench, build, report
+    from vibrofmu.speed import bench
+    from vibrofmu.fmus import build
+    from vibrofmu.output import report
     from vibrofmu.cli import main
 
     stand_in_runs(monkeypatch)

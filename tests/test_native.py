@@ -24,9 +24,9 @@ import pytest
 from fmpy import extract, read_model_description, simulate_fmu
 from fmpy.validation import validate_fmu
 
-from vibrofmu.doctor import compile_host, compile_windows_host, run_host
-from vibrofmu.native import series_probe_library
-from vibrofmu.run import FmuInstance, FmuLog, run_fmu
+from vibrofmu.hosts.doctor import compile_host, compile_windows_host, run_host
+from vibrofmu.fmus.native import series_probe_library
+from vibrofmu.hosts.run import FmuInstance, FmuLog, run_fmu
 
 FMI2_ERROR = 3
 

@@ -7,8 +7,8 @@ import pytest
 
 from vibromodel.analytic import OafmSettings, assemble, cached_solve, domains, solve
 from vibromodel.parameters import ParameterError, Scene
-from vibrofmu.oafm_study import convergence_study, describe, grid_check, paper_reproduction, verdict
-from vibrofmu.reference import reference_solution
+from vibrofmu.analyses.oafm_study import convergence_study, describe, grid_check, paper_reproduction, verdict
+from vibrofmu.analyses.reference import reference_solution
 
 PAPER_DOMAINS = OafmSettings(tau_star=50.0, tau_end=200.0)  # the paper's [0, 50] and [50, 200]
 

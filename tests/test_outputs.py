@@ -5,8 +5,8 @@ F_contact drive term) were evaluated with x(t + h) but the drive at t."""
 import numpy as np
 import pytest
 
-from vibrofmu import kernel
-from vibrofmu.run import FmuInstance
+from vibrofmu.fmus import kernel
+from vibrofmu.hosts.run import FmuInstance
 from vibromodel.compiled import CompiledPlant
 from vibromodel.models import make_model
 from vibromodel.parameters import Scene

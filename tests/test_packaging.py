@@ -14,7 +14,7 @@ import pytest
 from fmpy import read_model_description
 from fmpy.validation import validate_fmu
 
-from vibrofmu.run import run_fmu
+from vibrofmu.hosts.run import run_fmu
 
 REPOSITORY = Path(__file__).resolve().parents[1]
 # what a fresh clone does not have: copied trees leave it out

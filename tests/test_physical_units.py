@@ -6,7 +6,7 @@ import numpy as np
 from scipy.integrate import solve_ivp
 
 from vibromodel.parameters import PhysicalParameters, consistency_warning
-from vibrofmu.reference import reference_solution
+from vibrofmu.analyses.reference import reference_solution
 
 EPS0 = 8.8541878128e-12
 

@@ -5,7 +5,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from vibrofmu import export
+from vibrofmu.output import export
 
 
 def _inside_figure(fig, artist):

@@ -14,8 +14,8 @@ import pytest
 from fmpy import extract, read_model_description, simulate_fmu
 
 from vibrofmu.cli import main
-from vibrofmu.doctor import compile_host, recorded_environment, run_host
-from vibrofmu.pythonenv import ENV_VARIABLE, env_text, parse_env
+from vibrofmu.hosts.doctor import compile_host, recorded_environment, run_host
+from vibrofmu.fmus.pythonenv import ENV_VARIABLE, env_text, parse_env
 
 ROOT_CAUSE_HINT = "vibrofmu doctor"
 

@@ -2,7 +2,7 @@
 import numpy as np
 
 from vibromodel.parameters import Scene
-from vibrofmu.reference import reference_solution
+from vibrofmu.analyses.reference import reference_solution
 
 
 def test_dop853_reference_agrees_with_radau():

@@ -3,7 +3,7 @@
 and on the machine that built it the result is the same bit for bit (deterministic FMU)."""
 import numpy as np
 
-from vibrofmu.refresult import read_reference, simulate_experiment, validate_against_reference
+from vibrofmu.fmus.refresult import read_reference, simulate_experiment, validate_against_reference
 
 
 def test_packed_reference_describes_the_default_experiment(plant_fmu):

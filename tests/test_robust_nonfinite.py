@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 from fmpy.fmi1 import FMICallException
 
-from vibrofmu.kernel import kernel_library
-from vibrofmu.run import FmuInstance
+from vibrofmu.fmus.kernel import kernel_library
+from vibrofmu.hosts.run import FmuInstance
 from vibromodel.closedloop import ERRATA_SCENE, ClosedLoop, LoopSettings
 from vibromodel.compiled_loop import LOOP_OUTPUTS, CompiledClosedLoop, make_closed_loop
 from vibromodel.control import ESTIMATE_NAMES

@@ -75,7 +75,7 @@ def test_rules_export_as_plain_json_records_in_checking_order():
 def initialisation_error(request, which, values, tolerance=None):
     """The error logged by fmi2ExitInitializationMode with these start values (it must fail with fmi2Error), after
     which the outputs read finite or the getter fails: never non-finite with fmi2OK."""
-    from vibrofmu.run import FmuInstance
+    from vibrofmu.hosts.run import FmuInstance
 
     fmu, unzipped = request.getfixturevalue(f"{which}_fmu"), request.getfixturevalue(f"{which}_unzipped")
     with FmuInstance(fmu, unzip_dir=unzipped) as instance:
@@ -153,7 +153,7 @@ def test_a_non_finite_output_fails_the_call_naming_it_and_keeps_the_last_finite_
     """Issue 15: slave_support skipped non-finite values silently (the controller then answered fmi2OK with frozen
     outputs). Now publishing one raises NonFiniteOutput, an ArithmeticError: doStep turns it into fmi2Error with
     "simulation stopped: ... tau = ..." (StatusSlave._guarded_step), initialisation into fmi2Error too."""
-    from vibrofmu.build import FMU_SRC
+    from vibrofmu.fmus.build import FMU_SRC
 
     monkeypatch.syspath_prepend(str(FMU_SRC))
     from AdaptiveLyapunovController import AdaptiveLyapunovController

@@ -1,6 +1,6 @@
 """Instantiate/free cycles do not leak (issue 15, item 4), measured in a C host (tests/c_host/instance_cycles.c)
 so that no Python host's wrappers are counted: the resident set size after a warm-up (interpreter, imports and
-caches settled) and after the cycles. Before the entry module (vibrofmu.entry) a plant instance kept 36 KB and a
+caches settled) and after the cycles. Before the entry module (vibrofmu.fmus.entry) a plant instance kept 36 KB and a
 controller or closed-loop instance 23 KB (pythonfmu's findClass)."""
 import re
 import subprocess
@@ -9,8 +9,8 @@ from pathlib import Path
 import pytest
 from fmpy import extract, read_model_description
 
-from vibrofmu.build import FMU_SRC
-from vibrofmu.doctor import host_environment
+from vibrofmu.fmus.build import FMU_SRC
+from vibrofmu.hosts.doctor import host_environment
 
 SOURCE = Path(__file__).parent / "c_host" / "instance_cycles.c"
 FMUS = ("plant", "controller", "closed_loop", "native_plant", "native_controller", "native_closed_loop")

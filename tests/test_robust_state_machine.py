@@ -27,7 +27,7 @@ def status(call, *args):
 
 def new(request, which, stop_time=None):
     """(instance, its start values, output, input) set up, in initialization mode."""
-    from vibrofmu.run import FmuInstance
+    from vibrofmu.hosts.run import FmuInstance
 
     name, values, output, input_ = FMUS[which]
     instance = FmuInstance(request.getfixturevalue(f"{name}_fmu"), unzip_dir=request.getfixturevalue(f"{name}_unzipped"))
@@ -175,7 +175,7 @@ def test_get_with_unknown_reference_or_wrong_type_is_an_error_not_fatal(request,
 
 @pytest.mark.parametrize("which", ["plant_fast", "controller", "closed_loop"])
 def test_get_before_initialisation_is_refused(request, which):
-    from vibrofmu.run import FmuInstance
+    from vibrofmu.hosts.run import FmuInstance
 
     name, values, output, _ = FMUS[which]
     with FmuInstance(request.getfixturevalue(f"{name}_fmu"),

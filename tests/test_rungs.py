@@ -12,8 +12,8 @@ import math
 import numpy as np
 import pytest
 
-from vibrofmu.kernel import kernel_library
-from vibrofmu.run import run_fmu
+from vibrofmu.fmus.kernel import kernel_library
+from vibrofmu.hosts.run import run_fmu
 from vibromodel import compiled_open_loop as col
 from vibromodel.analytic import OafmSettings
 from vibromodel.oafm_bases import eq11_operator

@@ -1,4 +1,4 @@
-"""Shooting and continuation of periodic orbits (harness/vibrofmu/shooting.py): the ground truth of issue 4."""
+"""Shooting and continuation of periodic orbits (harness/vibrofmu/analyses/shooting.py): the ground truth of issue 4."""
 import math
 
 import numpy as np
@@ -7,7 +7,7 @@ import pytest
 from vibromodel import forces
 from vibromodel.averaging import equilibrium
 from vibromodel.parameters import Scene
-from vibrofmu import shooting as sh
+from vibrofmu.analyses import shooting as sh
 
 STRONG = Scene(mu=0.002, Delta=0.0007)  # the strongly nonlinear scene of docs/model.md, Averaging and slow flow, issue 4
 OMEGA_E = equilibrium(STRONG).omega_e  # sqrt(k1) of the averaged model (lead's averaging.py)

@@ -15,9 +15,9 @@ import numpy as np
 import pytest
 from fmpy.validation import validate_fmu
 
-from vibrofmu import container, ssp
+from vibrofmu.hosts import container, ssp
 from vibrofmu.cli import DEFAULT_SCENE
-from vibrofmu.cosim import SceneError, load_scene, run_cosim
+from vibrofmu.hosts.cosim import SceneError, load_scene, run_cosim
 
 STOP = 20.0  # 200 communication steps at H = 0.1: every FMU and connection is exercised, about 1 s per run
 

@@ -9,10 +9,10 @@ from fmpy import extract
 from vibromodel import averaging as av
 from vibromodel.parameters import Scene
 from vibromodel.plant import Settings
-from vibrofmu import shooting
+from vibrofmu.analyses import shooting
 from vibrofmu.cli import main
-from vibrofmu.stability import fold_agreement, shoot_predictions, stability_study
-from vibrofmu.sweep import MAX_PERIODS, Sweep, SweepPoint, hysteresis_jumps, settle, sweep
+from vibrofmu.analyses.stability import fold_agreement, shoot_predictions, stability_study
+from vibrofmu.analyses.sweep import MAX_PERIODS, Sweep, SweepPoint, hysteresis_jumps, settle, sweep
 
 STRONG = Scene(mu=0.002)  # mu = 0.002, Delta = 0.0007, the rest as the paper example
 

@@ -1,4 +1,4 @@
-"""Tests for the FMI 2.0 status shim (harness/vibrofmu/shim.py, fmu_src/fmi2_status_shim.c).
+"""Tests for the FMI 2.0 status shim (harness/vibrofmu/fmus/shim.py, fmu_src/fmi2_status_shim.c).
 
 A tiny pythonfmu slave (tests/data/StatusProbe.py) is built into an FMU, the
 shim is installed, and the FMU is driven through fmpy's FMU2Slave.
@@ -26,7 +26,7 @@ from fmpy.fmi2 import (
 from fmpy import calloc, free
 from fmpy.validation import validate_fmu
 
-from vibrofmu.shim import install_status_shim
+from vibrofmu.fmus.shim import install_status_shim
 
 DATA = Path(__file__).parent / "data"
 OK, DISCARD, ERROR, FATAL = 0, 2, 3, 4

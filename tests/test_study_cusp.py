@@ -15,7 +15,7 @@ from vibrofmu.study.cases import make_cases, run_case
 from vibrofmu.study.engines import CoreEngine, FmuEngine
 from vibrofmu.study.scheduling import guided_batches
 from vibrofmu.study.spec import build_spec
-from vibrofmu.sweep import WINDOW_PERIODS
+from vibrofmu.analyses.sweep import WINDOW_PERIODS
 
 
 def normal_form_band(delta, delta_c=0.00055, omega_c=0.9968, a=2.0, b=-3.0, c=40.0):

@@ -5,7 +5,7 @@
  * One VkPlant holds everything: the model's constants, the solver's state, the plant's time and input, the
  * outputs and a pending error.  It contains no pointers, so its bytes are the plant's FMU state.
  * vibromodel/compiled.py mirrors the layout with ctypes and checks it with vk_layout().  The library built from
- * fmu_src/core (every .c file) is vibrokernel.so (harness/vibrofmu/kernel.py).
+ * fmu_src/core (every .c file) is vibrokernel.so (harness/vibrofmu/fmus/kernel.py).
  */
 #ifndef VIBRO_PLANT_H
 #define VIBRO_PLANT_H

@@ -1,6 +1,6 @@
 /*
  * pyfloat.c -- Python's float semantics (pyfloat.h).
- * Build: no FMA contraction, never -ffast-math (harness/vibrofmu/kernel.py holds the command).
+ * Build: no FMA contraction, never -ffast-math (harness/vibrofmu/fmus/kernel.py holds the command).
  */
 #include "pyfloat.h"
 

@@ -4,7 +4,7 @@
  * Written once (fmi2_native.c) for every native FMU, in the spirit of the Reference-FMUs: each model has a
  * folder with config.h (its ModelData: every FMI variable's value plus the model's own plain-data state) and
  * native_model.c (the hooks below).  variables.h, generated at build time from the pythonfmu FMU's
- * modelDescription.xml (harness/vibrofmu/native.py), lists the variables with the same value references,
+ * modelDescription.xml (harness/vibrofmu/fmus/native.py), lists the variables with the same value references,
  * causalities and start values, so the native FMU has the pythonfmu FMU's interface.
  *
  * The layer reproduces the behaviour of the pythonfmu slaves behind the status shim (slave_support.py,

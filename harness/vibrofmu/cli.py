@@ -22,7 +22,7 @@ from xml.etree import ElementTree
 
 from vibromodel.parameters import ParameterError
 
-from . import paths
+from vibrofmu import paths
 
 PLANT_NAME = "HertzEAOscillator.fmu"
 CONTROLLER_NAME = "AdaptiveLyapunovController.fmu"
@@ -110,7 +110,7 @@ def plant_fmu(given: str | None) -> Path:
 def built_plant(path: Path) -> Path:
     """`path` (from plant_fmu), built first when it is the missing default."""
     if not path.exists():
-        from .build import build_plant
+        from vibrofmu.fmus.build import build_plant
 
         print(f"building {path} ...", file=sys.stderr)
         _say_compiled_parts()
@@ -119,7 +119,7 @@ def built_plant(path: Path) -> Path:
 
 
 def _say_compiled_parts() -> None:
-    from .build import compiled_parts
+    from vibrofmu.fmus.build import compiled_parts
 
     line = compiled_parts()
     if line:
@@ -183,7 +183,7 @@ def progress_printer(label: str):
 
 
 def cmd_build(args) -> int:
-    from .build import build_all
+    from vibrofmu.fmus.build import build_all
 
     _say_compiled_parts()
     for fmu in build_all(out_folder(args.out_dir)):
@@ -195,9 +195,9 @@ def cmd_closed_loop(args) -> int:
     from vibromodel.control import Law
     from vibromodel.tracking import ReferenceKind
 
-    from . import closed_loop
-    from .build import build_all
-    from .cosim import SceneError, load_scene
+    from vibrofmu.analyses import closed_loop
+    from vibrofmu.fmus.build import build_all
+    from vibrofmu.hosts.cosim import SceneError, load_scene
 
     fmu_dir = Path(args.fmu_dir) if args.fmu_dir else paths.build_dir()
     if fmu_dir.exists() and not fmu_dir.is_dir():
@@ -267,7 +267,7 @@ def cmd_simulate(args) -> int:
     from vibromodel.parameters import Scene
     from vibromodel.plant import Settings
 
-    from .simulate import FIDELITIES, SOLVERS, check_inputs, simulate
+    from vibrofmu.analyses.simulate import FIDELITIES, SOLVERS, check_inputs, simulate
 
     scene = Scene().with_values(**parse_set(args.set))
     settings = Settings(fidelity=FIDELITIES[args.fidelity], solver=SOLVERS[args.solver], rtol=args.rtol,
@@ -295,7 +295,7 @@ def cmd_simulate(args) -> int:
 
 
 def cmd_demo(args) -> int:
-    from .demo import run_demo
+    from vibrofmu.analyses.demo import run_demo
 
     fmu = plant_fmu(args.fmu)
     out = out_folder(args.out)
@@ -307,7 +307,7 @@ def cmd_oafm(args) -> int:
     from vibromodel.oafm import Grid
     from vibromodel.parameters import Scene, validate
 
-    from .oafm_study import run_oafm
+    from vibrofmu.analyses.oafm_study import run_oafm
 
     scene = Scene().with_values(**parse_set(args.set))
     validate(scene)
@@ -347,7 +347,7 @@ def cmd_stability(args) -> int:
     from vibromodel.averaging import averaged, steady_states
     from vibromodel.parameters import Scene, validate
 
-    from .stability import default_range, stability_study, write_study
+    from vibrofmu.analyses.stability import default_range, stability_study, write_study
 
     scene = Scene().with_values(**parse_set(args.set))
     validate(scene)
@@ -411,7 +411,8 @@ def cmd_stability(args) -> int:
 
 
 def cmd_bench(args) -> int:
-    from . import bench, extremes
+    from vibrofmu.speed import bench
+    from vibrofmu.analyses import extremes
 
     fmu = plant_fmu(args.fmu)
     out = out_folder(args.out)
@@ -437,7 +438,7 @@ def cmd_bench(args) -> int:
 def cmd_doctor(args) -> int:
     import tempfile
 
-    from . import doctor
+    from vibrofmu.hosts import doctor
 
     if args.env_file:
         try:
@@ -473,7 +474,7 @@ def build_options(p):
 
 
 def simulate_options(p):
-    from .simulate import FIDELITIES, SOLVERS
+    from vibrofmu.analyses.simulate import FIDELITIES, SOLVERS
 
     p.add_argument("--fidelity", choices=list(FIDELITIES), default="exact", help="plant model")
     p.add_argument("--solver", choices=list(SOLVERS), default="adaptive",
@@ -595,9 +596,11 @@ def make_parser(commands=None) -> argparse.ArgumentParser:
             options(p)
     # Sub-commands of other modules hook in here, one call each (e.g. `study.add_parser(sub)`), with their
     # heavy imports inside their command.
-    from . import container, report, ssp  # light modules: heavy imports happen inside their commands
+    from vibrofmu.hosts import container
+    from vibrofmu.output import report
+    from vibrofmu.hosts import ssp  # light modules: heavy imports happen inside their commands
     ssp.add_parser(sub); container.add_parser(sub); report.add_parser(sub)
-    from .study import add_parser as add_study_parser  # issue 16: harness/vibrofmu/study/
+    from vibrofmu.study import add_parser as add_study_parser  # issue 16: harness/vibrofmu/study/
     add_study_parser(sub)
     return parser
 

@@ -15,7 +15,7 @@ import shutil
 from pathlib import Path
 
 PACKAGE_DIR = Path(__file__).resolve().parent
-SCENES_DIR = PACKAGE_DIR / "scenes"
+SCENES_DIR = PACKAGE_DIR / "hosts" / "scenes"
 _CHECKOUT = PACKAGE_DIR.parents[1]  # <repository> when this file is <repository>/harness/vibrofmu/paths.py
 
 

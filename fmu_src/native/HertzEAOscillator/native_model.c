@@ -2,7 +2,7 @@
  * model.c -- the native plant FMU: HertzEAOscillator.py's slave logic (vibromodel.plant.make_plant,
  * CompiledPlant, StatusSlave._initialise / _guarded_step) on the compiled kernel vibrokernel.c, with the
  * same checks, in the same order, and the same messages.  The rules' constants and fixed texts come from
- * rules.h, generated from vibromodel at build time (harness/vibrofmu/native.py).
+ * rules.h, generated from vibromodel at build time (harness/vibrofmu/fmus/native.py).
  *
  * Fidelities 0, 1, 2 with DOP853 or RK4 run here (kernel = 0 and 1 alike: the pure-Python plant gives the
  * compiled kernel's bits).  Fidelity 3 (slow-flow table) and fidelity 4 (OAFM fit) need set-up code that only

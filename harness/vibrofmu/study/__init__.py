@@ -11,7 +11,7 @@ import sys
 import time
 from pathlib import Path
 
-from .spec import KINDS
+from vibrofmu.study.spec import KINDS
 
 
 def add_parser(sub) -> None:
@@ -37,7 +37,7 @@ def add_parser(sub) -> None:
 
 
 def cmd_study(args) -> int:
-    from .spec import SpecError
+    from vibrofmu.study.spec import SpecError
 
     try:
         return _run(args)
@@ -52,9 +52,9 @@ def cusp_test(client, spec, store, fmu_digest, out: Path) -> list[dict]:
     import numpy as np
     from distributed import as_completed
 
-    from .. import export
-    from .cusp import run_test_point, test_points
-    from .scheduling import STOP, Progress
+    from vibrofmu.output import export
+    from vibrofmu.study.cusp import run_test_point, test_points
+    from vibrofmu.study.scheduling import STOP, Progress
 
     table = store.load()
     data = {name: np.asarray(table.column(name).to_pylist()) for name in table.column_names}
@@ -81,13 +81,13 @@ def _run(args) -> int:
     import hashlib
     import json
 
-    from .. import export
-    from ..build import PLANT_FMU, build_plant
-    from . import analysis, plots
-    from .cases import make_cases
-    from .scheduling import FmuFile, Progress, connect, execute, stop_on_sigint
-    from .spec import SpecError, build_spec
-    from .storage import Store
+    from vibrofmu.output import export
+    from vibrofmu.fmus.build import PLANT_FMU, build_plant
+    from vibrofmu.study import analysis, plots
+    from vibrofmu.study.cases import make_cases
+    from vibrofmu.study.scheduling import FmuFile, Progress, connect, execute, stop_on_sigint
+    from vibrofmu.study.spec import SpecError, build_spec
+    from vibrofmu.study.storage import Store
 
     spec = build_spec(args.kind, args.spec, args.set, args.quick, args.engine)
     if args.workers is not None and args.workers < 1:

@@ -22,9 +22,9 @@ import numpy as np
 
 from vibromodel import averaging as av
 
-from ..stability import sweep_tolerance
-from ..sweep import SETTLE_TOLERANCE, Sweep, SweepPoint, hysteresis_jumps
-from .spec import Spec
+from vibrofmu.analyses.stability import sweep_tolerance
+from vibrofmu.analyses.sweep import SETTLE_TOLERANCE, Sweep, SweepPoint, hysteresis_jumps
+from vibrofmu.study.spec import Spec
 
 Z95 = 1.959963984540054  # two-sided 95 % normal quantile
 # response map: up and down amplitudes farther apart than this are on different branches. Each settled
@@ -53,7 +53,7 @@ def projection(run: dict, workers: int) -> dict:
     c_w, c_s = run.get("case_cost_s_mean", math.nan), run.get("scheduler_s_per_task", math.nan)
     if not (c_w > 0 and c_s > 0):
         return {}
-    from .scheduling import needed_batch
+    from vibrofmu.study.scheduling import needed_batch
 
     b_needed = needed_batch(c_s, c_w, workers)
     out = {"workers": workers, "case_cost_s": c_w, "scheduler_s_per_task": c_s}
@@ -166,7 +166,7 @@ def to_initial_state(model, AB: np.ndarray) -> np.ndarray:
 def basins(spec: Spec, d: dict) -> dict:
     from scipy.spatial import cKDTree
 
-    from .cases import basins_omega
+    from vibrofmu.study.cases import basins_omega
 
     omega = basins_omega(spec)
     scene = spec.base_scene().with_values(omega=omega)
@@ -278,7 +278,7 @@ def response_map(spec: Spec, d: dict, tests: list[dict] | None = None) -> dict:
         run_cusp = {"Delta_bracket": [float(deltas[first - 1]) if first > 0 else None, float(deltas[first])],
                     "omega": float(0.5 * (where.min() + where.max())),
                     "first_bistable_Delta": float(deltas[first])}
-    from . import cusp as cusp_module
+    from vibrofmu.study import cusp as cusp_module
 
     extrapolation = {
         "runs_sweeps": cusp_module.extrapolate(cusp_module.band_rows(deltas, omegas, measured, np.abs(r["up"] - r["down"]))),

@@ -22,7 +22,7 @@ import numpy as np
 from vibromodel import averaging as av
 from vibromodel.parameters import Scene
 
-from .spec import Spec
+from vibrofmu.study.spec import Spec
 
 
 def basins_omega(spec: Spec) -> float:
@@ -95,7 +95,7 @@ def run_case(spec: Spec, engine, case: dict) -> list[dict]:
         scene = scene.with_values(omega=omega)
         start = scene  # this point's start state (the previous point's end state)
         if stopped:
-            from .engines import Outcome
+            from vibrofmu.study.engines import Outcome
 
             outcome = Outcome(failed=True, message=f"not run: {stopped}")
         else:

@@ -33,7 +33,7 @@ import numpy as np
 
 from vibromodel import averaging as av
 
-from ..sweep import SAMPLES_PER_PERIOD, WINDOW_PERIODS, first_harmonic
+from vibrofmu.analyses.sweep import SAMPLES_PER_PERIOD, WINDOW_PERIODS, first_harmonic
 
 MIN_POINTS = 3  # extrapolation: rows with at least 3 bistable grid points (width >= 3 omega steps; a band of
 # one or two points has a width error of +-1 step, i.e. 50-100 %)
@@ -274,9 +274,9 @@ def test_points(spec, data: dict) -> list[dict]:
 
 def run_test_point(spec_dict: dict, fmu_digest: str | None, point: dict) -> dict:
     """A Dask task: the two-start test at one grid point on this worker's engine."""
-    from .engines import engine_for
-    from .scheduling import _FMU_BYTES
-    from .spec import Spec
+    from vibrofmu.study.engines import engine_for
+    from vibrofmu.study.scheduling import _FMU_BYTES
+    from vibrofmu.study.spec import Spec
 
     spec = Spec(**spec_dict)
     engine = engine_for(spec.engine, _FMU_BYTES.get(fmu_digest) if fmu_digest else None)

@@ -25,7 +25,7 @@ from vibromodel.integrate import IntegrationError, TerminalEvent
 from vibromodel.parameters import ParameterError, Scene
 from vibromodel.plant import Settings
 
-from ..sweep import settle_loop
+from vibrofmu.analyses.sweep import settle_loop
 
 try:
     from fmpy.fmi1 import FMICallException as FmiError
@@ -144,7 +144,7 @@ class CoreEngine(Engine):
         import vibromodel
         from vibromodel.compiled import load_library
 
-        from ..kernel import kernel_library, kernel_sources
+        from vibrofmu.fmus.kernel import kernel_library, kernel_sources
 
         if kernel_sources():
             self.library = kernel_library()
@@ -166,7 +166,7 @@ class FmuRun:
     def __init__(self, engine: "FmuEngine", instance, scene: Scene):
         import ctypes
 
-        from ..simulate import start_values
+        from vibrofmu.analyses.simulate import start_values
 
         self.engine, self.instance = engine, instance
         self.fmu = instance.fmu
@@ -203,7 +203,7 @@ class FmuRun:
         return x, v
 
     def reason(self, error) -> str:
-        from ..run import _reason
+        from vibrofmu.hosts.run import _reason
 
         return _reason(error, self.engine.log, self.instance.name)
 
@@ -226,7 +226,7 @@ class FmuEngine(Engine):
     def __init__(self, fmu_bytes: bytes):
         from fmpy import extract
 
-        from ..run import FmuLog
+        from vibrofmu.hosts.run import FmuLog
 
         self.folder = tempfile.mkdtemp(prefix="vibrofmu-study-")
         self.fmu_path = os.path.join(self.folder, "plant.fmu")
@@ -241,7 +241,7 @@ class FmuEngine(Engine):
     def _instance(self):
         from fmpy.fmi1 import FMICallException
 
-        from ..run import FmuInstance
+        from vibrofmu.hosts.run import FmuInstance
 
         while self.idle:
             instance = self.idle.pop()
@@ -275,7 +275,7 @@ class FmuEngine(Engine):
         try:
             return FmuRun(self, instance, scene)
         except FmiError as error:  # the start values were refused: the FMU's log says why
-            from ..run import _reason
+            from vibrofmu.hosts.run import _reason
 
             self.give_back(instance)
             raise RunRefused(_reason(error, self.log, instance.name)) from None

@@ -9,7 +9,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from .spec import Spec  # noqa: E402
+from vibrofmu.study.spec import Spec  # noqa: E402
 
 
 def plot(spec: Spec, table, result: dict, out: Path) -> list[Path]:

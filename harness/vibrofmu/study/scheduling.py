@@ -29,7 +29,7 @@ import time
 from distributed import as_completed
 from distributed.diagnostics.plugin import WorkerPlugin
 
-from .spec import Spec, SpecError
+from vibrofmu.study.spec import Spec, SpecError
 
 CONNECT_TIMEOUT_S = 3.0  # --scheduler: give up connecting after this (the whole command must fail within 10 s)
 OVERHEAD_PROBE_TASKS = 200
@@ -77,8 +77,8 @@ def noop(i):
 
 def run_batch(spec_dict: dict, fmu_digest: str | None, cases: list[dict]) -> list[dict]:
     """A task: the rows of every case of the batch, on this worker's engine."""
-    from .engines import engine_for
-    from .cases import run_case
+    from vibrofmu.study.engines import engine_for
+    from vibrofmu.study.cases import run_case
 
     spec = Spec(**spec_dict)
     engine = engine_for(spec.engine, _FMU_BYTES.get(fmu_digest) if fmu_digest else None)
@@ -95,8 +95,8 @@ def warm_up(spec_dict: dict, fmu_digest: str | None) -> float:
     engine (unpack the FMU or load the kernel), so that the pilot measures a case, not the imports, and the
     speed-up from 1 to W workers is not diluted by this fixed per-worker cost. Returns its seconds."""
     started = time.perf_counter()
-    from .cases import run_case  # noqa: F401 - the import is the point
-    from .engines import engine_for
+    from vibrofmu.study.cases import run_case  # noqa: F401 - the import is the point
+    from vibrofmu.study.engines import engine_for
 
     spec = Spec(**spec_dict)
     if spec.engine == "core" or fmu_digest in _FMU_BYTES:

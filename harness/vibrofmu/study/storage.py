@@ -37,7 +37,7 @@ class Store:
     def prepare(self, spec_record: dict, resume: bool) -> None:
         """Create DIR; with resume, check that DIR holds this study (same spec digest); without, refuse a DIR
         that already holds results (so that nothing is overwritten by accident)."""
-        from .spec import SpecError
+        from vibrofmu.study.spec import SpecError
 
         self.dir.mkdir(parents=True, exist_ok=True)
         self.parts.mkdir(exist_ok=True)

@@ -35,7 +35,7 @@ import sys
 import time
 from pathlib import Path
 
-REPO_ROOT = Path(__file__).resolve().parents[2]  # the checkout (README.md, docs/) when run from one
+REPO_ROOT = Path(__file__).resolve().parents[3]  # the checkout (README.md, docs/) when run from one
 BLOCK = re.compile(r"<!-- report:(?P<name>[a-z_]+) -->\n(?P<body>.*?)<!-- /report:(?P=name) -->", re.S)
 OPEN = re.compile(r"<!-- report:([a-z_]+) -->")
 CLOSE = re.compile(r"<!-- /report:([a-z_]+) -->")
@@ -110,8 +110,8 @@ def accuracy_block(fmu: Path) -> str:
     import numpy as np
     from vibromodel.parameters import Scene
 
-    from .reference import reference_solution
-    from .run import run_fmu
+    from vibrofmu.analyses.reference import reference_solution
+    from vibrofmu.hosts.run import run_fmu
 
     scene = Scene()
     reference = reference_solution(scene, 0, 200.0)
@@ -136,9 +136,9 @@ def accuracy_block(fmu: Path) -> str:
 def ssp_block(fmu_dir: Path, work_dir: Path) -> str:
     from dataclasses import replace
 
-    from . import ssp
-    from .cli import DEFAULT_SCENE
-    from .cosim import load_scene, run_cosim
+    from vibrofmu.hosts import ssp
+    from vibrofmu.cli import DEFAULT_SCENE
+    from vibrofmu.hosts.cosim import load_scene, run_cosim
 
     scene = load_scene(DEFAULT_SCENE, fmu_dir)
     path = ssp.write_ssp(scene, work_dir / "closed_loop.ssp")
@@ -156,9 +156,9 @@ def ssp_orderings_block(fmu_dir: Path) -> str:
 
     import numpy as np
 
-    from . import closed_loop
-    from .cli import DEFAULT_SCENE
-    from .cosim import load_scene, run_cosim
+    from vibrofmu.analyses import closed_loop
+    from vibrofmu.cli import DEFAULT_SCENE
+    from vibrofmu.hosts.cosim import load_scene, run_cosim
 
     scene = load_scene(DEFAULT_SCENE, fmu_dir)
     lines = ["Error of the plant's x against the monolithic closed-loop FMU (max over τ = 0, 1, …, 200):", "",
@@ -181,7 +181,7 @@ def ssp_orderings_block(fmu_dir: Path) -> str:
 
 
 def container_block(fmu_dir: Path, quick: bool) -> str:
-    from . import container
+    from vibrofmu.hosts import container
 
     steps = CONTAINER_STEPS[:2] if quick else CONTAINER_STEPS
     rows = container.compare(fmu_dir, steps)
@@ -257,7 +257,7 @@ def stability_block(sources: list[Path]) -> str | None:
 
 def speed_block(sources: list[Path]) -> str | None:
     """Ratios from bench.json and the oafm / stability summaries in the given folders; None if there are none."""
-    from . import bench
+    from vibrofmu.speed import bench
 
     lines = []
     for folder in sources:
@@ -317,7 +317,7 @@ def generate(names, fmu_dir: Path, sources: list[Path], quick: bool, work_dir: P
 def run_studies(fmu_dir: Path, work_dir: Path, quick: bool) -> list[Path] | None:
     """Run oafm, stability and bench (quick: fewer orders, quick bench) into work_dir; the folders of those that
     completed (a failure is printed and skipped)."""
-    from .cli import main
+    from vibrofmu.cli import main
 
     plant = str(fmu_dir / "HertzEAOscillator.fmu")
     runs = {"oafm": ["oafm", "--fmu", plant] + (["--study-max-order", "3"] if quick else []),
@@ -360,8 +360,8 @@ def add_parser(sub) -> None:
 def cmd_report(args) -> int:
     import tempfile
 
-    from .build import build_all
-    from .ssp import default_build_dir
+    from vibrofmu.fmus.build import build_all
+    from vibrofmu.hosts.ssp import default_build_dir
 
     root = Path(args.root)
     if not (root / "README.md").is_file() or not (root / "docs").is_dir():

@@ -16,7 +16,7 @@ independent references.
   phase (solve_ivp, no event needed: the indentation stays positive inside it) joined to the exact free-flight
   parabola x'' = 1, with the phase durations from quadrature.
 
-Command line (no CLI entry): python -m vibrofmu.campaigns [n_scenes] [seed]; python -m vibrofmu.campaigns graze.
+Command line (no CLI entry): python -m vibrofmu.analyses.campaigns [n_scenes] [seed]; python -m vibrofmu.analyses.campaigns graze.
 """
 from __future__ import annotations
 
@@ -32,7 +32,7 @@ from vibromodel.integrate import TerminalEvent
 from vibromodel.parameters import Scene
 from vibromodel.plant import Plant, Settings, Solver
 
-from .reference import reference_solution
+from vibrofmu.analyses.reference import reference_solution
 
 CONTACT_X = -1.5  # 1 + 2x/3 = 0
 
@@ -278,7 +278,7 @@ def graze_sweep(depth_exponents=np.arange(1.0, 12.01, 0.5), rtols=(1e-3, 1e-4, 1
 def main(argv: list[str]) -> None:
     """Run N scenes (default 10,000) in chunks of 500 (seeds SEED*1000 + chunk), printing the running totals after
     each chunk."""
-    from . import kernel
+    from vibrofmu.fmus import kernel
 
     if argv and argv[0] == "graze":
         rows = graze_sweep()

@@ -25,8 +25,8 @@ from pathlib import Path
 import numpy as np
 from fmpy import extract, read_model_description, simulate_fmu
 
-from . import paths
-from .pythonenv import ENV_FILE, ENV_VARIABLE, describe, env_text, imported_modules, missing, parse_env, record_for
+from vibrofmu import paths
+from vibrofmu.fmus.pythonenv import ENV_FILE, ENV_VARIABLE, describe, env_text, imported_modules, missing, parse_env, record_for
 
 FMU_SRC = paths.FMU_SRC
 HOST_SOURCE = paths.C_HOST_DIR / "fmi2_host.c"

@@ -2,9 +2,9 @@
 side by side in one run: doStep + getReal(x) over tau in [0, STOP], paper example, best of REPEATS, at intervals
 0.1 and 1, in the plain C host of the bench ladder (timing_host.c, `vibrofmu doctor`'s environment) and under FMPy.
 
-    python -m vibrofmu.loopcost BUILD_DIR [--repeats 3] [--kernel 0|1] [--reference 0|1|2] [--clock wall|cpu]
+    python -m vibrofmu.speed.loopcost BUILD_DIR [--repeats 3] [--kernel 0|1] [--reference 0|1|2] [--clock wall|cpu]
 
-BUILD_DIR holds HertzEAOscillator.fmu and HertzEAClosedLoop.fmu (vibrofmu.build). Both FMUs run with their
+BUILD_DIR holds HertzEAOscillator.fmu and HertzEAClosedLoop.fmu (vibrofmu.fmus.build). Both FMUs run with their
 defaults (the closed loop's reference: --reference, default its own). Numbers on a shared machine are noisy; each
 host and interval runs the two FMUs one after the other, so their ratio is the number to read. On a loaded
 machine a long loop is preempted more often than a short one, which inflates the wall-time ratio; --clock cpu
@@ -20,7 +20,7 @@ from pathlib import Path
 
 from fmpy import extract
 
-from .ladder import compile_timing_host, fmpy_run, host_run
+from vibrofmu.speed.ladder import compile_timing_host, fmpy_run, host_run
 
 STOP = 200.0
 INTERVALS = (0.1, 1.0)

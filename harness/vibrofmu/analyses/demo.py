@@ -8,7 +8,7 @@ import numpy as np
 from vibromodel.parameters import Scene
 from vibromodel.plant import Settings
 
-from .simulate import simulate
+from vibrofmu.analyses.simulate import simulate
 
 TABLE_TAUS = (10.0, 25.0, 50.0, 100.0, 200.0)
 DEMO_SETTINGS = Settings(fidelity=0, solver=0, rtol=1e-10)

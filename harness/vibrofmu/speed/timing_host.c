@@ -1,6 +1,6 @@
 /*
  * timing_host.c -- the plain C FMI 2.0 host of `vibrofmu bench`'s ladder: the cost per output of an FMU as a
- * system-simulation tool pays it, without any Python host around the calls (compiled by vibrofmu.bench).
+ * system-simulation tool pays it, without any Python host around the calls (compiled by vibrofmu.speed.bench).
  *
  * Usage: timing_host LIBRARY RESOURCE_URI GUID STOP STEP REPEATS XVR [rVR=VALUE | iVR=VALUE ...]
  *                    [then STEP [rVR=VALUE | iVR=VALUE ...] ...]

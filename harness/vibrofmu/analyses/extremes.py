@@ -32,9 +32,9 @@ from vibromodel.models import make_model
 from vibromodel.parameters import MIN_RTOL, PULL_IN_GAP, Scene
 from vibromodel.plant import RK4_DEFAULT_STEP, Settings, Solver
 
-from .reference import reference_solution
-from .run import FmuInstance, run_fmu
-from .simulate import plant_run
+from vibrofmu.analyses.reference import reference_solution
+from vibrofmu.hosts.run import FmuInstance, run_fmu
+from vibrofmu.analyses.simulate import plant_run
 
 
 # -- helpers ---------------------------------------------------------------------------------------------------
@@ -478,7 +478,7 @@ def memory(fmu, quick: bool = True) -> dict:
 def extreme_rows(quick: bool = True, fmu: Path | str | None = None) -> list[dict]:
     """Every extreme's row; fmu: the plant FMU (built into a temporary folder if not given)."""
     if fmu is None:
-        from .build import build_plant
+        from vibrofmu.fmus.build import build_plant
 
         fmu = build_plant(Path(tempfile.mkdtemp(prefix="vibrofmu-extremes-")))
     rows = [energy_drift(quick)]

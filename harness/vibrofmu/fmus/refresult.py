@@ -20,7 +20,7 @@ import scipy
 from fmpy import read_model_description, simulate_fmu
 from fmpy.util import read_csv, validate_result
 
-from .export import write_csv
+from vibrofmu.output.export import write_csv
 
 DOCUMENTATION = "documentation"
 

@@ -11,10 +11,10 @@ from vibromodel import fidelities
 from vibromodel.parameters import ParameterError, Scene, consistency_warning, validate
 from vibromodel.plant import Plant, Settings, checked_settings
 
-from . import export
-from .compare import errors
-from .reference import REFERENCE_ATOL, REFERENCE_RTOL, Reference, reference_solution
-from .run import RunResult, run_fmu
+from vibrofmu.output import export
+from vibrofmu.analyses.compare import errors
+from vibrofmu.analyses.reference import REFERENCE_ATOL, REFERENCE_RTOL, Reference, reference_solution
+from vibrofmu.hosts.run import RunResult, run_fmu
 
 FIDELITIES = fidelities.keys()  # command-line names -> levels (the registry)
 SOLVERS = {"adaptive": 0, "rk4": 1}

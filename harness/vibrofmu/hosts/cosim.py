@@ -32,7 +32,7 @@ import numpy as np
 from fmpy import read_model_description
 from fmpy.fmi1 import FMICallException
 
-from .run import FmuInstance, FmuLog, _reason
+from vibrofmu.hosts.run import FmuInstance, FmuLog, _reason
 
 ORDERINGS = ("gauss-seidel", "jacobi", "fmpy")
 SCENE_KEYS = {"stop_time", "step", "ordering", "tolerance", "connections", "fmu"}
@@ -92,7 +92,7 @@ def load_scene(path: Path | str, fmu_dir: Path) -> CosimScene:
     first, then against fmu_dir (the build folder)."""
     path = Path(path)
     if path.suffix == ".ssp":
-        from .ssp import load_ssp
+        from vibrofmu.hosts.ssp import load_ssp
         return load_ssp(path)
     try:
         text = path.read_text()

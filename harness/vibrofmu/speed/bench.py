@@ -35,11 +35,13 @@ from vibromodel.parameters import ParameterError, Scene
 from vibromodel.compiled import CompiledPlant
 from vibromodel.plant import Kernel, Settings, Solver
 
-from . import export, ladder
-from .kernel import kernel_library
-from .reference import reference_solution
-from .run import FmuInstance, FmuLog, _reason
-from .simulate import plant_run, start_values
+from vibrofmu.output import export
+
+from vibrofmu.speed import ladder
+from vibrofmu.fmus.kernel import kernel_library
+from vibrofmu.analyses.reference import reference_solution
+from vibrofmu.hosts.run import FmuInstance, FmuLog, _reason
+from vibrofmu.analyses.simulate import plant_run, start_values
 
 BENCH_RTOL = 1e-13  # the reference's rtol (atol = 1e-2 rtol, like everything here)
 SELF_CHECK_RTOL = 1e-12  # a second reference, to show the first one's own error
@@ -528,7 +530,7 @@ def run_bench(fmu: Path, out_dir: Path, quick: bool = False, repeats: int | None
         # built first: a pythonfmu FMU run in this process imports the pythonfmu copy packed in its resources
         # (without the builder's binaries), after which pythonfmu's builder in this process makes FMUs without
         # binaries/linux64 ("has no binaries/linux64/HertzEAClosedLoop.so" after the cases)
-        from .build import build_closed_loop
+        from vibrofmu.fmus.build import build_closed_loop
 
         with tempfile.TemporaryDirectory(prefix="vibrofmu-bench-loop-") as tmp:
             say_first = progress or (lambda line: None)
@@ -617,7 +619,7 @@ def run_ladder_with_fmus(fmu: Path, closed_loop_fmu: Path | None, quick: bool, s
     intervals = LADDER_QUICK_INSTRUCTION_INTERVALS if quick else ladder.INSTRUCTION_INTERVALS
     with tempfile.TemporaryDirectory(prefix="vibrofmu-bench-loop-") as tmp:
         if closed_loop_fmu is None:
-            from .build import build_closed_loop
+            from vibrofmu.fmus.build import build_closed_loop
 
             closed_loop_fmu = build_closed_loop(Path(tmp))
         record = ladder.run_ladder(fmu, closed_loop_fmu, stop=stop, rounds=rounds, instructions=instructions,

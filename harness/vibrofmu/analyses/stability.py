@@ -21,10 +21,12 @@ from vibromodel.averaging_printed import printed_averaged, printed_classificatio
 from vibromodel.parameters import Scene
 from vibromodel.plant import Plant, Settings
 
-from . import export, shooting
-from .run import run_fmu
-from .simulate import start_values
-from .sweep import MAX_PERIODS, SETTLE_TOLERANCE, WINDOW_PERIODS, Sweep, hysteresis_jumps, sweep
+from vibrofmu.output import export
+
+from vibrofmu.analyses import shooting
+from vibrofmu.hosts.run import run_fmu
+from vibrofmu.analyses.simulate import start_values
+from vibrofmu.analyses.sweep import MAX_PERIODS, SETTLE_TOLERANCE, WINDOW_PERIODS, Sweep, hysteresis_jumps, sweep
 
 FOLD_MARGIN = 4.0  # grid points within this many fold-location uncertainties of a fold are "at a fold"
 

@@ -36,10 +36,10 @@ from vibromodel.integrate import ATOL_PER_RTOL
 from vibromodel.models import Fidelity
 from vibromodel.parameters import Scene
 
-from . import paths
-from .doctor import host_environment
-from .reference import reference_solution
-from .run import FmuInstance
+from vibrofmu import paths
+from vibrofmu.hosts.doctor import host_environment
+from vibrofmu.analyses.reference import reference_solution
+from vibrofmu.hosts.run import FmuInstance
 
 TIMING_HOST_SOURCE = Path(__file__).with_name("timing_host.c")
 FMU_SRC = paths.FMU_SRC  # the checkout's fmu_src/ or the installed vibrofmu/fmu_src/
@@ -480,7 +480,7 @@ def ladder_lines(ladder: dict) -> list[str]:
 def plot_ladder(path: Path, ladder: dict) -> None:
     """Error of x against cost per output, one marker per rung: the time columns in the top row; below, the
     instruction counts per interval (when measured) and the ratios to exact f0 that the acceptance reads."""
-    from . import export
+    from vibrofmu.output import export
 
     plt = export.plt
     columns = [(c["host"], c["interval"]) for c in ladder["rungs"][0]["columns"]]

@@ -6,7 +6,7 @@ deterministic. This module runs the ladder's C timing host (timing_host.c, one r
 the work of the output loop (doStep + getReal(x)) and nothing of instantiation or initialisation; divided by
 the number of outputs it is the instruction cost per output.
 
-    python -m vibrofmu.instructions [--build DIR] [--stop 200] [--interval 0.1 --interval 1]
+    python -m vibrofmu.speed.instructions [--build DIR] [--stop 200] [--interval 0.1 --interval 1]
 
 prints the ladder's rungs on the native FMUs of DIR/native (default build/native), plus the pythonfmu FMUs of
 DIR where they run in the C host (--pythonfmu), plus the plant FMU of an older checkout's build folder
@@ -23,8 +23,8 @@ from pathlib import Path
 
 from fmpy import extract
 
-from . import paths
-from .ladder import RUNGS, callgrind_counts, compile_timing_host, host_command, valgrind_missing
+from vibrofmu import paths
+from vibrofmu.speed.ladder import RUNGS, callgrind_counts, compile_timing_host, host_command, valgrind_missing
 
 FMU_FILES = {"plant": "HertzEAOscillator.fmu", "closed_loop": "HertzEAClosedLoop.fmu"}
 
@@ -58,7 +58,7 @@ def count_instructions(fmu_unzip_dir, start_values: dict, stop: float, interval:
 _FLOOR_SETUP = """
 import ctypes, sys
 from pathlib import Path
-from vibrofmu.kernel import compile_kernel
+from vibrofmu.fmus.kernel import compile_kernel
 from vibromodel.compiled import CompiledPlant, load_library
 from vibromodel.parameters import Scene
 from vibromodel.plant import Settings
@@ -122,7 +122,7 @@ def legacy_environment() -> dict:
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m vibrofmu.instructions", description=__doc__.split("\n\n")[0])
+    parser = argparse.ArgumentParser(prog="python -m vibrofmu.speed.instructions", description=__doc__.split("\n\n")[0])
     parser.add_argument("--build", type=Path, default=Path("build"), help="folder with the built FMUs")
     parser.add_argument("--stop", type=float, default=200.0)
     parser.add_argument("--interval", type=float, action="append", help="output interval (repeatable)")

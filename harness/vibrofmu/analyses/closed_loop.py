@@ -13,9 +13,9 @@ from vibromodel.control import ESTIMATE_NAMES, THETA_NAMES, Law, true_theta
 from vibromodel.parameters import Scene, scene_names
 from vibromodel.tracking import ReferenceKind
 
-from . import export
-from .cosim import CosimScene, run_cosim
-from .run import run_fmu
+from vibrofmu.output import export
+from vibrofmu.hosts.cosim import CosimScene, run_cosim
+from vibrofmu.hosts.run import run_fmu
 
 TOLERANCE = 1e-10  # rtol of the plant's integrator (docs/model.md, Adaptive controller simulation)
 STUDY_STEPS = (0.5, 0.2, 0.1, 0.05, 0.02)

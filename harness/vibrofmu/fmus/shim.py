@@ -34,7 +34,7 @@ import xml.etree.ElementTree as ET
 import zipfile
 from pathlib import Path
 
-from . import paths
+from vibrofmu import paths
 
 SHIM_SOURCE = paths.FMU_SRC / "fmi2_status_shim.c"
 PYLOADER_SOURCE = SHIM_SOURCE.with_name("pyloader.c")  # finds the FMU's Python (see there)

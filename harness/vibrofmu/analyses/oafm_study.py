@@ -18,9 +18,9 @@ from vibromodel.oafm_bases import paper_transient_basis
 from vibromodel.oafm_printed import C1_C4, TAU_STAR, printed_solution
 from vibromodel.parameters import Scene, consistency_warning
 
-from . import export
-from .reference import reference_solution
-from .run import run_fmu
+from vibrofmu.output import export
+from vibrofmu.analyses.reference import reference_solution
+from vibrofmu.hosts.run import run_fmu
 
 ERROR_SPACING = 0.02  # 300+ points per forcing period
 BREAKDOWN_FRACTION = 0.01  # error above 1 % of the domain's amplitude: not a valid approximation there

@@ -13,7 +13,7 @@ What goes where in the SSD:
   `simulate_ssp` calls `setupExperiment` without a tolerance, and the FMUs then use `rtol`, so both
   masters integrate with the same tolerance;
 - stop time in `DefaultExperiment`; the communication step and the ordering, which SSP 1.0 has no
-  element for, in an annotation of type `org.vibrofmu.cosim`.
+  element for, in an annotation of type `org.vibrofmu.hosts.cosim`.
 
 FMPy 0.3.32's `simulate_ssp` does not apply the SSD's parameter bindings itself (it takes a
 `parameter_set` argument instead): `fmpy_parameter_set` builds that set from the bindings, so that
@@ -27,7 +27,7 @@ import zipfile
 from pathlib import Path
 
 
-ANNOTATION = "org.vibrofmu.cosim"
+ANNOTATION = "org.vibrofmu.hosts.cosim"
 SSD_NAME = "SystemStructure.ssd"
 NAMESPACES = {
     "ssd": "http://ssp-standard.org/SSP1/SystemStructureDescription",
@@ -131,7 +131,7 @@ def load_ssp(path: Path | str, unzip_dir: Path | None = None) -> CosimScene:
     new temporary folder that lives as long as the process). Raises SceneError naming the problem."""
     from fmpy.ssp.ssd import Component, read_ssd
 
-    from .cosim import Connection, CosimScene, SceneError, _check_numbers, _fmu_spec
+    from vibrofmu.hosts.cosim import Connection, CosimScene, SceneError, _check_numbers, _fmu_spec
 
     path = Path(path)
     try:
@@ -172,7 +172,7 @@ def _annotation(path: Path) -> dict:
     """Stop time (DefaultExperiment) and the cosim annotation's step, ordering, tolerance."""
     import xml.etree.ElementTree as ET
 
-    from .cosim import SceneError
+    from vibrofmu.hosts.cosim import SceneError
 
     with zipfile.ZipFile(path) as archive:
         root = ET.fromstring(archive.read(SSD_NAME))
@@ -225,7 +225,7 @@ def simulate_with_fmpy(path: Path | str, step: float | None = None, stop_time: f
 
 def write_scene_ssps(scene_files, fmu_dir: Path, out_dir: Path) -> list[Path]:
     """Each TOML/JSON scene as out_dir/<stem>.ssp (the FMUs from fmu_dir)."""
-    from .cosim import load_scene
+    from vibrofmu.hosts.cosim import load_scene
 
     written = []
     for scene_file in scene_files:
@@ -249,9 +249,9 @@ def max_difference(a: dict, b: dict, columns) -> dict:
 def default_build_dir() -> Path:
     """Where `vibrofmu build` puts the FMUs by default (paths.build_dir where the package has that resolver)."""
     try:
-        from .paths import build_dir
+        from vibrofmu.paths import build_dir
     except ImportError:
-        from .build import BUILD_DIR
+        from vibrofmu.fmus.build import BUILD_DIR
 
         return BUILD_DIR
     return build_dir()
@@ -271,8 +271,8 @@ def add_parser(sub) -> None:
 def cmd_ssp(args) -> int:
     from dataclasses import replace
 
-    from .build import build_all
-    from .cosim import SceneError, run_cosim
+    from vibrofmu.fmus.build import build_all
+    from vibrofmu.hosts.cosim import SceneError, run_cosim
 
     fmu_dir = Path(args.fmu_dir or default_build_dir())
     if not all((fmu_dir / name).exists() for name in ("HertzEAOscillator.fmu", "AdaptiveLyapunovController.fmu")):

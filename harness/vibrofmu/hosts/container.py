@@ -136,8 +136,8 @@ def run_container(fmu: Path, step: float, stop_time: float = STOP_TIME) -> dict:
 def master_scene(fmu_dir: Path, step: float, stop_time: float = STOP_TIME):
     """The container's loop as a scene of the project's master: FMUs in the order reference, controller, plant;
     Jacobi; the same parameters and tolerance."""
-    from .cli import DEFAULT_SCENE
-    from .cosim import load_scene
+    from vibrofmu.cli import DEFAULT_SCENE
+    from vibrofmu.hosts.cosim import load_scene
 
     scene = load_scene(DEFAULT_SCENE, Path(fmu_dir))
     specs = {spec.name: spec for spec in scene.fmus}
@@ -160,7 +160,7 @@ def run_master_like_container(scene) -> dict:
     the connections are copied in order. Returns {"time", "x", "x_ref"} at the communication points."""
     import numpy as np
 
-    from .cosim import Master
+    from vibrofmu.hosts.cosim import Master
 
     master = Master(scene)
     inst = master.instances
@@ -200,8 +200,8 @@ def compare(fmu_dir: Path, steps=(0.1, 0.05, 0.01), stop_time: float = STOP_TIME
     at the communication points, for each H."""
     import numpy as np
 
-    from . import closed_loop
-    from .cosim import run_cosim
+    from vibrofmu.analyses import closed_loop
+    from vibrofmu.hosts.cosim import run_cosim
 
     fmu_dir = Path(fmu_dir)
     work_dir = Path(work_dir or tempfile.mkdtemp(prefix="vibrofmu_container_"))
@@ -257,8 +257,8 @@ def cmd_container(args) -> int:
     import math
     import sys
 
-    from .build import build_all
-    from .ssp import default_build_dir
+    from vibrofmu.fmus.build import build_all
+    from vibrofmu.hosts.ssp import default_build_dir
 
     steps = tuple(args.compare or (0.1, 0.05, 0.01)) if args.compare is not None else ()
     for H in (args.H, *steps):

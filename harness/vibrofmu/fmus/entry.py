@@ -24,7 +24,7 @@ import shutil
 import sys
 from pathlib import Path
 
-ENTRY = '''"""pythonfmu entry point of the {name} FMU; the slave is {module}.py (see vibrofmu.entry for why)."""
+ENTRY = '''"""pythonfmu entry point of the {name} FMU; the slave is {module}.py (see vibrofmu.fmus.entry for why)."""
 import sys
 globals()["{name}"] = __import__("{module}").{name}
 globals()[""] = globals()["{name}"]  # what pythonfmu's findClass looks up when the locals hold no class

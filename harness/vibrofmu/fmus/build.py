@@ -20,13 +20,13 @@ from vibromodel.compiled import LIBRARY_NAME
 from vibromodel.parameters import Scene
 from vibromodel.plant import DEFAULT_EXPERIMENT
 
-from . import paths
-from .entry import importable, pythonfmu_entry
-from .fmu_variables import annotate
-from .kernel import compile_kernel
-from .pythonenv import pack_python_env
-from .refresult import pack_reference
-from .shim import install_status_shim
+from vibrofmu import paths
+from vibrofmu.fmus.entry import importable, pythonfmu_entry
+from vibrofmu.fmus.fmu_variables import annotate
+from vibrofmu.fmus.kernel import compile_kernel
+from vibrofmu.fmus.pythonenv import pack_python_env
+from vibrofmu.fmus.refresult import pack_reference
+from vibrofmu.fmus.shim import install_status_shim
 
 FMU_SRC = paths.FMU_SRC
 PLANT_SLAVE = FMU_SRC / "HertzEAOscillator.py"
@@ -55,7 +55,7 @@ def build_fmu(slave: Path, out_dir: Path | None = None, extra_resources: tuple[P
     the slaves save their whole state (slave_support.StatusSlave; pythonfmu alone saves registered variables only)."""
     out_dir = Path(out_dir) if out_dir is not None else paths.build_dir()
     out_dir.mkdir(parents=True, exist_ok=True)
-    with tempfile.TemporaryDirectory() as tmp, importable(FMU_SRC):  # an entry script in front (vibrofmu.entry)
+    with tempfile.TemporaryDirectory() as tmp, importable(FMU_SRC):  # an entry script in front (vibrofmu.fmus.entry)
         entry, implementation = pythonfmu_entry(slave, Path(tmp))
         project_files = [paths.vibromodel_dir(), FMU_SRC / "slave_support.py", FMU_SRC / "fast_path.py",
                          implementation, *extra_resources]
@@ -108,7 +108,7 @@ def _kernel(folder: Path) -> tuple[Path, ...]:
 
 
 def build_all(out_dir: Path | None = None) -> list[Path]:
-    """The pythonfmu FMUs in out_dir (default ./build) and their native twins in out_dir/native (vibrofmu.native)."""
+    """The pythonfmu FMUs in out_dir (default ./build) and their native twins in out_dir/native (vibrofmu.fmus.native)."""
     fmus = [build(out_dir) for build in (build_plant, build_controller, build_closed_loop)]
     return fmus + build_natives(fmus, Path(fmus[0]).parent / "native")
 
@@ -116,7 +116,7 @@ def build_all(out_dir: Path | None = None) -> list[Path]:
 def build_natives(fmus: list[Path], out_dir: Path) -> list[Path]:
     """The native FMU of each pythonfmu FMU that has a native model (fmu_src/native/<id>/); none without a C
     compiler."""
-    from .native import NATIVE_SRC, build_native
+    from vibrofmu.fmus.native import NATIVE_SRC, build_native
 
     if compiled_parts() is not None:
         return []

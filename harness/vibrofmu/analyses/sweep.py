@@ -22,8 +22,8 @@ from fmpy.fmi1 import FMICallException
 from vibromodel.parameters import Scene
 from vibromodel.plant import Settings
 
-from .run import FmuInstance, _reason
-from .simulate import start_values
+from vibrofmu.hosts.run import FmuInstance, _reason
+from vibrofmu.analyses.simulate import start_values
 
 WINDOW_PERIODS = 10
 SAMPLES_PER_PERIOD = 32  # communication steps per forcing period; the first harmonic is exact for these
