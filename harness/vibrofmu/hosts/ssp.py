@@ -13,7 +13,7 @@ What goes where in the SSD:
   `simulate_ssp` calls `setupExperiment` without a tolerance, and the FMUs then use `rtol`, so both
   masters integrate with the same tolerance;
 - stop time in `DefaultExperiment`; the communication step and the ordering, which SSP 1.0 has no
-  element for, in an annotation of type `org.vibrofmu.hosts.cosim`.
+  element for, in an annotation of type `org.vibrofmu.cosim`.
 
 FMPy 0.3.32's `simulate_ssp` does not apply the SSD's parameter bindings itself (it takes a
 `parameter_set` argument instead): `fmpy_parameter_set` builds that set from the bindings, so that
@@ -27,7 +27,7 @@ import zipfile
 from pathlib import Path
 
 
-ANNOTATION = "org.vibrofmu.hosts.cosim"
+ANNOTATION = "org.vibrofmu.cosim"
 SSD_NAME = "SystemStructure.ssd"
 NAMESPACES = {
     "ssd": "http://ssp-standard.org/SSP1/SystemStructureDescription",
