@@ -7,7 +7,7 @@ import math
 import pytest
 
 from vibrofmu.analyses.closed_loop import STUDY_STEPS, convergence_study
-from vibrofmu.cli import DEFAULT_SCENE
+from vibrofmu.paths import DEFAULT_SCENE
 from vibrofmu.hosts.cosim import SceneError, load_scene, run_cosim
 
 

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from vibrofmu.output import report
+from vibrofmu import report
 from vibrofmu.cli import main
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -192,7 +192,7 @@ def test_ladder_only_writes_bench_json_the_report_reads(plant_fmu, monkeypatch, 
     the ladder, and the report's speed block shows it."""
     from vibrofmu.speed import bench
     from vibrofmu.fmus import build
-    from vibrofmu.output import report
+    from vibrofmu import report
     from vibrofmu.cli import main
 
     stand_in_runs(monkeypatch)

@@ -16,7 +16,8 @@ import pytest
 from fmpy.validation import validate_fmu
 
 from vibrofmu.hosts import container, ssp
-from vibrofmu.cli import DEFAULT_SCENE
+from vibrofmu.analyses import container_check
+from vibrofmu.paths import DEFAULT_SCENE
 from vibrofmu.hosts.cosim import SceneError, load_scene, run_cosim
 
 STOP = 20.0  # 200 communication steps at H = 0.1: every FMU and connection is exercised, about 1 s per run
@@ -99,7 +100,7 @@ def test_container_validates_and_runs_its_default_experiment(container_fmu):
 
 def test_container_equals_the_master_with_its_call_sequence(fmu_dir, container_fmu):
     H = 0.1
-    ours = container.run_master_like_container(container._with_rtol(container.master_scene(fmu_dir, H, STOP)))
+    ours = container_check.run_master_like_container(container_check._with_rtol(container_check.master_scene(fmu_dir, H, STOP)))
     theirs = container.run_container(container_fmu, H, STOP)
     n = len(ours["x"])
     assert len(theirs["x"]) == n

@@ -16,6 +16,11 @@ from pathlib import Path
 
 PACKAGE_DIR = Path(__file__).resolve().parent
 SCENES_DIR = PACKAGE_DIR / "hosts" / "scenes"
+DEFAULT_SCENE = SCENES_DIR / "closed_loop.toml"  # the closed-loop co-simulation scene (source of closed_loop.ssp)
+PLANT_NAME = "HertzEAOscillator.fmu"  # the FMU files `vibrofmu build` writes
+CONTROLLER_NAME = "AdaptiveLyapunovController.fmu"
+CLOSED_LOOP_NAME = "HertzEAClosedLoop.fmu"
+PLANT_MODEL = "HertzEAOscillator"
 _CHECKOUT = PACKAGE_DIR.parents[1]  # <repository> when this file is <repository>/harness/vibrofmu/paths.py
 
 

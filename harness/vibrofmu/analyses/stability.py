@@ -334,3 +334,19 @@ def write_study(study: dict, out_dir: Path) -> None:
         (response.omega, response.r, response.stable), study["sweeps"], study["folds"], study["summary"]["omega_range"],
         f"frequency response: mu = {s.mu:g}, Delta = {s.Delta:g}, alpha = {s.alpha:g}, beta = {s.beta:g}, "
         f"gamma = {s.gamma:g}, Omega = {s.Omega:g}")
+
+
+def multiplier_error_note(scene: Scene, model: av.Averaged, omega: float) -> str | None:
+    """Why the slow flow's multipliers miss Floquet's far from resonance (docs/numerics.md): the slow flow turns at
+    (omega^2 - k1)/(2 omega) instead of omega - sqrt(k1 - mu^2/4), and that phase error per period gives
+    |exp(lambda T) - rho| ~ exp(-mu T/2) 2|sin(dphi/2)|. None when omega is not a number (no orbits on the grid)
+    or the linearisation is not underdamped."""
+    k1 = model.omega_e**2
+    if not (omega == omega and k1 > scene.mu**2 / 4):
+        return None
+    period = 2 * math.pi / omega
+    phase = (omega - math.sqrt(k1 - scene.mu**2 / 4) - (omega * omega - k1) / (2 * omega)) * period
+    return (f"  (expected far from resonance: the slow flow turns at (omega^2 - k1)/(2 omega) instead of "
+            f"omega - sqrt(k1 - mu^2/4); the phase error per period gives |exp(lambda T) - rho| ~ "
+            f"exp(-mu T/2) 2|sin(dphi/2)| = {math.exp(-scene.mu * period / 2) * abs(2 * math.sin(phase / 2)):.2e} "
+            f"at omega {omega:.6g}; see docs/numerics.md)")

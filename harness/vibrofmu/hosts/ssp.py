@@ -26,6 +26,8 @@ import tempfile
 import zipfile
 from pathlib import Path
 
+from vibrofmu.hosts.scene import (Connection, CosimScene, FmuSpec, SceneError, check_numbers, fmu_spec,
+                                  read_scene)
 
 ANNOTATION = "org.vibrofmu.cosim"
 SSD_NAME = "SystemStructure.ssd"
@@ -131,7 +133,6 @@ def load_ssp(path: Path | str, unzip_dir: Path | None = None) -> CosimScene:
     new temporary folder that lives as long as the process). Raises SceneError naming the problem."""
     from fmpy.ssp.ssd import Component, read_ssd
 
-    from vibrofmu.hosts.cosim import Connection, CosimScene, SceneError, _check_numbers, _fmu_spec
 
     path = Path(path)
     try:
@@ -154,7 +155,7 @@ def load_ssp(path: Path | str, unzip_dir: Path | None = None) -> CosimScene:
         if not element.source or not fmu.is_file():
             raise SceneError(f"scene {path}: component '{element.name}': no FMU {element.source!r} in the archive")
         try:  # the same checks as a TOML scene's: parameters exist and are numbers
-            fmus.append(_fmu_spec(len(fmus), {"name": element.name, "path": str(fmu), "parameters": values},
+            fmus.append(fmu_spec(len(fmus), {"name": element.name, "path": str(fmu), "parameters": values},
                                   unzip_dir, unzip_dir))
         except SceneError as error:
             raise SceneError(f"scene {path}: {error}") from None
@@ -164,7 +165,7 @@ def load_ssp(path: Path | str, unzip_dir: Path | None = None) -> CosimScene:
     scene = CosimScene(fmus=tuple(fmus), connections=connections, step=settings["step"],
                        stop_time=settings["stop_time"], ordering=settings["ordering"],
                        tolerance=settings.get("tolerance"))
-    _check_numbers(scene, f"scene {path}")
+    check_numbers(scene, f"scene {path}")
     return scene
 
 
@@ -172,7 +173,6 @@ def _annotation(path: Path) -> dict:
     """Stop time (DefaultExperiment) and the cosim annotation's step, ordering, tolerance."""
     import xml.etree.ElementTree as ET
 
-    from vibrofmu.hosts.cosim import SceneError
 
     with zipfile.ZipFile(path) as archive:
         root = ET.fromstring(archive.read(SSD_NAME))
@@ -225,11 +225,10 @@ def simulate_with_fmpy(path: Path | str, step: float | None = None, stop_time: f
 
 def write_scene_ssps(scene_files, fmu_dir: Path, out_dir: Path) -> list[Path]:
     """Each TOML/JSON scene as out_dir/<stem>.ssp (the FMUs from fmu_dir)."""
-    from vibrofmu.hosts.cosim import load_scene
 
     written = []
     for scene_file in scene_files:
-        scene = load_scene(scene_file, fmu_dir)
+        scene = read_scene(scene_file, fmu_dir)
         written.append(write_ssp(scene, Path(out_dir) / f"{Path(scene_file).stem}.ssp", Path(scene_file).stem))
     return written
 
@@ -244,53 +243,3 @@ def max_difference(a: dict, b: dict, columns) -> dict:
         d = np.abs(np.asarray(a[column][:n], float) - np.asarray(b[column][:n], float))
         out[column] = float(np.max(d)) if n else math.nan
     return out
-
-
-def default_build_dir() -> Path:
-    """Where `vibrofmu build` puts the FMUs by default (paths.build_dir where the package has that resolver)."""
-    try:
-        from vibrofmu.paths import build_dir
-    except ImportError:
-        from vibrofmu.fmus.build import BUILD_DIR
-
-        return BUILD_DIR
-    return build_dir()
-
-
-def add_parser(sub) -> None:
-    """`vibrofmu ssp`: the shipped scenes as .ssp files (hooked into cli.py)."""
-    p = sub.add_parser("ssp", help="write the co-simulation scenes as SSP files (default: build/closed_loop.ssp)")
-    p.add_argument("--fmu-dir", default=None, help="where the FMUs are (default: build/; built when missing)")
-    p.add_argument("--out-dir", default=None, help="where to write the .ssp files (default: the FMU folder)")
-    p.add_argument("--check", action="store_true",
-                   help="also run each .ssp with FMPy's simulate_ssp and with the master (ordering fmpy) and "
-                        "print max |difference| (default: off)")
-    p.set_defaults(func=cmd_ssp)
-
-
-def cmd_ssp(args) -> int:
-    from dataclasses import replace
-
-    from vibrofmu.fmus.build import build_all
-    from vibrofmu.hosts.cosim import SceneError, run_cosim
-
-    fmu_dir = Path(args.fmu_dir or default_build_dir())
-    if not all((fmu_dir / name).exists() for name in ("HertzEAOscillator.fmu", "AdaptiveLyapunovController.fmu")):
-        print(f"building the FMUs into {fmu_dir} ...", flush=True)
-        build_all(fmu_dir)
-    scenes = sorted((Path(__file__).parent / "scenes").glob("*.toml"))
-    try:
-        written = write_scene_ssps(scenes, fmu_dir, Path(args.out_dir or fmu_dir))
-    except SceneError as error:
-        print(f"error: {error}")
-        return 2
-    for path in written:
-        print(f"wrote {path}")
-        if args.check:
-            ours = run_cosim(replace(load_ssp(path), ordering="fmpy"))
-            theirs = simulate_with_fmpy(path)
-            columns = [c for c in ours.outputs if c in theirs]
-            worst = max(max_difference(theirs, ours.outputs, columns).values())
-            print(f"  fmpy.ssp vs the master (ordering fmpy), {len(columns)} outputs at {len(ours.time)} points: "
-                  f"max |difference| = {worst:.3g}")
-    return 0

@@ -11,39 +11,6 @@ import sys
 import time
 from pathlib import Path
 
-from vibrofmu.study.spec import KINDS
-
-
-def add_parser(sub) -> None:
-    """The `study` subcommand (the one hook in cli.py)."""
-    p = sub.add_parser("study", help="response map, basins or Monte Carlo on Dask; Parquet results, plots, and "
-                                     "agreement with the averaged prediction")
-    p.add_argument("kind", choices=KINDS)
-    p.add_argument("--out", required=True, help="output folder (results.parquet, summary.json, plots)")
-    p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
-                   help="scene parameter, or a setting of the kind (basins: sigma; monte-carlo: samples, seed); "
-                        "repeatable (default: none)")
-    p.add_argument("--spec", default=None,
-                   help="TOML spec: [scene], [grid], [tolerances], [settings] (default: none, the kind's built-in spec)")
-    p.add_argument("--scheduler", default=None,
-                   help="address of an existing Dask scheduler (tcp://HOST:PORT; default: a local cluster)")
-    p.add_argument("--workers", type=int, default=None, help="local worker processes (default: one per core)")
-    p.add_argument("--resume", action="store_true", help="continue the study in --out; recompute nothing written")
-    p.add_argument("--quick", action="store_true", help="a small version of the kind (under a minute on 2 cores)")
-    p.add_argument("--engine", choices=["fmu", "core"], default=None,
-                   help="fmu: the plant FMU under FMPy (default); core: the compiled kernel directly")
-    p.add_argument("--fmu", default=None, help="plant FMU (default: build/HertzEAOscillator.fmu, built when missing)")
-    p.set_defaults(func=cmd_study)
-
-
-def cmd_study(args) -> int:
-    from vibrofmu.study.spec import SpecError
-
-    try:
-        return _run(args)
-    except SpecError as error:
-        print(f"error: {error}", file=sys.stderr)
-        return 2
 
 
 def cusp_test(client, spec, store, fmu_digest, out: Path) -> list[dict]:
@@ -77,9 +44,9 @@ def cusp_test(client, spec, store, fmu_digest, out: Path) -> list[dict]:
     return tests
 
 
-def _run(args) -> int:
+def run(args) -> int:
+    """`vibrofmu study` with its parsed options (commands/study.py)."""
     import hashlib
-    import json
 
     from vibrofmu.output import export
     from vibrofmu.fmus.build import PLANT_FMU, build_plant

@@ -35,7 +35,7 @@ import sys
 import time
 from pathlib import Path
 
-REPO_ROOT = Path(__file__).resolve().parents[3]  # the checkout (README.md, docs/) when run from one
+REPO_ROOT = Path(__file__).resolve().parents[2]  # the checkout (README.md, docs/) when run from one
 BLOCK = re.compile(r"<!-- report:(?P<name>[a-z_]+) -->\n(?P<body>.*?)<!-- /report:(?P=name) -->", re.S)
 OPEN = re.compile(r"<!-- report:([a-z_]+) -->")
 CLOSE = re.compile(r"<!-- /report:([a-z_]+) -->")
@@ -137,7 +137,7 @@ def ssp_block(fmu_dir: Path, work_dir: Path) -> str:
     from dataclasses import replace
 
     from vibrofmu.hosts import ssp
-    from vibrofmu.cli import DEFAULT_SCENE
+    from vibrofmu.paths import DEFAULT_SCENE
     from vibrofmu.hosts.cosim import load_scene, run_cosim
 
     scene = load_scene(DEFAULT_SCENE, fmu_dir)
@@ -157,7 +157,7 @@ def ssp_orderings_block(fmu_dir: Path) -> str:
     import numpy as np
 
     from vibrofmu.analyses import closed_loop
-    from vibrofmu.cli import DEFAULT_SCENE
+    from vibrofmu.paths import DEFAULT_SCENE
     from vibrofmu.hosts.cosim import load_scene, run_cosim
 
     scene = load_scene(DEFAULT_SCENE, fmu_dir)
@@ -181,7 +181,7 @@ def ssp_orderings_block(fmu_dir: Path) -> str:
 
 
 def container_block(fmu_dir: Path, quick: bool) -> str:
-    from vibrofmu.hosts import container
+    from vibrofmu.analyses import container_check as container
 
     steps = CONTAINER_STEPS[:2] if quick else CONTAINER_STEPS
     rows = container.compare(fmu_dir, steps)
@@ -312,98 +312,3 @@ def generate(names, fmu_dir: Path, sources: list[Path], quick: bool, work_dir: P
             if body is not None:
                 bodies[name] = body
     return bodies
-
-
-def run_studies(fmu_dir: Path, work_dir: Path, quick: bool) -> list[Path] | None:
-    """Run oafm, stability and bench (quick: fewer orders, quick bench) into work_dir; the folders of those that
-    completed (a failure is printed and skipped)."""
-    from vibrofmu.cli import main
-
-    plant = str(fmu_dir / "HertzEAOscillator.fmu")
-    runs = {"oafm": ["oafm", "--fmu", plant] + (["--study-max-order", "3"] if quick else []),
-            "stability": ["stability", "--fmu", plant],
-            "bench": ["bench", "--fmu", plant] + (["--quick"] if quick else [])}
-    folders = []
-    for name, argv in runs.items():
-        folder = work_dir / name
-        print(f"report: running vibrofmu {' '.join(argv[:1] + argv[3:])} ...", file=sys.stderr, flush=True)
-        try:
-            code = main(argv + ["--out", str(folder)])
-        except Exception as error:  # a failing study must not lose the other blocks: say which and go on
-            code = f"{type(error).__name__}: {error}"
-        if code != 0:
-            print(f"error: vibrofmu {name} failed ({code}); the blocks from its summary are not updated",
-                  file=sys.stderr)
-            continue
-        folders.append(folder)
-    return folders
-
-
-def add_parser(sub) -> None:
-    p = sub.add_parser("report", help="regenerate the numbers in README.md and docs/*.md (blocks between "
-                                      "<!-- report:NAME --> markers)")
-    p.add_argument("--from", dest="sources", action="append", default=[], metavar="DIR",
-                   help="folder with a bench.json or an oafm/stability summary.json for the oafm, stability and "
-                        "speed blocks (repeatable; default: run oafm, stability and bench now)")
-    p.add_argument("--quick", action="store_true", help="container comparison at H = 0.1, 0.05 only; oafm study to "
-                                                        "order 3; bench --quick (default: off, about 20 min)")
-    p.add_argument("--check", action="store_true",
-                   help="re-compute the deterministic blocks (accuracy, ssp) and compare with the documents; "
-                        "write nothing (default: off)")
-    p.add_argument("--only", nargs="+", choices=NAMES, default=None, help="regenerate these blocks only (default: all)")
-    p.add_argument("--fmu-dir", default=None, help="where the FMUs are (default: build/; built when missing)")
-    p.add_argument("--root", default=str(REPO_ROOT), help="the repository whose README.md and docs/ are "
-                                                          "rewritten (default: this checkout)")
-    p.set_defaults(func=cmd_report)
-
-
-def cmd_report(args) -> int:
-    import tempfile
-
-    from vibrofmu.fmus.build import build_all
-    from vibrofmu.hosts.ssp import default_build_dir
-
-    root = Path(args.root)
-    if not (root / "README.md").is_file() or not (root / "docs").is_dir():
-        print(f"error: --root {root}: no README.md and docs/ there (run report in a checkout of vibrofmu, or give "
-              "--root)", file=sys.stderr)
-        return 2
-    sources = [Path(s) for s in args.sources]
-    for source in sources:
-        if not source.is_dir():
-            print(f"error: --from {source}: not a folder", file=sys.stderr)
-            return 2
-    try:
-        texts = {doc: doc.read_text() for doc in documents(root) if doc.is_file()}
-        found = {doc: parse_blocks(text, str(doc)) for doc, text in texts.items()}
-    except ReportError as error:
-        print(f"error: {error}", file=sys.stderr)
-        return 2
-    fmu_dir = Path(args.fmu_dir or default_build_dir())
-    if not all((fmu_dir / n).exists() for n in ("HertzEAOscillator.fmu", "AdaptiveLyapunovController.fmu",
-                                                 "HertzEAClosedLoop.fmu")):
-        print(f"building the FMUs into {fmu_dir} ...", file=sys.stderr)
-        build_all(fmu_dir)
-    names = DETERMINISTIC if args.check else (args.only or NAMES)
-    with tempfile.TemporaryDirectory() as work_dir:
-        if not sources and any(name in FROM_SUMMARIES for name in names):
-            sources = run_studies(fmu_dir, Path(work_dir), args.quick)
-            if sources is None:
-                return 1
-        bodies = generate(names, fmu_dir, sources, args.quick, Path(work_dir))
-    if args.check:
-        stale = [f"{doc.relative_to(root)}: {name}" for doc, blocks in found.items() for name, body in blocks.items()
-                 if name in bodies and body.rstrip() != bodies[name].rstrip()]
-        if stale:
-            print("error: generated numbers differ from the documents (run `vibrofmu report`): " + "; ".join(stale),
-                  file=sys.stderr)
-            return 1
-        checked = sorted({name for blocks in found.values() for name in blocks if name in bodies})
-        print(f"report --check: blocks {', '.join(checked) or 'none'} match a fresh run")
-        return 0
-    for doc, text in texts.items():
-        new = replace_blocks(text, bodies)
-        if new != text:
-            doc.write_text(new)
-            print(f"updated {doc.relative_to(root)}: " + ", ".join(n for n in found[doc] if n in bodies))
-    return 0

@@ -1,0 +1,50 @@
+"""`vibrofmu bench`: work-precision of every fidelity, solver and setting; the speed-accuracy ladder."""
+import sys
+
+from vibrofmu.commands.common import FMU_HELP, Command, built_plant, count, out_folder, plant_fmu
+
+
+def options(p):
+    p.add_argument("--quick", action="store_true", help="tau in [0, 200], fewer settings, 1 timed repeat")
+    p.add_argument("--repeats", type=count, default=None, help="timed runs per case after the warm-up "
+                                                               "(default: 3; --quick 1)")
+    p.add_argument("--ladder-rounds", type=count, default=None,
+                   help="interleaved rounds of the speed-accuracy ladder (default: 3)")
+    p.add_argument("--ladder-only", action="store_true",
+                   help="only the speed-accuracy ladder (tau in [0, 200]; a few minutes): bench.json, ladder.png")
+    p.add_argument("--no-instructions", action="store_true",
+                   help="skip the ladder's instruction counts (valgrind's callgrind, a few minutes)")
+    p.add_argument("--fmu", default=None, help=FMU_HELP)
+    p.add_argument("--out", required=True, help="output folder (bench.json, work_precision.png, ladder.png)")
+
+
+def run(args) -> int:
+    from vibrofmu.analyses import extremes
+    from vibrofmu.speed import bench
+
+    fmu = plant_fmu(args.fmu)
+    out = out_folder(args.out)
+    fmu = built_plant(fmu)
+
+    def say(line):
+        print(line, file=sys.stderr, flush=True)
+
+    if args.ladder_only:
+        summary = bench.run_ladder_only(fmu, out, quick=args.quick, progress=say, ladder_rounds=args.ladder_rounds,
+                                        instructions=not args.no_instructions)
+        for line in bench.summary_lines(summary):
+            print(line)
+        print(f"ladder in {summary['bench']['seconds']:.0f} s; wrote {out}/bench.json, {out}/ladder.png")
+        return 0
+    summary = bench.run_bench(fmu, out, quick=args.quick, repeats=args.repeats, ladder_rounds=args.ladder_rounds,
+                              instructions=not args.no_instructions,
+                              extreme_rows=lambda quick: extremes.extreme_rows(quick, fmu), progress=say)
+    for line in bench.summary_lines(summary):
+        print(line)
+    print(f"{len(summary['cases'])} cases in {summary['bench']['seconds']:.0f} s; wrote {out}/bench.json, "
+          f"{out}/work_precision.png, {out}/ladder.png")
+    return 0
+
+
+COMMAND = Command("bench", "work-precision: error vs wall time of every fidelity, solver and setting, beside "
+                           "solve_ivp and the compiled floor; the speed targets", options, run)

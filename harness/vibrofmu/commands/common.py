@@ -1,0 +1,237 @@
+"""What every sub-command shares: the Command record each command module exports, the parser with one-line
+errors, option types, checks of user-given files and folders, progress lines, and `run` (the error handling
+of one command).
+
+A user mistake (a bad option value, a missing or wrong file, an output folder that cannot be made) ends the
+command with one line `error: ...` on stderr and exit code 2, before anything long runs; a run that stops
+early (pull-in, a failing FMU) exits with 1. This module imports only the standard library, vibromodel's
+parameters and vibrofmu.paths, so that `vibrofmu --help` stays fast: each command imports what it needs
+(numpy, scipy, matplotlib, FMPy) when it runs.
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import sys
+import zipfile
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+from xml.etree import ElementTree
+
+from vibromodel.parameters import ParameterError
+
+from vibrofmu import paths
+from vibrofmu.paths import CLOSED_LOOP_NAME, CONTROLLER_NAME, PLANT_MODEL, PLANT_NAME  # noqa: F401 (re-exported)
+
+
+@dataclass(frozen=True)
+class Command:
+    """One sub-command: `name` on the command line, `help` its one-line description, `options(parser)` defines
+    its options (called only when the command is on the command line), `run(args) -> exit code`."""
+
+    name: str
+    help: str
+    options: Callable[[argparse.ArgumentParser], None]
+    run: Callable[[argparse.Namespace], int]
+
+
+class UserError(Exception):
+    """A mistake in the command line or its files: printed as one line, exit code 2."""
+
+
+class HelpFormatter(argparse.HelpFormatter):
+    """Appends "(default: X)" to an option's help unless the help already says its default or the option is
+    a flag (off by default)."""
+
+    def _get_help_string(self, action):
+        text = action.help or ""
+        if ("default" in text or not action.option_strings or action.default is None or action.default is False
+                or action.default == [] or action.default is argparse.SUPPRESS):
+            return text
+        return f"{text} (default: %(default)s)"
+
+
+class Parser(argparse.ArgumentParser):
+    """argparse with one-line errors (exit code 2) and HelpFormatter; sub-commands use the same class."""
+
+    def __init__(self, *args, **kwargs):
+        kwargs.setdefault("formatter_class", HelpFormatter)
+        super().__init__(*args, **kwargs)
+
+    def error(self, message):
+        self.exit(2, f"error: {self.prog}: {message} (see {self.prog} --help)\n")
+
+
+def run(command: Callable[[argparse.Namespace], int], args: argparse.Namespace) -> int:
+    """Run one command: a user mistake is one line `error: ...` and exit code 2, Ctrl-C exit code 130."""
+    try:
+        return command(args)
+    except (UserError, ParameterError) as error:
+        print(f"error: {error}", file=sys.stderr)
+        return 2
+    except paths.NoCompiler as error:
+        print(f"error: {error} (set $CC or install gcc)", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("error: interrupted", file=sys.stderr)
+        return 130
+
+
+def invoke(command: Command, argv: list[str]) -> int:
+    """Parse `argv` as the options of `command` and run it (another command's use of a command, e.g. report)."""
+    parser = Parser(prog=f"vibrofmu {command.name}")
+    command.options(parser)
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as stop:
+        return stop.code
+    return run(command.run, args)
+
+
+# -- option types: each rejects a bad value with a one-line reason ------------------------------------------
+def _number(kind, test, condition):
+    def parse(text: str):
+        try:
+            value = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not {'an integer' if kind is int else 'a number'}") from None
+        if not (math.isfinite(value) and test(value)):
+            raise argparse.ArgumentTypeError(f"must be {condition}, got {text}")
+        return value
+
+    parse.__name__ = kind.__name__
+    return parse
+
+
+positive = _number(float, lambda v: v > 0, "a finite number > 0")
+non_negative = _number(float, lambda v: v >= 0, "a finite number >= 0")
+count = _number(int, lambda v: v >= 1, "an integer >= 1")
+non_negative_int = _number(int, lambda v: v >= 0, "an integer >= 0")
+
+FMU_HELP = f"plant FMU (default: ./build/{PLANT_NAME}, built when missing)"
+SET_HELP = ("scene parameter, repeatable: mu, Delta, omega, Omega, alpha, beta, gamma, R, x_start, v_start "
+            "(default: the paper's example)")
+
+
+# -- checks of user-given paths --------------------------------------------------------------------------
+def checked_fmu(path: Path, model: str | None = None) -> Path:
+    """`path` if it is an FMU file (a zip archive with modelDescription.xml) of `model` (its modelName; None:
+    any); UserError otherwise."""
+    if not path.exists():
+        raise UserError(f"no FMU at {path}")
+    if not path.is_file():
+        raise UserError(f"{path} is not a file (an FMU is a .fmu file)")
+    try:
+        with zipfile.ZipFile(path) as archive:
+            name = ElementTree.fromstring(archive.read("modelDescription.xml")).get("modelName")
+    except (zipfile.BadZipFile, KeyError, ElementTree.ParseError):
+        raise UserError(f"{path} is not an FMU (no zip archive with a modelDescription.xml)") from None
+    except OSError as error:
+        raise UserError(f"cannot read {path}: {error.strerror}") from None
+    if model is not None and name != model:
+        raise UserError(f"{path} is the FMU of {name}; this command needs {model}")
+    return path
+
+
+def plant_fmu(given: str | None) -> Path:
+    """The plant FMU the user named (checked now: it must exist and be the plant's), or the default
+    ./build/HertzEAOscillator.fmu (built_plant builds it when missing, once the other checks passed)."""
+    if given is not None:
+        return checked_fmu(Path(given), PLANT_MODEL)
+    return paths.build_dir() / PLANT_NAME
+
+
+def built_plant(path: Path) -> Path:
+    """`path` (from plant_fmu), built first when it is the missing default."""
+    if not path.exists():
+        from vibrofmu.fmus.build import build_plant
+
+        print(f"building {path} ...", file=sys.stderr)
+        say_compiled_parts()
+        build_plant(path.parent)
+    return checked_fmu(path, PLANT_MODEL)
+
+
+def built_all(fmu_dir: Path, names=(PLANT_NAME, CONTROLLER_NAME, CLOSED_LOOP_NAME)) -> Path:
+    """`fmu_dir`, after building the three FMUs into it when one of `names` is missing there."""
+    if not all((fmu_dir / name).exists() for name in names):
+        from vibrofmu.fmus.build import build_all
+
+        print(f"building the FMUs into {fmu_dir} ...", file=sys.stderr)
+        say_compiled_parts()
+        build_all(fmu_dir)
+    return fmu_dir
+
+
+def say_compiled_parts() -> None:
+    from vibrofmu.fmus.build import compiled_parts
+
+    line = compiled_parts()
+    if line:
+        print(line, file=sys.stderr)
+
+
+def writable_folder(path: str) -> Path:
+    """`path` if the output folder exists or can be created there (nothing is created); UserError otherwise."""
+    folder = Path(path)
+    for parent in (folder, *folder.parents):
+        if parent.exists():
+            if parent == folder and not folder.is_dir():
+                raise UserError(f"cannot use {folder} as the output folder: a file of that name exists")
+            if not parent.is_dir():
+                raise UserError(f"cannot create the output folder {folder}: {parent} is not a folder")
+            if not os.access(parent, os.W_OK | os.X_OK):
+                raise UserError(f"cannot create the output folder {folder}: {parent} is not writable")
+            break
+    return folder
+
+
+def out_folder(path: str) -> Path:
+    """The output folder, created now (a folder that cannot be made is a UserError before anything runs)."""
+    folder = Path(path)
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except FileExistsError:
+        raise UserError(f"cannot use {folder} as the output folder: a file of that name exists") from None
+    except OSError as error:
+        raise UserError(f"cannot create the output folder {folder}: {error.strerror}") from None
+    return folder
+
+
+def parse_set(items: list[str]) -> dict[str, float]:
+    """NAME=VALUE pairs -> {name: float}; a missing '=', unknown names and non-numbers raise UserError."""
+    from vibromodel.parameters import Scene
+
+    values = {}
+    for item in items:
+        name, sep, text = item.partition("=")
+        if not sep:
+            raise UserError(f"--set {item}: expected NAME=VALUE, e.g. --set R=2")
+        try:
+            values[name.strip()] = float(text)
+        except ValueError:
+            raise ParameterError(name.strip(), text, "not a number") from None
+    Scene().with_values(**values)  # unknown names fail here (ParameterError)
+    return values
+
+
+def progress_printer(label: str):
+    """Print progress every 10 % on stderr for long runs."""
+    state = {"next": 10}
+
+    def progress(done: int, total: int):
+        if total >= 20000 and 100 * done >= state["next"] * total:
+            print(f"{label}: {state['next']} %", file=sys.stderr, flush=True)
+            state["next"] += 10
+
+    return progress
+
+
+def failed(check: dict | None, label: str) -> bool:
+    """A check that could not run (an FMU stopped): say why on stderr."""
+    if check and "error" in check:
+        print(f"error: {label}: {check['error']}", file=sys.stderr)
+        return True
+    return False

@@ -1,0 +1,98 @@
+"""`vibrofmu report`: the numbers in README.md and docs/*.md regenerated (report.py holds the blocks)."""
+import sys
+from pathlib import Path
+
+from vibrofmu import paths
+from vibrofmu.commands import bench, oafm, stability
+from vibrofmu.commands.common import Command, built_all, invoke
+from vibrofmu.report import NAMES, REPO_ROOT  # a light module: the standard library only at its top
+
+
+def options(p):
+    p.add_argument("--from", dest="sources", action="append", default=[], metavar="DIR",
+                   help="folder with a bench.json or an oafm/stability summary.json for the oafm, stability and "
+                        "speed blocks (repeatable; default: run oafm, stability and bench now)")
+    p.add_argument("--quick", action="store_true", help="container comparison at H = 0.1, 0.05 only; oafm study to "
+                                                        "order 3; bench --quick (default: off, about 20 min)")
+    p.add_argument("--check", action="store_true",
+                   help="re-compute the deterministic blocks (accuracy, ssp) and compare with the documents; "
+                        "write nothing (default: off)")
+    p.add_argument("--only", nargs="+", choices=NAMES, default=None, help="regenerate these blocks only (default: all)")
+    p.add_argument("--fmu-dir", default=None, help="where the FMUs are (default: build/; built when missing)")
+    p.add_argument("--root", default=str(REPO_ROOT), help="the repository whose README.md and docs/ are "
+                                                          "rewritten (default: this checkout)")
+
+
+def run_studies(fmu_dir: Path, work_dir: Path, quick: bool) -> list[Path] | None:
+    """Run oafm, stability and bench (quick: fewer orders, quick bench) into work_dir; the folders of those that
+    completed (a failure is printed and skipped)."""
+    plant = str(fmu_dir / paths.PLANT_NAME)
+    runs = {"oafm": (oafm.COMMAND, ["--fmu", plant] + (["--study-max-order", "3"] if quick else [])),
+            "stability": (stability.COMMAND, ["--fmu", plant]),
+            "bench": (bench.COMMAND, ["--fmu", plant] + (["--quick"] if quick else []))}
+    folders = []
+    for name, (command, argv) in runs.items():
+        folder = work_dir / name
+        print(f"report: running vibrofmu {' '.join([name] + argv[2:])} ...", file=sys.stderr, flush=True)
+        try:
+            code = invoke(command, argv + ["--out", str(folder)])
+        except Exception as error:  # a failing study must not lose the other blocks: say which and go on
+            code = f"{type(error).__name__}: {error}"
+        if code != 0:
+            print(f"error: vibrofmu {name} failed ({code}); the blocks from its summary are not updated",
+                  file=sys.stderr)
+            continue
+        folders.append(folder)
+    return folders
+
+
+def run(args) -> int:
+    import tempfile
+
+    from vibrofmu.report import (DETERMINISTIC, FROM_SUMMARIES, ReportError, documents, generate,
+                                        parse_blocks, replace_blocks)
+
+    root = Path(args.root)
+    if not (root / "README.md").is_file() or not (root / "docs").is_dir():
+        print(f"error: --root {root}: no README.md and docs/ there (run report in a checkout of vibrofmu, or give "
+              "--root)", file=sys.stderr)
+        return 2
+    sources = [Path(s) for s in args.sources]
+    for source in sources:
+        if not source.is_dir():
+            print(f"error: --from {source}: not a folder", file=sys.stderr)
+            return 2
+    try:
+        texts = {doc: doc.read_text() for doc in documents(root) if doc.is_file()}
+        found = {doc: parse_blocks(text, str(doc)) for doc, text in texts.items()}
+    except ReportError as error:
+        print(f"error: {error}", file=sys.stderr)
+        return 2
+    fmu_dir = built_all(Path(args.fmu_dir or paths.build_dir()))
+    names = DETERMINISTIC if args.check else (args.only or NAMES)
+    with tempfile.TemporaryDirectory() as work_dir:
+        if not sources and any(name in FROM_SUMMARIES for name in names):
+            sources = run_studies(fmu_dir, Path(work_dir), args.quick)
+            if sources is None:
+                return 1
+        bodies = generate(names, fmu_dir, sources, args.quick, Path(work_dir))
+    if args.check:
+        stale = [f"{doc.relative_to(root)}: {name}" for doc, blocks in found.items() for name, body in blocks.items()
+                 if name in bodies and body.rstrip() != bodies[name].rstrip()]
+        if stale:
+            print("error: generated numbers differ from the documents (run `vibrofmu report`): " + "; ".join(stale),
+                  file=sys.stderr)
+            return 1
+        checked = sorted({name for blocks in found.values() for name in blocks if name in bodies})
+        print(f"report --check: blocks {', '.join(checked) or 'none'} match a fresh run")
+        return 0
+    for doc, text in texts.items():
+        new = replace_blocks(text, bodies)
+        if new != text:
+            doc.write_text(new)
+            print(f"updated {doc.relative_to(root)}: " + ", ".join(n for n in found[doc] if n in bodies))
+    return 0
+
+
+COMMAND = Command("report", "regenerate the numbers in README.md and docs/*.md (blocks between "
+                            "<!-- report:NAME --> markers)", options, run)

@@ -1,0 +1,56 @@
+"""`vibrofmu simulate`: the plant FMU under FMPy, exported, optionally against the reference."""
+from vibrofmu.commands.common import (FMU_HELP, SET_HELP, Command, UserError, built_plant, non_negative, out_folder,
+                                      parse_set, plant_fmu, progress_printer, writable_folder)
+
+
+def options(p):
+    from vibrofmu.analyses.simulate import FIDELITIES, SOLVERS
+
+    p.add_argument("--fidelity", choices=list(FIDELITIES), default="exact", help="plant model")
+    p.add_argument("--solver", choices=list(SOLVERS), default="adaptive",
+                   help="adaptive DOP853 with contact events, or fixed-step RK4")
+    # rtol, stop time and output interval are checked with the scene (simulate.check_inputs: ParameterError)
+    p.add_argument("--rtol", type=float, default=1e-8, help="relative tolerance of the adaptive solver")
+    p.add_argument("--max-step", type=non_negative, default=0.0, help="RK4 step / adaptive ceiling; 0 = automatic")
+    p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", help=SET_HELP)
+    p.add_argument("--stop-time", type=float, default=200.0, help="end of the run, tau")
+    p.add_argument("--output-interval", type=float, default=0.1, help="communication step (doStep size)")
+    p.add_argument("--compare", action="store_true", help="compare with the DOP853 rtol 1e-12 reference")
+    p.add_argument("--fmu", default=None, help=FMU_HELP)
+    p.add_argument("--out", required=True, help="output folder (result.csv, summary.json, x.png)")
+
+
+def run(args) -> int:
+    from vibromodel.parameters import Scene
+    from vibromodel.plant import Settings
+
+    from vibrofmu.analyses.simulate import FIDELITIES, SOLVERS, check_inputs, simulate
+
+    scene = Scene().with_values(**parse_set(args.set))
+    settings = Settings(fidelity=FIDELITIES[args.fidelity], solver=SOLVERS[args.solver], rtol=args.rtol,
+                        max_step=args.max_step)
+    fmu = plant_fmu(args.fmu)
+    writable_folder(args.out)
+    if 0 < args.stop_time < args.output_interval:
+        raise UserError(f"--output-interval {args.output_interval:g} is longer than --stop-time {args.stop_time:g}")
+    # bad values raise ParameterError now; the last check (it may print the one-time note on the scene)
+    check_inputs(scene, settings, args.stop_time, args.output_interval)
+    out = out_folder(args.out)
+    result, summary, _ = simulate(built_plant(fmu), scene, settings, args.stop_time, args.output_interval, out,
+                                  compare=args.compare, progress=progress_printer("simulate"))
+    print(f"wrote {out}/result.csv, summary.json, x.png ({len(result.time)} points, "
+          f"wall time {result.wall_time:.3f} s)")
+    if "error" in summary:
+        e = summary["error"]
+        print(f"max |x - x_ref| = {e['max_abs_error_x']:.3e}, RMS = {e['rms_error_x']:.3e}; "
+              f"max |v - v_ref| = {e['max_abs_error_v']:.3e}")
+    if not result.completed:
+        import sys
+
+        print(f"error: the FMU stopped at tau = {result.end_time:g} before the stop time {args.stop_time:g}: "
+              f"{result.stop_reason}", file=sys.stderr)
+        return 1
+    return 0
+
+
+COMMAND = Command("simulate", "run the plant FMU under FMPy and export the results", options, run)
