@@ -60,11 +60,14 @@ def run_master_like_container(scene) -> dict:
         for spec in scene.fmus:
             inst[spec.name].fmu.exitInitializationMode()
         n = int(round(scene.stop_time / scene.step))
-        read = lambda: (inst["plant"].fmu.getReal(inst["plant"].value_references(["x"]))[0],
-                        inst["reference"].fmu.getReal(inst["reference"].value_references(["x"]))[0])
+
+        def read():
+            return (inst["plant"].fmu.getReal(inst["plant"].value_references(["x"]))[0],
+                    inst["reference"].fmu.getReal(inst["reference"].value_references(["x"]))[0])
+
         times, xs, refs = [0.0], *([v] for v in read())
         t = 0.0
-        for i in range(n):
+        for _ in range(n):
             for name in inst:
                 inst[name].fmu.doStep(currentCommunicationPoint=t, communicationStepSize=scene.step)
             copy_connections()

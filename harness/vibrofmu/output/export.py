@@ -78,7 +78,10 @@ def contact_loss_intervals(time, in_contact) -> list[tuple[float, float]]:
         return []
     edges = np.diff(np.concatenate(([0], open_.astype(np.int8), [0])))
     starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1) - 1
-    mid = lambda i, j: 0.5 * (time[i] + time[j])
+
+    def mid(i, j):
+        return 0.5 * (time[i] + time[j])
+
     return [(mid(i - 1, i) if i > 0 else time[0], mid(j, j + 1) if j + 1 < len(time) else time[-1])
             for i, j in zip(starts, ends)]
 
