@@ -114,7 +114,7 @@ void fmi2_layer_log(const Fmi2Layer *L, fmi2Status status, const char *format, .
     va_end(args);
 }
 
-fmi2Status fmi2_layer_mode_check(const Fmi2Layer *L, const char *call, unsigned mask)
+fmi2Status fmi2_layer_mode_refusal(const Fmi2Layer *L, const char *call, unsigned mask)
 {
     if (L->mode == FMI2_MODE_FATAL) return fmi2Fatal; /* already reported once */
     if (L->mode == FMI2_MODE_ERROR && !(mask & FMI2_BIT(FMI2_ERROR))) {
@@ -139,8 +139,8 @@ const char *fmi2_phase_refusal(const char *call, unsigned mask, int phase, char 
     return buf;
 }
 
-fmi2Status fmi2_layer_finite_reals(Fmi2Layer *L, fmi2Status st, const fmi2ValueReference vr[], size_t nvr,
-                                   const fmi2Real value[])
+fmi2Status fmi2_layer_refuse_nonfinite(Fmi2Layer *L, fmi2Status st, const fmi2ValueReference vr[], size_t nvr,
+                                       const fmi2Real value[])
 {
     if (st > fmi2Warning) return st;
     for (size_t i = 0; i < nvr; i++) {

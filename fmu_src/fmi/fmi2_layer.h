@@ -17,6 +17,7 @@
 #ifndef FMI2_LAYER_H
 #define FMI2_LAYER_H
 
+#include <math.h>
 #include <stdarg.h>
 #include <stddef.h>
 
@@ -58,8 +59,13 @@ void fmi2_layer_vlog(const Fmi2Layer *L, fmi2Status status, const char *format, 
 
 /* The error mode's check of call `call` (allowed states: mask): fmi2OK when it may run; after a fatal fmi2Fatal
    (nothing logged: reported once); in the error mode, when the table does not allow the call there, fmi2Error
-   with "call X not allowed after an error" logged. */
-fmi2Status fmi2_layer_mode_check(const Fmi2Layer *L, const char *call, unsigned mask);
+   with "call X not allowed after an error" logged.  Inline: in the OK mode (every call of a running simulation)
+   it is one comparison, as the checks it replaced were. */
+fmi2Status fmi2_layer_mode_refusal(const Fmi2Layer *L, const char *call, unsigned mask);
+static inline fmi2Status fmi2_layer_mode_check(const Fmi2Layer *L, const char *call, unsigned mask)
+{
+    return L->mode == FMI2_MODE_OK ? fmi2OK : fmi2_layer_mode_refusal(L, call, mask);
+}
 #define FMI2_MODE_CHECK(L, F) fmi2_layer_mode_check((L), #F, FMI2_MASK_##F)
 
 /* The state machine's check of call `call` (allowed states: mask) in phase `phase` (FMI2_INSTANTIATED ...
@@ -70,7 +76,15 @@ const char *fmi2_phase_refusal(const char *call, unsigned mask, int phase, char 
 
 /* After a getter of Reals answered st: every value finite, else fmi2Error naming the first that is not (logged:
    "fmi2GetReal: variable with valueReference VR is VALUE (not finite): refused") and the error mode. */
-fmi2Status fmi2_layer_finite_reals(Fmi2Layer *L, fmi2Status st, const fmi2ValueReference vr[], size_t nvr,
-                                   const fmi2Real value[]);
+fmi2Status fmi2_layer_refuse_nonfinite(Fmi2Layer *L, fmi2Status st, const fmi2ValueReference vr[], size_t nvr,
+                                       const fmi2Real value[]);
+static inline fmi2Status fmi2_layer_finite_reals(Fmi2Layer *L, fmi2Status st, const fmi2ValueReference vr[],
+                                                 size_t nvr, const fmi2Real value[])
+{
+    if (st > fmi2Warning) return st;
+    for (size_t i = 0; i < nvr; i++)
+        if (!isfinite(value[i])) return fmi2_layer_refuse_nonfinite(L, st, vr, nvr, value);
+    return st; /* inline: the loop the shim and the native layer each had (no call on the getters' path) */
+}
 
 #endif
