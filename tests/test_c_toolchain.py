@@ -1,6 +1,7 @@
-"""Every C translation unit of the project compiles without a warning under -Wall -Wextra (its own flag set of
-vibrofmu.fmus.toolchain, plus -Werror), so that a new warning fails here; and the C layer's state table
-(fmu_src/fmi/fmi2_calls.h) is the one generated from slave_support.CALLS.
+"""The C toolchain (vibrofmu.fmus.toolchain) and what is written once in C: every C translation unit of the project
+compiles without a warning under -Wall -Wextra (its own flag set, plus -Werror), so that a new warning fails here;
+the C layer's state table (fmu_src/fmi/fmi2_calls.h) is the one generated from slave_support.CALLS; the host-API
+header (fmu_src/fmi/fmi2_host_api.h) names a function an FMU binary lacks.
 
 -fsyntax-only runs the front end's warnings (those of -Wall -Wextra are front-end warnings) without generating
 code, so the whole check takes seconds. The native FMUs' files need their generated headers (variables.h from a
@@ -80,3 +81,33 @@ def test_a_warning_fails_the_check(tmp_path):
 def test_the_state_table_header_is_current():
     """fmu_src/fmi/fmi2_calls.h is what `python3 -m vibrofmu.fmus.fmi_calls` writes from slave_support.CALLS."""
     assert fmi_calls.CALLS_HEADER.read_text() == fmi_calls.calls_header()
+
+
+def test_the_c_host_names_a_function_the_library_lacks(tmp_path):
+    """fmi2_host_api.h's fmi2_api_missing in the C host: a library with every function the host calls but
+    fmi2DoStep is refused before anything is called, naming fmi2DoStep's short name (exit code 1)."""
+    from vibrofmu.hosts.doctor import compile_host
+
+    source = tmp_path / "partial.c"
+    source.write_text("\n".join(
+        ['#include "fmi2Functions.h"',
+         "fmi2Component fmi2Instantiate(fmi2String a, fmi2Type b, fmi2String c, fmi2String d,",
+         "    const fmi2CallbackFunctions *e, fmi2Boolean f, fmi2Boolean g)",
+         "{ (void)a; (void)b; (void)c; (void)d; (void)e; (void)f; (void)g; return 0; }",
+         *(f"fmi2Status fmi2{name}(fmi2Component c) {{ (void)c; return fmi2OK; }}"
+           for name in ("EnterInitializationMode", "ExitInitializationMode", "Terminate")),
+         "void fmi2FreeInstance(fmi2Component c) { (void)c; }",
+         "fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean a, fmi2Real b, fmi2Real d, fmi2Boolean e,",
+         "    fmi2Real f) { (void)c; (void)a; (void)b; (void)d; (void)e; (void)f; return fmi2OK; }",
+         "fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference v[], size_t n, fmi2Real x[])",
+         "{ (void)c; (void)v; (void)n; (void)x; return fmi2OK; }",
+         "fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference v[], size_t n, const fmi2Real x[])",
+         "{ (void)c; (void)v; (void)n; (void)x; return fmi2OK; }", ""]))
+    library = tmp_path / "partial.so"
+    subprocess.run([*toolchain.c_compiler(), "-shared", "-fPIC", *toolchain.WARNINGS, "-Werror",
+                    toolchain.fmi_include(), "-o", str(library), str(source)], check=True, capture_output=True)
+    host = compile_host(tmp_path)
+    proc = subprocess.run([str(host), str(library), "file:///nowhere", "guid", "0", "1", "0.5", "0"],
+                          capture_output=True, text=True, env={})
+    assert proc.returncode == 1 and "missing FMI function: DoStep" in proc.stderr, proc.stderr
+    assert proc.stdout == ""  # refused before fmi2Instantiate: nothing simulated
