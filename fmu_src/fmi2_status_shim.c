@@ -48,6 +48,10 @@
  *
  * NULL component pointers give fmi2Error (fmi2FreeInstance(NULL) is a no-op).
  *
+ * Logging, the error mode, the finite-value check of fmi2GetReal and the state table (which calls an instance
+ * in the error state answers) are fmu_src/fmi/fmi2_layer.c's, shared with the native FMUs; the FMI 2.0 phases
+ * (instantiated, initialization mode, ...) are the slave's (slave_support.StatusSlave, the same table).
+ *
  * Fast path.  Python's per-call cost (pythonfmu's callbacks, ~4 us each)
  * dominates a plant step on the compiled kernel (vibrokernel.c, < 1 us).  A
  * slave whose model lives in C can hand the shim that model, during a call
@@ -122,52 +126,16 @@
 
 #define FLAG_ERROR 3
 
-#include "fmi2_types.h"  /* minimal FMI 2.0 type definitions */
-#include "pyloader.h"    /* finding Python */
+#include "fmi2_layer.h"    /* the FMI 2.0 headers, logging, error mode, state table (fmu_src/fmi/) */
+#include "fmi2_host_api.h" /* the table of fmi2 functions of the inner library (fmu_src/fmi/) */
+#include "pyloader.h"      /* finding Python */
 
 #define EXPORT __attribute__((visibility("default")))
 
 /* ---- inner library ---- */
 
-typedef struct {
-    fmi2Component (*Instantiate)(fmi2String, fmi2Type, fmi2String, fmi2String,
-                                 const fmi2CallbackFunctions *, fmi2Boolean, fmi2Boolean);
-    void (*FreeInstance)(fmi2Component);
-    fmi2Status (*SetupExperiment)(fmi2Component, fmi2Boolean, fmi2Real, fmi2Real, fmi2Boolean, fmi2Real);
-    fmi2Status (*EnterInitializationMode)(fmi2Component);
-    fmi2Status (*ExitInitializationMode)(fmi2Component);
-    fmi2Status (*Terminate)(fmi2Component);
-    fmi2Status (*Reset)(fmi2Component);
-    fmi2Status (*GetReal)(fmi2Component, const fmi2ValueReference[], size_t, fmi2Real[]);
-    fmi2Status (*GetInteger)(fmi2Component, const fmi2ValueReference[], size_t, fmi2Integer[]);
-    fmi2Status (*GetBoolean)(fmi2Component, const fmi2ValueReference[], size_t, fmi2Boolean[]);
-    fmi2Status (*GetString)(fmi2Component, const fmi2ValueReference[], size_t, fmi2String[]);
-    fmi2Status (*SetReal)(fmi2Component, const fmi2ValueReference[], size_t, const fmi2Real[]);
-    fmi2Status (*SetInteger)(fmi2Component, const fmi2ValueReference[], size_t, const fmi2Integer[]);
-    fmi2Status (*SetBoolean)(fmi2Component, const fmi2ValueReference[], size_t, const fmi2Boolean[]);
-    fmi2Status (*SetString)(fmi2Component, const fmi2ValueReference[], size_t, const fmi2String[]);
-    fmi2Status (*GetFMUstate)(fmi2Component, fmi2FMUstate *);
-    fmi2Status (*SetFMUstate)(fmi2Component, fmi2FMUstate);
-    fmi2Status (*FreeFMUstate)(fmi2Component, fmi2FMUstate *);
-    fmi2Status (*SerializedFMUstateSize)(fmi2Component, fmi2FMUstate, size_t *);
-    fmi2Status (*SerializeFMUstate)(fmi2Component, fmi2FMUstate, fmi2Byte[], size_t);
-    fmi2Status (*DeSerializeFMUstate)(fmi2Component, const fmi2Byte[], size_t, fmi2FMUstate *);
-    fmi2Status (*GetDirectionalDerivative)(fmi2Component, const fmi2ValueReference[], size_t,
-                                           const fmi2ValueReference[], size_t, const fmi2Real[], fmi2Real[]);
-    fmi2Status (*SetRealInputDerivatives)(fmi2Component, const fmi2ValueReference[], size_t,
-                                          const fmi2Integer[], const fmi2Real[]);
-    fmi2Status (*GetRealOutputDerivatives)(fmi2Component, const fmi2ValueReference[], size_t,
-                                           const fmi2Integer[], fmi2Real[]);
-    fmi2Status (*DoStep)(fmi2Component, fmi2Real, fmi2Real, fmi2Boolean);
-    fmi2Status (*CancelStep)(fmi2Component);
-    fmi2Status (*GetStatus)(fmi2Component, const fmi2StatusKind, fmi2Status *);
-    fmi2Status (*GetRealStatus)(fmi2Component, const fmi2StatusKind, fmi2Real *);
-    fmi2Status (*GetIntegerStatus)(fmi2Component, const fmi2StatusKind, fmi2Integer *);
-    fmi2Status (*GetBooleanStatus)(fmi2Component, const fmi2StatusKind, fmi2Boolean *);
-    fmi2Status (*GetStringStatus)(fmi2Component, const fmi2StatusKind, fmi2String *);
-} InnerApi;
 
-static InnerApi inner;
+static Fmi2Api inner;
 static void *inner_handle = NULL;
 static char load_error[8192] = "";
 static pthread_once_t load_once = PTHREAD_ONCE_INIT;
@@ -197,28 +165,19 @@ static void load_inner(void)
         snprintf(load_error, sizeof load_error, "cannot load inner library: %s", dlerror());
         return;
     }
-#define RESOLVE(name)                                                                    \
-    do {                                                                                 \
-        *(void **)(&inner.name) = dlsym(h, "fmi2" #name);                                \
-        if (inner.name == NULL) {                                                        \
-            snprintf(load_error, sizeof load_error, "symbol fmi2" #name " missing in %s", path); \
-            dlclose(h);                                                                  \
-            memset(&inner, 0, sizeof inner);                                             \
-            return;                                                                      \
-        }                                                                                \
-    } while (0)
-    RESOLVE(Instantiate); RESOLVE(FreeInstance);
-    RESOLVE(SetupExperiment); RESOLVE(EnterInitializationMode); RESOLVE(ExitInitializationMode);
-    RESOLVE(Terminate); RESOLVE(Reset);
-    RESOLVE(GetReal); RESOLVE(GetInteger); RESOLVE(GetBoolean); RESOLVE(GetString);
-    RESOLVE(SetReal); RESOLVE(SetInteger); RESOLVE(SetBoolean); RESOLVE(SetString);
-    RESOLVE(GetFMUstate); RESOLVE(SetFMUstate); RESOLVE(FreeFMUstate);
-    RESOLVE(SerializedFMUstateSize); RESOLVE(SerializeFMUstate); RESOLVE(DeSerializeFMUstate);
-    RESOLVE(GetDirectionalDerivative); RESOLVE(SetRealInputDerivatives); RESOLVE(GetRealOutputDerivatives);
-    RESOLVE(DoStep); RESOLVE(CancelStep);
-    RESOLVE(GetStatus); RESOLVE(GetRealStatus); RESOLVE(GetIntegerStatus);
-    RESOLVE(GetBooleanStatus); RESOLVE(GetStringStatus);
-#undef RESOLVE
+    fmi2_api_load(h, &inner);
+    static const char *const ALL[] = {
+#define FMI2_API_NAME(name) #name,
+        FMI2_API_FUNCTIONS(FMI2_API_NAME)
+#undef FMI2_API_NAME
+        NULL};
+    const char *missing = fmi2_api_missing(&inner, ALL);
+    if (missing != NULL) {
+        snprintf(load_error, sizeof load_error, "symbol fmi2%s missing in %s", missing, path);
+        dlclose(h);
+        memset(&inner, 0, sizeof inner);
+        return;
+    }
     void (*release_py_state)(void);
     *(void **)(&release_py_state) = dlsym(h, "finalizePythonInterpreter");
     if (release_py_state != NULL) atexit(release_py_state);
@@ -226,8 +185,6 @@ static void load_inner(void)
 }
 
 /* ---- shim component ---- */
-
-typedef enum { SHIM_OK, SHIM_ERROR, SHIM_FATAL } ShimState;
 
 #define FAST_MAX 32 /* most Real (and Boolean) outputs served; fast_path.FAST_MAX */
 
@@ -247,14 +204,9 @@ typedef struct {
 } FastPath;
 
 typedef struct {
+    Fmi2Layer fmi;                  /* the host's callbacks, name, logging, error mode (fmi2_layer.h) */
     fmi2Component inner;
-    fmi2CallbackFunctions cb;       /* the host's callbacks (copy) */
     fmi2CallbackFunctions inner_cb; /* given to the inner library: logger = forward_log */
-    char *name;
-    ShimState state;
-    int logging_on;                 /* host's debug logging flag ... */
-    size_t ncat;                    /* ... and categories (0 = all) */
-    char **cat;
     FastPath fast;                  /* step == NULL: none attached */
     int error_logged;               /* the inner library logged an error during the current call */
     int stop_defined;               /* fmi2SetupExperiment's stop time (the fast path steps only before it) */
@@ -275,7 +227,7 @@ static fmi2Status forward_from(Shim *s, fmi2Status (*call)(fmi2Component), fmi2C
 
 static int fast_enabled(const Shim *s)
 {
-    return s->state == SHIM_OK && s->fast.step != NULL && *s->fast.enabled != 0;
+    return s->fmi.mode == FMI2_MODE_OK && s->fast.step != NULL && *s->fast.enabled != 0;
 }
 
 /* Index of vr in a fast-path table, or -1. */
@@ -289,7 +241,7 @@ static int fast_index(const fmi2ValueReference *table, size_t n, fmi2ValueRefere
 /* Serve a whole getter call from the model, or return 0 (forward it). */
 static int fast_get_real(const Shim *s, const fmi2ValueReference vr[], size_t nvr, fmi2Real value[])
 {
-    if (s->fast.step == NULL || s->state == SHIM_FATAL) return 0;
+    if (s->fast.step == NULL || s->fmi.mode == FMI2_MODE_FATAL) return 0;
     for (size_t i = 0; i < nvr; i++)
         if (fast_index(s->fast.real_vr, s->fast.n_real, vr[i]) < 0) return 0;
     for (size_t i = 0; i < nvr; i++)
@@ -299,7 +251,7 @@ static int fast_get_real(const Shim *s, const fmi2ValueReference vr[], size_t nv
 
 static int fast_get_boolean(const Shim *s, const fmi2ValueReference vr[], size_t nvr, fmi2Boolean value[])
 {
-    if (s->fast.step == NULL || s->state == SHIM_FATAL) return 0;
+    if (s->fast.step == NULL || s->fmi.mode == FMI2_MODE_FATAL) return 0;
     for (size_t i = 0; i < nvr; i++)
         if (fast_index(s->fast.boolean_vr, s->fast.n_boolean, vr[i]) < 0) return 0;
     for (size_t i = 0; i < nvr; i++)
@@ -372,94 +324,24 @@ static int fast_set_real(Shim *s, const fmi2ValueReference vr[], size_t nvr, con
     return s->fast.inputs_set(s->fast.model) == 0;
 }
 
-static void noop_logger(fmi2ComponentEnvironment e, fmi2String i, fmi2Status s, fmi2String c, fmi2String m, ...)
-{
-    (void)e; (void)i; (void)s; (void)c; (void)m;
-}
-
-static void free_categories(Shim *s)
-{
-    for (size_t i = 0; i < s->ncat; i++) free(s->cat[i]);
-    free(s->cat);
-    s->cat = NULL;
-    s->ncat = 0;
-}
-
-static void set_logging(Shim *s, fmi2Boolean on, size_t n, const fmi2String cats[])
-{
-    free_categories(s);
-    s->logging_on = on != 0;
-    if (n == 0 || cats == NULL) return;
-    s->cat = calloc(n, sizeof *s->cat);
-    if (s->cat == NULL) return; /* out of memory: all categories */
-    for (size_t i = 0; i < n; i++)
-        if (cats[i] != NULL && (s->cat[s->ncat] = strdup(cats[i])) != NULL) s->ncat++;
-}
-
-static int category_enabled(const Shim *s, fmi2String category)
-{
-    if (!s->logging_on) return 0;
-    if (s->ncat == 0) return 1;
-    for (size_t i = 0; i < s->ncat; i++)
-        if (strcmp(s->cat[i], "logAll") == 0 || (category && strcmp(s->cat[i], category) == 0)) return 1;
-    return 0;
-}
-
-/* Pass a message to a host logger.  The host treats the message as a
-   printf format: '%' is doubled so that the text is printed as is. */
-static void log_to(const fmi2CallbackFunctions *cb, fmi2String instanceName, fmi2Status status,
-                   fmi2String category, fmi2String msg)
-{
-    if (msg == NULL) msg = "";
-    if (instanceName == NULL) instanceName = "";
-    if (strchr(msg, '%') == NULL) {
-        cb->logger(cb->componentEnvironment, instanceName, status, category, msg);
-        return;
-    }
-    char *buf = malloc(2 * strlen(msg) + 1);
-    if (buf == NULL) return;
-    char *o = buf;
-    for (const char *p = msg; *p; p++) {
-        if (*p == '%') *o++ = '%';
-        *o++ = *p;
-    }
-    *o = '\0';
-    cb->logger(cb->componentEnvironment, instanceName, status, category, buf);
-    free(buf);
-}
-
 /* Logger handed to the inner library.  pythonfmu 0.7.0 drops *every* message
    (even errors and its "Fatal py exception" report) unless debug logging is
    on, so the inner instance always runs with logging on and the filtering is
-   done here: warnings, discards, errors and fatals always reach the host;
-   fmi2OK messages only when the host enabled logging for their category. */
+   done here (fmi2_layer_emit): warnings, discards, errors and fatals always
+   reach the host; fmi2OK messages only when the host enabled logging for their
+   category. */
 static void forward_log(fmi2ComponentEnvironment env, fmi2String instanceName, fmi2Status status,
                         fmi2String category, fmi2String message, ...)
 {
     Shim *s = (Shim *)env;
     if (status >= fmi2Error) s->error_logged = 1;
-    if (status >= fmi2Warning || category_enabled(s, category))
-        log_to(&s->cb, instanceName, status, category, message);
-}
-
-static void shim_log(const Shim *s, fmi2Status status, const char *msg)
-{
-    log_to(&s->cb, s->name, status, status >= fmi2Error ? "logStatusError" : "logAll", msg);
-}
-
-static fmi2Status refuse(Shim *s, const char *fn)
-{
-    char msg[160];
-    if (s->state == SHIM_FATAL) return fmi2Fatal; /* already reported once */
-    snprintf(msg, sizeof msg, "call %s not allowed after an error", fn);
-    shim_log(s, fmi2Error, msg);
-    return fmi2Error;
+    fmi2_layer_emit(&s->fmi, instanceName, status, category, message);
 }
 
 /* Record fatal results (never forward again after one). */
 static fmi2Status note(Shim *s, fmi2Status st)
 {
-    if (st == fmi2Fatal) s->state = SHIM_FATAL;
+    if (st == fmi2Fatal) s->fmi.mode = FMI2_MODE_FATAL;
     return st;
 }
 
@@ -473,9 +355,9 @@ static fmi2Status settle(Shim *s, fmi2Status st, int may_clear_error)
         if (rs > fmi2Warning) st = rs;
         else if (flag == FLAG_ERROR) st = fmi2Error;
     }
-    if (st == fmi2Fatal) s->state = SHIM_FATAL;
-    else if (st == fmi2Error) s->state = SHIM_ERROR;
-    else if (may_clear_error) s->state = SHIM_OK;
+    if (st == fmi2Fatal) s->fmi.mode = FMI2_MODE_FATAL;
+    else if (st == fmi2Error) s->fmi.mode = FMI2_MODE_ERROR;
+    else if (may_clear_error) s->fmi.mode = FMI2_MODE_OK;
     return st;
 }
 
@@ -483,30 +365,14 @@ static fmi2Status settle(Shim *s, fmi2Status st, int may_clear_error)
    The slave (slave_support.StatusSlave) keeps the FMI 2.0 state and refuses calls made in the wrong one by
    logging an error.  Getters are not followed by settle(): an error the slave logged during one (an unknown
    value reference, a wrong type, a getter before initialisation) makes it fmi2Error here.  No Real is ever
-   returned non-finite with fmi2OK: such a value gives fmi2Error naming it. */
+   returned non-finite with fmi2OK: such a value gives fmi2Error naming it (fmi2_layer_finite_reals). */
 static fmi2Status checked_getter(Shim *s, fmi2Status st)
 {
     if (st <= fmi2Warning && s->error_logged) {
         st = fmi2Error;
-        if (s->state != SHIM_FATAL) s->state = SHIM_ERROR;
+        if (s->fmi.mode != FMI2_MODE_FATAL) s->fmi.mode = FMI2_MODE_ERROR;
     }
     s->error_logged = 0;
-    return st;
-}
-
-static fmi2Status finite_reals(Shim *s, fmi2Status st, const fmi2ValueReference vr[], size_t nvr,
-                               const fmi2Real value[])
-{
-    if (st > fmi2Warning) return st;
-    for (size_t i = 0; i < nvr; i++) {
-        if (isfinite(value[i])) continue;
-        char msg[200];
-        snprintf(msg, sizeof msg, "fmi2GetReal: variable with valueReference %u is %g (not finite): refused",
-                 (unsigned)vr[i], value[i]);
-        shim_log(s, fmi2Error, msg);
-        s->state = SHIM_ERROR;
-        return fmi2Error;
-    }
     return st;
 }
 
@@ -515,12 +381,10 @@ static fmi2Status fast_outputs_checked(Shim *s, fmi2Real t)
 {
     for (size_t i = 0; i < s->fast.n_real; i++) {
         if (isfinite(*s->fast.real[i])) continue;
-        char msg[240];
-        snprintf(msg, sizeof msg, "simulation stopped: output with valueReference %u is %g (not finite) after "
-                 "the step from tau = %.17g; the parameters are beyond the model's numerical range",
-                 (unsigned)s->fast.real_vr[i], *s->fast.real[i], t);
-        shim_log(s, fmi2Error, msg);
-        s->state = SHIM_ERROR;
+        fmi2_layer_log(&s->fmi, fmi2Error, "simulation stopped: output with valueReference %u is %g (not finite) "
+                       "after the step from tau = %.17g; the parameters are beyond the model's numerical range",
+                       (unsigned)s->fast.real_vr[i], *s->fast.real[i], t);
+        s->fmi.mode = FMI2_MODE_ERROR;
         return fmi2Error;
     }
     return fmi2OK;
@@ -536,10 +400,13 @@ static int before_stop(const Shim *s, fmi2Real t, fmi2Real h)
 
 /* Guards.  S: the shim pointer; NULL components give fmi2Error. */
 #define SHIM(c) Shim *S = (Shim *)(c); if (S == NULL) return fmi2Error
-/* forwarded in OK and ERROR state (getters, inquiries) */
-#define ALLOW_IN_ERROR() if (S->state == SHIM_FATAL) return fmi2Fatal
-/* forwarded only in OK state */
-#define ONLY_IN_OK(fn) if (S->state != SHIM_OK) return refuse(S, fn)
+/* The error mode's guard of call F (the state table, fmi2_calls.h): after a fatal fmi2Fatal; in the error state
+   fmi2Error and "call F not allowed after an error" unless the table allows F there. */
+#define ALLOWED(F)                                                                           \
+    do {                                                                                     \
+        fmi2Status guard_ = fmi2_layer_mode_check(&S->fmi, #F, FMI2_MASK_##F);               \
+        if (guard_ != fmi2OK) return guard_;                                                 \
+    } while (0)
 
 /* ---- exported FMI 2.0 API ---- */
 
@@ -553,25 +420,23 @@ EXPORT fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, 
     pthread_once(&load_once, load_inner);
     if (inner_handle == NULL) {
         if (functions != NULL && functions->logger != NULL)
-            log_to(functions, instanceName, fmi2Fatal, "logStatusFatal", load_error);
+            fmi2_log_to(functions, instanceName, fmi2Fatal, "logStatusFatal", load_error);
         return NULL;
     }
     Shim *s = calloc(1, sizeof *s);
     if (s == NULL) return NULL;
-    s->name = strdup(instanceName ? instanceName : "");
-    if (functions != NULL) s->cb = *functions;
-    if (s->cb.logger == NULL) s->cb.logger = noop_logger;
-    s->state = SHIM_OK;
-    set_logging(s, loggingOn, 0, NULL);
-    s->inner_cb = s->cb;
+    if (!fmi2_layer_init(&s->fmi, instanceName, functions, loggingOn)) {
+        free(s);
+        return NULL;
+    }
+    s->inner_cb = s->fmi.cb;
     s->inner_cb.logger = forward_log;
     s->inner_cb.stepFinished = NULL;
     s->inner_cb.componentEnvironment = s;
-    if (s->name != NULL)
-        s->inner = inner.Instantiate(instanceName, fmuType, fmuGUID, fmuResourceLocation, &s->inner_cb,
-                                     visible, 1 /* filtering is done by forward_log */);
+    s->inner = inner.Instantiate(instanceName, fmuType, fmuGUID, fmuResourceLocation, &s->inner_cb,
+                                 visible, 1 /* filtering is done by forward_log */);
     if (s->inner == NULL) {
-        free(s->name);
+        fmi2_layer_free(&s->fmi);
         free(s);
         return NULL;
     }
@@ -582,32 +447,31 @@ EXPORT void fmi2FreeInstance(fmi2Component c)
 {
     Shim *S = (Shim *)c;
     if (S == NULL) return;
-    if (S->state == SHIM_FATAL) {
+    if (S->fmi.mode == FMI2_MODE_FATAL) {
         /* pythonfmu's destructor would DECREF already-released Python objects
            again (use-after-free): leak the inner instance, and keep this
            struct too since the leaked instance still points at inner_cb. */
-        free_categories(S);
+        fmi2_layer_free_categories(&S->fmi);
         return;
     }
     detach(S);
     inner.FreeInstance(S->inner);
-    free_categories(S);
-    free(S->name);
+    fmi2_layer_free(&S->fmi);
     free(S);
 }
 
 /* Not forwarded: the inner instance always logs, forward_log filters. */
 EXPORT fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingOn, size_t n, const fmi2String cats[])
 {
-    SHIM(c); ALLOW_IN_ERROR();
-    set_logging(S, loggingOn, n, cats);
+    SHIM(c); ALLOWED(fmi2SetDebugLogging);
+    fmi2_layer_set_logging(&S->fmi, loggingOn, n, cats);
     return fmi2OK;
 }
 
 EXPORT fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean tolDef, fmi2Real tol, fmi2Real tStart,
                                       fmi2Boolean stopDef, fmi2Real tStop)
 {
-    SHIM(c); ONLY_IN_OK("fmi2SetupExperiment");
+    SHIM(c); ALLOWED(fmi2SetupExperiment);
     fmi2Status st = settle(S, inner.SetupExperiment(S->inner, tolDef, tol, tStart, stopDef, tStop), 0);
     if (st <= fmi2Warning) {
         S->stop_defined = stopDef != 0;
@@ -618,25 +482,25 @@ EXPORT fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean tolDef, fmi2R
 
 EXPORT fmi2Status fmi2EnterInitializationMode(fmi2Component c)
 {
-    SHIM(c); ONLY_IN_OK("fmi2EnterInitializationMode");
+    SHIM(c); ALLOWED(fmi2EnterInitializationMode);
     return settle(S, inner.EnterInitializationMode(S->inner), 0);
 }
 
 EXPORT fmi2Status fmi2ExitInitializationMode(fmi2Component c)
 {
-    SHIM(c); ONLY_IN_OK("fmi2ExitInitializationMode");
+    SHIM(c); ALLOWED(fmi2ExitInitializationMode);
     return settle(S, forward_from(S, inner.ExitInitializationMode, S->inner), 0);
 }
 
 EXPORT fmi2Status fmi2Terminate(fmi2Component c)
 {
-    SHIM(c); ONLY_IN_OK("fmi2Terminate");
+    SHIM(c); ALLOWED(fmi2Terminate);
     return settle(S, inner.Terminate(S->inner), 0);
 }
 
 EXPORT fmi2Status fmi2Reset(fmi2Component c)
 {
-    SHIM(c); ALLOW_IN_ERROR();
+    SHIM(c); ALLOWED(fmi2Reset);
     detach(S);
     S->stop_defined = 0;
     return settle(S, forward_from(S, inner.Reset, S->inner), 1);
@@ -646,7 +510,7 @@ EXPORT fmi2Status fmi2Reset(fmi2Component c)
 #define GETTER(Name, T)                                                                         \
     EXPORT fmi2Status fmi2Get##Name(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, T value[]) \
     {                                                                                           \
-        SHIM(c); ALLOW_IN_ERROR();                                                              \
+        SHIM(c); ALLOWED(fmi2Get##Name);                                                              \
         FAST;                                                                                   \
         S->error_logged = 0;                                                                    \
         return CHECK(checked_getter(S, note(S, inner.Get##Name(S->inner, vr, nvr, value))));    \
@@ -657,8 +521,8 @@ GETTER(Integer, fmi2Integer)
 GETTER(String, fmi2String)
 #undef FAST
 #undef CHECK
-#define CHECK(st) finite_reals(S, (st), vr, nvr, value)
-#define FAST if (fast_get_real(S, vr, nvr, value)) return finite_reals(S, fmi2OK, vr, nvr, value)
+#define CHECK(st) fmi2_layer_finite_reals(&S->fmi, (st), vr, nvr, value)
+#define FAST if (fast_get_real(S, vr, nvr, value)) return fmi2_layer_finite_reals(&S->fmi, fmi2OK, vr, nvr, value)
 GETTER(Real, fmi2Real)
 #undef FAST
 #undef CHECK
@@ -671,7 +535,7 @@ GETTER(Boolean, fmi2Boolean)
 #define SETTER(Name, T)                                                                         \
     EXPORT fmi2Status fmi2Set##Name(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const T value[]) \
     {                                                                                           \
-        SHIM(c); ONLY_IN_OK("fmi2Set" #Name);                                                   \
+        SHIM(c); ALLOWED(fmi2Set##Name);                                                   \
         FAST;                                                                                   \
         return settle(S, inner.Set##Name(S->inner, vr, nvr, value), 0);                         \
     }
@@ -686,13 +550,13 @@ SETTER(String, fmi2String)
 
 EXPORT fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *state)
 {
-    SHIM(c); ALLOW_IN_ERROR();
+    SHIM(c); ALLOWED(fmi2GetFMUstate);
     return note(S, inner.GetFMUstate(S->inner, state));
 }
 
 EXPORT fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate state)
 {
-    SHIM(c); ALLOW_IN_ERROR();
+    SHIM(c); ALLOWED(fmi2SetFMUstate);
     detach(S);
     calling_shim = S;
     fmi2Status st = inner.SetFMUstate(S->inner, state);
@@ -702,19 +566,19 @@ EXPORT fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate state)
 
 EXPORT fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *state)
 {
-    SHIM(c); ALLOW_IN_ERROR();
+    SHIM(c); ALLOWED(fmi2FreeFMUstate);
     return note(S, inner.FreeFMUstate(S->inner, state));
 }
 
 EXPORT fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate state, size_t *size)
 {
-    SHIM(c); ALLOW_IN_ERROR();
+    SHIM(c); ALLOWED(fmi2SerializedFMUstateSize);
     return note(S, inner.SerializedFMUstateSize(S->inner, state, size));
 }
 
 EXPORT fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate state, fmi2Byte bytes[], size_t size)
 {
-    SHIM(c); ALLOW_IN_ERROR();
+    SHIM(c); ALLOWED(fmi2SerializeFMUstate);
     return note(S, inner.SerializeFMUstate(S->inner, state, bytes, size));
 }
 
@@ -724,7 +588,7 @@ EXPORT fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate state, fmi
    successful deserialization into an fmi2Error. */
 EXPORT fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte bytes[], size_t size, fmi2FMUstate *state)
 {
-    SHIM(c); ALLOW_IN_ERROR();
+    SHIM(c); ALLOWED(fmi2DeSerializeFMUstate);
     return note(S, inner.DeSerializeFMUstate(S->inner, bytes, size, state));
 }
 
@@ -732,27 +596,27 @@ EXPORT fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueR
                                                const fmi2ValueReference vK[], size_t nK,
                                                const fmi2Real dvK[], fmi2Real dvU[])
 {
-    SHIM(c); ALLOW_IN_ERROR();
+    SHIM(c); ALLOWED(fmi2GetDirectionalDerivative);
     return note(S, inner.GetDirectionalDerivative(S->inner, vU, nU, vK, nK, dvK, dvU));
 }
 
 EXPORT fmi2Status fmi2SetRealInputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
                                               const fmi2Integer order[], const fmi2Real value[])
 {
-    SHIM(c); ONLY_IN_OK("fmi2SetRealInputDerivatives");
+    SHIM(c); ALLOWED(fmi2SetRealInputDerivatives);
     return note(S, inner.SetRealInputDerivatives(S->inner, vr, nvr, order, value));
 }
 
 EXPORT fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
                                                const fmi2Integer order[], fmi2Real value[])
 {
-    SHIM(c); ALLOW_IN_ERROR();
+    SHIM(c); ALLOWED(fmi2GetRealOutputDerivatives);
     return note(S, inner.GetRealOutputDerivatives(S->inner, vr, nvr, order, value));
 }
 
 EXPORT fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean noSetPrior)
 {
-    SHIM(c); ONLY_IN_OK("fmi2DoStep");
+    SHIM(c); ALLOWED(fmi2DoStep);
     if (fast_enabled(S) && before_stop(S, t, h) && S->fast.step(S->fast.model, t, h) == 0) {
         S->fast_steps++;
         return fast_outputs_checked(S, t);
@@ -762,14 +626,14 @@ EXPORT fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolea
 
 EXPORT fmi2Status fmi2CancelStep(fmi2Component c)
 {
-    SHIM(c); ONLY_IN_OK("fmi2CancelStep");
+    SHIM(c); ALLOWED(fmi2CancelStep);
     return note(S, inner.CancelStep(S->inner));
 }
 
 #define STATUS_GETTER(Name, T)                                                                  \
     EXPORT fmi2Status fmi2Get##Name(fmi2Component c, const fmi2StatusKind k, T *value)          \
     {                                                                                           \
-        SHIM(c); ALLOW_IN_ERROR();                                                              \
+        SHIM(c); ALLOWED(fmi2Get##Name);                                                              \
         return note(S, inner.Get##Name(S->inner, k, value));                                    \
     }
 STATUS_GETTER(Status, fmi2Status)

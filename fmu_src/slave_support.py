@@ -21,9 +21,35 @@ from vibromodel.integrate import IntegrationError
 from vibromodel.parameters import NonFiniteOutput, ParameterError, check_finite, check_parameters, scene_names
 
 STATUS_OK, STATUS_ERROR = 0, 3
-# FMI 2.0 co-simulation states the slave tracks (the error state is the status shim's and `halted`'s).
+# FMI 2.0 co-simulation states the slave tracks (the error state is the C layer's -- fmu_src/fmi/fmi2_layer.c, in
+# the status shim and the native FMUs -- and `halted`'s).
 INSTANTIATED, INITIALIZATION_MODE, STEP_MODE, TERMINATED = ("instantiated", "initialization mode", "step mode",
                                                             "terminated")
+PHASES = (INSTANTIATED, INITIALIZATION_MODE, STEP_MODE, TERMINATED)
+ERROR = "error"  # after a call ended in fmi2Error (kept by the C layer; a Python-only FMU has no error state)
+# The FMI 2.0 co-simulation state machine, ONE table: the states in which each call is allowed (cf. the Modelica
+# Reference-FMUs' ASSERT_STATE masks). Getters and setters are allowed in every phase at this level; the rules per
+# variable follow in _get_values and _set_refusal. The slaves read it here (_allowed); the C layer reads it as
+# fmu_src/fmi/fmi2_calls.h, generated from it (python3 -m vibrofmu.fmus.fmi_calls; tests/test_c_toolchain.py checks
+# that the header is current). A Python-only FMU (built without a C compiler) has only this Python side.
+_ANYWHERE = (*PHASES, ERROR)
+CALLS = {
+    "fmi2SetDebugLogging": _ANYWHERE,
+    "fmi2SetupExperiment": (INSTANTIATED,),
+    "fmi2EnterInitializationMode": (INSTANTIATED,),
+    "fmi2ExitInitializationMode": (INITIALIZATION_MODE,),
+    "fmi2Terminate": (STEP_MODE,),
+    "fmi2Reset": _ANYWHERE,
+    **{f"fmi2Get{kind}": _ANYWHERE for kind in ("Real", "Integer", "Boolean", "String")},
+    **{f"fmi2Set{kind}": PHASES for kind in ("Real", "Integer", "Boolean", "String")},
+    **{name: _ANYWHERE for name in ("fmi2GetFMUstate", "fmi2SetFMUstate", "fmi2FreeFMUstate",
+                                    "fmi2SerializedFMUstateSize", "fmi2SerializeFMUstate", "fmi2DeSerializeFMUstate",
+                                    "fmi2GetDirectionalDerivative", "fmi2GetRealOutputDerivatives")},
+    "fmi2SetRealInputDerivatives": PHASES,
+    "fmi2DoStep": (STEP_MODE,),
+    "fmi2CancelStep": PHASES,
+    **{f"fmi2Get{kind}Status": _ANYWHERE for kind in ("", "Real", "Integer", "Boolean", "String")},
+}
 RUN_FIELDS = ("phase", "halted", "initialised", "start_time", "stop_time", "experiment_tolerance")  # in the FMU state
 # A doStep may end this far (relative) past the declared stop time: hosts compute the last communication point
 # as start + n*h, which can land an ulp or so beyond the stop time (the plant's time-matching tolerance).
@@ -110,8 +136,9 @@ class StatusSlave(Fmi2Slave):
         self._error(message)
 
     # -- the FMI 2.0 state machine (co-simulation): each call only in the states the standard allows --------
-    def _allowed(self, call, *phases) -> bool:
-        """True if `call` is allowed in the current state; otherwise log an error naming both and say False."""
+    def _allowed(self, call) -> bool:
+        """True if `call` is allowed in the current state (CALLS); otherwise log an error naming both and say False."""
+        phases = [state for state in CALLS[call] if state in PHASES]
         if self.phase in phases:
             return True
         self._error(f"{call} is not allowed in the {self.phase} state (FMI 2.0 allows it in: "
@@ -119,17 +146,17 @@ class StatusSlave(Fmi2Slave):
         return False
 
     def setup_experiment(self, start_time, stop_time=None, tolerance=None):
-        if not self._allowed("fmi2SetupExperiment", INSTANTIATED):
+        if not self._allowed("fmi2SetupExperiment"):
             return
         self.start_time, self.stop_time = start_time, stop_time
         self.experiment_tolerance = tolerance
 
     def enter_initialization_mode(self):
-        if self._allowed("fmi2EnterInitializationMode", INSTANTIATED):
+        if self._allowed("fmi2EnterInitializationMode"):
             self.phase = INITIALIZATION_MODE
 
     def terminate(self):
-        if self._allowed("fmi2Terminate", STEP_MODE):
+        if self._allowed("fmi2Terminate"):
             self.phase = TERMINATED
             self.halted = "fmi2Terminate was called (FMI 2.0: only fmi2Reset or fmi2FreeInstance may follow)"
             self._enable_fast_path()
@@ -203,7 +230,7 @@ class StatusSlave(Fmi2Slave):
         if self.phase == TERMINATED:
             self._error(f"doStep refused: {self.halted}")
             return False
-        if not self._allowed("fmi2DoStep", STEP_MODE):
+        if not self._allowed("fmi2DoStep"):
             return False
         stop = self.stop_time
         end = None if stop is None else stop + STOP_TIME_TOLERANCE * max(1.0, abs(stop))
@@ -216,7 +243,7 @@ class StatusSlave(Fmi2Slave):
         return True
 
     def exit_initialization_mode(self):
-        if not self._allowed("fmi2ExitInitializationMode", INITIALIZATION_MODE):
+        if not self._allowed("fmi2ExitInitializationMode"):
             return
         self.phase = STEP_MODE
         self._initialise(self._start)

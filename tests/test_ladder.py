@@ -12,12 +12,13 @@ import pytest
 from vibrofmu.speed import ladder
 
 from vibrofmu import paths
+from vibrofmu.fmus import toolchain
 
 # A stand-in FMU: every fmi2DoStep runs the same fixed loop (WORK iterations) and x = t, so that every doStep
 # + getReal pair executes exactly the same instructions: a count that is right must be proportional to the
 # number of outputs, with no constant part (instantiation, set-up or the host's own loop would add one).
 STAND_IN = r"""
-#include "fmi2_types.h"
+#include "fmi2Functions.h"
 typedef struct { double t, acc; } S;
 static S state;
 fmi2Component fmi2Instantiate(fmi2String n, fmi2Type k, fmi2String g, fmi2String r, const fmi2CallbackFunctions *f,
@@ -54,7 +55,7 @@ def stand_in(tmp_path_factory):
     source = out / "stand_in.c"
     source.write_text(STAND_IN)
     library = out / "stand_in.so"
-    subprocess.run([*paths.c_compiler(), "-O1", "-shared", "-fPIC", f"-DWORK={WORK}", f"-I{ladder.FMU_SRC}", "-o",
+    subprocess.run([*paths.c_compiler(), "-O1", "-shared", "-fPIC", f"-DWORK={WORK}", toolchain.fmi_include(), "-o",
                     str(library), str(source)], check=True, capture_output=True)
     return ladder.compile_timing_host(out), library
 

@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 from fmpy import extract, read_model_description
 
-from vibrofmu.fmus.build import FMU_SRC
+from vibrofmu.fmus import toolchain
 from vibrofmu.hosts.doctor import host_environment
 
 SOURCE = Path(__file__).parent / "c_host" / "instance_cycles.c"
@@ -19,7 +19,8 @@ FMUS = ("plant", "controller", "closed_loop", "native_plant", "native_controller
 @pytest.fixture(scope="module")
 def cycles_host(tmp_path_factory):
     host = tmp_path_factory.mktemp("cycles") / "instance_cycles"
-    subprocess.run(["gcc", "-O2", "-Wall", "-Wextra", "-Werror", f"-I{FMU_SRC}", "-o", str(host), str(SOURCE), "-ldl"],
+    subprocess.run([*toolchain.c_compiler(), *toolchain.HOST, "-Werror", *toolchain.host_includes(), "-o", str(host),
+                    str(SOURCE), *toolchain.HOST_LIBS],
                    check=True, capture_output=True)
     return host
 

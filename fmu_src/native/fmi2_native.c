@@ -15,24 +15,15 @@
 #include "pytext.h"
 #include "rules.h"
 
-#ifdef _WIN32
-#define EXPORT __declspec(dllexport)
-#else
-#define EXPORT __attribute__((visibility("default")))
-#endif
+#define EXPORT FMI2_Export /* fmi2Functions.h: dllexport on Windows, default visibility elsewhere */
 
 #define STOP_TIME_TOLERANCE 1e-9 /* slave_support.STOP_TIME_TOLERANCE */
 #define FLAG_OK 0
 #define FLAG_ERROR 3
 
-typedef enum { MODE_OK, MODE_ERROR } Mode;
-
 struct Instance {
+    Fmi2Layer fmi; /* callbacks, name, logging, error mode (FMI2_MODE_ERROR: a state-changing call ended in fmi2Error) */
     State s;
-    Mode mode;                /* MODE_ERROR: a state-changing call ended in fmi2Error (fmi2_status_shim.c) */
-    fmi2CallbackFunctions cb;
-    char *name;
-    int logging_on;
 };
 
 /* The serialized FMU state: this header, then the State's bytes. */
@@ -56,34 +47,13 @@ static uint64_t state_checksum(const unsigned char *bytes, size_t n)
     return h;
 }
 
-/* ---- logging ---- */
-
-static void noop_logger(fmi2ComponentEnvironment e, fmi2String i, fmi2Status s, fmi2String c, fmi2String m, ...)
-{
-    (void)e; (void)i; (void)s; (void)c; (void)m;
-}
-
-static void vlog(Instance *inst, fmi2Status status, const char *format, va_list args)
-{
-    if (status == fmi2OK && !inst->logging_on) return;
-    char message[2048], escaped[4096];
-    vsnprintf(message, sizeof message, format, args);
-    size_t k = 0; /* the host treats the message as a printf format */
-    for (const char *p = message; *p && k + 2 < sizeof escaped; p++) {
-        if (*p == '%') escaped[k++] = '%';
-        escaped[k++] = *p;
-    }
-    escaped[k] = '\0';
-    const char *category = status >= fmi2Error ? "logStatusError" : status == fmi2Warning ? "logStatusWarning"
-                                                                                          : "logAll";
-    inst->cb.logger(inst->cb.componentEnvironment, inst->name, status, category, escaped);
-}
+/* ---- logging (fmi2_layer.c) ---- */
 
 void native_log(Instance *inst, fmi2Status status, const char *format, ...)
 {
     va_list args;
     va_start(args, format);
-    vlog(inst, status, format, args);
+    fmi2_layer_vlog(&inst->fmi, status, format, args);
     va_end(args);
 }
 
@@ -92,7 +62,7 @@ void native_error(Instance *inst, const char *format, ...)
     va_list args;
     inst->s.value[VR_fmi_status] = FLAG_ERROR;
     va_start(args, format);
-    vlog(inst, fmi2Error, format, args);
+    fmi2_layer_vlog(&inst->fmi, fmi2Error, format, args);
     va_end(args);
 }
 
@@ -114,21 +84,20 @@ void native_halt_parameter(Instance *inst, const char *name, double value, int i
     native_halt(inst, "parameter %s = %s: %s", name, text, reason);
 }
 
-int native_logging_on(const Instance *inst) { return inst->logging_on; }
+int native_logging_on(const Instance *inst) { return inst->fmi.logging_on; }
 State *native_state(Instance *inst) { return &inst->s; }
 
-/* ---- the FMI 2.0 state machine (slave_support.StatusSlave: phase; the status shim: the error state) ---- */
+/* ---- the FMI 2.0 state machine: the state table (fmi2_calls.h) read by fmi2_layer.c ---- */
 
-static const char *const PHASE_NAMES[] = {"instantiated", "initialization mode", "step mode", "terminated"};
-
-/* StatusSlave._allowed: call allowed in phase `allowed`, else an error naming both. */
-static int allowed(Instance *inst, const char *call, int64_t phase)
+/* StatusSlave._allowed: 1 if call F is allowed in the current phase, else 0 and an error naming both (the check
+   inline: one test of a bit on every doStep; the message out of line). */
+static int phase_refused(Instance *inst, const char *call, unsigned mask)
 {
-    if (inst->s.phase == phase) return 1;
-    native_error(inst, "%s is not allowed in the %s state (FMI 2.0 allows it in: %s)", call,
-                 PHASE_NAMES[inst->s.phase], PHASE_NAMES[phase]);
+    char why[256];
+    native_error(inst, "%s", fmi2_phase_refusal(call, mask, (int)inst->s.phase, why, sizeof why));
     return 0;
 }
+#define PHASE_ALLOWS(I, F) ((FMI2_MASK_##F & FMI2_BIT((I)->s.phase)) != 0 || phase_refused((I), #F, FMI2_MASK_##F))
 
 /* The current value of variable vr as Python prints it (repr). */
 static void value_text(const State *s, fmi2ValueReference vr, char *out, size_t size)
@@ -222,21 +191,21 @@ int native_rule_refusal(const State *s, const char *const names[], size_t n, cha
 static fmi2Status settle(Instance *inst, int may_clear_error)
 {
     if (inst->s.value[VR_fmi_status] == FLAG_ERROR) {
-        inst->mode = MODE_ERROR;
+        inst->fmi.mode = FMI2_MODE_ERROR;
         return fmi2Error;
     }
-    if (may_clear_error) inst->mode = MODE_OK;
+    if (may_clear_error) inst->fmi.mode = FMI2_MODE_OK;
     return fmi2OK;
 }
 
-static fmi2Status refuse(Instance *inst, const char *fn)
-{
-    native_log(inst, fmi2Error, "call %s not allowed after an error", fn);
-    return fmi2Error;
-}
-
 #define INST(c) Instance *I = (Instance *)(c); if (I == NULL) return fmi2Error
-#define ONLY_IN_OK(fn) if (I->mode != MODE_OK) return refuse(I, fn)
+/* The error mode's guard of call F (the state table): in the error state fmi2Error and "call F not allowed after an
+   error" unless the table allows F there. */
+#define ALLOWED(F)                                                                           \
+    do {                                                                                     \
+        fmi2Status guard_ = fmi2_layer_mode_check(&I->fmi, #F, FMI2_MASK_##F);               \
+        if (guard_ != fmi2OK) return guard_;                                                 \
+    } while (0)
 
 static void reset_state(State *s)
 {
@@ -261,15 +230,10 @@ EXPORT fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, 
     (void)fmuGUID; (void)fmuResourceLocation; (void)visible;
     Instance *inst = calloc(1, sizeof *inst);
     if (inst == NULL) return NULL;
-    if (functions != NULL) inst->cb = *functions;
-    if (inst->cb.logger == NULL) inst->cb.logger = noop_logger;
-    inst->name = malloc(strlen(instanceName ? instanceName : "") + 1);
-    if (inst->name == NULL) { free(inst); return NULL; }
-    strcpy(inst->name, instanceName ? instanceName : "");
-    inst->logging_on = loggingOn != 0;
+    if (!fmi2_layer_init(&inst->fmi, instanceName, functions, loggingOn)) { free(inst); return NULL; }
     if (fmuType != fmi2CoSimulation) {
         native_log(inst, fmi2Error, "%s is a co-simulation FMU: fmuType must be fmi2CoSimulation", MODEL_IDENTIFIER);
-        free(inst->name);
+        fmi2_layer_free(&inst->fmi);
         free(inst);
         return NULL;
     }
@@ -281,23 +245,22 @@ EXPORT void fmi2FreeInstance(fmi2Component c)
 {
     Instance *I = (Instance *)c;
     if (I == NULL) return;
-    free(I->name);
+    fmi2_layer_free(&I->fmi);
     free(I);
 }
 
 EXPORT fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingOn, size_t n, const fmi2String cats[])
 {
-    INST(c);
-    (void)n; (void)cats;
-    I->logging_on = loggingOn != 0;
+    INST(c); ALLOWED(fmi2SetDebugLogging);
+    fmi2_layer_set_logging(&I->fmi, loggingOn, n, cats);
     return fmi2OK;
 }
 
 EXPORT fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean tolDef, fmi2Real tol, fmi2Real tStart,
                                       fmi2Boolean stopDef, fmi2Real tStop)
 {
-    INST(c); ONLY_IN_OK("fmi2SetupExperiment");
-    if (!allowed(I, "fmi2SetupExperiment", PHASE_INSTANTIATED)) return settle(I, 0);
+    INST(c); ALLOWED(fmi2SetupExperiment);
+    if (!PHASE_ALLOWS(I, fmi2SetupExperiment)) return settle(I, 0);
     I->s.start_time = tStart;
     I->s.has_stop = stopDef != 0;
     I->s.stop_time = stopDef ? tStop : 0.0;
@@ -308,15 +271,15 @@ EXPORT fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean tolDef, fmi2R
 
 EXPORT fmi2Status fmi2EnterInitializationMode(fmi2Component c)
 {
-    INST(c); ONLY_IN_OK("fmi2EnterInitializationMode");
-    if (allowed(I, "fmi2EnterInitializationMode", PHASE_INSTANTIATED)) I->s.phase = PHASE_INITIALIZATION_MODE;
+    INST(c); ALLOWED(fmi2EnterInitializationMode);
+    if (PHASE_ALLOWS(I, fmi2EnterInitializationMode)) I->s.phase = PHASE_INITIALIZATION_MODE;
     return settle(I, 0);
 }
 
 EXPORT fmi2Status fmi2ExitInitializationMode(fmi2Component c)
 {
-    INST(c); ONLY_IN_OK("fmi2ExitInitializationMode");
-    if (!allowed(I, "fmi2ExitInitializationMode", PHASE_INITIALIZATION_MODE)) return settle(I, 0);
+    INST(c); ALLOWED(fmi2ExitInitializationMode);
+    if (!PHASE_ALLOWS(I, fmi2ExitInitializationMode)) return settle(I, 0);
     I->s.phase = PHASE_STEP_MODE;
     I->s.initialised = 1;
     if (check_parameters(I)) { /* StatusSlave._initialise: the table, then the model */
@@ -329,8 +292,8 @@ EXPORT fmi2Status fmi2ExitInitializationMode(fmi2Component c)
 
 EXPORT fmi2Status fmi2Terminate(fmi2Component c)
 {
-    INST(c); ONLY_IN_OK("fmi2Terminate");
-    if (allowed(I, "fmi2Terminate", PHASE_STEP_MODE)) {
+    INST(c); ALLOWED(fmi2Terminate);
+    if (PHASE_ALLOWS(I, fmi2Terminate)) {
         I->s.phase = PHASE_TERMINATED;
         I->s.halted = 1;
         snprintf(I->s.halt_message, sizeof I->s.halt_message,
@@ -341,7 +304,7 @@ EXPORT fmi2Status fmi2Terminate(fmi2Component c)
 
 EXPORT fmi2Status fmi2Reset(fmi2Component c)
 {
-    INST(c);
+    INST(c); ALLOWED(fmi2Reset);
     reset_state(&I->s);
     return settle(I, 1);
 }
@@ -377,7 +340,7 @@ static fmi2Status get_values(Instance *I, const fmi2ValueReference vr[], size_t 
         failed = 1;
     }
     if (failed) {
-        I->mode = MODE_ERROR;
+        I->fmi.mode = FMI2_MODE_ERROR;
         return fmi2Error;
     }
     return fmi2OK;
@@ -387,7 +350,7 @@ static fmi2Status get_values(Instance *I, const fmi2ValueReference vr[], size_t 
 #define GETTER(Name, T, TYPE, CONVERT, CHECK)                                                             \
     EXPORT fmi2Status fmi2Get##Name(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, T value[])  \
     {                                                                                                     \
-        INST(c);                                                                                          \
+        INST(c); ALLOWED(fmi2Get##Name);                                                                  \
         fmi2Status worst = fmi2OK;                                                                        \
         for (size_t done = 0; done < nvr; done += MAX_GET) {                                              \
             size_t n = nvr - done < MAX_GET ? nvr - done : MAX_GET;                                       \
@@ -402,22 +365,7 @@ static fmi2Status get_values(Instance *I, const fmi2ValueReference vr[], size_t 
 #define AS_INTEGER(v) ((fmi2Integer)(v))
 #define AS_BOOLEAN(v) ((v) != 0.0)
 #define NO_CHECK(st) (st)
-#define FINITE_CHECK(st) finite_reals(I, (st), vr, nvr, value)
-
-/* The status shim's finite_reals: no Real is returned non-finite with fmi2OK. */
-static fmi2Status finite_reals(Instance *I, fmi2Status st, const fmi2ValueReference vr[], size_t nvr,
-                               const fmi2Real value[])
-{
-    if (st > fmi2Warning) return st;
-    for (size_t i = 0; i < nvr; i++) {
-        if (isfinite(value[i])) continue;
-        native_log(I, fmi2Error, "fmi2GetReal: variable with valueReference %u is %g (not finite): refused",
-                   (unsigned)vr[i], value[i]);
-        I->mode = MODE_ERROR;
-        return fmi2Error;
-    }
-    return st;
-}
+#define FINITE_CHECK(st) fmi2_layer_finite_reals(&I->fmi, (st), vr, nvr, value)
 
 GETTER(Real, fmi2Real, T_REAL, AS_REAL, FINITE_CHECK)
 GETTER(Integer, fmi2Integer, T_INTEGER, AS_INTEGER, NO_CHECK)
@@ -425,7 +373,7 @@ GETTER(Boolean, fmi2Boolean, T_BOOLEAN, AS_BOOLEAN, NO_CHECK)
 
 EXPORT fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2String value[])
 {
-    INST(c);
+    INST(c); ALLOWED(fmi2GetString);
     fmi2Status worst = fmi2OK;
     for (size_t i = 0; i < nvr; i++) {
         double ignored;
@@ -495,7 +443,7 @@ static fmi2Status set_values(Instance *I, const fmi2ValueReference vr[], size_t 
 #define SETTER(Name, T, Type, FORMAT)                                                                     \
     EXPORT fmi2Status fmi2Set##Name(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const T value[]) \
     {                                                                                                     \
-        INST(c); ONLY_IN_OK("fmi2Set" #Name);                                                             \
+        INST(c); ALLOWED(fmi2Set##Name);                                                                  \
         fmi2Status worst = fmi2OK;                                                                        \
         for (size_t done = 0; done < nvr; done += MAX_SET) {                                              \
             size_t n = nvr - done < MAX_SET ? nvr - done : MAX_SET;                                       \
@@ -521,7 +469,7 @@ SETTER(Boolean, fmi2Boolean, T_BOOLEAN, FORMAT_BOOLEAN)
 
 EXPORT fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2String value[])
 {
-    INST(c); ONLY_IN_OK("fmi2SetString");
+    INST(c); ALLOWED(fmi2SetString);
     for (size_t i = 0; i < nvr; i++) {
         char quoted[256];
         py_str_repr(value[i] ? value[i] : "", quoted, sizeof quoted);
@@ -536,14 +484,14 @@ EXPORT fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], 
 
 EXPORT fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean noSetPrior)
 {
-    INST(c); ONLY_IN_OK("fmi2DoStep");
+    INST(c); ALLOWED(fmi2DoStep);
     (void)noSetPrior;
     /* StatusSlave._step_allowed: step mode only, and not beyond the declared stop time */
     if (I->s.phase == PHASE_TERMINATED) {
         native_error(I, "doStep refused: %s", I->s.halt_message);
         return settle(I, 0);
     }
-    if (!allowed(I, "fmi2DoStep", PHASE_STEP_MODE)) return settle(I, 0);
+    if (!PHASE_ALLOWS(I, fmi2DoStep)) return settle(I, 0);
     if (I->s.has_stop) {
         const double stop = I->s.stop_time, end = stop + STOP_TIME_TOLERANCE * fmax(1.0, fabs(stop));
         if (isfinite(t) && isfinite(h) && t <= end && end < t + h) {
@@ -567,7 +515,7 @@ EXPORT fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolea
 
 EXPORT fmi2Status fmi2CancelStep(fmi2Component c)
 {
-    INST(c);
+    INST(c); ALLOWED(fmi2CancelStep);
     native_log(I, fmi2Error, "fmi2CancelStep: doStep always completes (no asynchronous steps)");
     return fmi2Error;
 }
@@ -576,7 +524,7 @@ EXPORT fmi2Status fmi2CancelStep(fmi2Component c)
 
 EXPORT fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *state)
 {
-    INST(c);
+    INST(c); ALLOWED(fmi2GetFMUstate);
     if (state == NULL) return fmi2Error;
     State *copy = *state != NULL ? (State *)*state : malloc(sizeof *copy);
     if (copy == NULL) {
@@ -590,7 +538,7 @@ EXPORT fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *state)
 
 EXPORT fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate state)
 {
-    INST(c);
+    INST(c); ALLOWED(fmi2SetFMUstate);
     if (state == NULL) {
         native_log(I, fmi2Error, "fmi2SetFMUstate refused: no state given");
         return fmi2Error;
@@ -604,7 +552,7 @@ EXPORT fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate state)
 
 EXPORT fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *state)
 {
-    INST(c);
+    INST(c); ALLOWED(fmi2FreeFMUstate);
     if (state != NULL) {
         free(*state);
         *state = NULL;
@@ -614,7 +562,7 @@ EXPORT fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *state)
 
 EXPORT fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate state, size_t *size)
 {
-    INST(c);
+    INST(c); ALLOWED(fmi2SerializedFMUstateSize);
     (void)state;
     *size = sizeof(StateHeader) + sizeof(State);
     return fmi2OK;
@@ -622,7 +570,7 @@ EXPORT fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate state
 
 EXPORT fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate state, fmi2Byte bytes[], size_t size)
 {
-    INST(c);
+    INST(c); ALLOWED(fmi2SerializeFMUstate);
     if (state == NULL || size < sizeof(StateHeader) + sizeof(State)) {
         native_log(I, fmi2Error, "fmi2SerializeFMUstate: no state, or %zu bytes are too few", size);
         return fmi2Error;
@@ -639,7 +587,7 @@ EXPORT fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate state, fmi
 
 EXPORT fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte bytes[], size_t size, fmi2FMUstate *state)
 {
-    INST(c);
+    INST(c); ALLOWED(fmi2DeSerializeFMUstate);
     StateHeader header;
     if (size != sizeof header + sizeof(State)) {
         native_log(I, fmi2Error, "fmi2DeSerializeFMUstate refused: not a state of this FMU (%zu bytes, expected "
@@ -672,7 +620,7 @@ EXPORT fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueR
                                                const fmi2ValueReference vK[], size_t nK,
                                                const fmi2Real dvK[], fmi2Real dvU[])
 {
-    INST(c);
+    INST(c); ALLOWED(fmi2GetDirectionalDerivative);
     (void)vU; (void)nU; (void)vK; (void)nK; (void)dvK; (void)dvU;
     native_log(I, fmi2Error, "fmi2GetDirectionalDerivative is not provided (providesDirectionalDerivative=false)");
     return fmi2Error;
@@ -681,7 +629,7 @@ EXPORT fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueR
 EXPORT fmi2Status fmi2SetRealInputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
                                               const fmi2Integer order[], const fmi2Real value[])
 {
-    INST(c);
+    INST(c); ALLOWED(fmi2SetRealInputDerivatives);
     (void)vr; (void)nvr; (void)order; (void)value;
     native_log(I, fmi2Error, "fmi2SetRealInputDerivatives is not provided (canInterpolateInputs=false)");
     return fmi2Error;
@@ -690,7 +638,7 @@ EXPORT fmi2Status fmi2SetRealInputDerivatives(fmi2Component c, const fmi2ValueRe
 EXPORT fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
                                                const fmi2Integer order[], fmi2Real value[])
 {
-    INST(c);
+    INST(c); ALLOWED(fmi2GetRealOutputDerivatives);
     (void)vr; (void)nvr; (void)order; (void)value;
     native_log(I, fmi2Error, "fmi2GetRealOutputDerivatives is not provided (maxOutputDerivativeOrder=0)");
     return fmi2Error;
@@ -698,36 +646,36 @@ EXPORT fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueR
 
 EXPORT fmi2Status fmi2GetStatus(fmi2Component c, const fmi2StatusKind s, fmi2Status *value)
 {
-    INST(c);
+    INST(c); ALLOWED(fmi2GetStatus);
     if (s != fmi2DoStepStatus) return fmi2Discard;
-    *value = I->mode == MODE_OK ? fmi2OK : fmi2Error;
+    *value = I->fmi.mode == FMI2_MODE_OK ? fmi2OK : fmi2Error;
     return fmi2OK;
 }
 
 EXPORT fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind s, fmi2Real *value)
 {
-    INST(c);
+    INST(c); ALLOWED(fmi2GetRealStatus);
     (void)s; (void)value;
     return fmi2Discard;
 }
 
 EXPORT fmi2Status fmi2GetIntegerStatus(fmi2Component c, const fmi2StatusKind s, fmi2Integer *value)
 {
-    INST(c);
+    INST(c); ALLOWED(fmi2GetIntegerStatus);
     (void)s; (void)value;
     return fmi2Discard;
 }
 
 EXPORT fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind s, fmi2Boolean *value)
 {
-    INST(c);
+    INST(c); ALLOWED(fmi2GetBooleanStatus);
     (void)s; (void)value;
     return fmi2Discard;
 }
 
 EXPORT fmi2Status fmi2GetStringStatus(fmi2Component c, const fmi2StatusKind s, fmi2String *value)
 {
-    INST(c);
+    INST(c); ALLOWED(fmi2GetStringStatus);
     (void)s; (void)value;
     return fmi2Discard;
 }

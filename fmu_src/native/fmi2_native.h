@@ -9,8 +9,8 @@
  *
  * The layer reproduces the behaviour of the pythonfmu slaves behind the status shim (slave_support.py,
  * fmi2_status_shim.c): the same setting rules and messages, the status flag fmi_status (0 ok, 3 error), the
- * error state (after an fmi2Error only getters, fmi2Reset, fmi2SetFMUstate and fmi2FreeInstance), and the
- * FMU state (the instance's State is plain data without pointers: get/set is a copy, serialization its bytes).
+ * error state (after an fmi2Error only getters, fmi2Reset, fmi2SetFMUstate and fmi2FreeInstance: the state table of
+ * fmu_src/fmi/fmi2_layer.c, shared with the shim), and the FMU state (the instance's State is plain data without pointers: get/set is a copy, serialization its bytes).
  */
 #ifndef FMI2_NATIVE_H
 #define FMI2_NATIVE_H
@@ -18,7 +18,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#include "fmi2_types.h"
+#include "fmi2_layer.h"  /* the FMI 2.0 headers, logging, error mode, state table (fmu_src/fmi/, shared with the shim) */
 
 typedef enum { T_REAL, T_INTEGER, T_BOOLEAN } VarType;
 typedef enum { C_PARAMETER, C_INPUT, C_OUTPUT, C_LOCAL } VarCausality;
@@ -38,8 +38,10 @@ typedef struct {
 #define HALT_MESSAGE 640
 
 /* Everything that decides an instance's future: plain data (the FMU state). */
-/* FMI 2.0 co-simulation states (slave_support.StatusSlave.phase); the error state is Instance.mode */
-enum { PHASE_INSTANTIATED, PHASE_INITIALIZATION_MODE, PHASE_STEP_MODE, PHASE_TERMINATED };
+/* FMI 2.0 co-simulation states (slave_support.StatusSlave.phase; the state table's phases, fmi2_calls.h); the error
+   state is the instance's Fmi2Layer mode */
+enum { PHASE_INSTANTIATED = FMI2_INSTANTIATED, PHASE_INITIALIZATION_MODE = FMI2_INITIALIZATION_MODE,
+       PHASE_STEP_MODE = FMI2_STEP_MODE, PHASE_TERMINATED = FMI2_TERMINATED };
 
 typedef struct {
     double value[N_VARIABLES];   /* every FMI variable, by value reference (Integer/Boolean as exact doubles) */

@@ -1,4 +1,5 @@
-"""Where the files that `build` and `doctor` need are, and which C compiler they use: the one resolver.
+"""Where the files that `build` and `doctor` need are: the one resolver (the C compiler and its flags:
+vibrofmu.fmus.toolchain, re-exported here as c_compiler / NoCompiler).
 
 Installed from a wheel (`pip install .`, `pip install dist/*.whl`), the repository's fmu_src/ (slaves, C
 sources and headers, including any sub-folders such as core/ and native/) is inside the package as
@@ -9,9 +10,6 @@ package has no such folders and the files are read where they are, <repository>/
 """
 from __future__ import annotations
 
-import os
-import shlex
-import shutil
 from pathlib import Path
 
 PACKAGE_DIR = Path(__file__).resolve().parent
@@ -50,19 +48,5 @@ def build_dir() -> Path:
     return Path.cwd() / "build"
 
 
-class NoCompiler(RuntimeError):
-    """No C compiler: $CC is unset and neither cc nor gcc is on PATH, or $CC names no program."""
-
-
-def c_compiler() -> list[str]:
-    """The C compiler command: $CC (split like a shell word list, e.g. "ccache gcc"), else cc, else gcc.
-    Raises NoCompiler when there is none."""
-    command = shlex.split(os.environ.get("CC", ""))
-    if command:
-        if shutil.which(command[0]) is None:
-            raise NoCompiler(f"$CC = {os.environ['CC']!r} is not a program on PATH")
-        return command
-    for name in ("cc", "gcc"):
-        if shutil.which(name):
-            return [name]
-    raise NoCompiler("no C compiler: $CC is not set and neither cc nor gcc is on PATH")
+# The C compiler lives with its flags in vibrofmu.fmus.toolchain; these names stay for the callers of paths.
+from vibrofmu.fmus.toolchain import NoCompiler, c_compiler  # noqa: E402,F401

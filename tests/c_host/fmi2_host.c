@@ -40,25 +40,9 @@
 #include <string.h>
 #include <time.h>
 
-#include "fmi2_types.h"  /* fmu_src/: the FMI 2.0 types, shared with the status shim */
-
-/* Loading a library: dlopen, or on Windows (cross-compiled with mingw-w64, run under wine) LoadLibrary. */
-#ifdef _WIN32
-#include <windows.h>
-static void *dlopen(const char *path, int flags) { (void)flags; return (void *)LoadLibraryA(path); }
-static void *dlsym(void *lib, const char *name) { return (void *)(intptr_t)GetProcAddress((HMODULE)lib, name); }
-static int dlclose(void *lib) { return !FreeLibrary((HMODULE)lib); }
-static const char *dlerror(void)
-{
-    static char text[64];
-    snprintf(text, sizeof text, "Windows error %lu", (unsigned long)GetLastError());
-    return text;
-}
-#define RTLD_NOW 0
-#define RTLD_LOCAL 0
-#else
-#include <dlfcn.h>
-#endif
+/* fmu_src/fmi/: the table of fmi2 functions (Fmi2Api) and loading a library -- dlopen, or on Windows
+   (cross-compiled with mingw-w64, run under wine) LoadLibrary -- on the FMI standard's headers */
+#include "fmi2_host_api.h"
 
 static double now(void)
 {
@@ -78,22 +62,9 @@ static int quiet = 0;
 static double t_loaded, t_initialised, t_done;
 static long rows_done = 0;
 
-typedef struct {
-    fmi2Component (*Instantiate)(fmi2String, fmi2Type, fmi2String, fmi2String,
-                                 const fmi2CallbackFunctions *, fmi2Boolean, fmi2Boolean);
-    void (*FreeInstance)(fmi2Component);
-    fmi2Status (*SetupExperiment)(fmi2Component, fmi2Boolean, fmi2Real, fmi2Real, fmi2Boolean, fmi2Real);
-    fmi2Status (*EnterInitializationMode)(fmi2Component);
-    fmi2Status (*ExitInitializationMode)(fmi2Component);
-    fmi2Status (*Terminate)(fmi2Component);
-    fmi2Status (*GetReal)(fmi2Component, const fmi2ValueReference[], size_t, fmi2Real[]);
-    fmi2Status (*SetReal)(fmi2Component, const fmi2ValueReference[], size_t, const fmi2Real[]);
-    fmi2Status (*DoStep)(fmi2Component, fmi2Real, fmi2Real, fmi2Boolean);
-} Api;
+typedef Fmi2Api Api;
 
 #define MAX_VRS 64
-
-
 
 static const char *const STATUS_NAMES[] = {"fmi2OK", "fmi2Warning", "fmi2Discard",
                                            "fmi2Error", "fmi2Fatal", "fmi2Pending"};
@@ -122,15 +93,13 @@ static int die(const char *what, const char *detail)
     return 1;
 }
 
-static int load_api(void *lib, Api *api)
+/* The functions this host calls: the name of the first the library lacks, or NULL. */
+static const char *load_api(void *lib, Api *api)
 {
-#define LOAD(name)                                                      \
-    if ((*(void **)&api->name = dlsym(lib, "fmi2" #name)) == NULL) return 0
-    LOAD(Instantiate); LOAD(FreeInstance); LOAD(SetupExperiment);
-    LOAD(EnterInitializationMode); LOAD(ExitInitializationMode); LOAD(Terminate);
-    LOAD(GetReal); LOAD(SetReal); LOAD(DoStep);
-#undef LOAD
-    return 1;
+    static const char *const NEEDED[] = {"Instantiate", "FreeInstance", "SetupExperiment", "EnterInitializationMode",
+                                         "ExitInitializationMode", "Terminate", "GetReal", "SetReal", "DoStep", NULL};
+    fmi2_api_load(lib, api);
+    return fmi2_api_missing(api, NEEDED);
 }
 
 /* "15,16" -> vrs; returns the count, 0 on a malformed list */
@@ -264,10 +233,11 @@ int main(int argc, char **argv)
 
     quiet = getenv("FMI2_HOST_QUIET") != NULL;
     t_loaded = now();
-    void *lib = dlopen(argv[1], RTLD_NOW | RTLD_LOCAL);
-    if (lib == NULL) return die("cannot load the FMU binary", dlerror());
+    void *lib = fmi2_host_open(argv[1]);
+    if (lib == NULL) return die("cannot load the FMU binary", fmi2_host_error());
     Api api;
-    if (!load_api(lib, &api)) return die("missing FMI function", dlerror());
+    const char *missing = load_api(lib, &api);
+    if (missing != NULL) return die("missing FMI function", missing);
 
     fmi2CallbackFunctions callbacks = {logger, calloc, free, NULL, NULL};
     fmi2Component c = api.Instantiate("c_host", fmi2CoSimulation, argv[3], argv[2], &callbacks, 0, 0);
@@ -280,6 +250,6 @@ int main(int argc, char **argv)
         fprintf(stderr, "fmi2_host: timing instantiate_s=%.9g per_output_s=%.9g rows=%ld\n", t_initialised - t_loaded,
                 (t_done - t_initialised) / (double)(rows_done > 1 ? rows_done - 1 : 1), rows_done);
     if (st != fmi2Fatal) api.FreeInstance(c);
-    dlclose(lib);
+    fmi2_host_close(lib);
     return st == fmi2OK ? 0 : 2;
 }

@@ -10,14 +10,13 @@
  * stdout: "cycles=<n> rss_after_warmup_kb=<kb> rss_end_kb=<kb> growth_kb=<kb>"
  * Exit code: 0 success, 1 usage or loading error, 2 an FMI call failed (named on stderr).
  */
-#include <dlfcn.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <unistd.h>
 
-#include "fmi2_types.h"
+#include "fmi2_host_api.h" /* fmu_src/fmi/: Fmi2Api, the table of fmi2 functions, on the FMI standard's headers */
 
 static void logger(fmi2ComponentEnvironment env, fmi2String instance, fmi2Status status, fmi2String category,
                    fmi2String message, ...)
@@ -42,10 +41,6 @@ static long rss_kb(void)
     return resident * (sysconf(_SC_PAGESIZE) / 1024);
 }
 
-#define LOAD(var, name)                                                               \
-    *(void **)(&var) = dlsym(lib, name);                                              \
-    if (var == NULL) { fprintf(stderr, "missing %s\n", name); return 1; }
-
 #define CHECK(call, name)                                                             \
     if ((call) > fmi2Warning) { fprintf(stderr, "%s failed in cycle %ld\n", name, i); return 2; }
 
@@ -57,31 +52,28 @@ int main(int argc, char **argv)
     }
     long cycles = atol(argv[4]), warmup = atol(argv[5]);
     int run = argc > 6 && strcmp(argv[6], "run") == 0;
-    void *lib = dlopen(argv[1], RTLD_NOW | RTLD_LOCAL);
-    if (lib == NULL) { fprintf(stderr, "dlopen: %s\n", dlerror()); return 1; }
-    fmi2Component (*instantiate)(fmi2String, fmi2Type, fmi2String, fmi2String, const fmi2CallbackFunctions *,
-                                 fmi2Boolean, fmi2Boolean);
-    void (*free_instance)(fmi2Component);
-    fmi2Status (*setup)(fmi2Component, fmi2Boolean, fmi2Real, fmi2Real, fmi2Boolean, fmi2Real);
-    fmi2Status (*enter)(fmi2Component), (*exit_init)(fmi2Component), (*terminate)(fmi2Component);
-    fmi2Status (*do_step)(fmi2Component, fmi2Real, fmi2Real, fmi2Boolean);
-    LOAD(instantiate, "fmi2Instantiate"); LOAD(free_instance, "fmi2FreeInstance");
-    LOAD(setup, "fmi2SetupExperiment"); LOAD(enter, "fmi2EnterInitializationMode");
-    LOAD(exit_init, "fmi2ExitInitializationMode"); LOAD(terminate, "fmi2Terminate"); LOAD(do_step, "fmi2DoStep");
+    void *lib = fmi2_host_open(argv[1]);
+    if (lib == NULL) { fprintf(stderr, "dlopen: %s\n", fmi2_host_error()); return 1; }
+    static const char *const NEEDED[] = {"Instantiate", "FreeInstance", "SetupExperiment", "EnterInitializationMode",
+                                         "ExitInitializationMode", "Terminate", "DoStep", NULL};
+    Fmi2Api api;
+    fmi2_api_load(lib, &api);
+    const char *missing = fmi2_api_missing(&api, NEEDED);
+    if (missing != NULL) { fprintf(stderr, "missing fmi2%s\n", missing); return 1; }
     fmi2CallbackFunctions callbacks = {logger, calloc, free, NULL, NULL};
     long rss_warm = -1;
     for (long i = 0; i < cycles + warmup; i++) {
         if (i == warmup) rss_warm = rss_kb();
-        fmi2Component c = instantiate("cycle", fmi2CoSimulation, argv[3], argv[2], &callbacks, 0, 0);
+        fmi2Component c = api.Instantiate("cycle", fmi2CoSimulation, argv[3], argv[2], &callbacks, 0, 0);
         if (c == NULL) { fprintf(stderr, "fmi2Instantiate failed in cycle %ld\n", i); return 2; }
         if (run) {
-            CHECK(setup(c, 0, 0.0, 0.0, 0, 0.0), "fmi2SetupExperiment");
-            CHECK(enter(c), "fmi2EnterInitializationMode");
-            CHECK(exit_init(c), "fmi2ExitInitializationMode");
-            for (int k = 0; k < 3; k++) CHECK(do_step(c, 0.1 * k, 0.1, 1), "fmi2DoStep");
-            CHECK(terminate(c), "fmi2Terminate");
+            CHECK(api.SetupExperiment(c, 0, 0.0, 0.0, 0, 0.0), "fmi2SetupExperiment");
+            CHECK(api.EnterInitializationMode(c), "fmi2EnterInitializationMode");
+            CHECK(api.ExitInitializationMode(c), "fmi2ExitInitializationMode");
+            for (int k = 0; k < 3; k++) CHECK(api.DoStep(c, 0.1 * k, 0.1, 1), "fmi2DoStep");
+            CHECK(api.Terminate(c), "fmi2Terminate");
         }
-        free_instance(c);
+        api.FreeInstance(c);
     }
     long rss_end = rss_kb();
     printf("cycles=%ld rss_after_warmup_kb=%ld rss_end_kb=%ld growth_kb=%ld\n", cycles, rss_warm, rss_end,

@@ -16,6 +16,7 @@ from pathlib import Path
 from vibromodel import compiled
 
 from vibrofmu import paths
+from vibrofmu.fmus import toolchain
 
 FMU_SRC = paths.FMU_SRC
 CORE = FMU_SRC / "core"
@@ -29,16 +30,14 @@ def kernel_sources() -> list[Path]:
 
 def kernel_headers() -> list[Path]:
     return sorted(CORE.glob("*.h"))
-# Bit-identity with the Python integrator needs IEEE double arithmetic as written: no FMA contraction, no
-# -ffast-math; math errno stays on (the kernel reads pow's errno as CPython's float_pow does).
-GCC_COMMAND = ("gcc", "-std=c11", "-O2", "-ffp-contract=off", "-fPIC", "-shared", "-flto", "-fno-semantic-interposition",
-               "-Wall", "-Wextra")
+# The flags: toolchain.KERNEL (bit identity with the Python integrator: IEEE double arithmetic as written, see there).
+GCC_COMMAND = ("gcc", *toolchain.KERNEL)
 
 
 def compile_kernel(out_path: Path) -> Path:
     """Compile fmu_src/core/*.c into the shared library out_path; raises RuntimeError with gcc's output on failure."""
     out_path = Path(out_path)
-    cmd = [*paths.c_compiler(), *GCC_COMMAND[1:], "-o", str(out_path), *map(str, kernel_sources()), "-lm"]  # $CC for gcc
+    cmd = [*toolchain.c_compiler(), *GCC_COMMAND[1:], "-o", str(out_path), *map(str, kernel_sources()), "-lm"]  # $CC for gcc
     proc = subprocess.run(cmd, capture_output=True, text=True)
     if proc.returncode != 0:
         raise RuntimeError(f"compiling the kernel failed ({' '.join(cmd)}):\n{proc.stderr}")
@@ -54,8 +53,8 @@ def sources_digest() -> str:
     """Hash of the kernel's sources and compiler command (with $CC, as compile_kernel runs it): the cached
     library's key, so a library built by another compiler is not reused."""
     try:
-        compiler = paths.c_compiler()
-    except paths.NoCompiler:  # then nothing is cached under this key, and compile_kernel says why
+        compiler = toolchain.c_compiler()
+    except toolchain.NoCompiler:  # then nothing is cached under this key, and compile_kernel says why
         compiler = ["(no compiler)"]
     digest = hashlib.sha256(" ".join([*compiler, *GCC_COMMAND[1:]]).encode())
     for path in (*kernel_sources(), *kernel_headers()):

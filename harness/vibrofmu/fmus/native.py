@@ -25,13 +25,19 @@ import zipfile
 from pathlib import Path
 
 from vibrofmu import paths
+from vibrofmu.fmus import toolchain
 
 FMU_SRC = paths.FMU_SRC  # a checkout's fmu_src/ or the installed package's copy
 NATIVE_SRC = FMU_SRC / "native"
-COMMON_SOURCES = (NATIVE_SRC / "fmi2_native.c", NATIVE_SRC / "pytext.c", NATIVE_SRC / "scene_checks.c",
-                  NATIVE_SRC / "series.c", FMU_SRC / "core" / "pyfloat.c")
-COMMON_HEADERS = (NATIVE_SRC / "fmi2_native.h", NATIVE_SRC / "pytext.h", NATIVE_SRC / "scene_checks.h",
-                  NATIVE_SRC / "series.h", FMU_SRC / "core" / "pyfloat.h", FMU_SRC / "fmi2_types.h")
+FMI_SRC = FMU_SRC / "fmi"  # the FMI 2.0 layer shared with the status shim
+# The FMI standard's own headers (fmi2Functions.h ...) are not packed: an importing tool has them (FMI 2.0,
+# section 2.1.2), FMPy's build_platform_binary compiles against its package's copy, and so does this build
+# (toolchain.fmi_include_dir).
+COMMON_SOURCES = (NATIVE_SRC / "fmi2_native.c", FMI_SRC / "fmi2_layer.c", NATIVE_SRC / "pytext.c",
+                  NATIVE_SRC / "scene_checks.c", NATIVE_SRC / "series.c", FMU_SRC / "core" / "pyfloat.c")
+COMMON_HEADERS = (NATIVE_SRC / "fmi2_native.h", FMI_SRC / "fmi2_layer.h", FMI_SRC / "fmi2_calls.h",
+                  NATIVE_SRC / "pytext.h", NATIVE_SRC / "scene_checks.h", NATIVE_SRC / "series.h",
+                  FMU_SRC / "core" / "pyfloat.h")
 # what each model needs beyond its folder's native_model.c and config.h
 MODEL_FILES = {
     "HertzEAOscillator": tuple(FMU_SRC / "core" / name for name in (
@@ -45,12 +51,9 @@ MODEL_FILES = {
         "roots.h")) + tuple(NATIVE_SRC / name for name in (
             "plant_setup.c", "plant_setup.h", "controller_setup.c", "controller_setup.h")),
 }
-# IEEE double arithmetic as written (the kernel's bit identity with Python): no FMA contraction, no fast-math.
-C_FLAGS = ("-std=c11", "-O2", "-ffp-contract=off", "-Wall", "-Wextra")
-# -flto: one optimisation unit across the model, solver and FMI files (as the pythonfmu FMUs' kernel, kernel.py)
-LINUX_COMMAND = ("gcc", *C_FLAGS, "-fPIC", "-shared", "-fvisibility=hidden", "-flto")
-# __USE_MINGW_ANSI_STDIO: C99 printf (inf, %zu, %g as glibc) instead of msvcrt's.
-WIN64_COMMAND = ("x86_64-w64-mingw32-gcc", *C_FLAGS, "-shared", "-static-libgcc", "-D__USE_MINGW_ANSI_STDIO=1", "-flto")
+# The compiler commands (vibrofmu.fmus.toolchain: NATIVE_LINUX64 with $CC, NATIVE_WIN64 with mingw-w64).
+LINUX_COMMAND = ("gcc", *toolchain.NATIVE_LINUX64)
+WIN64_COMMAND = (toolchain.WIN64_COMPILER, *toolchain.NATIVE_WIN64)
 
 _TYPES = {"Real": "T_REAL", "Integer": "T_INTEGER", "Boolean": "T_BOOLEAN"}
 _CAUSALITIES = {"parameter": "C_PARAMETER", "input": "C_INPUT", "output": "C_OUTPUT", "local": "C_LOCAL"}
@@ -247,8 +250,9 @@ def write_sources(model_id: str, model_description: bytes, out: Path) -> list[st
 def compile_binary(sources: Path, c_files: list[str], out: Path, target: str = "linux64") -> Path:
     """Compile the sources into out (linux64: gcc .so; win64: mingw .dll); RuntimeError with the compiler's
     output on failure."""
-    command = (*paths.c_compiler(), *LINUX_COMMAND[1:]) if target == "linux64" else WIN64_COMMAND
-    cmd = [*command, f"-I{sources}", "-o", str(out), *(str(sources / f) for f in c_files), "-lm"]
+    command = (*toolchain.c_compiler(), *LINUX_COMMAND[1:]) if target == "linux64" else WIN64_COMMAND
+    cmd = [*command, f"-I{sources}", toolchain.fmi_include(), "-o", str(out), *(str(sources / f) for f in c_files),
+           "-lm"]
     proc = subprocess.run(cmd, capture_output=True, text=True)
     if proc.returncode != 0 or proc.stderr.strip():
         raise RuntimeError(f"compiling {out.name} failed or warned ({' '.join(cmd)}):\n{proc.stderr}")
@@ -256,7 +260,7 @@ def compile_binary(sources: Path, c_files: list[str], out: Path, target: str = "
 
 
 def win64_available() -> bool:
-    return shutil.which(WIN64_COMMAND[0]) is not None
+    return shutil.which(toolchain.WIN64_COMPILER) is not None
 
 
 def native_model_description(model_description: bytes, c_files: list[str]) -> bytes:
@@ -323,8 +327,8 @@ def series_probe_library(out_dir: Path):
     import ctypes
 
     out = Path(out_dir) / "series.so"
-    cmd = [*(part for part in LINUX_COMMAND if part != "-fvisibility=hidden"), "-o", str(out),
-           str(NATIVE_SRC / "series.c"), "-lm"]  # symbols visible
+    cmd = [*toolchain.c_compiler(), *(part for part in toolchain.NATIVE_LINUX64 if part != "-fvisibility=hidden"),
+           "-o", str(out), str(NATIVE_SRC / "series.c"), "-lm"]  # symbols visible
     proc = subprocess.run(cmd, capture_output=True, text=True)
     if proc.returncode != 0:
         raise RuntimeError(f"compiling series.c failed ({' '.join(cmd)}):\n{proc.stderr}")

@@ -35,9 +35,12 @@ import zipfile
 from pathlib import Path
 
 from vibrofmu import paths
+from vibrofmu.fmus import toolchain
 
 SHIM_SOURCE = paths.FMU_SRC / "fmi2_status_shim.c"
 PYLOADER_SOURCE = SHIM_SOURCE.with_name("pyloader.c")  # finds the FMU's Python (see there)
+FMI_DIR = paths.FMU_SRC / "fmi"  # the FMI 2.0 layer shared with the native FMUs, and the host-API header
+LAYER_SOURCE = FMI_DIR / "fmi2_layer.c"
 
 
 def _model_identifier_and_check_vr(model_description: bytes, status_vr: int) -> str:
@@ -54,9 +57,9 @@ def _model_identifier_and_check_vr(model_description: bytes, status_vr: int) -> 
 
 
 def _compile_shim(status_vr: int, out: Path) -> None:
-    cmd = [*paths.c_compiler(), "-shared", "-fPIC", "-O2", "-fvisibility=hidden",
-           f"-DSTATUS_VR={int(status_vr)}", "-o", str(out), str(SHIM_SOURCE), str(PYLOADER_SOURCE),
-           "-ldl", "-pthread"]
+    cmd = [*toolchain.c_compiler(), *toolchain.SHIM, f"-DSTATUS_VR={int(status_vr)}", f"-I{FMI_DIR}",
+           toolchain.fmi_include(), "-o", str(out), str(SHIM_SOURCE), str(LAYER_SOURCE), str(PYLOADER_SOURCE),
+           *toolchain.SHIM_LIBS]
     proc = subprocess.run(cmd, capture_output=True, text=True)
     if proc.returncode != 0:
         raise RuntimeError(f"compiling the status shim failed ({' '.join(cmd)}):\n{proc.stderr}")

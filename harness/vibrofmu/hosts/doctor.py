@@ -26,6 +26,7 @@ import numpy as np
 from fmpy import extract, read_model_description, simulate_fmu
 
 from vibrofmu import paths
+from vibrofmu.fmus import toolchain
 from vibrofmu.fmus.pythonenv import ENV_FILE, ENV_VARIABLE, describe, env_text, imported_modules, missing, parse_env, record_for
 
 FMU_SRC = paths.FMU_SRC
@@ -89,8 +90,8 @@ def export_lines(env: dict[str, str]) -> str:
 
 def compile_host(out_dir: Path) -> Path:
     host = Path(out_dir) / "fmi2_host"
-    cmd = [*paths.c_compiler(), "-O2", "-Wall", "-Wextra", f"-I{FMU_SRC}", "-o", str(host), str(HOST_SOURCE),
-           "-ldl", "-lm"]
+    cmd = [*toolchain.c_compiler(), *toolchain.HOST, *toolchain.host_includes(), "-o", str(host), str(HOST_SOURCE),
+           *toolchain.HOST_LIBS]
     proc = subprocess.run(cmd, capture_output=True, text=True)
     if proc.returncode != 0:
         raise RuntimeError(f"compiling the C host failed ({' '.join(cmd)}):\n{proc.stderr}")
@@ -100,8 +101,8 @@ def compile_host(out_dir: Path) -> Path:
 def compile_windows_host(out_dir: Path) -> Path:
     """The same host for Windows (mingw-w64), to run win64 binaries under wine."""
     host = Path(out_dir) / "fmi2_host.exe"
-    cmd = ["x86_64-w64-mingw32-gcc", "-O2", "-Wall", "-Wextra", "-D__USE_MINGW_ANSI_STDIO=1", f"-I{FMU_SRC}",
-           "-o", str(host), str(HOST_SOURCE)]
+    cmd = [toolchain.WIN64_COMPILER, *toolchain.HOST_WIN64, *toolchain.host_includes(), "-o", str(host),
+           str(HOST_SOURCE)]
     proc = subprocess.run(cmd, capture_output=True, text=True)
     if proc.returncode != 0:
         raise RuntimeError(f"compiling the Windows C host failed ({' '.join(cmd)}):\n{proc.stderr}")

@@ -23,7 +23,7 @@ from pathlib import Path
 
 from fmpy import extract
 
-from vibrofmu import paths
+from vibrofmu.fmus import toolchain
 from vibrofmu.speed.ladder import RUNGS, callgrind_counts, compile_timing_host, host_command, valgrind_missing
 
 FMU_FILES = {"plant": "HertzEAOscillator.fmu", "closed_loop": "HertzEAClosedLoop.fmu"}
@@ -54,7 +54,7 @@ def count_instructions(fmu_unzip_dir, start_values: dict, stop: float, interval:
 # The kernel floor of exact f0: Plant.do_step in C (vk_run), without the FMI layer, for this tree's kernel or the
 # single-file kernel of older ones (fmu_src/vibrokernel.c, commit f1a4d0f). The tree's own Python sets up the
 # plant (CompiledPlant) and writes the plant structure's bytes (pointer-free in every version) into a file;
-# the small C driver below loads them and runs vk_run under callgrind, so no Python is inside the count.
+# the small C driver floor_driver.c loads them and runs vk_run under callgrind, so no Python is inside the count.
 _FLOOR_SETUP = """
 import ctypes, sys
 from pathlib import Path
@@ -69,25 +69,7 @@ assert library is not None, why
 plant = CompiledPlant(Scene(), Settings(), library, 0.0)
 (out / 'plant.bin').write_bytes(ctypes.string_at(plant._address, ctypes.sizeof(plant._plant)))
 """
-_FLOOR_DRIVER = r"""
-#include <dlfcn.h>
-#include <stdio.h>
-#include <stdlib.h>
-int main(int argc, char **argv)
-{
-    void *lib = dlopen(argv[1], RTLD_NOW);
-    int (*run)(void *, double, size_t, double *) = (int (*)(void *, double, size_t, double *))dlsym(lib, "vk_run");
-    FILE *f = fopen(argv[2], "rb");
-    static unsigned char plant[1 << 20];
-    size_t size = fread(plant, 1, sizeof plant, f);
-    double dt = strtod(argv[3], NULL);
-    size_t n = strtoul(argv[4], NULL, 10);
-    double *x = malloc(n * sizeof *x);
-    int code = run(plant, dt, n, x);
-    printf("%d %zu %.17g\n", code, size, x[n - 1]);
-    return code;
-}
-"""
+FLOOR_DRIVER_SOURCE = Path(__file__).with_name("floor_driver.c")  # a C file, compiled with toolchain.HOST
 
 
 def count_kernel_floor(tree: Path, python: Path, stop: float, interval: float) -> float:
@@ -100,8 +82,8 @@ def count_kernel_floor(tree: Path, python: Path, stop: float, interval: float) -
         work = Path(work)
         env = {**os.environ, "PYTHONPATH": f"{Path(tree) / 'fmu_src'}{os.pathsep}{Path(tree) / 'harness'}"}
         subprocess.run([str(python), "-c", _FLOOR_SETUP, str(work)], check=True, env=env, cwd=tree)
-        (work / "driver.c").write_text(_FLOOR_DRIVER)
-        subprocess.run([*paths.c_compiler(), "-O2", "-o", str(work / "driver"), str(work / "driver.c"), "-ldl"], check=True)
+        subprocess.run([*toolchain.c_compiler(), *toolchain.HOST, "-o", str(work / "driver"), str(FLOOR_DRIVER_SOURCE),
+                        *toolchain.HOST_LIBS], check=True)
         out = work / "callgrind.out"
         proc = subprocess.run(["valgrind", "--tool=callgrind", f"--callgrind-out-file={out}", "--collect-atstart=no",
                                "--toggle-collect=vk_run", str(work / "driver"), str(work / "vibrokernel.so"),

@@ -37,6 +37,7 @@ from vibromodel.models import Fidelity
 from vibromodel.parameters import Scene
 
 from vibrofmu import paths
+from vibrofmu.fmus import toolchain
 from vibrofmu.hosts.doctor import host_environment
 from vibrofmu.analyses.reference import reference_solution
 from vibrofmu.hosts.run import FmuInstance
@@ -95,7 +96,8 @@ INSTRUCTIONS_NOTE = ("instructions executed in doStep + getReal(x) and everythin
 
 def compile_timing_host(out_dir: Path) -> Path:
     host = Path(out_dir) / "timing_host"
-    cmd = [*paths.c_compiler(), "-O2", "-Wall", "-Wextra", f"-I{FMU_SRC}", "-o", str(host), str(TIMING_HOST_SOURCE), "-ldl", "-lm"]
+    cmd = [*toolchain.c_compiler(), *toolchain.HOST, *toolchain.host_includes(), "-o", str(host), str(TIMING_HOST_SOURCE),
+           *toolchain.HOST_LIBS]
     proc = subprocess.run(cmd, capture_output=True, text=True)
     if proc.returncode != 0:
         raise RuntimeError(f"compiling the timing host failed ({' '.join(cmd)}):\n{proc.stderr}")

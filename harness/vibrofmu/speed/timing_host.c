@@ -21,30 +21,17 @@
  * the thread's CPU time) for every run, then "x T VALUE"
  * for every output of its last run (%.17g).  Exit code 0, or 1 (usage, loading) or 2 (an FMI call failed; named on stderr).
  */
-#include <dlfcn.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
 
-#include "fmi2_types.h"
+#include "fmi2_host_api.h" /* fmu_src/fmi/: Fmi2Api, the table of fmi2 functions, on the FMI standard's headers */
 
 #define MAX_PARAMETERS 64
 
-typedef struct {
-    fmi2Component (*Instantiate)(fmi2String, fmi2Type, fmi2String, fmi2String, const fmi2CallbackFunctions *,
-                                 fmi2Boolean, fmi2Boolean);
-    void (*FreeInstance)(fmi2Component);
-    fmi2Status (*SetupExperiment)(fmi2Component, fmi2Boolean, fmi2Real, fmi2Real, fmi2Boolean, fmi2Real);
-    fmi2Status (*EnterInitializationMode)(fmi2Component);
-    fmi2Status (*ExitInitializationMode)(fmi2Component);
-    fmi2Status (*Terminate)(fmi2Component);
-    fmi2Status (*GetReal)(fmi2Component, const fmi2ValueReference[], size_t, fmi2Real[]);
-    fmi2Status (*SetReal)(fmi2Component, const fmi2ValueReference[], size_t, const fmi2Real[]);
-    fmi2Status (*SetInteger)(fmi2Component, const fmi2ValueReference[], size_t, const fmi2Integer[]);
-    fmi2Status (*DoStep)(fmi2Component, fmi2Real, fmi2Real, fmi2Boolean);
-} Api;
+typedef Fmi2Api Api;
 
 static void logger(fmi2ComponentEnvironment env, fmi2String instance, fmi2Status status, fmi2String category,
                    fmi2String message, ...)
@@ -167,19 +154,20 @@ int main(int argc, char **argv)
         fprintf(stderr, "timing_host: STOP, STEP and REPEATS must be > 0\n");
         return 1;
     }
-    void *lib = dlopen(argv[1], RTLD_NOW | RTLD_LOCAL);
+    void *lib = fmi2_host_open(argv[1]);
     if (lib == NULL) {
-        fprintf(stderr, "timing_host: cannot load %s: %s\n", argv[1], dlerror());
+        fprintf(stderr, "timing_host: cannot load %s: %s\n", argv[1], fmi2_host_error());
         return 1;
     }
-#define LOAD(name)                                                                         \
-    if ((*(void **)&api.name = dlsym(lib, "fmi2" #name)) == NULL) {                        \
-        fprintf(stderr, "timing_host: no fmi2" #name "\n");                                \
-        return 1;                                                                          \
+    static const char *const NEEDED[] = {"Instantiate", "FreeInstance", "SetupExperiment", "EnterInitializationMode",
+                                         "ExitInitializationMode", "Terminate", "GetReal", "SetReal", "SetInteger",
+                                         "DoStep", NULL};
+    fmi2_api_load(lib, &api);
+    const char *missing = fmi2_api_missing(&api, NEEDED);
+    if (missing != NULL) {
+        fprintf(stderr, "timing_host: no fmi2%s\n", missing);
+        return 1;
     }
-    LOAD(Instantiate); LOAD(FreeInstance); LOAD(SetupExperiment); LOAD(EnterInitializationMode);
-    LOAD(ExitInitializationMode); LOAD(Terminate); LOAD(GetReal); LOAD(SetReal); LOAD(SetInteger); LOAD(DoStep);
-#undef LOAD
     size_t capacity = (size_t)(stop / min_step) + 2;
     double *times = malloc(capacity * sizeof *times), *xs = malloc(capacity * sizeof *xs);
     fmi2CallbackFunctions callbacks = {logger, calloc, free, NULL, NULL};

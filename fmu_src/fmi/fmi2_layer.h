@@ -1,0 +1,90 @@
+/*
+ * fmi2_layer.h -- the FMI 2.0 plumbing of the vibrofmu FMUs, written once (fmi2_layer.c) and used by both FMI
+ * layers: the status shim over pythonfmu's library (fmu_src/fmi2_status_shim.c) and the native FMUs
+ * (fmu_src/native/fmi2_native.c).  It holds
+ *   - logging: the host's callbacks, fmi2SetDebugLogging's flag and categories, messages passed on with '%'
+ *     doubled (the host treats a message as a printf format);
+ *   - the error mode: an instance whose state-changing call ended in fmi2Error answers only the calls the state
+ *     table allows in the error state (the others: fmi2Error and "call X not allowed after an error"); after an
+ *     fmi2Fatal nothing is answered but fmi2Fatal;
+ *   - the finite-value check of the Reals a getter returns (none leaves with fmi2OK non-finite);
+ *   - the FMI 2.0 co-simulation state machine: ONE table of the states each call is allowed in (fmi2_calls.h, in
+ *     the manner of the Modelica Reference-FMUs' ASSERT_STATE masks), generated from slave_support.CALLS, which
+ *     the Python slaves read.
+ * The FMI types and function prototypes are the standard's own headers (fmi2Functions.h: from FMPy's package,
+ * see harness/vibrofmu/fmus/toolchain.py).
+ */
+#ifndef FMI2_LAYER_H
+#define FMI2_LAYER_H
+
+#include <math.h>
+#include <stdarg.h>
+#include <stddef.h>
+
+#include "fmi2Functions.h"
+#include "fmi2_calls.h"  /* FMI2_<STATE>, FMI2_STATE_NAMES, FMI2_MASK_<call> (generated) */
+
+/* The instance's error mode (orthogonal to its phase FMI2_INSTANTIATED ... FMI2_TERMINATED). */
+typedef enum { FMI2_MODE_OK, FMI2_MODE_ERROR, FMI2_MODE_FATAL } Fmi2Mode;
+
+typedef struct {
+    fmi2CallbackFunctions cb; /* the host's callbacks (a copy; logger never NULL) */
+    char *name;               /* the instance name */
+    Fmi2Mode mode;
+    int logging_on;           /* fmi2SetDebugLogging's flag ... */
+    size_t ncat;              /* ... and categories (0: all) */
+    char **cat;
+} Fmi2Layer;
+
+/* fmi2Instantiate's part: the callbacks, the name, the logging flag; 0 when out of memory (nothing to free). */
+int fmi2_layer_init(Fmi2Layer *L, fmi2String instanceName, const fmi2CallbackFunctions *functions,
+                    fmi2Boolean loggingOn);
+/* fmi2FreeInstance's part: the name and the categories. */
+void fmi2_layer_free(Fmi2Layer *L);
+void fmi2_layer_free_categories(Fmi2Layer *L);
+/* fmi2SetDebugLogging: the flag, and the categories (n == 0: all). */
+void fmi2_layer_set_logging(Fmi2Layer *L, fmi2Boolean loggingOn, size_t n, const fmi2String categories[]);
+
+/* A message to a host's logger as text ('%' doubled), without filtering. */
+void fmi2_log_to(const fmi2CallbackFunctions *cb, fmi2String instanceName, fmi2Status status, fmi2String category,
+                 fmi2String message);
+/* A message to the host, filtered: Warning, Discard, Error and Fatal always; fmi2OK only with logging on and its
+   category enabled. */
+void fmi2_layer_emit(const Fmi2Layer *L, fmi2String instanceName, fmi2Status status, fmi2String category,
+                     fmi2String message);
+/* A printf-formatted message of this instance (category logStatusError, logStatusWarning or logAll by status),
+   filtered as fmi2_layer_emit. */
+void fmi2_layer_log(const Fmi2Layer *L, fmi2Status status, const char *format, ...);
+void fmi2_layer_vlog(const Fmi2Layer *L, fmi2Status status, const char *format, va_list args);
+
+/* The error mode's check of call `call` (allowed states: mask): fmi2OK when it may run; after a fatal fmi2Fatal
+   (nothing logged: reported once); in the error mode, when the table does not allow the call there, fmi2Error
+   with "call X not allowed after an error" logged.  Inline: in the OK mode (every call of a running simulation)
+   it is one comparison, as the checks it replaced were. */
+fmi2Status fmi2_layer_mode_refusal(const Fmi2Layer *L, const char *call, unsigned mask);
+static inline fmi2Status fmi2_layer_mode_check(const Fmi2Layer *L, const char *call, unsigned mask)
+{
+    return L->mode == FMI2_MODE_OK ? fmi2OK : fmi2_layer_mode_refusal(L, call, mask);
+}
+#define FMI2_MODE_CHECK(L, F) fmi2_layer_mode_check((L), #F, FMI2_MASK_##F)
+
+/* The state machine's check of call `call` (allowed states: mask) in phase `phase` (FMI2_INSTANTIATED ...
+   FMI2_TERMINATED): NULL when allowed; else why, written into buf: "<call> is not allowed in the <phase> state
+   (FMI 2.0 allows it in: <phases>)" (slave_support.StatusSlave._allowed's text). */
+const char *fmi2_phase_refusal(const char *call, unsigned mask, int phase, char *buf, size_t size);
+#define FMI2_PHASE_REFUSAL(F, phase, buf, size) fmi2_phase_refusal(#F, FMI2_MASK_##F, (phase), (buf), (size))
+
+/* After a getter of Reals answered st: every value finite, else fmi2Error naming the first that is not (logged:
+   "fmi2GetReal: variable with valueReference VR is VALUE (not finite): refused") and the error mode. */
+fmi2Status fmi2_layer_refuse_nonfinite(Fmi2Layer *L, fmi2Status st, const fmi2ValueReference vr[], size_t nvr,
+                                       const fmi2Real value[]);
+static inline fmi2Status fmi2_layer_finite_reals(Fmi2Layer *L, fmi2Status st, const fmi2ValueReference vr[],
+                                                 size_t nvr, const fmi2Real value[])
+{
+    if (st > fmi2Warning) return st;
+    for (size_t i = 0; i < nvr; i++)
+        if (!isfinite(value[i])) return fmi2_layer_refuse_nonfinite(L, st, vr, nvr, value);
+    return st; /* inline: the loop the shim and the native layer each had (no call on the getters' path) */
+}
+
+#endif

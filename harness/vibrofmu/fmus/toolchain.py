@@ -1,0 +1,83 @@
+"""The C toolchain, in one place: the compiler command, where the FMI standard's headers are, and the named flag
+sets of every C build of the project (the compiled core, the status shim, the native FMUs for linux64 and win64,
+the C hosts).
+
+Every flag set warns with -Wall -Wextra; tests/test_c_toolchain.py compiles every C translation unit of the project
+with these sets plus -Werror, so a new warning fails there. The flags that decide numbers stay exactly as they
+were: the compiled core and the native FMUs compute in IEEE double arithmetic as written (-ffp-contract=off: no
+FMA contraction, no -ffast-math; math errno stays on -- the kernel reads pow's errno as CPython's float_pow does),
+which is what makes them bit-identical to the Python model; their speed comes from -O2 and -flto.
+
+The FMI 2.0 headers (fmi2Functions.h, fmi2FunctionTypes.h, fmi2TypesPlatform.h) are the standard's own, read from
+FMPy's installed package (fmpy/c-code, FMPy's `build_platform_binary` compiles FMU sources against the same
+folder): nothing of the standard is copied into this repository.
+"""
+from __future__ import annotations
+
+import importlib.util
+import os
+import shlex
+import shutil
+from pathlib import Path
+
+WARNINGS = ("-Wall", "-Wextra")
+# IEEE double arithmetic as written (bit identity of the C core with the Python model): see the module's text.
+IEEE = ("-ffp-contract=off",)
+
+# The compiled core (fmu_src/core/*.c -> vibrokernel.so), one optimisation unit (-flto).
+KERNEL = ("-std=c11", "-O2", *IEEE, "-fPIC", "-shared", "-flto", "-fno-semantic-interposition", *WARNINGS)
+# The status shim over pythonfmu's library (fmu_src/fmi2_status_shim.c with fmi/fmi2_layer.c and pyloader.c).
+SHIM = ("-shared", "-fPIC", "-O2", "-fvisibility=hidden", *WARNINGS)
+SHIM_LIBS = ("-ldl", "-pthread")
+# The native FMUs: the same arithmetic as the core; -flto across the model, solver and FMI files.
+NATIVE = ("-std=c11", "-O2", *IEEE, *WARNINGS)
+NATIVE_LINUX64 = (*NATIVE, "-fPIC", "-shared", "-fvisibility=hidden", "-flto")
+# Debian's mingw-w64; __USE_MINGW_ANSI_STDIO: C99 printf (inf, %zu, %g as glibc) instead of msvcrt's.
+WIN64_COMPILER = "x86_64-w64-mingw32-gcc"
+NATIVE_WIN64 = (*NATIVE, "-shared", "-static-libgcc", "-D__USE_MINGW_ANSI_STDIO=1", "-flto")
+# The C hosts (tests/c_host/fmi2_host.c, instance_cycles.c, speed/timing_host.c, speed/floor_driver.c).
+HOST = ("-O2", *WARNINGS)
+HOST_LIBS = ("-ldl", "-lm")
+HOST_WIN64 = ("-O2", *WARNINGS, "-D__USE_MINGW_ANSI_STDIO=1")
+
+
+class NoCompiler(RuntimeError):
+    """No C compiler: $CC is unset and neither cc nor gcc is on PATH, or $CC names no program."""
+
+
+def c_compiler() -> list[str]:
+    """The C compiler command: $CC (split like a shell word list, e.g. "ccache gcc"), else cc, else gcc.
+    Raises NoCompiler when there is none."""
+    command = shlex.split(os.environ.get("CC", ""))
+    if command:
+        if shutil.which(command[0]) is None:
+            raise NoCompiler(f"$CC = {os.environ['CC']!r} is not a program on PATH")
+        return command
+    for name in ("cc", "gcc"):
+        if shutil.which(name):
+            return [name]
+    raise NoCompiler("no C compiler: $CC is not set and neither cc nor gcc is on PATH")
+
+
+def fmi_include_dir() -> Path:
+    """The folder of the FMI standard's headers in FMPy's installed package (fmpy/c-code); FileNotFoundError when
+    FMPy is missing or ships no fmi2Functions.h."""
+    spec = importlib.util.find_spec("fmpy")
+    if spec is None or spec.origin is None:
+        raise FileNotFoundError("FMPy is not installed: the FMI 2.0 headers come from its package (pip install fmpy)")
+    folder = Path(spec.origin).parent / "c-code"
+    if not (folder / "fmi2Functions.h").is_file():
+        raise FileNotFoundError(f"{folder} has no fmi2Functions.h (FMPy's FMI headers)")
+    return folder
+
+
+def fmi_include() -> str:
+    """-I of the FMI standard's headers."""
+    return f"-I{fmi_include_dir()}"
+
+
+def host_includes() -> list[str]:
+    """-I of the host-API header (fmu_src/fmi/fmi2_host_api.h, which every C host includes) and of the FMI headers."""
+    from vibrofmu import paths
+
+    return [f"-I{paths.FMU_SRC / 'fmi'}", fmi_include()]
