@@ -11,7 +11,6 @@ import pytest
 
 from vibrofmu.speed import ladder
 
-from vibrofmu import paths
 from vibrofmu.fmus import toolchain
 
 # A stand-in FMU: every fmi2DoStep runs the same fixed loop (WORK iterations) and x = t, so that every doStep
@@ -55,7 +54,7 @@ def stand_in(tmp_path_factory):
     source = out / "stand_in.c"
     source.write_text(STAND_IN)
     library = out / "stand_in.so"
-    subprocess.run([*paths.c_compiler(), "-O1", "-shared", "-fPIC", f"-DWORK={WORK}", toolchain.fmi_include(), "-o",
+    subprocess.run([*toolchain.c_compiler(), "-O1", "-shared", "-fPIC", f"-DWORK={WORK}", toolchain.fmi_include(), "-o",
                     str(library), str(source)], check=True, capture_output=True)
     return ladder.compile_timing_host(out), library
 

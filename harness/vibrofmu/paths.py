@@ -46,7 +46,3 @@ def build_dir() -> Path:
     """The default output folder of `vibrofmu build` and of the commands that build missing FMUs:
     ./build of the current directory."""
     return Path.cwd() / "build"
-
-
-# The C compiler lives with its flags in vibrofmu.fmus.toolchain; these names stay for the callers of paths.
-from vibrofmu.fmus.toolchain import NoCompiler, c_compiler  # noqa: E402,F401

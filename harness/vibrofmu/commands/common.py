@@ -23,6 +23,7 @@ from xml.etree import ElementTree
 from vibromodel.parameters import ParameterError
 
 from vibrofmu import paths
+from vibrofmu.fmus.toolchain import NoCompiler
 from vibrofmu.paths import CLOSED_LOOP_NAME, CONTROLLER_NAME, PLANT_MODEL, PLANT_NAME  # noqa: F401 (re-exported)
 
 
@@ -71,7 +72,7 @@ def run(command: Callable[[argparse.Namespace], int], args: argparse.Namespace) 
     except (UserError, ParameterError) as error:
         print(f"error: {error}", file=sys.stderr)
         return 2
-    except paths.NoCompiler as error:
+    except NoCompiler as error:
         print(f"error: {error} (set $CC or install gcc)", file=sys.stderr)
         return 2
     except KeyboardInterrupt:

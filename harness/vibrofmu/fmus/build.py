@@ -3,7 +3,7 @@ goes on top; each FMU also gets the compiled kernel (vibrokernel.so) in its reso
 the default experiment goes into the documentation; finally every variable gets its description and unit
 (fmu_variables.annotate) and the file is made readable by all (0644).
 
-Without a C compiler (paths.c_compiler) the FMUs are built without their compiled parts: no kernel (the plant
+Without a C compiler (toolchain.c_compiler) the FMUs are built without their compiled parts: no kernel (the plant
 integrates in Python, the same numbers, slower) and no status shim (pythonfmu's own binary: a failing call
 returns fmi2Discard or fmi2Fatal instead of fmi2Error). `compiled_parts()` says which case applies.
 """
@@ -27,6 +27,7 @@ from vibrofmu.fmus.kernel import compile_kernel
 from vibrofmu.fmus.pythonenv import pack_python_env
 from vibrofmu.fmus.refresult import pack_reference
 from vibrofmu.fmus.shim import install_status_shim
+from vibrofmu.fmus import toolchain
 
 FMU_SRC = paths.FMU_SRC
 PLANT_SLAVE = FMU_SRC / "HertzEAOscillator.py"
@@ -42,9 +43,9 @@ FMU_MODE = 0o644  # rw-r--r--: the FMU is a deliverable others read (mkstemp alo
 def compiled_parts() -> str | None:
     """None when a C compiler is available; else the one line that says what the FMUs are built without."""
     try:
-        paths.c_compiler()
+        toolchain.c_compiler()
         return None
-    except paths.NoCompiler as error:
+    except toolchain.NoCompiler as error:
         return (f"warning: {error}; building the FMUs without their compiled parts (no C kernel: the plant "
                 f"integrates in Python, slower; no status shim: failures return fmi2Discard/fmi2Fatal, not fmi2Error)")
 
