@@ -16,33 +16,19 @@ import math
 import numpy as np
 
 from .compiled import check_structure
+# controller.h's and closedloop.h's constants and structures, generated from the headers (core_layouts.py)
+from .core_layouts import (VC_N, VC_NON_FINITE, VC_OK, VC_RAISED, VL_BAD_STEP, VL_BAD_TIME, VL_FAILED, VL_OK,
+                           VL_RAISED, VL_TERMINAL, VcController, VcRegressor, VlLoop)
 from .control import ESTIMATE_NAMES, Controller, Gains, validate_estimates, validate_law
 from .fidelities import entry
 from .parameters import NonFiniteOutput, ParameterError, Scene, check_finite, validate
 from .plant import TIME_TOLERANCE
 
-VC_OK, VC_BAD_STEP, VC_BAD_INPUT, VC_BAD_TIME, VC_RAISED, VC_NON_FINITE = 0, 1, 2, 4, 7, 8
-N = 9
+N = VC_N
 CONTROLLER_INPUTS = ("x", "v", "x_ref", "v_ref", "a_ref")
 CONTROLLER_OUTPUTS = ("U", "e1", "e2", "V", *ESTIMATE_NAMES)
 
 _double, _int = ctypes.c_double, ctypes.c_int64
-
-
-class VcRegressor(ctypes.Structure):
-    _fields_ = [(name, _double) for name in ("w_delta", "delta_sign", "w_beta", "w_gamma")]
-
-
-class VcController(ctypes.Structure):
-    """controller.h's VcController, field for field (checked against the library by _check_layout)."""
-
-    _fields_ = [
-        ("g3", _double * 6), ("phi", VcRegressor), ("phi_update", VcRegressor), ("theta", _double * N),
-        ("l1", _double), ("l2", _double), ("Lambda", _double * N), ("adaptation", _double * N),
-        ("c", _double), ("k_damping", _double), ("promised_e1", _double), ("true_delta", _double),
-        ("law", _int), ("time_tolerance", _double), ("t", _double), ("theta_hat", _double * N),
-        ("in", _double * len(CONTROLLER_INPUTS)), ("out", _double * len(CONTROLLER_OUTPUTS)), ("enabled", _int),
-    ]
 
 
 def _check_layout(library, function, structure) -> str | None:
@@ -227,22 +213,6 @@ def make_estimator(scene: Scene, gains: Gains, law: int, estimates, t0: float, k
 
 # -- the closed loop -------------------------------------------------------------------------------------------
 LOOP_OUTPUTS = ("x", "v", "x_ref", "U", "e1", "e2", "V", "V_rate", "V_rate_promised", *ESTIMATE_NAMES)
-VL_OK, VL_BAD_STEP, VL_BAD_TIME, VL_TERMINAL, VL_FAILED, VL_RAISED = 0, 1, 4, 5, 6, 7
-
-
-def _loop_structure():
-    """closedloop.h's VlLoop (built on first use: the solver structures come from vibromodel.compiled)."""
-    from .compiled import VK_MESSAGE, Dop853State, Rk4State, VkModel
-    from .compiled_open_loop import OeSolution
-
-    class VlLoop(ctypes.Structure):
-        _fields_ = [("model", VkModel), ("controller", VcController), ("solver", _int), ("time_tolerance", _double),
-                    ("dop", Dop853State), ("rk4", Rk4State), ("t", _double),
-                    ("out", _double * len(LOOP_OUTPUTS)), ("enabled", _int), ("error", _int),
-                    ("error_t", _double), ("error_x", _double), ("error_v", _double),
-                    ("message", ctypes.c_char * VK_MESSAGE), ("reference", OeSolution)]
-
-    return VlLoop
 
 
 def declare_loop(library) -> str | None:
@@ -263,7 +233,6 @@ def declare_loop(library) -> str | None:
             function.restype, function.argtypes = restype, argtypes
     except AttributeError as error:
         return f"the kernel has no closed loop: {error}"
-    VlLoop = _loop_structure()
     sizes = (ctypes.c_size_t * 8)()
     library.vl_layout(sizes)
     expected = (ctypes.sizeof(VlLoop), VlLoop.dop.offset, VlLoop.t.offset, VlLoop.out.offset, VlLoop.enabled.offset,
@@ -289,7 +258,7 @@ class CompiledClosedLoop:
         if self._program.reason is not None:
             self.problem = f"the reference's sums cannot be evaluated by recurrence: {self._program.reason}"
             return
-        self._structure = _loop_structure()
+        self._structure = VlLoop
         self._l = self._structure()
         self.address = ctypes.addressof(self._l)
         l, settings = self._l, python.settings
