@@ -15,10 +15,11 @@ import math
 
 import numpy as np
 
+from . import forces
 from .compiled import check_structure
 # controller.h's and closedloop.h's constants and structures, generated from the headers (core_layouts.py)
-from .core_layouts import (VC_N, VC_NON_FINITE, VC_OK, VC_RAISED, VL_BAD_STEP, VL_BAD_TIME, VL_FAILED, VL_OK,
-                           VL_RAISED, VL_TERMINAL, VcController, VcRegressor, VlLoop)
+from .core_layouts import (VC_GAINS, VC_N, VC_NON_FINITE, VC_OK, VC_RAISED, VL_BAD_STEP, VL_BAD_TIME, VL_FAILED,
+                           VL_OK, VL_RAISED, VL_TERMINAL, VcController, VlLoop)
 from .control import ESTIMATE_NAMES, Controller, Gains, validate_estimates, validate_law
 from .fidelities import entry
 from .parameters import NonFiniteOutput, ParameterError, Scene, check_finite, validate
@@ -55,6 +56,7 @@ def declare(library) -> str | None:
         "vc_publish": (status, [address]),
         "vc_do_step": (status, [address, d, d]),
         "vc_outputs": (status, [address, d, doubles, doubles]),
+        "vc_constants": (None, [address, d, d, d, d, d, d, doubles, doubles, ctypes.c_int64, doubles, d, d]),
     }
     try:
         for name, (restype, argtypes) in signatures.items():
@@ -65,23 +67,13 @@ def declare(library) -> str | None:
     return _check_layout(library, library.vc_layout, VcController)
 
 
-def _regressor(regressor) -> VcRegressor:
-    return VcRegressor(regressor.w_delta, regressor.delta_sign, regressor.w_beta, regressor.w_gamma)
-
-
-def fill_controller(structure: VcController, controller: Controller, scene: Scene) -> None:
-    """The constants of a control.Controller into a VcController (computed once, by control.py)."""
-    structure.g3 = (_double * 6)(*controller.phi.g3)
-    structure.phi, structure.phi_update = _regressor(controller.phi), _regressor(controller.phi_update)
-    structure.theta = (_double * N)(*controller.theta)
-    structure.l1, structure.l2 = controller.l1, controller.l2
-    structure.Lambda = (_double * N)(*controller.Lambda)
-    structure.adaptation = (_double * N)(*controller.adaptation)
-    structure.c, structure.k_damping = controller.c, controller.gains.k_damping
-    structure.promised_e1 = controller.promised_e1
-    structure.true_delta = scene.Delta
-    structure.law = int(controller.law)
-    structure.time_tolerance = TIME_TOLERANCE
+def fill_controller(structure: VcController, controller: Controller, scene: Scene, library) -> None:
+    """The constants of a control.Controller into a VcController, by the kernel's vc_constants: the one C
+    derivation of them, which the native FMUs use too (control.Controller derives the same bits in Python)."""
+    library.vc_constants(ctypes.addressof(structure), scene.mu, scene.Delta, scene.omega, scene.Omega, scene.beta,
+                         scene.gamma, (_double * 6)(*forces.coefficients(scene.alpha, scene.gamma, scene.R)),
+                         (_double * 6)(*controller.phi.g3), int(controller.law),
+                         (_double * VC_GAINS)(*controller.gains.lambdas), controller.gains.k_damping, TIME_TOLERANCE)
 
 
 def raise_from(code: int) -> None:
@@ -105,7 +97,7 @@ class CompiledEstimator:
         self._library = library
         self._c = VcController()
         self.address = ctypes.addressof(self._c)
-        fill_controller(self._c, self.controller, scene)
+        fill_controller(self._c, self.controller, scene, library)
         self._c.t = t0
         self._c.theta_hat = (_double * N)(*estimates)
         self._c.out[4:] = list(estimates)
@@ -265,7 +257,7 @@ class CompiledClosedLoop:
         polynomial = entry(settings.fidelity).compiled_model  # VkModel.polynomial of the plant's level
         for name, value in _model_fields(python.scene, python.model, polynomial).items():
             setattr(l.model, name, value if isinstance(value, (int, float)) else (_double * 6)(*value))
-        fill_controller(l.controller, python.controller, python.scene)
+        fill_controller(l.controller, python.controller, python.scene, library)
         l.solver, l.time_tolerance = int(settings.solver), TIME_TOLERANCE
         l.dop.rtol, l.dop.atol = settings.rtol, settings.rtol * ATOL_PER_RTOL  # as ClosedLoop gives Dop853
         l.dop.max_step, l.dop.step_budget = settings.max_step or math.inf, math.inf
