@@ -10,24 +10,19 @@
 #include <stdlib.h>
 #include <string.h>
 
-/* Python's iv ** iw for floats (CPython 3.11 float_pow) with the exponents used here: -1/8, 1/9 (of error
- * ratios, which are >= 0 or NaN; squares are py_square's products). So float_pow's branches for an exponent
- * that is 0, NaN, infinite or an odd integer, for 0 ** negative (ZeroDivisionError) and for negative **
- * fraction (a complex result) cannot be taken and are left out; a negative base (an even integer exponent)
- * is kept. noipa: GCC must not drop pow's errno. */
-__attribute__((noipa)) double py_pow(double iv, double iw, int *fault)
+/* iv ** iw as Python's float ** gives it, for the exponents used here (-1/8, 1/9) of error ratios iv >= 0 or NaN:
+ * C's pow (the libm call CPython's float_pow makes for them), a NaN base returned as it is, and the faults where
+ * Python raises: 0 ** negative (ZeroDivisionError) and an infinite result from a finite base (OverflowError;
+ * found from the value, not from errno). */
+double py_pow(double iv, double iw, int *fault)
 {
-    double ix;
     if (isnan(iv)) return iv;
-    if (isinf(iv)) return iw > 0.0 ? fabs(iv) : 0.0;
-    if (iv == 0.0) return 0.0;
-    if (iv < 0.0) iv = -iv;  /* only for an even integer iw */
-    if (iv == 1.0) return 1.0;
-    errno = 0;
-    ix = pow(iv, iw);
-    if (errno == 0 && isinf(ix)) errno = ERANGE;     /* _Py_ADJUST_ERANGE1 */
-    else if (errno == ERANGE && ix == 0.0) errno = 0;  /* underflow is fine */
-    if (errno != 0) *fault = FAULT_OVERFLOW;  /* ERANGE: the only errno pow sets for a positive finite base */
+    if (iv == 0.0 && iw < 0.0) {
+        *fault = FAULT_ZERO_DIVISION;
+        return 0.0;
+    }
+    const double ix = pow(iv, iw);
+    if (isinf(ix) && isfinite(iv)) *fault = FAULT_OVERFLOW;
     return ix;
 }
 

@@ -47,7 +47,7 @@ static inline double py_square(double q, int *fault)
     if (isinf(square) && !isinf(q)) *fault = FAULT_OVERFLOW;
     return square;
 }
-/* iv ** iw for iw = -1/8, 1/9 (float_pow): FAULT_OVERFLOW */
+/* iv ** iw for iw = -1/8, 1/9 and iv >= 0 or NaN (Python's float **): FAULT_ZERO_DIVISION, FAULT_OVERFLOW */
 double py_pow(double iv, double iw, int *fault);
 /* math.hypot(*values[0..n-1]) */
 double py_hypot(const double *values, int n);
