@@ -32,9 +32,8 @@ LIBRARY_NAME = "vibrokernel.so"
 
 PRE_CHECK_CODES = {VK_BAD_STEP: "VK_BAD_STEP", VK_BAD_INPUT: "VK_BAD_INPUT", VK_TOO_MANY_STEPS: "VK_TOO_MANY_STEPS",
                    VK_BAD_TIME: "VK_BAD_TIME"}
-# VK_RAISED's message is "<type>: <text>", the exception's one argument, but for OverflowError "<errno> <strerror>",
-# its two (CPython's float_pow raises PyErr_SetFromErrno(OverflowError)).
-RAISED_TYPES = {kind.__name__: kind for kind in (ZeroDivisionError, ValueError, RuntimeError)}
+# VK_RAISED's message is "<type>: <text>": the exception Python raises there, with the C twin's text as its argument.
+RAISED_TYPES = {kind.__name__: kind for kind in (ZeroDivisionError, ValueError, OverflowError, RuntimeError)}
 
 _double, _int = ctypes.c_double, ctypes.c_int64
 
@@ -386,7 +385,4 @@ class CompiledPlant:
         kind, _, text = message.partition(": ")
         if code == VK_RAISED and kind in RAISED_TYPES:
             raise RAISED_TYPES[kind](text)
-        if code == VK_RAISED and kind == "OverflowError":
-            number, _, reason = text.partition(" ")
-            raise OverflowError(int(number), reason)
         raise RuntimeError(f"vibrokernel left error code {code}: {message}")

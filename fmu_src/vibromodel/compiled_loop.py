@@ -388,9 +388,6 @@ class CompiledClosedLoop:
         if code == VL_RAISED and kind == "NonFiniteOutput":  # "output <name> = <value> is not finite; ..."
             name, _, rest = text.removeprefix("output ").partition(" = ")
             raise NonFiniteOutput(name, float(rest.partition(" ")[0]))
-        if code == VL_RAISED and kind == "OverflowError":
-            number, _, reason = text.partition(" ")
-            raise OverflowError(int(number), reason)
         raise RuntimeError(f"the compiled closed loop left error code {code}: {message}")
 
 
