@@ -22,7 +22,7 @@ from pathlib import Path
 from vibrofmu import paths
 
 CORE = paths.FMU_SRC / "core"
-MODULE = paths.FMU_SRC / "vibromodel" / "core_layouts.py"
+MODULE = paths.vibromodel_dir() / "core_layouts.py"  # the vibromodel the FMUs carry
 # The headers with structures or constants the front ends use (the others hold functions only).
 HEADERS = ("dop853.h", "rk4.h", "model.h", "plant.h", "slowflow_eval.h", "oafm_eval.h", "openloop_plant.h",
            "controller.h", "closedloop.h")
