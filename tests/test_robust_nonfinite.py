@@ -9,6 +9,7 @@ import math
 import numpy as np
 import pytest
 from fmpy.fmi1 import FMICallException
+from message_text import canonical_tree
 
 from vibrofmu.fmus.kernel import kernel_library
 from vibrofmu.hosts.run import FmuInstance
@@ -87,4 +88,4 @@ def test_controller_step_to_a_non_finite_output_fails_alike_in_every_path(contro
     assert trace[1] == ERROR and trace[2] == trace[0] and trace[4] == trace[0]
     assert "NonFiniteOutput(\"output U = -inf is not finite" in errors[0]
     assert compiled == python
-    assert native == python
+    assert canonical_tree(native) == canonical_tree(python)  # the same words and numbers (message_text)

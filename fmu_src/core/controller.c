@@ -260,6 +260,35 @@ int vc_do_step(VcController *c, double t, double h)
     return VC_OK;
 }
 
+void vc_constants(VcController *c, double mu, double Delta, double omega, double Omega, double beta, double gamma,
+                  const double *poly, const double *g3, int64_t law, const double *lambdas, double k_damping,
+                  double time_tolerance)
+{
+    memcpy(c->g3, g3, sizeof c->g3);
+    const double theta[VC_N] = {mu, poly[1], poly[2], poly[3], poly[4], poly[5], Delta, beta, gamma};
+    memcpy(c->theta, theta, sizeof theta);                /* control.true_theta */
+    const VcRegressor phi = {omega, 1.0, Omega, 2.0 * Omega};
+    c->phi = phi;                                         /* control.Regressor(scene) */
+    if (law == 2) { /* Eq. 81 as printed: -cos tau for Delta^, cos Omega tau for gamma^ */
+        const VcRegressor literal = {1.0, -1.0, Omega, Omega};
+        c->phi_update = literal;
+    } else {
+        c->phi_update = phi;
+    }
+    c->l1 = lambdas[0];
+    c->l2 = lambdas[1];
+    for (int i = 0; i < VC_N; i++) {
+        c->Lambda[i] = lambdas[i + 2];
+        c->adaptation[i] = c->l2 / c->Lambda[i];          /* lambda2 Lambda^-1 */
+    }
+    c->c = sqrt(c->l1 / c->l2);                           /* Eq. 84 */
+    c->k_damping = k_damping;
+    c->promised_e1 = -pow(c->l1, 1.5) / sqrt(c->l2);      /* Eq. 85 */
+    c->true_delta = Delta;
+    c->law = law;
+    c->time_tolerance = time_tolerance;
+}
+
 #define FIELD(name) offsetof(VcController, name)
 size_t vc_layout(size_t *offsets, size_t n_fields)
 {

@@ -11,8 +11,9 @@
  * The paper-literal law (Eqs 78, 81 as printed) uses the true Delta in U and its own update regressor.
  *
  * The same operations in the same order as control.py (sums left to right from 0), so that both give the same
- * bits. Every constant (true theta, series G3, gains, frequencies) is computed once by control.py and stored
- * here. VcController holds no pointers: its bytes are the controller FMU's model state.
+ * bits. Every constant (true theta, gains, frequencies) is computed once, by vc_constants (below) from the
+ * parameters, a0..a5 and G3, and stored here. VcController holds no pointers: its bytes are the controller FMU's
+ * model state.
  */
 #ifndef VIBRO_CONTROLLER_H
 #define VIBRO_CONTROLLER_H
@@ -55,6 +56,17 @@ typedef struct {
     double out[VC_OUTPUTS];          /* U, e1, e2, V, theta^ */
     int64_t enabled;                 /* the FMU's C fast path may step this controller */
 } VcController;
+
+#define VC_GAINS 11      /* lambda1 .. lambda11 */
+
+/* The constants of control.Controller into c (g3 .. time_tolerance; the state, inputs and outputs untouched): the
+   one C derivation of them, used by the native FMUs (native/controller_setup.c) and by the pythonfmu FMUs'
+   compiled models (vibromodel/compiled_loop.fill_controller). poly = a0..a5 (forces.coefficients, corrected),
+   g3 = series G3 (forces.series_g3), law 0/1/2 (control.Law), lambdas = lambda1..lambda11 (control.Gains). The
+   same operations as control.Controller, so the same bits (tests/test_controller_constants.py). */
+void vc_constants(VcController *c, double mu, double Delta, double omega, double Omega, double beta, double gamma,
+                  const double *poly, const double *g3, int64_t law, const double *lambdas, double k_damping,
+                  double time_tolerance);
 
 /* sizeof(VcController) and its fields' offsets in declaration order (0 if n_fields is not their number). */
 size_t vc_layout(size_t *offsets, size_t n_fields);

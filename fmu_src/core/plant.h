@@ -4,8 +4,9 @@
  *
  * One VkPlant holds everything: the model's constants, the solver's state, the plant's time and input, the
  * outputs and a pending error.  It contains no pointers, so its bytes are the plant's FMU state.
- * vibromodel/compiled.py mirrors the layout with ctypes and checks it with vk_layout().  The library built from
- * fmu_src/core (every .c file) is vibrokernel.so (harness/vibrofmu/fmus/kernel.py).
+ * vibromodel/core_layouts.py, generated from this header, gives ctypes the layout; vk_layout() checks it against
+ * the compiled library at load time.  The library built from fmu_src/core (every .c file) is vibrokernel.so
+ * (harness/vibrofmu/fmus/kernel.py).
  */
 #ifndef VIBRO_PLANT_H
 #define VIBRO_PLANT_H

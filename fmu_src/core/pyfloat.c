@@ -4,30 +4,23 @@
  */
 #include "pyfloat.h"
 
-#include <errno.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
-#include <string.h>
 
-/* Python's iv ** iw for floats (CPython 3.11 float_pow) with the exponents used here: -1/8, 1/9 (of error
- * ratios, which are >= 0 or NaN; squares are py_square's products). So float_pow's branches for an exponent
- * that is 0, NaN, infinite or an odd integer, for 0 ** negative (ZeroDivisionError) and for negative **
- * fraction (a complex result) cannot be taken and are left out; a negative base (an even integer exponent)
- * is kept. noipa: GCC must not drop pow's errno. */
-__attribute__((noipa)) double py_pow(double iv, double iw, int *fault)
+/* iv ** iw as Python's float ** gives it, for the exponents used here (-1/8, 1/9) of error ratios iv >= 0 or NaN:
+ * C's pow (the libm call CPython's float_pow makes for them), a NaN base returned as it is, and the faults where
+ * Python raises: 0 ** negative (ZeroDivisionError) and an infinite result from a finite base (OverflowError;
+ * found from the value, not from errno). */
+double py_pow(double iv, double iw, int *fault)
 {
-    double ix;
     if (isnan(iv)) return iv;
-    if (isinf(iv)) return iw > 0.0 ? fabs(iv) : 0.0;
-    if (iv == 0.0) return 0.0;
-    if (iv < 0.0) iv = -iv;  /* only for an even integer iw */
-    if (iv == 1.0) return 1.0;
-    errno = 0;
-    ix = pow(iv, iw);
-    if (errno == 0 && isinf(ix)) errno = ERANGE;     /* _Py_ADJUST_ERANGE1 */
-    else if (errno == ERANGE && ix == 0.0) errno = 0;  /* underflow is fine */
-    if (errno != 0) *fault = FAULT_OVERFLOW;  /* ERANGE: the only errno pow sets for a positive finite base */
+    if (iv == 0.0 && iw < 0.0) {
+        *fault = FAULT_ZERO_DIVISION;
+        return 0.0;
+    }
+    const double ix = pow(iv, iw);
+    if (isinf(ix) && isfinite(iv)) *fault = FAULT_OVERFLOW;
     return ix;
 }
 
@@ -104,73 +97,16 @@ const char *py_g(number_text buf, double x, int precision)
     return buf;
 }
 
-/* The `precision` significant digits of ax > 0 rounded to nearest, or with `up` the next such decimal above
- * them, and their decimal exponent; true if they read back as ax. */
-static int decimal_digits(double ax, int precision, int up, char *digits, int *exponent)
-{
-    char text[40];
-    int n = 0;
-    snprintf(text, sizeof text, "%.*e", precision - 1, ax);
-    for (const char *c = text; *c != 'e'; c++)
-        if (*c != '.') digits[n++] = *c;
-    digits[n] = '\0';
-    *exponent = atoi(strchr(text, 'e') + 1);
-    if (up) {
-        int i = n - 1;
-        for (; i >= 0 && digits[i] == '9'; i--) digits[i] = '0';
-        if (i >= 0) {
-            digits[i] += 1;
-        } else {  /* 99..9 -> 100..0 */
-            digits[0] = '1';
-            *exponent += 1;
-        }
-    }
-    snprintf(text, sizeof text, "%c.%se%d", digits[0], digits + 1, *exponent);
-    return strtod(text, NULL) == ax;
-}
-
-/* repr(x) (float_repr_style 'short'): the fewest significant digits that read back as x, of those the
- * nearest to x (the nearest decimal, or for a power of two, whose rounding interval reaches twice as far
- * above as below, possibly the next one above); positional notation when the decimal point falls within
- * -4 < point <= 16 of the digits' start, else d.ddde+XX. */
+/* The text of x in messages: the first of %.15g, %.16g, %.17g that reads back as x (so the message holds x
+ * exactly); "nan" for every NaN. Plain C formatting, not Python's repr: a message names the value, not its Python
+ * spelling ("2" where Python writes 2.0). */
 const char *py_repr(number_text buf, double x)
 {
-    char digits[20], *out = buf;
-    int n, precision, exponent, point, i;
     if (isnan(x)) return "nan";
-    if (isinf(x)) return x > 0 ? "inf" : "-inf";
-    if (x == 0.0) return signbit(x) ? "-0.0" : "0.0";
-    for (precision = 1; precision < 17; precision++) {
-        if (decimal_digits(fabs(x), precision, 0, digits, &exponent)) break;
-        if (decimal_digits(fabs(x), precision, 1, digits, &exponent)) break;
+    for (int precision = 15; precision <= 17; precision++) {
+        snprintf(buf, sizeof(number_text), "%.*g", precision, x);
+        if (strtod(buf, NULL) == x) break;
     }
-    if (precision == 17) decimal_digits(fabs(x), precision, 0, digits, &exponent);
-    n = (int)strlen(digits);
-    point = exponent + 1;
-    if (x < 0) *out++ = '-';
-    if (point <= -4 || point > 16) {
-        *out++ = digits[0];
-        if (n > 1) *out++ = '.';
-        for (i = 1; i < n; i++) *out++ = digits[i];
-        snprintf(out, sizeof(number_text) - (size_t)(out - buf), "e%c%02d", exponent < 0 ? '-' : '+', abs(exponent));
-        return buf;
-    }
-    if (point <= 0) {
-        *out++ = '0';
-        *out++ = '.';
-        for (i = 0; i < -point; i++) *out++ = '0';
-        for (i = 0; i < n; i++) *out++ = digits[i];
-    } else {
-        for (i = 0; i < point || i < n; i++) {
-            if (i == point) *out++ = '.';
-            *out++ = i < n ? digits[i] : '0';
-        }
-        if (point >= n) {
-            *out++ = '.';
-            *out++ = '0';
-        }
-    }
-    *out = '\0';
     return buf;
 }
 
@@ -184,8 +120,8 @@ void py_fault_text(int fault, char *buf, unsigned long size)
     case FAULT_MATH_DOMAIN:
         snprintf(buf, size, "ValueError: math domain error");
         break;
-    default:  /* FAULT_OVERFLOW: PyErr_SetFromErrno(OverflowError) raises OverflowError(ERANGE, strerror(ERANGE)) */
-        snprintf(buf, size, "OverflowError: %d %s", ERANGE, strerror(ERANGE));
+    default:  /* FAULT_OVERFLOW */
+        snprintf(buf, size, "OverflowError: result out of range");
         break;
     }
 }

@@ -1,7 +1,7 @@
 /*
  * pyfloat.h -- Python's float semantics in C, for the compiled twins of vibromodel (model.c, dop853.c, plant.c):
  * the operations whose result or error differs from C's (min/max with NaN, division by zero, math.cos of an
- * infinity, float ** with its OverflowError, math.hypot), and Python's number formatting for messages.
+ * infinity, float ** with its OverflowError, math.hypot), and the text of numbers in messages.
  * A function that can raise in Python sets *fault (left unchanged otherwise).
  */
 #ifndef VIBRO_PYFLOAT_H
@@ -47,7 +47,7 @@ static inline double py_square(double q, int *fault)
     if (isinf(square) && !isinf(q)) *fault = FAULT_OVERFLOW;
     return square;
 }
-/* iv ** iw for iw = -1/8, 1/9 (float_pow): FAULT_OVERFLOW */
+/* iv ** iw for iw = -1/8, 1/9 and iv >= 0 or NaN (Python's float **): FAULT_ZERO_DIVISION, FAULT_OVERFLOW */
 double py_pow(double iv, double iw, int *fault);
 /* math.hypot(*values[0..n-1]) */
 double py_hypot(const double *values, int n);
@@ -55,8 +55,10 @@ double py_hypot(const double *values, int n);
 /* Text of numbers in messages */
 typedef char number_text[40];
 const char *py_g(number_text buf, double x, int precision);  /* f"{x:.{precision}g}" */
-const char *py_repr(number_text buf, double x);              /* repr(x) */
-/* "<exception type>: <text>" that a fault raises in Python */
+/* x exactly (the first of %.15g .. %.17g that reads back as x); named for Python's repr, which it replaced */
+const char *py_repr(number_text buf, double x);
+/* "<exception type>: <text>" of the exception a fault raises in Python (the type is Python's; the text says what
+   happened in the C twin's words) */
 void py_fault_text(int fault, char *buf, unsigned long size);
 
 #endif

@@ -1,18 +1,18 @@
 /*
- * pytext.h -- Python's text of numbers and exceptions, so that the native FMUs log the messages the Python
- * slaves log (which format values with repr()).
+ * pytext.h -- the text of numbers, strings and kernel exceptions in the native FMUs' messages. The values are
+ * exact (a number reads back as itself); the spelling is C's, not Python's repr (the names are those of the
+ * Python functions the messages once imitated: the call sites are unchanged).
  */
 #ifndef PYTEXT_H
 #define PYTEXT_H
 
 #include <stddef.h>
 
-/* repr(x) of a Python float ("1e-05", "0.0001", "2.0", "inf", "nan"): core/pyfloat.c's py_repr into out. */
+/* x exactly: core/pyfloat.c's py_repr ("1e-05", "0.0001", "2", "inf", "nan") into out. */
 void native_repr(double x, char *out, size_t size);
-/* repr of the exception a kernel message "<Type>: <text>" stands for: "Type('text')";
-   "OverflowError: 34 Numerical result out of range" -> "OverflowError(34, 'Numerical result out of range')". */
+/* A kernel message "<Type>: <text>" as it is (the exception's type, then its text). */
 void py_exception_repr(const char *message, char *out, size_t size);
-/* repr(s) of a Python str (quotes chosen as Python does; \\, \n, \r, \t and the quote escaped). */
+/* s in single quotes. */
 void py_str_repr(const char *s, char *out, size_t size);
 
 #endif

@@ -17,6 +17,11 @@ from pathlib import Path
 import numpy as np
 
 from . import settings as plant
+# core/plant.h's return codes, core/dop853.h's array sizes and the structures: generated from the headers
+# (core_layouts.py by harness/vibrofmu/fmus/layouts.py); Dop853State and Rk4State are dop853.h's Dop853, rk4.h's Rk4
+from .core_layouts import (DOP_MAX_EVENTS, DOP_STAGES, VK_BAD_INPUT, VK_BAD_STEP, VK_BAD_TIME, VK_FAILED,
+                           VK_MESSAGE, VK_OK, VK_RAISED, VK_TERMINAL, VK_TOO_MANY_STEPS, Dop853 as Dop853State,
+                           Rk4 as Rk4State, VkModel, VkPlant)
 from .fidelities import entry
 from .integrate import ATOL_PER_RTOL, IntegrationError, TerminalEvent
 from .models import PolynomialModel, pull_in_slope
@@ -25,69 +30,12 @@ from .settings import Outputs, Settings, Solver, check_step, checked_settings
 
 LIBRARY_NAME = "vibrokernel.so"
 
-# core/plant.h: return codes; core/dop853.h: array sizes
-VK_OK, VK_BAD_STEP, VK_BAD_INPUT, VK_TOO_MANY_STEPS, VK_BAD_TIME, VK_TERMINAL, VK_FAILED, VK_RAISED = range(8)
 PRE_CHECK_CODES = {VK_BAD_STEP: "VK_BAD_STEP", VK_BAD_INPUT: "VK_BAD_INPUT", VK_TOO_MANY_STEPS: "VK_TOO_MANY_STEPS",
                    VK_BAD_TIME: "VK_BAD_TIME"}
-DOP_MAX_DIM, DOP_MAX_EVENTS, DOP_STAGES, DOP_DENSE, VK_MESSAGE = 16, 4, 16, 7, 480
-# VK_RAISED's message is "<type>: <text>", the exception's one argument, but for OverflowError "<errno> <strerror>",
-# its two (CPython's float_pow raises PyErr_SetFromErrno(OverflowError)).
-RAISED_TYPES = {kind.__name__: kind for kind in (ZeroDivisionError, ValueError, RuntimeError)}
+# VK_RAISED's message is "<type>: <text>": the exception Python raises there, with the C twin's text as its argument.
+RAISED_TYPES = {kind.__name__: kind for kind in (ZeroDivisionError, ValueError, OverflowError, RuntimeError)}
 
 _double, _int = ctypes.c_double, ctypes.c_int64
-_vector = _double * DOP_MAX_DIM
-
-
-def _doubles(*names):
-    return [(name, _double) for name in names]
-
-
-def _ints(*names):
-    return [(name, _int) for name in names]
-
-
-class DopEvent(ctypes.Structure):
-    """core/dop853.h's DopEvent: g(y) = c0 + c . y"""
-    _fields_ = [("c0", _double), ("c", _vector), ("terminal", _int)]
-
-
-class Dop853State(ctypes.Structure):
-    """core/dop853.h's Dop853 (configuration, then state from `t` on)."""
-    _fields_ = [
-        *_ints("n", "n_events"), *_doubles("rtol", "atol", "max_step", "step_budget"),
-        ("events", DopEvent * DOP_MAX_EVENTS),
-        *_doubles("t", "h"), ("y", _vector), ("f", _vector), ("t_old", _double), ("y_old", _vector), ("f_old", _vector),
-        ("k", (_double * DOP_MAX_DIM) * DOP_STAGES), ("dense", (_double * DOP_MAX_DIM) * DOP_DENSE), ("stop_t", _double), ("stop_y", _vector),
-        *_ints("has_old", "n_stages", "dense_ready", "stopped"), ("side", _int * DOP_MAX_EVENTS),
-        *_ints("nfev", "n_steps"),
-    ]
-
-
-class Rk4State(ctypes.Structure):
-    """core/rk4.h's Rk4."""
-    _fields_ = [*_ints("n", "n_events"), ("max_step", _double), ("events", DopEvent * DOP_MAX_EVENTS),
-                ("t", _double), ("y", _vector), *_ints("nfev", "n_steps")]
-
-
-class VkModel(ctypes.Structure):
-    """core/model.h's VkModel."""
-    _fields_ = [
-        *_doubles("mu", "Delta", "omega", "alpha", "beta", "gamma", "Omega", "R"),
-        ("poly", _double * 6), ("g1", _double * 6), ("g2", _double * 6), ("g3", _double * 6),
-        *_doubles("pull_in_c", "pull_in_gap"),
-        *_ints("polynomial", "load_forcing", "electrostatics", "ac"),
-    ]
-
-
-class VkPlant(ctypes.Structure):
-    """core/plant.h's VkPlant, field for field (checked against the library by check_layout)."""
-
-    _fields_ = [
-        ("model", VkModel), *_doubles("time_tolerance", "max_steps_per_dostep"), ("solver", _int),
-        ("dop", Dop853State), ("rk4", Rk4State), ("U", _double),
-        *_doubles("plant_t", "U_input"), ("out", _double * 5), *_ints("in_contact", "enabled", "error"),
-        *_doubles("error_t", "error_x", "error_v"), ("message", ctypes.c_char * VK_MESSAGE),
-    ]
 
 
 # Valid values of the compiled models' integer fields (core/*.h), by field name, checked by check_structure on
@@ -437,7 +385,4 @@ class CompiledPlant:
         kind, _, text = message.partition(": ")
         if code == VK_RAISED and kind in RAISED_TYPES:
             raise RAISED_TYPES[kind](text)
-        if code == VK_RAISED and kind == "OverflowError":
-            number, _, reason = text.partition(" ")
-            raise OverflowError(int(number), reason)
         raise RuntimeError(f"vibrokernel left error code {code}: {message}")

@@ -15,34 +15,21 @@ import math
 
 import numpy as np
 
+from . import forces
 from .compiled import check_structure
+# controller.h's and closedloop.h's constants and structures, generated from the headers (core_layouts.py)
+from .core_layouts import (VC_GAINS, VC_N, VC_NON_FINITE, VC_OK, VC_RAISED, VL_BAD_STEP, VL_BAD_TIME, VL_FAILED,
+                           VL_OK, VL_RAISED, VL_TERMINAL, VcController, VlLoop)
 from .control import ESTIMATE_NAMES, Controller, Gains, validate_estimates, validate_law
 from .fidelities import entry
 from .parameters import NonFiniteOutput, ParameterError, Scene, check_finite, validate
 from .plant import TIME_TOLERANCE
 
-VC_OK, VC_BAD_STEP, VC_BAD_INPUT, VC_BAD_TIME, VC_RAISED, VC_NON_FINITE = 0, 1, 2, 4, 7, 8
-N = 9
+N = VC_N
 CONTROLLER_INPUTS = ("x", "v", "x_ref", "v_ref", "a_ref")
 CONTROLLER_OUTPUTS = ("U", "e1", "e2", "V", *ESTIMATE_NAMES)
 
 _double, _int = ctypes.c_double, ctypes.c_int64
-
-
-class VcRegressor(ctypes.Structure):
-    _fields_ = [(name, _double) for name in ("w_delta", "delta_sign", "w_beta", "w_gamma")]
-
-
-class VcController(ctypes.Structure):
-    """controller.h's VcController, field for field (checked against the library by _check_layout)."""
-
-    _fields_ = [
-        ("g3", _double * 6), ("phi", VcRegressor), ("phi_update", VcRegressor), ("theta", _double * N),
-        ("l1", _double), ("l2", _double), ("Lambda", _double * N), ("adaptation", _double * N),
-        ("c", _double), ("k_damping", _double), ("promised_e1", _double), ("true_delta", _double),
-        ("law", _int), ("time_tolerance", _double), ("t", _double), ("theta_hat", _double * N),
-        ("in", _double * len(CONTROLLER_INPUTS)), ("out", _double * len(CONTROLLER_OUTPUTS)), ("enabled", _int),
-    ]
 
 
 def _check_layout(library, function, structure) -> str | None:
@@ -69,6 +56,7 @@ def declare(library) -> str | None:
         "vc_publish": (status, [address]),
         "vc_do_step": (status, [address, d, d]),
         "vc_outputs": (status, [address, d, doubles, doubles]),
+        "vc_constants": (None, [address, d, d, d, d, d, d, doubles, doubles, ctypes.c_int64, doubles, d, d]),
     }
     try:
         for name, (restype, argtypes) in signatures.items():
@@ -79,23 +67,13 @@ def declare(library) -> str | None:
     return _check_layout(library, library.vc_layout, VcController)
 
 
-def _regressor(regressor) -> VcRegressor:
-    return VcRegressor(regressor.w_delta, regressor.delta_sign, regressor.w_beta, regressor.w_gamma)
-
-
-def fill_controller(structure: VcController, controller: Controller, scene: Scene) -> None:
-    """The constants of a control.Controller into a VcController (computed once, by control.py)."""
-    structure.g3 = (_double * 6)(*controller.phi.g3)
-    structure.phi, structure.phi_update = _regressor(controller.phi), _regressor(controller.phi_update)
-    structure.theta = (_double * N)(*controller.theta)
-    structure.l1, structure.l2 = controller.l1, controller.l2
-    structure.Lambda = (_double * N)(*controller.Lambda)
-    structure.adaptation = (_double * N)(*controller.adaptation)
-    structure.c, structure.k_damping = controller.c, controller.gains.k_damping
-    structure.promised_e1 = controller.promised_e1
-    structure.true_delta = scene.Delta
-    structure.law = int(controller.law)
-    structure.time_tolerance = TIME_TOLERANCE
+def fill_controller(structure: VcController, controller: Controller, scene: Scene, library) -> None:
+    """The constants of a control.Controller into a VcController, by the kernel's vc_constants: the one C
+    derivation of them, which the native FMUs use too (control.Controller derives the same bits in Python)."""
+    library.vc_constants(ctypes.addressof(structure), scene.mu, scene.Delta, scene.omega, scene.Omega, scene.beta,
+                         scene.gamma, (_double * 6)(*forces.coefficients(scene.alpha, scene.gamma, scene.R)),
+                         (_double * 6)(*controller.phi.g3), int(controller.law),
+                         (_double * VC_GAINS)(*controller.gains.lambdas), controller.gains.k_damping, TIME_TOLERANCE)
 
 
 def raise_from(code: int) -> None:
@@ -119,7 +97,7 @@ class CompiledEstimator:
         self._library = library
         self._c = VcController()
         self.address = ctypes.addressof(self._c)
-        fill_controller(self._c, self.controller, scene)
+        fill_controller(self._c, self.controller, scene, library)
         self._c.t = t0
         self._c.theta_hat = (_double * N)(*estimates)
         self._c.out[4:] = list(estimates)
@@ -227,22 +205,6 @@ def make_estimator(scene: Scene, gains: Gains, law: int, estimates, t0: float, k
 
 # -- the closed loop -------------------------------------------------------------------------------------------
 LOOP_OUTPUTS = ("x", "v", "x_ref", "U", "e1", "e2", "V", "V_rate", "V_rate_promised", *ESTIMATE_NAMES)
-VL_OK, VL_BAD_STEP, VL_BAD_TIME, VL_TERMINAL, VL_FAILED, VL_RAISED = 0, 1, 4, 5, 6, 7
-
-
-def _loop_structure():
-    """closedloop.h's VlLoop (built on first use: the solver structures come from vibromodel.compiled)."""
-    from .compiled import VK_MESSAGE, Dop853State, Rk4State, VkModel
-    from .compiled_open_loop import OeSolution
-
-    class VlLoop(ctypes.Structure):
-        _fields_ = [("model", VkModel), ("controller", VcController), ("solver", _int), ("time_tolerance", _double),
-                    ("dop", Dop853State), ("rk4", Rk4State), ("t", _double),
-                    ("out", _double * len(LOOP_OUTPUTS)), ("enabled", _int), ("error", _int),
-                    ("error_t", _double), ("error_x", _double), ("error_v", _double),
-                    ("message", ctypes.c_char * VK_MESSAGE), ("reference", OeSolution)]
-
-    return VlLoop
 
 
 def declare_loop(library) -> str | None:
@@ -263,7 +225,6 @@ def declare_loop(library) -> str | None:
             function.restype, function.argtypes = restype, argtypes
     except AttributeError as error:
         return f"the kernel has no closed loop: {error}"
-    VlLoop = _loop_structure()
     sizes = (ctypes.c_size_t * 8)()
     library.vl_layout(sizes)
     expected = (ctypes.sizeof(VlLoop), VlLoop.dop.offset, VlLoop.t.offset, VlLoop.out.offset, VlLoop.enabled.offset,
@@ -289,14 +250,14 @@ class CompiledClosedLoop:
         if self._program.reason is not None:
             self.problem = f"the reference's sums cannot be evaluated by recurrence: {self._program.reason}"
             return
-        self._structure = _loop_structure()
+        self._structure = VlLoop
         self._l = self._structure()
         self.address = ctypes.addressof(self._l)
         l, settings = self._l, python.settings
         polynomial = entry(settings.fidelity).compiled_model  # VkModel.polynomial of the plant's level
         for name, value in _model_fields(python.scene, python.model, polynomial).items():
             setattr(l.model, name, value if isinstance(value, (int, float)) else (_double * 6)(*value))
-        fill_controller(l.controller, python.controller, python.scene)
+        fill_controller(l.controller, python.controller, python.scene, library)
         l.solver, l.time_tolerance = int(settings.solver), TIME_TOLERANCE
         l.dop.rtol, l.dop.atol = settings.rtol, settings.rtol * ATOL_PER_RTOL  # as ClosedLoop gives Dop853
         l.dop.max_step, l.dop.step_budget = settings.max_step or math.inf, math.inf
@@ -427,9 +388,6 @@ class CompiledClosedLoop:
         if code == VL_RAISED and kind == "NonFiniteOutput":  # "output <name> = <value> is not finite; ..."
             name, _, rest = text.removeprefix("output ").partition(" = ")
             raise NonFiniteOutput(name, float(rest.partition(" ")[0]))
-        if code == VL_RAISED and kind == "OverflowError":
-            number, _, reason = text.partition(" ")
-            raise OverflowError(int(number), reason)
         raise RuntimeError(f"the compiled closed loop left error code {code}: {message}")
 
 

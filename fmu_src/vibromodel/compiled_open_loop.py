@@ -21,12 +21,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from .compiled import VkPlant, _model_fields
+# oafm_eval.h's and openloop_plant.h's constants and structures, generated from the headers (core_layouts.py)
+from .core_layouts import (OE_BASES, OE_ITEMS, OE_POWERS, OE_RESYNC, OE_STEP_SLACK, OL_BEYOND, OL_REFUSED, OeCache,
+                           OePiece, OeSolution, OlPlant, SfTable)
 from .models import Fidelity
 from .plant import Plant
 from .settings import TIME_TOLERANCE, Outputs, check_step
 
-OE_BASES, OE_POWERS, OE_ITEMS, OE_RESYNC, OE_STEP_SLACK = 6, 17, 256, 16, 4.0  # oafm_eval.h
-OL_REFUSED, OL_BEYOND, OL_NONFINITE = 20, 21, 22  # openloop_plant.h
 EPS = np.finfo(float).eps
 SEARCH_RANGE = 8  # largest |n_j| tried when writing a rate as a combination of bases (harmonic order <= 8)
 SEARCH_LIMIT = 200_000  # combinations tried at most per value (the range shrinks with more bases)
@@ -35,36 +36,6 @@ OPEN_LOOP = (Fidelity.AVERAGED, Fidelity.ANALYTIC)
 
 _d, _i = ctypes.c_double, ctypes.c_int64
 _dp, _ip = ctypes.POINTER(_d), ctypes.POINTER(_i)
-
-
-class SfTable(ctypes.Structure):
-    _fields_ = [(name, _d) for name in ("t0", "spacing", "omega", "x_e", "harmonic", "mean_shift", "Omega",
-                                        "psi_sin", "psi_cos")] + \
-               [("ac", _i), ("first", _i), ("n_cells", _i), ("t_end", _d), ("cells", _dp)]
-
-
-class OePiece(ctypes.Structure):
-    _fields_ = [("start", _d), ("n_decay_bases", _i), ("n_freq_bases", _i),
-                ("decay_base", _d * OE_BASES), ("freq_base", _d * OE_BASES),
-                ("decay_top", _i * OE_BASES), ("decay_bottom", _i * OE_BASES), ("decay_zero", _i * OE_BASES),
-                ("freq_top", _i * OE_BASES), ("freq_zero", _i * OE_BASES),
-                ("n_decay_table", _i), ("n_decay_rows", _i), ("n_freq_table", _i), ("n_freq_rows", _i),
-                ("decay_chain", _ip), ("freq_chain", _ip), ("n_groups", _i),
-                ("group_decay", _ip), ("group_secular", _ip), ("group_end", _ip), ("term_freq", _ip),
-                ("term_coefficient", _dp)]
-
-
-class OeCache(ctypes.Structure):
-    _fields_ = [("piece", _i), ("count", _i), ("s", _d), ("rotation_h", _d), ("seen_h", _d)] + \
-               [(name, _d * OE_ITEMS) for name in ("wre", "wim", "D", "rwre", "rwim", "rD")]
-
-
-class OeSolution(ctypes.Structure):
-    _fields_ = [("n_pieces", _i), ("pieces", ctypes.POINTER(OePiece)), ("cache", OeCache)]
-
-
-class OlPlant(ctypes.Structure):
-    _fields_ = [("plant", VkPlant), ("fidelity", _i), ("slowflow", SfTable), ("oafm", OeSolution)]
 
 
 def declare(library) -> str | None:

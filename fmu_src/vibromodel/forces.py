@@ -13,6 +13,13 @@ def hertz(x: float) -> float:
     return s * math.sqrt(s) if s > 0.0 else 0.0
 
 
+def potential(x: float) -> float:
+    """V(x) = -x + (3/5)(1 + 2x/3)^(5/2) in contact, -x beyond the contact edge x = -3/2: the potential of the
+    unforced, undamped Eq. 3, x'' = 1 - H(x) = -V'(x) (V' = H - 1 is continuous at the edge, V(-3/2) = 3/2)."""
+    s = 1.0 + 2.0 * x / 3.0
+    return -x + (0.6 * s * s * math.sqrt(s) if s > 0.0 else 0.0)
+
+
 def contact_indentation(x: float) -> float:
     """1 + 2x/3 = z/z_s: positive in contact, <= 0 when the mass has left the contact."""
     return 1.0 + 2.0 * x / 3.0

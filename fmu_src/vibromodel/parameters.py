@@ -8,6 +8,8 @@ import math
 import sys
 from dataclasses import asdict, dataclass, fields, replace
 
+from . import forces
+
 # Paper example (PAPER §4, docs/model.md, The paper's example reproduced): delta*epsilon is the detuning of omega from sqrt(a1).
 PAPER_DETUNING = 0.02 * 0.01
 
@@ -19,9 +21,8 @@ PULL_IN_GAP = 1e-3
 
 
 def paper_omega(alpha: float, gamma: float, R: float) -> float:
-    """Eq. 9: omega = sqrt(a1) + delta*epsilon, a1 of Eq. 8."""
-    a1 = 1.0 - 8.0 * alpha / (3.0 * R) - 4.0 * gamma / (3.0 * R)
-    return math.sqrt(a1) + PAPER_DETUNING
+    """Eq. 9: omega = sqrt(a1) + delta*epsilon, a1 of Eq. 8 (forces.coefficients, the model's own a1)."""
+    return math.sqrt(forces.coefficients(alpha, gamma, R)[1]) + PAPER_DETUNING
 
 
 # The paper example's forcing frequency, 0.9987322562...

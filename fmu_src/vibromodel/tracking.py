@@ -92,20 +92,13 @@ def reference_terms(scene: Scene, settings: ReferenceSettings) -> Terms:
     return terms + multitone_terms() if settings.kind == ReferenceKind.MULTITONE else terms
 
 
-def _evaluate(terms: Terms, t: np.ndarray) -> np.ndarray:
-    x = np.zeros_like(t)
-    for m, sigma, nu, a, b in terms.rows():
-        x += t**m * np.exp(-sigma * t) * (a * np.cos(nu * t) + b * np.sin(nu * t))
-    return x
-
-
 def regressor_gram(scene: Scene, settings: ReferenceSettings, start: float = GRAM_START, span: float = GRAM_SPAN,
                    step: float = GRAM_STEP) -> np.ndarray:
     """G = (1/T) int phi(x~, x~', t) phi^T dt over [start, start + span]: the level of persistent excitation."""
     terms = reference_terms(scene, settings)
     t = np.arange(start, start + span, step)
     phi = Regressor(scene)
-    rows = np.array([phi(ti, xi, vi) for ti, xi, vi in zip(t, _evaluate(terms, t), _evaluate(terms.derivative(), t))])
+    rows = np.array([phi(ti, xi, vi) for ti, xi, vi in zip(t, terms(t), terms.derivative()(t))])
     return rows.T @ rows / len(t)
 
 
@@ -120,6 +113,4 @@ def excitation_gains(scene: Scene, settings: ReferenceSettings, lambda1: float =
 def on_reference(scene: Scene, settings: ReferenceSettings) -> Scene:
     """The scene with the plant starting on the reference: x(0) = x~(0), x'(0) = x~'(0)."""
     terms = reference_terms(scene, settings)
-    zero = np.zeros(1)
-    return scene.with_values(x_start=float(_evaluate(terms, zero)[0]),
-                             v_start=float(_evaluate(terms.derivative(), zero)[0]))
+    return scene.with_values(x_start=float(terms(0.0)), v_start=float(terms.derivative()(0.0)))

@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from vibromodel.forces import hertz
+from vibromodel.forces import hertz, potential
 from vibromodel.integrate import TerminalEvent
 from vibromodel.parameters import Scene
 from vibromodel.plant import Plant, Settings, Solver
@@ -152,12 +152,6 @@ def _count(result: CampaignResult, solver: str, index: int, scene: Scene, rtol: 
 
 
 # -- grazes ---------------------------------------------------------------------------------------------------------
-def _potential(x: float) -> float:
-    """V(x) of the unforced, undamped Eq. 3: V' = H(x) - 1, V(-3/2) = 3/2 (x'' = -V'(x))."""
-    s = 1.0 + 2.0 * x / 3.0
-    return -x + (0.6 * s * s * math.sqrt(s) if s > 0.0 else 0.0)
-
-
 @dataclass(frozen=True)
 class GrazeReference:
     """The periodic motion of energy E = 3/2 + depth (module docstring): x_max, the contact phase's duration
@@ -202,7 +196,7 @@ def graze_reference(depth: float) -> GrazeReference:
     from scipy.optimize import brentq
 
     energy = 1.5 + depth
-    x_max = brentq(lambda x: _potential(x) - energy, 0.0, 10.0, xtol=1e-15, rtol=1e-15)
+    x_max = brentq(lambda x: potential(x) - energy, 0.0, 10.0, xtol=1e-15, rtol=1e-15)
     # t_contact = integral from -3/2 to x_max of dx / sqrt(2 (E - V(x))), split at the middle:
     # upper half x = x_max - u^2 (the turning point's square-root singularity); lower half xi = x + 3/2 = w^2 - depth,
     # where E - V = w^2 - 0.6 (2 xi / 3)^(5/2) (exact: V = -x + 0.6 g^(5/2), g = 2 xi / 3), so the integrand
@@ -211,7 +205,7 @@ def graze_reference(depth: float) -> GrazeReference:
 
     def upper(u):
         x = x_max - u * u
-        return 2.0 * u / math.sqrt(2.0 * (energy - _potential(x))) if u > 0.0 else math.sqrt(2.0 / _potential_slope(x_max))
+        return 2.0 * u / math.sqrt(2.0 * (energy - potential(x))) if u > 0.0 else math.sqrt(2.0 / _potential_slope(x_max))
 
     def lower(w):
         xi = w * w - depth

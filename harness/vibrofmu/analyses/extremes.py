@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 from scipy.integrate import solve_ivp
 
+from vibromodel.forces import potential
 from vibromodel.integrate import RK4_DRIVE_THETA, Dop853, rk4_drive_gains
 from vibromodel.models import make_model
 from vibromodel.parameters import MIN_RTOL, PULL_IN_GAP, Scene
@@ -65,16 +66,15 @@ SCIPY_METHODS = ("DOP853", "RK45", "LSODA")
 SCIPY_RTOL = 1e-12
 
 
-def energy(x, v):
-    """E = v^2/2 + int_0^x (H(s) - 1) ds of x'' = 1 - H(x) (Eq. 3 with mu = Delta = alpha = beta = gamma = 0).
+_POTENTIAL = np.vectorize(potential, otypes=[float])
 
-    H(s) = (1 + 2s/3)^(3/2) in contact and 0 once 1 + 2s/3 <= 0; int_0^x H ds = (3/5)((1 + 2x/3)^(5/2) - 1) in
-    contact, and beyond the contact edge x = -3/2 the integral stays at its value there, -3/5: max(1 + 2x/3, 0)
-    covers both. E is 0 at rest at the equilibrium x = 0, the potential's minimum: E(0) is the oscillation's energy.
-    """
+
+def energy(x, v):
+    """E = v^2/2 + V(x) - V(0) of x'' = 1 - H(x) (Eq. 3 with mu = Delta = alpha = beta = gamma = 0), V the
+    potential of forces.potential (V' = H - 1, in contact and beyond the contact edge x = -3/2). E is 0 at rest at
+    the equilibrium x = 0, the potential's minimum: E(0) is the oscillation's energy."""
     x, v = np.asarray(x, dtype=float), np.asarray(v, dtype=float)
-    s = np.maximum(1.0 + 2.0 * x / 3.0, 0.0)
-    return 0.5 * v**2 + 0.6 * (s**2.5 - 1.0) - x
+    return 0.5 * v**2 + (_POTENTIAL(x) - potential(0.0))
 
 
 def _drift(x, v, scene=UNDAMPED) -> float:

@@ -35,6 +35,8 @@ from scipy.optimize import brentq, newton
 from vibromodel import forces
 from vibromodel.parameters import PULL_IN_GAP, Scene
 
+from vibrofmu.analyses.harmonics import first_harmonic
+
 RTOL = 1e-11
 ATOL = 1e-13  # absolute floor: the state and Phi are O(0.01 .. 1), the omega-sensitivity O(1 .. 100)
 NEWTON_TOL = 1e-10  # on |P(z) - z|_inf: 1e3 x the period map's own error ~ rtol |z|
@@ -211,16 +213,15 @@ class Orbit:
         return self.kind == "stable"
 
 
-def first_harmonic(pmap: PeriodMap) -> tuple[complex, float]:
-    """(c1, mean) with c1 = (1/pi) int_0^{2 pi} x(s) e^{-is} ds: trapezoid rule, exact to round-off here."""
+def orbit_harmonic(pmap: PeriodMap) -> tuple[complex, float]:
+    """(c1, mean) of the orbit (harmonics.first_harmonic of x at HARMONIC_SAMPLES phases over one period)."""
     s = np.arange(HARMONIC_SAMPLES) * (TWO_PI / HARMONIC_SAMPLES)
-    x = pmap.x(s)
-    return 2.0 * np.mean(x * np.exp(-1j * s)), float(np.mean(x))
+    return first_harmonic(pmap.x(s), HARMONIC_SAMPLES)
 
 
 def orbit_from(model: PeriodicModel, pmap: PeriodMap) -> Orbit:
     """Floquet multipliers, Liouville check, first harmonic, mean and extrema of the orbit through pmap.z0."""
-    c1, mean = first_harmonic(pmap)
+    c1, mean = orbit_harmonic(pmap)
     rho = np.linalg.eigvals(pmap.monodromy).astype(complex)
     rho = rho[np.argsort(np.abs(rho))]
     x_ends = np.concatenate([pmap.extrema, pmap.z0[:1]])

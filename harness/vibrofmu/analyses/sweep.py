@@ -23,6 +23,7 @@ from vibromodel.parameters import Scene
 from vibromodel.plant import Settings
 
 from vibrofmu.hosts.run import FmuInstance, _reason
+from vibrofmu.analyses.harmonics import first_harmonic
 from vibrofmu.analyses.simulate import start_values
 
 WINDOW_PERIODS = 10
@@ -88,12 +89,6 @@ def hysteresis_jumps(up: Sweep, down: Sweep, threshold: float = HYSTERESIS_THRES
     return sorted(jumps, key=lambda jump: jump["omega"])
 
 
-def first_harmonic(x: np.ndarray) -> tuple[complex, float]:
-    """(2/N sum x_k e^(-2 pi i k/SAMPLES_PER_PERIOD), mean) over whole periods, x_k at phase 2 pi k/SAMPLES."""
-    phase = np.exp(-2j * np.pi * np.arange(len(x)) / SAMPLES_PER_PERIOD)
-    return complex(2.0 * np.mean(x * phase)), float(np.mean(x))
-
-
 class SweepStopped(RuntimeError):
     """The FMU refused a call during a sweep; the message carries its log message."""
 
@@ -116,7 +111,7 @@ def settle_loop(step, scene: Scene, accept=None, rate: float | None = None) -> t
             x[k] = step(n * h, h)
             n += 1
         periods += WINDOW_PERIODS
-        c, mean = first_harmonic(np.roll(x, 1))  # x[k] is at (k + 1) h: roll so that index = phase
+        c, mean = first_harmonic(np.roll(x, 1), SAMPLES_PER_PERIOD)  # x[k] is at (k + 1) h: roll so that index = phase
         settled = abs(c - c_previous) <= SETTLE_TOLERANCE * abs(c) * decay and (accept is None or accept(c))
         if settled or periods >= MAX_PERIODS:
             return c, mean, settled, periods

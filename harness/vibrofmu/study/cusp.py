@@ -33,7 +33,8 @@ import numpy as np
 
 from vibromodel import averaging as av
 
-from vibrofmu.analyses.sweep import SAMPLES_PER_PERIOD, WINDOW_PERIODS, first_harmonic
+from vibrofmu.analyses.harmonics import first_harmonic
+from vibrofmu.analyses.sweep import SAMPLES_PER_PERIOD, WINDOW_PERIODS
 
 MIN_POINTS = 3  # extrapolation: rows with at least 3 bistable grid points (width >= 3 omega steps; a band of
 # one or two points has a width error of +-1 step, i.e. 50-100 %)
@@ -219,7 +220,7 @@ def two_start(engine, scene, starts, max_periods: int = TEST_MAX_PERIODS, bound:
                     x[i, k] = run.step(n * h, h)
                 n += 1
             for i in range(2):
-                c[i].append(first_harmonic(np.roll(x[i], 1))[0])
+                c[i].append(first_harmonic(np.roll(x[i], 1), SAMPLES_PER_PERIOD)[0])
             windows = len(c[0])
             if windows == beat and wait is None:
                 d0 = float(np.mean(np.abs(np.array(c[0]) - np.array(c[1])))) / max(np.mean(np.abs(c[0])), 1e-300)
