@@ -29,8 +29,8 @@ from fmpy.fmi1 import FMICallException
 from scipy.integrate import solve_ivp
 
 from vibromodel import fidelities
+from vibromodel.fidelities import Fidelity, make_model
 from vibromodel.integrate import ATOL_PER_RTOL, IntegrationError
-from vibromodel.models import Fidelity, make_model
 from vibromodel.parameters import ParameterError, Scene
 from vibromodel.compiled import CompiledPlant
 from vibromodel.plant import Kernel, Settings, Solver

@@ -32,8 +32,8 @@ from pathlib import Path
 import numpy as np
 from fmpy import extract, read_model_description
 
+from vibromodel.fidelities import Fidelity
 from vibromodel.integrate import ATOL_PER_RTOL
-from vibromodel.models import Fidelity
 from vibromodel.parameters import Scene
 
 from vibrofmu import paths
