@@ -16,6 +16,7 @@ from dataclasses import dataclass
 from enum import IntEnum
 from typing import Callable
 
+from .analytic import cached_solve, covering
 from .models import ExactModel, PolynomialModel
 from .parameters import ParameterError, Rule, Scene
 
@@ -113,8 +114,6 @@ def _averaged_solution(scene, settings, t0, stop_time, cache_dirs):
 
 def _analytic_solution(scene, settings, t0, stop_time, cache_dirs):
     """Fidelity 4: the OAFM solution fitted to cover [t0, stop_time] (or read from a cache)."""
-    from .analytic import cached_solve, covering
-
     span = None if stop_time is None else stop_time - t0
     oafm = covering(scene, settings.oafm, span, strict=True)  # refuses a fit beyond analytic.MAX_FIT_SPAN
     solution, source = cached_solve(scene, oafm, t0, read_dirs=cache_dirs)
