@@ -18,6 +18,7 @@ from vibromodel.closedloop import ERRATA_SCENE, LoopSettings
 from vibromodel.compiled import load_library
 from vibromodel.compiled_loop import make_closed_loop
 from vibromodel.control import ESTIMATE_NAMES
+from vibromodel.fidelities import description, integrated
 from vibromodel.parameters import Scene, scene_names
 from vibromodel.plant import DEFAULT_EXPERIMENT, Settings
 from vibromodel.tracking import ReferenceSettings
@@ -38,7 +39,7 @@ class HertzEAClosedLoop(fast_path.CompiledModelSlave, StatusSlave):
         for name in scene_names():
             self._parameter(Real, name, getattr(scene, name))
         self._parameter(Integer, "fidelity", int(settings.fidelity),
-                        "plant: 0 exact Eq. 3, 1 polynomial Eq. 7, 2 Eq. 7 printed coefficients")
+                        f"plant: {description(integrated())}")  # "plant: 0 exact Eq. 3, 1 polynomial Eq. 7, ..."
         self._solver_parameters(settings)
         self._parameter(Integer, "reference", int(reference.kind),
                         "0 OAFM analytic solution, 1 the corrected closed form x0 + X_f cos(w t - psi), 2 the same + tones "

@@ -19,7 +19,7 @@ from slave_support import StatusSlave
 from vibromodel.analytic import OafmSettings
 from vibromodel.compiled import CompiledPlant, load_library
 from vibromodel.compiled_open_loop import CompiledOpenLoopPlant
-from vibromodel.fidelities import REGISTRY, entry
+from vibromodel.fidelities import description, entry
 from vibromodel.parameters import Scene, check_finite, check_parameters, scene_names, validate
 from vibromodel.plant import DEFAULT_EXPERIMENT, Plant, Settings, make_plant
 
@@ -67,7 +67,7 @@ class HertzEAOscillator(fast_path.FastPathSwitch, StatusSlave):
         for name in scene_names():
             self._parameter(Real, name, getattr(scene, name))
         self._parameter(Integer, "fidelity", int(settings.fidelity),  # "0 exact Eq. 3, 1 polynomial Eq. 7, ..."
-                        ", ".join(level.description for level in REGISTRY.values()))
+                        description())
         self._solver_parameters(settings)
         self._parameter(Integer, "kernel", int(settings.kernel),
                         "0 compiled C kernel (fidelities 0-2 with both solvers; 3 and 4: their per-output evaluation; "

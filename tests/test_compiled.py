@@ -13,8 +13,8 @@ from message_text import Message
 from vibrofmu.fmus import kernel
 from vibromodel import compiled, plant as plant_module, settings as settings_module
 from vibromodel.compiled import CompiledPlant, load_library
+from vibromodel.fidelities import make_model
 from vibromodel.integrate import IntegrationError, TerminalEvent
-from vibromodel.models import make_model
 from vibromodel.parameters import ParameterError, Scene
 from vibromodel.plant import Outputs, Plant, Settings
 

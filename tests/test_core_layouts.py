@@ -6,7 +6,7 @@ import subprocess
 
 import pytest
 
-from vibrofmu import paths
+from vibrofmu.fmus import toolchain
 from vibrofmu.fmus import layouts
 from vibromodel import compiled_loop, control, core_layouts
 
@@ -57,7 +57,7 @@ def test_sizes_offsets_and_constants_are_the_compilers(tmp_path):
     source.write_text("#include <stddef.h>\n#include <stdio.h>\n" + includes + "int main(void)\n{\n"
                       + "\n".join(lines) + "\n    return 0;\n}\n")
     program = tmp_path / "layouts"
-    subprocess.run([*paths.c_compiler(), "-std=c11", "-I", str(layouts.CORE), "-o", str(program), str(source)],
+    subprocess.run([*toolchain.c_compiler(), "-std=c11", "-I", str(layouts.CORE), "-o", str(program), str(source)],
                    check=True, capture_output=True, text=True)
     printed = subprocess.run([str(program)], check=True, capture_output=True, text=True).stdout.splitlines()
     assert printed == expected

@@ -5,7 +5,7 @@ import pytest
 import sympy as sp
 
 from vibromodel import forces
-from vibromodel.models import make_model
+from vibromodel.fidelities import make_model
 from vibromodel.parameters import Scene
 
 x = sp.Symbol("x")

@@ -4,8 +4,8 @@ import math
 import numpy as np
 import pytest
 
+from vibromodel.fidelities import make_model
 from vibromodel.integrate import Dop853, IntegrationError, Rk4
-from vibromodel.models import make_model
 from vibromodel.parameters import Scene
 from vibromodel.plant import Plant, Settings
 

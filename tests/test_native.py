@@ -29,6 +29,7 @@ from message_text import canonical_tree
 from vibrofmu.hosts.doctor import compile_host, compile_windows_host, run_host
 from vibrofmu.fmus.native import series_probe_library
 from vibrofmu.hosts.run import FmuInstance, FmuLog, run_fmu
+from vibromodel.fidelities import native_refusal
 
 FMI2_ERROR = 3
 
@@ -160,6 +161,7 @@ def test_what_needs_python_is_refused_naming_the_pythonfmu_fmu(values, name, nat
     errors = [m for m in result.log if m.startswith("[error]") and "not allowed after an error" not in m]
     assert len(errors) == 1 and f"parameter {name} = {values[name]}" in errors[0]
     assert "pythonfmu FMU HertzEAOscillator.fmu" in errors[0]
+    assert native_refusal(values["fidelity"]) in errors[0]  # the registry's text, through core/fidelity.h
 
 
 # Issue 15: outputs read in Initialization Mode follow the start values set so far (FMI 2.0). Start values, the

@@ -8,7 +8,7 @@ import pytest
 from vibrofmu.fmus import kernel
 from vibrofmu.hosts.run import FmuInstance
 from vibromodel.compiled import CompiledPlant
-from vibromodel.models import make_model
+from vibromodel.fidelities import make_model
 from vibromodel.parameters import Scene
 from vibromodel.plant import Plant, Settings
 

@@ -2,11 +2,15 @@
 #include <math.h>
 #include <stddef.h>
 
+#include "fidelity.h"
 #include "openloop_plant.h"
+
+/* the level's evaluator (fidelity.h, from the registry): the slow flow's table or the OAFM sums */
+static int slow_flow(const OlPlant *p) { return VK_FIDELITIES[p->fidelity].evaluator == VK_EVALUATOR_SLOWFLOW; }
 
 int ol_state(const OlPlant *p, double tau, double *xva)
 {
-    if (p->fidelity == 3) return sf_state(&p->slowflow, tau, xva) ? OL_BEYOND : 0;
+    if (slow_flow(p)) return sf_state(&p->slowflow, tau, xva) ? OL_BEYOND : 0;
     oe_state(&p->oafm, tau, xva);
     return 0;
 }
@@ -19,7 +23,7 @@ int ol_do_step(OlPlant *p, double t, double h)
     if (!(isfinite(h) && h > 0.0) || k->U_input != 0.0 || !(isfinite(t) && fabs(t - k->plant_t) <= tolerance))
         return OL_REFUSED;
     double xva[3];
-    if (p->fidelity == 3) {
+    if (slow_flow(p)) {
         if (sf_state(&p->slowflow, t + h, xva)) return OL_BEYOND;
     } else {
         oe_step(&p->oafm, t + h, xva);

@@ -27,9 +27,9 @@ enum {
 
 typedef struct {
     VkPlant plant;       /* the exact model's constants, plant_t, U_input, out[], in_contact, enabled, error */
-    int64_t fidelity;    /* 3 or 4 */
-    SfTable slowflow;    /* fidelity 3 */
-    OeSolution oafm;     /* fidelity 4 */
+    int64_t fidelity;    /* an open-loop level (3, 4): its evaluator is fidelity.h's VK_FIDELITIES[fidelity] */
+    SfTable slowflow;    /* VK_EVALUATOR_SLOWFLOW (fidelity 3) */
+    OeSolution oafm;     /* VK_EVALUATOR_OAFM (fidelity 4) */
 } OlPlant;
 
 /* (x, x', x'') at tau into xva: 0, or OL_BEYOND. */

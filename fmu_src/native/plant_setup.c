@@ -2,6 +2,7 @@
 #include <math.h>
 #include <stdio.h>
 
+#include "fidelity.h"
 #include "plant_setup.h"
 #include "rules.h"
 #include "series.h"
@@ -16,13 +17,14 @@ void native_plant_model(VkModel *m, const State *s, int fidelity)
     m->pull_in_gap = RULE_PULL_IN_GAP;
     m->load_forcing = Delta != 0.0;
     m->ac = beta != 0.0 || gamma != 0.0;
-    if (fidelity == 0) {
+    const int model = VK_FIDELITIES[fidelity].model; /* the registry's compiled model of the level (fidelity.h) */
+    if (model == VK_MODEL_EXACT) {
         m->polynomial = 0;
         m->electrostatics = alpha != 0.0 || m->ac;
     } else { /* (models.PolynomialModel's "R out of range" cannot happen: the rules keep R in [1e-6, 1e6]) */
         m->polynomial = 1;
         m->electrostatics = m->ac;
-        vibro_series(fidelity == 2, alpha, gamma, R, m->poly, m->g1, m->g2, m->g3);
+        vibro_series(model == VK_MODEL_POLYNOMIAL_PRINTED, alpha, gamma, R, m->poly, m->g1, m->g2, m->g3);
     }
 }
 

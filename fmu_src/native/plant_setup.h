@@ -5,7 +5,8 @@
 
 #include "fmi2_native.h"
 
-/* The model of `fidelity` (0, 1 or 2) of the scene in s->value into *m (other fields untouched). */
+/* The compiled model of `fidelity` (fidelity.h: VK_FIDELITIES[fidelity].model, which must not be VK_MODEL_NONE) of
+   the scene in s->value into *m (other fields untouched). */
 void native_plant_model(VkModel *m, const State *s, int fidelity);
 /* plant.rk4_drive_warnings: the forcing terms RK4 steps of max_step do not resolve, logged as fmi2Warning. */
 void native_rk4_drive_warnings(Instance *inst, const State *s, double max_step);

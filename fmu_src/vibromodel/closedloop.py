@@ -17,7 +17,7 @@ import numpy as np
 
 from .control import ERRATA_INITIAL_ESTIMATES, Controller, Gains, Law, validate_estimates, validate_law
 from .integrate import Dop853, Rk4
-from .fidelities import entry, integrated
+from .fidelities import closed_loop_refusal, entry, integrated
 from .parameters import ParameterError, Scene, validate
 from .plant import INTEGRATOR_REBUILT, RK4_DEFAULT_STEP, TIME_TOLERANCE, Settings, Solver, checked_settings
 from .snapshot import plain_attributes, restore_attributes
@@ -53,9 +53,7 @@ class ClosedLoop:
         settings, self.warnings = checked_settings(scene, settings)  # rtol clamped; RK4 drive resolution
         loop.validate()
         if settings.fidelity not in PLANT_FIDELITIES:
-            levels = [str(int(level)) for level in PLANT_FIDELITIES]
-            raise ParameterError("fidelity", settings.fidelity, f"the closed loop's plant must be "
-                                                                f"{', '.join(levels[:-1])} or {levels[-1]}")
+            raise ParameterError("fidelity", settings.fidelity, closed_loop_refusal())
         self.scene, self.settings, self.loop = scene, settings, loop
         self.model = entry(settings.fidelity).model(scene)
         self.controller = Controller(scene, loop.gains, loop.law)

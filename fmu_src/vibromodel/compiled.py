@@ -1,4 +1,4 @@
-"""The plant of fidelities 0, 1 and 2 with DOP853 or RK4 on the compiled core (fmu_src/core, vibrokernel.so).
+"""The plant of the integrated fidelities (0, 1 and 2) with DOP853 or RK4 on the compiled core (fmu_src/core, vibrokernel.so).
 
 CompiledPlant has plant.Plant's interface and gives the same bits: the core ports integrate.Dop853 and Rk4, the
 models and Plant.do_step operation for operation. Its whole state is one ctypes structure without pointers
@@ -22,9 +22,9 @@ from . import settings as plant
 from .core_layouts import (DOP_MAX_EVENTS, DOP_STAGES, VK_BAD_INPUT, VK_BAD_STEP, VK_BAD_TIME, VK_FAILED,
                            VK_MESSAGE, VK_OK, VK_RAISED, VK_TERMINAL, VK_TOO_MANY_STEPS, Dop853 as Dop853State,
                            Rk4 as Rk4State, VkModel, VkPlant)
-from .fidelities import entry
+from .fidelities import REGISTRY, CModel, entry
 from .integrate import ATOL_PER_RTOL, IntegrationError, TerminalEvent
-from .models import PolynomialModel, pull_in_slope
+from .models import pull_in_slope
 from .parameters import PULL_IN_GAP, validate
 from .settings import Outputs, Settings, Solver, check_step, checked_settings
 
@@ -160,15 +160,15 @@ def load_library(directories) -> tuple[ctypes.CDLL | None, str]:
 
 
 def supports(settings: Settings) -> bool:
-    """CompiledPlant runs the fidelities with a compiled model (fidelities registry) with either solver."""
-    return entry(settings.fidelity).compiled_model is not None and settings.solver in (Solver.ADAPTIVE, Solver.RK4)
+    """CompiledPlant runs the integrated fidelities with a compiled model (fidelities registry) with either solver."""
+    level = entry(settings.fidelity)
+    return level.integrated and level.c_model is not None and settings.solver in (Solver.ADAPTIVE, Solver.RK4)
 
 
-def _model_fields(scene, model, polynomial: int | None = None) -> dict:
-    """The model's constants and switches (models.ExactModel / PolynomialModel: the terms they evaluate); polynomial:
-    the registry's compiled_model (None: read from the model's class, as the closed loop calls it)."""
-    if polynomial is None:
-        polynomial = int(isinstance(model, PolynomialModel))
+def _model_fields(scene, model, c_model: CModel) -> dict:
+    """The model's constants and switches (models.ExactModel / PolynomialModel: the terms they evaluate); c_model:
+    the level's compiled model (fidelities.FidelityEntry.c_model): VkModel.polynomial = 0 for Eq. 3, 1 for Eq. 7."""
+    polynomial = int(c_model != CModel.EXACT)
     fields = {name: getattr(scene, name) for name in ("mu", "Delta", "omega", "alpha", "beta", "gamma", "Omega", "R")}
     ac = scene.beta != 0.0 or scene.gamma != 0.0
     fields.update(pull_in_c=pull_in_slope(scene.R), pull_in_gap=PULL_IN_GAP, load_forcing=scene.Delta != 0.0, ac=ac)
@@ -186,13 +186,14 @@ def _constant_ranges():
 
 
 class CompiledPlant:
-    """plant.Plant for fidelities 0, 1, 2 with either solver, on the kernel `library` (load_library)."""
+    """plant.Plant for the integrated fidelities with a compiled model (supports) with either solver, on the kernel `library` (load_library)."""
 
     def __init__(self, scene, settings: Settings, library, t0: float = 0.0):
         validate(scene)
         settings, self.warnings = checked_settings(scene, settings)  # what Plant runs with (rtol clamped)
         if not supports(settings):
-            raise ValueError(f"the compiled plant runs fidelities 0, 1, 2, not fidelity {settings.fidelity}")
+            runs = [str(int(e.level)) for e in REGISTRY.values() if e.integrated and e.c_model is not None]
+            raise ValueError(f"the compiled plant runs fidelities {', '.join(runs)}, not fidelity {settings.fidelity}")
         level = entry(settings.fidelity)
         model = level.model(scene)
         self.scene, self.settings, self.notes = scene, settings, []
@@ -201,7 +202,7 @@ class CompiledPlant:
         self._address = ctypes.addressof(self._plant)
         max_step = settings.max_step or math.inf  # as Plant gives Dop853
         model_struct = self._plant.model
-        for name, value in _model_fields(scene, model, level.compiled_model).items():
+        for name, value in _model_fields(scene, model, level.c_model).items():
             setattr(model_struct, name, value if isinstance(value, (int, float)) else (_double * 6)(*value))
         dop, rk4 = self._plant.dop, self._plant.rk4
         dop.rtol, dop.atol, dop.max_step = settings.rtol, settings.rtol * ATOL_PER_RTOL, max_step

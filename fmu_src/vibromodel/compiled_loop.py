@@ -254,8 +254,11 @@ class CompiledClosedLoop:
         self._l = self._structure()
         self.address = ctypes.addressof(self._l)
         l, settings = self._l, python.settings
-        polynomial = entry(settings.fidelity).compiled_model  # VkModel.polynomial of the plant's level
-        for name, value in _model_fields(python.scene, python.model, polynomial).items():
+        c_model = entry(settings.fidelity).c_model  # the plant level's compiled model
+        if c_model is None:
+            self.problem = f"the compiled core has no model of fidelity {settings.fidelity}"
+            return
+        for name, value in _model_fields(python.scene, python.model, c_model).items():
             setattr(l.model, name, value if isinstance(value, (int, float)) else (_double * 6)(*value))
         fill_controller(l.controller, python.controller, python.scene, library)
         l.solver, l.time_tolerance = int(settings.solver), TIME_TOLERANCE

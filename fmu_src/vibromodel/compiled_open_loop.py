@@ -24,15 +24,14 @@ from .compiled import VkPlant, _model_fields
 # oafm_eval.h's and openloop_plant.h's constants and structures, generated from the headers (core_layouts.py)
 from .core_layouts import (OE_BASES, OE_ITEMS, OE_POWERS, OE_RESYNC, OE_STEP_SLACK, OL_BEYOND, OL_REFUSED, OeCache,
                            OePiece, OeSolution, OlPlant, SfTable)
-from .models import Fidelity
-from .plant import Plant
+from .fidelities import Evaluator, entry
 from .settings import TIME_TOLERANCE, Outputs, check_step
 
 EPS = np.finfo(float).eps
 SEARCH_RANGE = 8  # largest |n_j| tried when writing a rate as a combination of bases (harmonic order <= 8)
 SEARCH_LIMIT = 200_000  # combinations tried at most per value (the range shrinks with more bases)
 MATCH_ULPS = 16.0  # a combination matches a rate within this many ulps of its largest part
-OPEN_LOOP = (Fidelity.AVERAGED, Fidelity.ANALYTIC)
+EVALUATOR_SOURCES = {Evaluator.SLOWFLOW: "slowflow_eval.c", Evaluator.OAFM: "oafm_eval.c"}  # in fmu_src/core
 
 _d, _i = ctypes.c_double, ctypes.c_int64
 _dp, _ip = ctypes.POINTER(_d), ctypes.POINTER(_i)
@@ -315,33 +314,38 @@ def oafm_hints(scene):
 # ---------------------------------------------------------------- the plant
 
 class CompiledOpenLoopPlant:
-    """plant.Plant of fidelity 3 or 4 with doStep in C; built by make() from a Plant that did the set-up."""
+    """plant.Plant of an open-loop fidelity (3, 4) with doStep in C, on the level's evaluator (fidelities.Evaluator);
+    built by make() from a plant.Plant that did the set-up."""
 
     @classmethod
-    def make(cls, python_plant: Plant, library) -> tuple["CompiledOpenLoopPlant | None", str]:
+    def make(cls, python_plant, library) -> tuple["CompiledOpenLoopPlant | None", str]:
         """(the compiled plant, what it runs on) or (None, why not)."""
+        evaluator = entry(python_plant.settings.fidelity).evaluator
+        if evaluator == Evaluator.NONE:
+            return None, f"fidelity {python_plant.settings.fidelity} has no compiled evaluator"
         problem = declare(library)
         if problem is not None:
             return None, problem
         compiled = cls(python_plant, library)
         if compiled._problem is not None:
             return None, compiled._problem
-        return compiled, "C evaluator (fmu_src/core/" + \
-            ("slowflow_eval.c)" if python_plant.settings.fidelity == Fidelity.AVERAGED else "oafm_eval.c)")
+        return compiled, f"C evaluator (fmu_src/core/{EVALUATOR_SOURCES[evaluator]})"
 
-    def __init__(self, python_plant: Plant, library):
+    def __init__(self, python_plant, library):
         self.python = python_plant
         self.scene, self.settings = python_plant.scene, python_plant.settings
+        level = entry(self.settings.fidelity)
+        self._evaluator = level.evaluator
         self.notes, self.warnings = python_plant.notes, python_plant.warnings
         self._library, self._problem = library, None
         self._plant = OlPlant()
         self._address = ctypes.addressof(self._plant)
         k = self._plant.plant  # the exact model's constants (its forces), the plant's time, input and outputs
-        for name, value in _model_fields(self.scene, python_plant.model, 0).items():  # 0: the exact model, Eq. 3
+        for name, value in _model_fields(self.scene, python_plant.model, level.c_model).items():  # its forces
             setattr(k.model, name, value if isinstance(value, (int, float)) else (_d * 6)(*value))
         k.time_tolerance, k.plant_t, k.U_input, k.enabled = TIME_TOLERANCE, python_plant.t, 0.0, 1
-        self._plant.fidelity = int(self.settings.fidelity)
-        if self.settings.fidelity == Fidelity.AVERAGED:
+        self._plant.fidelity = int(self.settings.fidelity)  # C reads the level's evaluator (core/fidelity.h)
+        if self._evaluator == Evaluator.SLOWFLOW:
             self._load_table()
         else:
             self._program = OafmProgram(python_plant.solution, *oafm_hints(self.scene))
@@ -391,7 +395,7 @@ class CompiledOpenLoopPlant:
             check_step(self.t, t, h, U, math.inf, int(self.settings.fidelity))
         self.python.t = self.t
         out = self.python.do_step(t, h, U)  # raises, or extends the table and steps
-        if self.settings.fidelity == Fidelity.AVERAGED and self.python.solution.t_end != self._plant.slowflow.t_end:
+        if self._evaluator == Evaluator.SLOWFLOW and self.python.solution.t_end != self._plant.slowflow.t_end:
             self._load_table()
         self._plant.plant.plant_t = self.python.t
         self._publish(out)
@@ -422,11 +426,11 @@ class CompiledOpenLoopPlant:
         return self.python.outputs_at(t, x, v, a)
 
     def snapshot(self) -> dict:
-        """The wrapped Plant's snapshot, and at fidelity 4 the evaluator's step cache (its bases at the last output
+        """The wrapped Plant's snapshot, and with the OAFM evaluator its step cache (its bases at the last output
         decide the rounding of the next ones)."""
         self.python.t, self.python.U = self.t, 0.0
         snapshot = {"plant": self.python.snapshot()}
-        if self.settings.fidelity == Fidelity.ANALYTIC:
+        if self._evaluator == Evaluator.OAFM:
             snapshot["oafm_cache"] = ctypes.string_at(ctypes.addressof(self._plant.oafm.cache),
                                                       ctypes.sizeof(OeCache)).hex()
         return snapshot
@@ -439,7 +443,7 @@ class CompiledOpenLoopPlant:
             plant_snapshot = snapshot["plant"]
         except (TypeError, ValueError, KeyError):
             raise ValueError("not a snapshot of a CompiledOpenLoopPlant") from None
-        analytic = self.settings.fidelity == Fidelity.ANALYTIC
+        analytic = self._evaluator == Evaluator.OAFM
         if set(snapshot) != ({"plant", "oafm_cache"} if analytic else {"plant"}) or \
                 (analytic and len(cache) != ctypes.sizeof(OeCache)):
             raise ValueError("not a snapshot of a CompiledOpenLoopPlant of this fidelity")

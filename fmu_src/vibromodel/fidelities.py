@@ -1,49 +1,102 @@
-"""The fidelity registry: one entry per fidelity level of the plant, read by everything that depends on the level
-(plant.Plant, compiled.CompiledPlant, models.make_model, settings.checked_settings, the harness's simulate and bench).
+"""The fidelity registry: THE one place that lists the fidelity levels of the plant. One entry per level says
+everything that depends on the level: its number (the enum Fidelity), command-line name, the FMU parameter's text,
+its model and (open-loop levels) its solution's factory, what the compiled core and the native FMUs run of it,
+and what the speed bench and ladder measure of it. Everything else reads the entries' properties, never level
+numbers: plant.Plant, compiled.CompiledPlant, compiled_open_loop, compiled_loop, closedloop, settings, the FMU
+slaves, the harness's simulate, bench and ladder, and the C (core/fidelity.h, generated from here by c_header()).
 
-Adding a fidelity touches its model (a module with the model or solution), its compiled evaluator (fmu_src/core) if
-it has one, and one entry here.
+Adding a fidelity: a model (or solution) it evaluates, one entry here, and core/fidelity.h regenerated
+(`python3 -m vibrofmu.fmus.kernel`); parameters.RULES's `fidelity` rule must equal rule() (tests/test_fidelities.py
+says when it does not: parameters cannot import this module, whose factories validate scenes with those rules).
 """
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from enum import IntEnum
 from typing import Callable
 
-from .models import ExactModel, Fidelity, PolynomialModel
-from .parameters import ParameterError, Scene
+from .analytic import cached_solve, covering
+from .models import ExactModel, PolynomialModel
+from .parameters import ParameterError, Rule, Scene
+
+
+class Fidelity(IntEnum):
+    EXACT = 0
+    POLYNOMIAL = 1
+    POLYNOMIAL_PAPER = 2
+    AVERAGED = 3  # slow flow (averaging.py, slowflow.py); its forces are those of Eq. 3 at x
+    ANALYTIC = 4  # OAFM closed form (analytic.py); its forces are those of Eq. 3 at x~
+
+
+class CModel(IntEnum):
+    """The compiled core's model of a level's forces (and x'' of an integrated level): core/model.h's VkModel
+    (polynomial = 0 or 1) and, for the native FMUs, which coefficients of Eq. 7 (native/series.c)."""
+    EXACT = 0  # Eq. 3 (models.ExactModel)
+    POLYNOMIAL = 1  # Eq. 7 with the corrected a0..a5 (models.PolynomialModel)
+    POLYNOMIAL_PRINTED = 2  # Eq. 7 with the paper's printed a0..a5 (models.PolynomialModel(printed=True))
+
+
+class Evaluator(IntEnum):
+    """The compiled per-output evaluator of an open-loop level (core/openloop_plant.c)."""
+    NONE = 0  # none: the level integrates (or runs in Python only)
+    SLOWFLOW = 1  # core/slowflow_eval.c: the table of compiled_open_loop.slowflow_table
+    OAFM = 2  # core/oafm_eval.c: the sums of compiled_open_loop.OafmProgram
 
 
 @dataclass(frozen=True)
 class FidelityEntry:
     """level: the FMU's `fidelity` value; key: its command-line name; description: the FMU parameter's text.
     model(scene): the forces (and x'' for an integrated level) of the level.
-    integrated: the plant steps model.accel with DOP853 or RK4 (Eq. 3 or Eq. 7).
-    compiled_model: VkModel.polynomial of the compiled core (core/model.h) for the level, None if the compiled plant
-    does not run it.
+    integrated: the plant steps model.accel with DOP853 or RK4 (Eq. 3 or Eq. 7); such a level can be a closed
+    loop's plant.
+    c_model: the compiled core's model of the level's forces (CModel), None if the core has none (then the level runs
+    in Python only, and the native FMUs must refuse it).
     open_loop(scene, settings, t0, stop_time, cache_dirs) -> (solution, notes): for a level whose doStep evaluates a
     precomputed solution (solution.state(t) -> (x, x', x'')) with U = 0; None for integrated levels.
+    evaluator: the compiled per-output evaluator of an open-loop level (Evaluator.NONE: none, Python evaluates).
     solution_in_snapshot: the solution holds state that FMU states must carry (it grows as the run advances).
     check_settings(settings): raises ParameterError for settings only this level has (None: none).
     work(solution) -> dict: what the set-up of an open-loop level did (table size, fit size...), for the bench.
-    uses_rtol: the level's result depends on Settings.rtol (every integrated level; fidelity 3's slow flow)."""
+    uses_rtol: the level's result depends on Settings.rtol (every integrated level; fidelity 3's slow flow).
+    native_refusal: None if the native FMUs (fmu_src/native) run the level, else why they cannot (their fmi2Error
+    says it, then "(fidelity N needs Python)" and the pythonfmu FMU to use instead).
+    below_target: the level's own model error exceeds the bench's accuracy target (speed/bench.py THRESHOLD), so
+    the bench does not search the target's settings for it.
+    ladder: the level is a rung of the speed ladder (speed/ladder.py; the first such level is its base);
+    ladder_limit: the rung's acceptance limit there, cost per output over the base's (None: none)."""
 
     level: Fidelity
     key: str
     description: str
     model: Callable[[Scene], object]
     integrated: bool
-    compiled_model: int | None
+    c_model: CModel | None
     open_loop: Callable | None = None
+    evaluator: Evaluator = Evaluator.NONE
     solution_in_snapshot: bool = False
     check_settings: Callable | None = None
     work: Callable | None = None
     uses_rtol: bool = True
+    native_refusal: str | None = None
+    below_target: bool = False
+    ladder: bool = False
+    ladder_limit: float | None = None
 
     @property
     def name(self) -> str:
         """The description without its leading level number ("averaged slow flow")."""
         return self.description.split(" ", 1)[1]
+
+    @property
+    def oafm_settings(self) -> bool:
+        """The level reads the OAFM settings (analytic.OafmSettings, checked by its validate())."""
+        return self.check_settings is _check_oafm
+
+    @property
+    def rung(self) -> str:
+        """The level's name on the speed ladder ("averaged f3")."""
+        return f"{self.key} f{int(self.level)}"
 
 
 def _averaged_solution(scene, settings, t0, stop_time, cache_dirs):
@@ -61,8 +114,6 @@ def _averaged_solution(scene, settings, t0, stop_time, cache_dirs):
 
 def _analytic_solution(scene, settings, t0, stop_time, cache_dirs):
     """Fidelity 4: the OAFM solution fitted to cover [t0, stop_time] (or read from a cache)."""
-    from .analytic import cached_solve, covering
-
     span = None if stop_time is None else stop_time - t0
     oafm = covering(scene, settings.oafm, span, strict=True)  # refuses a fit beyond analytic.MAX_FIT_SPAN
     solution, source = cached_solve(scene, oafm, t0, read_dirs=cache_dirs)
@@ -87,15 +138,23 @@ def _check_oafm(settings) -> None:
     settings.oafm.validate()
 
 
+NATIVE_NEEDS_PYTHON = "needs Python"  # native_refusal's words before "; use the pythonfmu FMU ..."
+
 REGISTRY: dict[Fidelity, FidelityEntry] = {e.level: e for e in (
-    FidelityEntry(Fidelity.EXACT, "exact", "0 exact Eq. 3", ExactModel, True, 0),
-    FidelityEntry(Fidelity.POLYNOMIAL, "polynomial", "1 polynomial Eq. 7", PolynomialModel, True, 1),
+    FidelityEntry(Fidelity.EXACT, "exact", "0 exact Eq. 3", ExactModel, True, CModel.EXACT, ladder=True),
+    FidelityEntry(Fidelity.POLYNOMIAL, "polynomial", "1 polynomial Eq. 7", PolynomialModel, True, CModel.POLYNOMIAL,
+                  ladder=True),
     FidelityEntry(Fidelity.POLYNOMIAL_PAPER, "polynomial-paper", "2 Eq. 7 printed coefficients",
-                  lambda scene: PolynomialModel(scene, printed=True), True, 1),
-    FidelityEntry(Fidelity.AVERAGED, "averaged", "3 averaged slow flow", ExactModel, False, None,
-                  open_loop=_averaged_solution, solution_in_snapshot=True, work=_averaged_work),
-    FidelityEntry(Fidelity.ANALYTIC, "analytic", "4 OAFM analytic", ExactModel, False, None,
-                  open_loop=_analytic_solution, check_settings=_check_oafm, work=_analytic_work, uses_rtol=False),
+                  lambda scene: PolynomialModel(scene, printed=True), True, CModel.POLYNOMIAL_PRINTED,
+                  below_target=True),  # its model error (~2e-8, the printed coefficients) is above the target's 1e-8
+    FidelityEntry(Fidelity.AVERAGED, "averaged", "3 averaged slow flow", ExactModel, False, CModel.EXACT,
+                  open_loop=_averaged_solution, evaluator=Evaluator.SLOWFLOW, solution_in_snapshot=True,
+                  work=_averaged_work, native_refusal="the native FMU cannot tabulate the averaged slow flow",
+                  ladder=True, ladder_limit=0.5),
+    FidelityEntry(Fidelity.ANALYTIC, "analytic", "4 OAFM analytic", ExactModel, False, CModel.EXACT,
+                  open_loop=_analytic_solution, evaluator=Evaluator.OAFM, check_settings=_check_oafm,
+                  work=_analytic_work, uses_rtol=False, native_refusal="the native FMU cannot fit the OAFM solution",
+                  ladder=True, ladder_limit=0.5),
 )}
 
 
@@ -105,6 +164,11 @@ def entry(fidelity: int) -> FidelityEntry:
         return REGISTRY[Fidelity(fidelity)]
     except ValueError:
         raise ParameterError("fidelity", fidelity, f"must be one of {[int(f) for f in REGISTRY]}") from None
+
+
+def make_model(scene: Scene, fidelity: int):
+    """The plant model of a fidelity level: 0, 1, 2 step it; 3 and 4 use Eq. 3's forces at their x."""
+    return entry(fidelity).model(scene)
 
 
 def keys() -> dict[str, int]:
@@ -120,3 +184,82 @@ def open_loop() -> tuple[Fidelity, ...]:
 def integrated() -> tuple[Fidelity, ...]:
     """The levels whose plant steps Eq. 3 or 7 (the closed loop's possible plants)."""
     return tuple(e.level for e in REGISTRY.values() if e.integrated)
+
+
+def _spoken(levels) -> str:
+    """"0, 1 or 2"."""
+    words = [str(int(level)) for level in levels]
+    return words[0] if len(words) == 1 else f"{', '.join(words[:-1])} or {words[-1]}"
+
+
+def description(levels=None) -> str:
+    """The FMU `fidelity` parameter's text: "0 exact Eq. 3, 1 polynomial Eq. 7, ..." for `levels` (default all)."""
+    return ", ".join(entry(level).description for level in (REGISTRY if levels is None else levels))
+
+
+def closed_loop_refusal() -> str:
+    """Why a closed loop refuses a level that does not integrate (closedloop.ClosedLoop, the native closed loop)."""
+    return f"the closed loop's plant must be {_spoken(integrated())}"
+
+
+def native_refusal(level: int) -> str | None:
+    """The native FMUs' text for a level they cannot run ("... (fidelity 3 needs Python)"), None if they run it."""
+    why = entry(level).native_refusal
+    return None if why is None else f"{why} (fidelity {int(level)} {NATIVE_NEEDS_PYTHON})"
+
+
+def rule() -> Rule:
+    """parameters.RULES's `fidelity` rule: a whole number from the lowest to the highest level, the reason naming
+    the levels by kind ("0 exact, 1 and 2 polynomial, 3 averaged, 4 analytic": levels of one model kind share
+    their name)."""
+    groups: dict[str, list[int]] = {}
+    for e in REGISTRY.values():
+        groups.setdefault(e.key.split("-")[0], []).append(int(e.level))
+    reason = ", ".join(f"{' and '.join(map(str, levels))} {kind}" for kind, levels in groups.items())
+    return Rule("fidelity", int(min(REGISTRY)), int(max(REGISTRY)), reason=reason, integer=True)
+
+
+def open_loop_rule_levels() -> tuple[int, ...]:
+    """The levels parameters.RULES's rules of the open-loop levels apply to (`when` of omega's and Omega's
+    MIN_AVERAGED_FREQUENCY rules): each is built per forcing period."""
+    return tuple(int(level) for level in open_loop())
+
+
+def c_header() -> str:
+    """core/fidelity.h: the registry for the C of fmu_src/core and fmu_src/native (they branch on these properties,
+    never on level numbers). Committed; tests/test_fidelities.py checks that it is current."""
+    rows = []
+    for e in REGISTRY.values():
+        refusal = native_refusal(e.level)
+        rows.append(f"    {{{int(e.integrated)}, {-1 if e.c_model is None else int(e.c_model)}, {int(e.evaluator)}, "
+                    f"{int(e.oafm_settings)}, {'NULL' if refusal is None else _c_string(refusal)}}},"
+                    f"  /* {int(e.level)} {e.key} */")
+        if e.c_model is None and refusal is None:
+            raise ValueError(f"fidelity {int(e.level)} has no compiled model: the native FMUs must refuse it")
+    if list(REGISTRY) != list(range(len(REGISTRY))):
+        raise ValueError("the C indexes VK_FIDELITIES by level: levels must run 0..N-1")
+    lines = ["/* fidelity.h -- the fidelity registry (vibromodel/fidelities.py) for the C of fmu_src/core and",
+             " * fmu_src/native: they branch on these properties of a level, never on its number.  Generated by",
+             " * vibromodel.fidelities.c_header() (python3 -m vibrofmu.fmus.kernel); do not edit. */",
+             "#ifndef VIBRO_FIDELITY_H", "#define VIBRO_FIDELITY_H", "", "#include <stddef.h>", ""]
+    lines += [f"#define VK_FID_{e.level.name} {int(e.level)}" for e in REGISTRY.values()]
+    lines += [f"#define VK_N_FIDELITIES {len(REGISTRY)}", "",
+              "/* the compiled core's model of a level's forces (fidelities.CModel): VkModel.polynomial = model > 0 */",
+              "#define VK_MODEL_NONE (-1)"]
+    lines += [f"#define VK_MODEL_{kind.name} {int(kind)}" for kind in CModel]
+    lines += ["", "/* an open-loop level's per-output evaluator (fidelities.Evaluator) */"]
+    lines += [f"#define VK_EVALUATOR_{kind.name} {int(kind)}" for kind in Evaluator]
+    lines += ["", "typedef struct {",
+              "    int integrated;              /* the plant steps Eq. 3 or 7 (a closed loop's possible plant) */",
+              "    int model;                   /* VK_MODEL_*: the level's forces (and x'' when integrated) */",
+              "    int evaluator;               /* VK_EVALUATOR_*: an open-loop level's evaluator */",
+              "    int oafm_settings;           /* the level reads the OAFM settings (OafmSettings.validate) */",
+              "    const char *native_refusal;  /* NULL: the native FMUs run it; else their refusal */",
+              "} VkFidelity;", "",
+              "static const VkFidelity VK_FIDELITIES[VK_N_FIDELITIES] = {", *rows, "};", "",
+              f"#define VK_FIDELITY_CLOSED_LOOP_REFUSAL {_c_string(closed_loop_refusal())}", "", "#endif", ""]
+    return "\n".join(lines)
+
+
+def _c_string(text: str) -> str:
+    return '"' + text.replace("\\", "\\\\").replace('"', '\\"') + '"'

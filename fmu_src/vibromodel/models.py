@@ -1,28 +1,19 @@
-"""One class per fidelity level of the plant; each gives x'' = accel(t, x, v, U) and its events.
+"""The plant's models; each gives x'' = accel(t, x, v, U) and its events (fidelities.py says which level uses which).
 
-Fidelity 0: exact Eq. 3 (+ input force U). Fidelity 1: polynomial Eq. 7 with the corrected a0..a5.
-Fidelity 2: Eq. 7 with the paper's printed a0..a5. A scene pays only for the physics it switches on:
+ExactModel: exact Eq. 3 (+ input force U). PolynomialModel: polynomial Eq. 7 with the corrected a0..a5, or with
+the paper's printed a0..a5 (printed=True). A scene pays only for the physics it switches on:
 terms whose amplitude is zero are not evaluated.
 """
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from enum import IntEnum
 from typing import Callable
 
 from . import forces
 from .parameters import PULL_IN_GAP, ParameterError, Scene
 
 R_OUT_OF_RANGE = "out of range of the series of Eq. 7 (powers of R up to R^5 overflow or vanish)"
-
-
-class Fidelity(IntEnum):
-    EXACT = 0
-    POLYNOMIAL = 1
-    POLYNOMIAL_PAPER = 2
-    AVERAGED = 3  # slow flow (averaging.py, slowflow.py); its forces are those of Eq. 3 at x
-    ANALYTIC = 4  # OAFM closed form (analytic.py); its forces are those of Eq. 3 at x~
 
 
 @dataclass(frozen=True)
@@ -74,8 +65,6 @@ def drive_frequencies(s: Scene) -> tuple[float, float, float]:
 class ExactModel:
     """Eq. 3 with U added: x'' = 1 + Delta cos(omega t) + F_em(t, x) - H(x) - mu x' + U."""
 
-    fidelity = Fidelity.EXACT
-
     def __init__(self, scene: Scene):
         self.scene = scene
         self.events = (CONTACT_EVENT,) + pull_in_events(scene.R)
@@ -123,7 +112,6 @@ class PolynomialModel:
 
     def __init__(self, scene: Scene, printed: bool = False):
         self.scene = scene
-        self.fidelity = Fidelity.POLYNOMIAL_PAPER if printed else Fidelity.POLYNOMIAL
         make = forces.coefficients_printed if printed else forces.coefficients
         try:
             self.a = make(scene.alpha, scene.gamma, scene.R)
@@ -170,10 +158,3 @@ class PolynomialModel:
         drive = s.beta * math.sin(s.Omega * t) + s.gamma * (1.0 - math.cos(2.0 * s.Omega * t))
         return forces.horner(self.g1, x), s.alpha * forces.horner(self.g2, x) + drive * forces.horner(self.g3, x)
 
-
-def make_model(scene: Scene, fidelity: int):
-    """The plant model of a fidelity level (fidelities.REGISTRY): 0, 1, 2 step it; 3 and 4 use Eq. 3's forces at
-    their x."""
-    from .fidelities import entry  # the registry builds on this module
-
-    return entry(fidelity).model(scene)

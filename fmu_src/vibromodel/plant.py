@@ -11,6 +11,7 @@ from enum import IntEnum
 
 from . import forces
 from .compiled import CompiledPlant, supports
+from .compiled_open_loop import CompiledOpenLoopPlant
 from .fidelities import entry
 from .integrate import Dop853, IntegrationError, Rk4
 from .parameters import ParameterError, Scene, validate
@@ -134,8 +135,6 @@ def make_plant(scene: Scene, settings: Settings, t0: float = 0.0, stop_time: flo
         if compiled is None:
             plant.notes.append(f"pure-Python evaluation: the compiled kernel is not available ({reason})")
             return plant
-        from .compiled_open_loop import CompiledOpenLoopPlant
-
         wrapped, why = CompiledOpenLoopPlant.make(plant, compiled)
         plant.notes.append(f"per-output evaluation on the {why}" if wrapped is not None else
                            f"pure-Python evaluation: {why}")

@@ -9,9 +9,8 @@ from dataclasses import dataclass, field, replace
 from enum import IntEnum
 
 from .analytic import OafmSettings
-from .fidelities import entry
+from .fidelities import Fidelity, entry
 from .integrate import RK4_DRIVE_ERROR, RK4_DRIVE_THETA, rk4_drive_gains
-from .models import Fidelity
 from .parameters import (ParameterError, Scene, check_parameters, clamp_tolerance, validate_max_step,
                          validate_tolerance)
 
@@ -27,7 +26,7 @@ class Solver(IntEnum):
 
 
 class Kernel(IntEnum):
-    COMPILED = 0  # vibromodel.compiled (C) where it applies (fidelities.FidelityEntry.compiled_model)
+    COMPILED = 0  # vibromodel.compiled (C) where it applies (fidelities.FidelityEntry.c_model)
     PYTHON = 1
 
 

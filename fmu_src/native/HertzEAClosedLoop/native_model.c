@@ -13,6 +13,7 @@
 #include <string.h>
 
 #include "controller_setup.h"
+#include "fidelity.h"
 #include "fmi2_native.h"
 #include "plant_setup.h"
 #include "pytext.h"
@@ -135,8 +136,13 @@ void model_initialise(Instance *inst, State *s)
                    "control would see only rounding): using rtol = %.3g", requested, RULE_MIN_RTOL, RULE_MIN_RTOL);
     }
     if (solver == 1) native_rk4_drive_warnings(inst, s, max_step != 0.0 ? max_step : RULE_RK4_DEFAULT_STEP);
-    if (fidelity != 0 && fidelity != 1 && fidelity != 2) {
-        native_halt_parameter(inst, "fidelity", fidelity, 1, "the closed loop's plant must be 0, 1 or 2");
+    if (!VK_FIDELITIES[fidelity].integrated) { /* the registry's levels (fidelity.h) */
+        native_halt_parameter(inst, "fidelity", fidelity, 1, VK_FIDELITY_CLOSED_LOOP_REFUSAL);
+        return;
+    }
+    if (VK_FIDELITIES[fidelity].native_refusal) {
+        snprintf(reason, sizeof reason, "%s; %s", VK_FIDELITIES[fidelity].native_refusal, PYTHONFMU_ALTERNATIVE);
+        native_halt_parameter(inst, "fidelity", fidelity, 1, reason);
         return;
     }
     const int reference = find_reference(inst, s);

@@ -4,14 +4,15 @@
  * same checks, in the same order, and the same messages.  The rules' constants and fixed texts come from
  * rules.h, generated from vibromodel at build time (harness/vibrofmu/fmus/native.py).
  *
- * Fidelities 0, 1, 2 with DOP853 or RK4 run here (kernel = 0 and 1 alike: the pure-Python plant gives the
- * compiled kernel's bits).  Fidelity 3 (slow-flow table) and fidelity 4 (OAFM fit) need set-up code that only
- * the pythonfmu FMU has: they are refused with fmi2Error naming it.
+ * The fidelities the registry lets the native FMUs run (fidelity.h: 0, 1, 2) with DOP853 or RK4 run here (kernel = 0
+ * and 1 alike: the pure-Python plant gives the compiled kernel's bits).  The others (fidelity 3's slow-flow table,
+ * fidelity 4's OAFM fit need set-up code that only the pythonfmu FMU has) are refused with fmi2Error naming it.
  */
 #include <math.h>
 #include <stdio.h>
 #include <string.h>
 
+#include "fidelity.h"
 #include "fmi2_native.h"
 #include "plant_setup.h"
 #include "pyfloat.h"
@@ -40,7 +41,7 @@ static int valid(Instance *inst, const State *s)
         native_halt_parameter(inst, "x_start", s->value[VR_x_start], 0, reason);
         return 0;
     }
-    if (s->value[VR_fidelity] == 4) {
+    if (VK_FIDELITIES[(int)s->value[VR_fidelity]].oafm_settings) {
         const double tau_star = s->value[VR_tau_star], tau_end = s->value[VR_oafm_tau_end];
         if (tau_end != 0.0 && tau_star != 0.0 && tau_end <= tau_star) {
             snprintf(reason, sizeof reason, "must exceed tau_star = %g", tau_star);
@@ -94,10 +95,10 @@ void model_initialise(Instance *inst, State *s)
     const double rtol_requested = s->has_tolerance ? s->tolerance : s->value[VR_rtol];
     if (!valid(inst, s)) return;
     const int fidelity = (int)s->value[VR_fidelity], solver = (int)s->value[VR_solver];
-    if (fidelity == 3 || fidelity == 4) {
-        native_halt_parameter(inst, "fidelity", fidelity, 1, fidelity == 3
-            ? "the native FMU cannot tabulate the averaged slow flow (fidelity 3 needs Python); " PYTHONFMU_ALTERNATIVE
-            : "the native FMU cannot fit the OAFM solution (fidelity 4 needs Python); " PYTHONFMU_ALTERNATIVE);
+    if (VK_FIDELITIES[fidelity].native_refusal) {
+        char reason[256];
+        snprintf(reason, sizeof reason, "%s; %s", VK_FIDELITIES[fidelity].native_refusal, PYTHONFMU_ALTERNATIVE);
+        native_halt_parameter(inst, "fidelity", fidelity, 1, reason);
         return;
     }
     double rtol = rtol_requested;
@@ -218,8 +219,9 @@ void model_do_step(Instance *inst, State *s, double t, double h)
 }
 
 /* HertzEAOscillator._initial_output: x = x_start, v = v_start, a and the forces of the fidelity's model at the start
-   time with U = 0 (fidelities 3 and 4: Eq. 3, the exact model), in_contact from x_start; the scene's rules and
-   electrode gaps first (check_parameters on fidelity and the scene, then validate). */
+   time with U = 0 (fidelities 3 and 4: Eq. 3, the exact model: the registry's compiled model of their forces),
+   in_contact from x_start; the scene's rules and electrode gaps first (check_parameters on fidelity and the scene,
+   then validate).  A level without a compiled model: its native refusal. */
 int model_initial_output(const State *s, fmi2ValueReference vr, double *value, char *why, size_t size)
 {
     static const char *const NAMES[] = {"fidelity", "mu", "Delta", "omega", "Omega", "alpha", "beta", "gamma", "R",
@@ -233,9 +235,14 @@ int model_initial_output(const State *s, fmi2ValueReference vr, double *value, c
         return 0;
     }
     const int fidelity = (int)s->value[VR_fidelity];
+    if (VK_FIDELITIES[fidelity].model == VK_MODEL_NONE) {
+        snprintf(why, size, "parameter fidelity = %d: %s; %s", fidelity, VK_FIDELITIES[fidelity].native_refusal,
+                 PYTHONFMU_ALTERNATIVE);
+        return 0;
+    }
     VkModel m;
     memset(&m, 0, sizeof m);
-    native_plant_model(&m, s, fidelity >= 3 ? 0 : fidelity);
+    native_plant_model(&m, s, fidelity);
     double out[5] = {x, v, 0.0, 0.0, 0.0};
     int fault = vm_forces(&m, t, x, &out[3], &out[4]);
     if (!fault) out[2] = vm_accel(&m, t, x, v, 0.0, &fault);

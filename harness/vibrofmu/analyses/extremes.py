@@ -27,9 +27,9 @@ from pathlib import Path
 import numpy as np
 from scipy.integrate import solve_ivp
 
+from vibromodel.fidelities import make_model
 from vibromodel.forces import potential
 from vibromodel.integrate import RK4_DRIVE_THETA, Dop853, rk4_drive_gains
-from vibromodel.models import make_model
 from vibromodel.parameters import MIN_RTOL, PULL_IN_GAP, Scene
 from vibromodel.plant import RK4_DEFAULT_STEP, Settings, Solver
 

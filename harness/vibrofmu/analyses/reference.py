@@ -11,8 +11,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.integrate import solve_ivp
 
+from vibromodel.fidelities import make_model
 from vibromodel.forces import contact_indentation
-from vibromodel.models import make_model
 from vibromodel.parameters import Scene
 
 REFERENCE_RTOL, REFERENCE_ATOL = 1e-12, 1e-14

@@ -13,6 +13,8 @@ Two headers are generated here, at build time, and packed in sources/:
   variables.h  the variable table, from the pythonfmu FMU's modelDescription.xml;
   rules.h      the parameter rules' constants and fixed messages, taken from vibromodel (parameters.py,
                plant.py, ...) by evaluating its checks, so that the native FMU logs what the Python slaves log.
+The fidelity registry's header fmu_src/core/fidelity.h (generated from vibromodel.fidelities and committed,
+vibrofmu.fmus.kernel) is packed with the core's files: the native models branch on its properties of a level.
 """
 from __future__ import annotations
 
@@ -42,13 +44,13 @@ COMMON_HEADERS = (NATIVE_SRC / "fmi2_native.h", FMI_SRC / "fmi2_layer.h", FMI_SR
 MODEL_FILES = {
     "HertzEAOscillator": tuple(FMU_SRC / "core" / name for name in (
         "plant.c", "plant.h", "model.c", "model.h", "dop853.c", "dop853.h", "dop853_tableau.h", "rk4.c", "rk4.h",
-        "roots.c", "roots.h")) + (NATIVE_SRC / "plant_setup.c", NATIVE_SRC / "plant_setup.h"),
+        "roots.c", "roots.h", "fidelity.h")) + (NATIVE_SRC / "plant_setup.c", NATIVE_SRC / "plant_setup.h"),
     "AdaptiveLyapunovController": (FMU_SRC / "core" / "controller.c", FMU_SRC / "core" / "controller.h",
                                    NATIVE_SRC / "controller_setup.c", NATIVE_SRC / "controller_setup.h"),
     "HertzEAClosedLoop": tuple(FMU_SRC / "core" / name for name in (
         "closedloop.c", "closedloop.h", "controller.c", "controller.h", "oafm_eval.c", "oafm_eval.h", "plant.c",
         "plant.h", "model.c", "model.h", "dop853.c", "dop853.h", "dop853_tableau.h", "rk4.c", "rk4.h", "roots.c",
-        "roots.h")) + tuple(NATIVE_SRC / name for name in (
+        "roots.h", "fidelity.h")) + tuple(NATIVE_SRC / name for name in (
             "plant_setup.c", "plant_setup.h", "controller_setup.c", "controller_setup.h")),
 }
 # The compiler commands (vibrofmu.fmus.toolchain: NATIVE_LINUX64 with $CC, NATIVE_WIN64 with mingw-w64).

@@ -32,9 +32,11 @@ from pathlib import Path
 import numpy as np
 from fmpy import extract, read_model_description
 
+from vibromodel import fidelities
+from vibromodel.fidelities import Fidelity
 from vibromodel.integrate import ATOL_PER_RTOL
-from vibromodel.models import Fidelity
 from vibromodel.parameters import Scene
+from vibromodel.settings import Settings
 
 from vibrofmu import paths
 from vibrofmu.fmus import toolchain
@@ -48,17 +50,16 @@ REFERENCE_RTOL = 1e-13
 CLOSED_LOOP_REFERENCE_RTOL = 1e-12
 C_INTERVALS = (0.1, 1.0)
 FMPY_INTERVAL = 1.0
-BASE = "exact f0"
+LEVELS = tuple(e for e in fidelities.REGISTRY.values() if e.ladder)  # the registry's rungs, the base first
+BASE = LEVELS[0].rung  # "exact f0": the plant FMU at its default fidelity
 RUNGS = (  # (name, FMU, start values)
-    (BASE, "plant", {}),
-    ("polynomial f1", "plant", {"fidelity": 1}),
-    ("averaged f3", "plant", {"fidelity": 3}),
-    ("analytic f4", "plant", {"fidelity": 4}),
+    *((e.rung, "plant", {} if e.level == Settings().fidelity else {"fidelity": int(e.level)}) for e in LEVELS),
     ("RK4 h = 0.01", "plant", {"solver": 1, "max_step": 0.01}),
     ("closed loop", "closed_loop", {}),
 )
 # issue 13's acceptance: cost per output of a rung over exact f0's, at most
-LIMITS = {"averaged f3": 0.5, "analytic f4": 0.5, "RK4 h = 0.01": 4.0, "closed loop": 3.0}
+LIMITS = {**{e.rung: e.ladder_limit for e in LEVELS if e.ladder_limit is not None}, "RK4 h = 0.01": 4.0,
+          "closed loop": 3.0}
 COLUMNS = tuple(("C host", interval) for interval in C_INTERVALS) + (("FMPy", FMPY_INTERVAL),)
 ACCEPTANCE_COLUMNS = (("C host", 0.1), ("FMPy", FMPY_INTERVAL))  # the issue's: C host at 0.1, FMPy at 1
 INSTRUCTION_INTERVALS = C_INTERVALS
