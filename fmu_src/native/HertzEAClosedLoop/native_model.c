@@ -134,7 +134,7 @@ void model_initialise(Instance *inst, State *s)
         native_log(inst, fmi2Warning, "parameter rtol = %s is below %.3g (100 machine epsilons: the error "
                    "control would see only rounding): using rtol = %.3g", requested, RULE_MIN_RTOL, RULE_MIN_RTOL);
     }
-    if (solver == 1) native_rk4_drive_warnings(inst, s, max_step != 0.0 ? max_step : RULE_RK4_DEFAULT_STEP);
+    native_drive_warnings(inst, s, vk_solvers[solver], max_step != 0.0 ? max_step : RULE_RK4_DEFAULT_STEP);
     if (fidelity != 0 && fidelity != 1 && fidelity != 2) {
         native_halt_parameter(inst, "fidelity", fidelity, 1, "the closed loop's plant must be 0, 1 or 2");
         return;

@@ -17,6 +17,7 @@ Two headers are generated here, at build time, and packed in sources/:
 from __future__ import annotations
 
 import math
+import re
 import shutil
 import subprocess
 import tempfile
@@ -32,17 +33,27 @@ COMMON_SOURCES = (NATIVE_SRC / "fmi2_native.c", NATIVE_SRC / "pytext.c", NATIVE_
                   NATIVE_SRC / "series.c", FMU_SRC / "core" / "pyfloat.c")
 COMMON_HEADERS = (NATIVE_SRC / "fmi2_native.h", NATIVE_SRC / "pytext.h", NATIVE_SRC / "scene_checks.h",
                   NATIVE_SRC / "series.h", FMU_SRC / "core" / "pyfloat.h", FMU_SRC / "fmi2_types.h")
+CORE = FMU_SRC / "core"
+
+
+def solver_files() -> tuple[Path, ...]:
+    """The compiled core's solvers: the table core/solver.c (with solver.h, the event search roots.c and the
+    DOP853 tableau) and each solver it names, `&vk_<file>_ops` defined in core/<file>.c with <file>.h: a solver
+    added to the table is packed without an entry here."""
+    names = re.findall(r"&vk_(\w+)_ops", (CORE / "solver.c").read_text())
+    return tuple(CORE / name for name in ("solver.c", "solver.h", "roots.c", "roots.h", "dop853_tableau.h")) + tuple(
+        CORE / f"{name}{ext}" for name in names for ext in (".c", ".h"))
+
+
 # what each model needs beyond its folder's native_model.c and config.h
 MODEL_FILES = {
-    "HertzEAOscillator": tuple(FMU_SRC / "core" / name for name in (
-        "plant.c", "plant.h", "model.c", "model.h", "dop853.c", "dop853.h", "dop853_tableau.h", "rk4.c", "rk4.h",
-        "roots.c", "roots.h")) + (NATIVE_SRC / "plant_setup.c", NATIVE_SRC / "plant_setup.h"),
-    "AdaptiveLyapunovController": (FMU_SRC / "core" / "controller.c", FMU_SRC / "core" / "controller.h",
+    "HertzEAOscillator": tuple(CORE / name for name in ("plant.c", "plant.h", "model.c", "model.h")) + solver_files()
+    + (NATIVE_SRC / "plant_setup.c", NATIVE_SRC / "plant_setup.h"),
+    "AdaptiveLyapunovController": (CORE / "controller.c", CORE / "controller.h",
                                    NATIVE_SRC / "controller_setup.c", NATIVE_SRC / "controller_setup.h"),
-    "HertzEAClosedLoop": tuple(FMU_SRC / "core" / name for name in (
+    "HertzEAClosedLoop": tuple(CORE / name for name in (
         "closedloop.c", "closedloop.h", "controller.c", "controller.h", "oafm_eval.c", "oafm_eval.h", "plant.c",
-        "plant.h", "model.c", "model.h", "dop853.c", "dop853.h", "dop853_tableau.h", "rk4.c", "rk4.h", "roots.c",
-        "roots.h")) + tuple(NATIVE_SRC / name for name in (
+        "plant.h", "model.c", "model.h")) + solver_files() + tuple(NATIVE_SRC / name for name in (
             "plant_setup.c", "plant_setup.h", "controller_setup.c", "controller_setup.h")),
 }
 # IEEE double arithmetic as written (the kernel's bit identity with Python): no FMA contraction, no fast-math.
