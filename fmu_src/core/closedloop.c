@@ -53,7 +53,6 @@ static int loop_rhs(void *context, double t, const double *y, double *f)
 
 /* The solver of the settings, the states it may use, the loop's right-hand side (no phasors: the controller's
    regressor shares the drive's time functions already) */
-static inline const VkSolverOps *ops_of(const VlLoop *l) { return vk_solvers[l->solver]; }
 
 static inline VkSolverSlots slots_of(VlLoop *l)
 {
@@ -62,6 +61,7 @@ static inline VkSolverSlots slots_of(VlLoop *l)
 }
 
 static const VkRhs LOOP_RHS = {loop_rhs, NULL, 0, NULL};
+static inline const VkSolverOps *ops_of(const VlLoop *l) { return vk_solvers[l->solver]; }
 
 int vl_outputs_at(const VlLoop *l, double t, const double *y, double *out)
 {

@@ -50,9 +50,7 @@ static int solver_error(VkPlant *p, int code, const DopReport *r)
     return set_error(p, code, r->t, r->y[0], r->y[1], "%s", text);
 }
 
-/* The solver of the settings and the states it may use */
-static inline const VkSolverOps *ops_of(const VkPlant *p) { return vk_solvers[p->solver]; }
-
+/* The states the solvers may use */
 static inline VkSolverSlots slots_of(VkPlant *p)
 {
     VkSolverSlots slots = {&p->dop, &p->rk4};
@@ -64,6 +62,9 @@ static int plant_rhs(void *context, double t, const double *y, double *f);
 static int plant_rhs_phased(void *context, double t, const double *phases, const double *y, double *f);
 /* The plant's right-hand side for the solvers: plain, and with the drive's phasors */
 static const VkRhs PLANT_RHS = {plant_rhs, plant_rhs_phased, 3, plant_frequencies_of};
+
+/* The solver of the settings */
+static inline const VkSolverOps *ops_of(const VkPlant *p) { return vk_solvers[p->solver]; }
 
 /* The exception a fault raises in Python, at the solver's state. */
 static int raise_fault(VkPlant *p, int fault)

@@ -222,8 +222,9 @@ static void rotate(const Phases *ph, const double *p, double *p_out)
     }
 }
 
-/* Rk4._step (ph == NULL: rhs; else ph->rhs with the phasors of each stage's time) */
-static int step(Rk4 *s, DopRhs rhs, Phases *ph, void *ctx, double h, DopReport *r)
+/* Rk4._step (ph == NULL: rhs; else ph->rhs with the phasors of each stage's time); inlined into each advance, so
+   that rk4_advance and rk4_advance_phased each get the step of their kind (no ph tests per stage) */
+static inline __attribute__((always_inline)) int step(Rk4 *s, DopRhs rhs, Phases *ph, void *ctx, double h, DopReport *r)
 {
     int n = (int)s->n;
     double t = s->t, *y = s->y, half = 0.5 * h;
@@ -292,7 +293,8 @@ static int anchor_rhs(void *context, double t, const double *y, double *f)
     return a->ph->rhs(a->ctx, t, a->ph->at_t, y, f);
 }
 
-static int advance(Rk4 *s, DopRhs rhs, Phases *ph, void *ctx, double t_target, DopReport *r)
+static inline __attribute__((always_inline)) int advance(Rk4 *s, DopRhs rhs, Phases *ph, void *ctx, double t_target,
+                                                         DopReport *r)
 {
     double span = t_target - s->t;
     if (span <= 0.0) return DOP_OK;

@@ -1,6 +1,8 @@
 /*
- * solver.c -- the table of the compiled core's solvers (solver.h), in the order of vibromodel/solvers.py's SOLVERS.
+ * solver.c -- the generic table of the compiled core's solvers (solver.h), in the order of VK_SOLVER_LIST.
  */
 #include "solver.h"
 
-const VkSolverOps *const vk_solvers[VK_N_SOLVERS] = {&vk_dop853_ops, &vk_rk4_ops};
+#define VK_OPS_ADDRESS(name, C) &vk_##name##_ops,
+const VkSolverOps *const vk_solvers[] = {VK_SOLVER_LIST(VK_OPS_ADDRESS, _)};
+const int vk_n_solvers = sizeof vk_solvers / sizeof vk_solvers[0];

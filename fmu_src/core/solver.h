@@ -1,14 +1,15 @@
 /*
- * solver.h -- the one interface of the compiled core's solvers, and their table (the C side of
- * vibromodel/solvers.py's SOLVERS: entry k of vk_solvers is the solver whose `solver` setting is k).
+ * solver.h -- the one interface of the compiled core's solvers, and their list (the C side of
+ * vibromodel/solvers.py's SOLVERS: entry k of VK_SOLVER_LIST and vk_solvers is the solver whose `solver` setting
+ * is k).
  *
  * A container (plant.c's VkPlant, closedloop.c's VlLoop) holds every solver family's state (Dop853 for the
  * adaptive solvers, Rk4 for the fixed-step ones: pointer-free, so its bytes are the FMU state) and calls the solver
  * of its `solver` setting through vk_solvers[solver], never branching on the solver: an indirect call per doStep
  * operation, the hot loops (stages, steps, events) inside each solver.
  *
- * Adding a solver: its ops in its own .c file (on the Dop853 or Rk4 state), one line in solver.c's table, one entry
- * in vibromodel/solvers.py.
+ * Adding a solver: its ops in its own .c file (on the Dop853 or Rk4 state), one entry in VK_SOLVER_LIST below, one
+ * entry in vibromodel/solvers.py.
  */
 #ifndef VIBRO_SOLVER_H
 #define VIBRO_SOLVER_H
@@ -55,11 +56,17 @@ typedef struct {
     double (*drive_gain_x)(double theta);
 } VkSolverOps;
 
-extern const VkSolverOps vk_dop853_ops, vk_rk4_ops;
+/* Every solver, in the order of vibromodel/solvers.py's SOLVERS (position = the `solver` setting): X(name, C) for
+   each, its ops vk_<name>_ops defined in core/<name>.c.  Adding a solver: one entry here. */
+#define VK_SOLVER_LIST(X, C) X(dop853, C) X(rk4, C)
 
-#define VK_N_SOLVERS 2
-/* indexed by the `solver` setting (0 <= solver < VK_N_SOLVERS: the parameter rules and the FMU state's constant
-   bytes keep it there) */
-extern const VkSolverOps *const vk_solvers[VK_N_SOLVERS];
+#define VK_DECLARE_OPS(name, C) extern const VkSolverOps vk_##name##_ops;
+VK_SOLVER_LIST(VK_DECLARE_OPS, _)
+#undef VK_DECLARE_OPS
+
+/* The table, indexed by the `solver` setting (0 <= solver < vk_n_solvers: the parameter rules and the FMU state's
+   constant bytes keep it there) */
+extern const VkSolverOps *const vk_solvers[];
+extern const int vk_n_solvers;
 
 #endif

@@ -21,7 +21,11 @@ from .fidelities import entry
 from .integrate import ATOL_PER_RTOL, IntegrationError, TerminalEvent
 from .models import PolynomialModel, pull_in_slope
 from .parameters import PULL_IN_GAP, validate
-from .settings import Outputs, Settings, Solver, check_step, checked_settings
+from .settings import Outputs, Settings, check_step, checked_settings
+from .solvers import BY_VALUE as SOLVERS_BY_VALUE, solver_entry
+
+# solvers.SolverEntry.family -> the field of VkPlant and VlLoop that holds that solver family's state
+SOLVER_SLOTS = {"adaptive": "dop", "fixed": "rk4"}
 
 LIBRARY_NAME = "vibrokernel.so"
 
@@ -213,7 +217,8 @@ def load_library(directories) -> tuple[ctypes.CDLL | None, str]:
 
 def supports(settings: Settings) -> bool:
     """CompiledPlant runs the fidelities with a compiled model (fidelities registry) with either solver."""
-    return entry(settings.fidelity).compiled_model is not None and settings.solver in (Solver.ADAPTIVE, Solver.RK4)
+    solver = SOLVERS_BY_VALUE.get(settings.solver)
+    return entry(settings.fidelity).compiled_model is not None and solver is not None and solver.compiled
 
 
 def _model_fields(scene, model, polynomial: int | None = None) -> dict:
@@ -267,7 +272,7 @@ class CompiledPlant:
 
     @property
     def _solver(self):
-        return self._plant.rk4 if self._plant.solver == Solver.RK4 else self._plant.dop
+        return getattr(self._plant, SOLVER_SLOTS[solver_entry(self._plant.solver).family])
 
     @property
     def max_step(self) -> float:

@@ -209,6 +209,12 @@ class Dop853:
         self._restart(t0, x0, v0, U)
         self.h = None  # chosen on the first step
 
+    @classmethod
+    def from_settings(cls, accel, events, t0, x0, v0, U, settings, max_step, *, rates=None, phased=None,
+                      step_budget=math.inf):
+        """solvers.SolverEntry.make: rtol of the settings, max_step the ceiling (phased is not used)."""
+        return cls(accel, events, t0, x0, v0, U, settings.rtol, max_step, rates=rates, step_budget=step_budget)
+
     # -- state ---------------------------------------------------------------------------------
     def _restart(self, t, x, v, U):
         """Start afresh at (t, x, v) with input U: a new derivative, no interpolant yet."""
@@ -672,6 +678,12 @@ class Rk4:
         self.phased = phased
         self._phases = self._rotation = None
         self._since_anchor = -1
+
+    @classmethod
+    def from_settings(cls, accel, events, t0, x0, v0, U, settings, max_step, *, rates=None, phased=None,
+                      step_budget=math.inf):
+        """solvers.SolverEntry.make: steps of max_step (the step budget is not used: the step count is set)."""
+        return cls(accel, events, t0, x0, v0, U, max_step, rates=rates, phased=phased)
 
     def set_input(self, t, U):
         self.U = U
