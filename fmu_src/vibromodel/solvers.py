@@ -24,7 +24,7 @@ FIXED_DEFAULT_STEP = 0.01  # the fixed-step solvers' step when max_step = 0 ("au
 class SolverEntry:
     """One solver.
 
-    key: its name in the harness (--solver choice, campaign counters): "dop853", "rk4";
+    key: its name in the harness's records (campaign counters): "dop853", "rk4"; option: its --solver choice;
     value: the `solver` setting (Settings.solver, the FMU parameter) and the index of core/solver.c's table;
     enum: its member of settings.Solver; name: as notes and logs name it; label: as the settings' error names it;
     description: as the parameter rule and the FMU's parameter description name it;
@@ -36,6 +36,7 @@ class SolverEntry:
     compiled: whether the compiled core has it (core/solver.c).
     """
     key: str
+    option: str
     value: int
     enum: str
     name: str
@@ -77,11 +78,11 @@ def _resolve(path: str):
 
 
 SOLVERS: dict[str, SolverEntry] = {entry.key: entry for entry in (
-    SolverEntry("dop853", 0, "ADAPTIVE", "DOP853", "adaptive", "adaptive DOP853",
+    SolverEntry("dop853", "adaptive", 0, "ADAPTIVE", "DOP853", "adaptive", "adaptive DOP853",
                 (("rtol", "relative tolerance of the error control"),
                  ("max_step", "step ceiling; 0 = none")),
                 "adaptive", ".integrate:Dop853"),
-    SolverEntry("rk4", 1, "RK4", "RK4", "RK4", "fixed-step RK4",
+    SolverEntry("rk4", "rk4", 1, "RK4", "RK4", "RK4", "fixed-step RK4",
                 (("max_step", f"the step; 0 = {FIXED_DEFAULT_STEP:g}"),),
                 "fixed", ".integrate:Rk4", drive_gains=".integrate:rk4_drive_gains"),
 )}
