@@ -56,12 +56,12 @@ typedef struct {
     double (*drive_gain_x)(double theta);
 } VkSolverOps;
 
-/* Every solver, in the order of vibromodel/solvers.py's SOLVERS (position = the `solver` setting): X(name, C) for
-   each, its ops vk_<name>_ops defined in core/<name>.c.  Adding a solver: one entry here. */
-#define VK_SOLVER_LIST(X, C) X(dop853, C) X(rk4, C)
+/* Every solver, in the order of vibromodel/solvers.py's SOLVERS (position = the `solver` setting): X(name) for each,
+   its ops vk_<name>_ops defined in core/<name>.c.  Adding a solver: one entry here. */
+#define VK_SOLVER_LIST(X) X(dop853) X(rk4)
 
-#define VK_DECLARE_OPS(name, C) extern const VkSolverOps vk_##name##_ops;
-VK_SOLVER_LIST(VK_DECLARE_OPS, _)
+#define VK_DECLARE_OPS(name) extern const VkSolverOps vk_##name##_ops;
+VK_SOLVER_LIST(VK_DECLARE_OPS)
 #undef VK_DECLARE_OPS
 
 /* The table, indexed by the `solver` setting (0 <= solver < vk_n_solvers: the parameter rules and the FMU state's

@@ -38,10 +38,10 @@ CORE = FMU_SRC / "core"
 
 def solver_files() -> tuple[Path, ...]:
     """The compiled core's solvers: the interface core/solver.h with its table solver.c (and the event search
-    roots.c, the DOP853 tableau) and each solver of its VK_SOLVER_LIST, X(<file>, C): core/<file>.c with <file>.h
+    roots.c, the DOP853 tableau) and each solver of its VK_SOLVER_LIST, X(<file>): core/<file>.c with <file>.h
     where there is one. A solver added to the list is packed without an entry here."""
-    listed = re.search(r"#define VK_SOLVER_LIST\(X, C\)(.*)", (CORE / "solver.h").read_text()).group(1)
-    names = re.findall(r"X\((\w+), C\)", listed)
+    listed = re.search(r"#define VK_SOLVER_LIST\(X\)(.*)", (CORE / "solver.h").read_text()).group(1)
+    names = re.findall(r"X\((\w+)\)", listed)
     files = [CORE / f"{name}{ext}" for name in names for ext in (".c", ".h")]
     return tuple(CORE / name for name in ("solver.c", "solver.h", "roots.c", "roots.h", "dop853_tableau.h")) + tuple(
         path for path in files if path.suffix == ".c" or path.is_file())
