@@ -18,6 +18,7 @@ from pythonfmu.enums import Fmi2Initial, Fmi2Status
 from vibromodel import snapshot
 from vibromodel.control import ERRATA_INITIAL_ESTIMATES, ESTIMATE_NAMES, GAIN_NAMES, Gains, Law
 from vibromodel.integrate import IntegrationError
+from vibromodel.solvers import RULE_TEXT
 from vibromodel.parameters import NonFiniteOutput, ParameterError, check_finite, check_parameters, scene_names
 
 STATUS_OK, STATUS_ERROR = 0, 3
@@ -102,7 +103,7 @@ class StatusSlave(Fmi2Slave):
 
     def _solver_parameters(self, settings):
         """The plant integrator's parameters (the plant and the closed loop): solver, rtol, max_step."""
-        self._parameter(Integer, "solver", int(settings.solver), "0 adaptive DOP853, 1 fixed-step RK4")
+        self._parameter(Integer, "solver", int(settings.solver), RULE_TEXT)
         self._parameter(Real, "rtol", settings.rtol, "relative tolerance (setupExperiment's tolerance wins)")
         self._parameter(Real, "max_step", settings.max_step, "RK4 step / adaptive step ceiling; 0 = automatic")
 

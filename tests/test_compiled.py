@@ -14,7 +14,7 @@ from vibrofmu.fmus import kernel
 from vibromodel import compiled, plant as plant_module, settings as settings_module
 from vibromodel.compiled import CompiledPlant, load_library
 from vibromodel.fidelities import make_model
-from vibromodel.integrate import IntegrationError, TerminalEvent
+from vibromodel.integrate import IntegrationError, TerminalEvent, rk4_drive_gains
 from vibromodel.parameters import ParameterError, Scene
 from vibromodel.plant import Outputs, Plant, Settings
 
@@ -387,3 +387,13 @@ def test_the_kernel_compiles_without_warnings(tmp_path):
     command = [*kernel.GCC_COMMAND, "-pedantic", "-Werror", "-o", str(tmp_path / "strict.so"),
                *map(str, kernel.kernel_sources()), "-lm"]
     assert subprocess.run(command, capture_output=True, text=True).stderr == ""
+
+
+@pytest.mark.parametrize("theta", [0.0, 1e-3, 0.3, 1.0, 1.696, 2.5, 4.0, 4 * math.pi / 3, 5.0, 2 * math.pi, 7.5])
+def test_the_solvers_drive_gain_is_integrates_bit_for_bit(library, theta):
+    """core/rk4.c rk4_drive_gain_x, which the native FMUs' drive warnings read through the solver table (solver.h:
+    drive_gain_x), is integrate.rk4_drive_gains(theta)[0]. Bit identity is free: the same IEEE operations in the same
+    order (-ffp-contract=off), sin and cos from the same libm that CPython's math module calls."""
+    function = library.rk4_drive_gain_x
+    function.restype, function.argtypes = ctypes.c_double, [ctypes.c_double]
+    assert bits(function(theta)) == bits(rk4_drive_gains(theta)[0])

@@ -1,6 +1,7 @@
 /*
  * closedloop.c -- the closed loop of closedloop.h: vibromodel/closedloop.py's ClosedLoop on the model of model.c,
- * the controller of controller.c, the reference of oafm_eval.c and the solvers of dop853.c / rk4.c.
+ * the controller of controller.c, the reference of oafm_eval.c and the solver of the settings, called through the
+ * solver interface (solver.h).
  */
 #include "closedloop.h"
 
@@ -11,6 +12,7 @@
 
 #include "plant.h"
 #include "pyfloat.h"
+#include "solver.h"
 
 /* The reference x~ at t into ref[0..2] and, where the reference computes it too, the control regressor's
    cos(w_delta t) into *cos_delta (then returned non-NULL): when x~ is one piece from 0 with a frequency base equal
@@ -48,6 +50,18 @@ static int loop_rhs(void *context, double t, const double *y, double *f)
     f[1] = vm_accel_driven(&l->model, t, &drive, y[0], y[1], U, &fault);
     return fault;
 }
+
+/* The solver of the settings, the states it may use, the loop's right-hand side (no phasors: the controller's
+   regressor shares the drive's time functions already) */
+
+static inline VkSolverSlots slots_of(VlLoop *l)
+{
+    VkSolverSlots slots = {&l->dop, &l->rk4};
+    return slots;
+}
+
+static const VkRhs LOOP_RHS = {loop_rhs, NULL, 0, NULL};
+static inline const VkSolverOps *ops_of(const VlLoop *l) { return vk_solvers[l->solver]; }
 
 int vl_outputs_at(const VlLoop *l, double t, const double *y, double *out)
 {
@@ -103,12 +117,8 @@ int vl_publish(VlLoop *l)
 {
     double y[DOP_MAX_DIM], out[VL_OUTPUTS];
     DopReport r;
-    if (l->solver == VL_RK4) {
-        memcpy(y, l->rk4.y, sizeof y);  /* RK4 ends every advance on its target: t */
-    } else {
-        int code = dop_value_at(&l->dop, loop_rhs, l, l->t, y, &r);
-        if (code) return solver_error(l, code, &r);
-    }
+    int code = ops_of(l)->value_at(slots_of(l), &LOOP_RHS, l, l->t, y, &r);  /* RK4 ends every advance on its target: t */
+    if (code) return solver_error(l, code, &r);
     int fault = vl_outputs_at(l, l->t, y, out);
     if (fault) return raise_fault(l, fault, l->t, y);
     static const char *const names[VL_OUTPUTS] = {"x", "v", "x_ref", "U", "e1", "e2", "V", "V_rate",
@@ -133,13 +143,8 @@ int vl_init(VlLoop *l, double t0, const double *y0)
     vk_set_events(&l->rk4.n_events, l->rk4.events, &l->model);
     l->dop.h = 0.0;
     l->t = t0;
-    if (l->solver == VL_RK4) {
-        l->rk4.t = t0;
-        memcpy(l->rk4.y, y0, VL_DIM * sizeof(double));
-    } else {
-        int code = dop_restart(&l->dop, loop_rhs, l, t0, y0, &r);
-        if (code) return solver_error(l, code, &r);
-    }
+    int code = ops_of(l)->restart(slots_of(l), &LOOP_RHS, l, t0, y0, &r);
+    if (code) return solver_error(l, code, &r);
     return vl_publish(l);
 }
 
@@ -149,8 +154,7 @@ int vl_do_step(VlLoop *l, double t, double h)
     if (l->error) return (int)l->error;
     if (!(isfinite(h) && h > 0.0)) return VL_BAD_STEP;
     if (!(isfinite(t) && fabs(t - l->t) <= l->time_tolerance * py_max(1.0, fabs(t)))) return VL_BAD_TIME;
-    int code = l->solver == VL_RK4 ? rk4_advance(&l->rk4, loop_rhs, l, t + h, &r)
-                                   : dop_advance(&l->dop, loop_rhs, l, t + h, &r);
+    int code = ops_of(l)->advance(slots_of(l), &LOOP_RHS, l, t + h, &r);
     if (code) return solver_error(l, code, &r);
     l->t = t + h;
     return vl_publish(l);

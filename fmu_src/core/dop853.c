@@ -14,14 +14,14 @@
 #include "dop853_tableau.h"
 #include "pyfloat.h"
 #include "roots.h"
+#include "solver.h"
 
 /* integrate.py's step control constants */
 #define SAFETY 0.9
 #define MIN_FACTOR 0.2
 #define MAX_FACTOR 10.0
 #define ERROR_EXPONENT (-1.0 / 8.0)
-/* integrate.EVENT_MAX_DEPTH, EVENT_SCREEN (event location: docs/events.md) */
-#define EVENT_MAX_DEPTH DOP_EVENT_MAX_DEPTH
+/* integrate.EVENT_SCREEN (event location: docs/events.md; the search itself: roots.c) */
 #define EVENT_SCREEN 2.0
 
 /* The stages of one step: k[stage][component], stages 0..n-1 (stage-major, as Dop853.k) */
@@ -398,54 +398,51 @@ static int locate(Dop853 *s, DopRhs rhs, void *ctx, int event, double xa, double
     return code;
 }
 
-/* integrate._monotone */
-int dop_monotone(const double *b, int degree)
-{
-    int rising = 1, falling = 1;
-    for (int k = 0; k < degree; k++) {
-        rising = rising && b[k + 1] > b[k];
-        falling = falling && b[k + 1] < b[k];
-    }
-    return rising || falling;
-}
-
-/* integrate._split: de Casteljau at 1/2 */
-void dop_split(const double *b_in, int degree, double *left, double *right)
-{
-    double b[DOP_DENSE + 1];
-    memcpy(b, b_in, sizeof(double) * (size_t)(degree + 1));
-    left[0] = b[0];
-    right[degree] = b[degree];
-    for (int r = 1; r <= degree; r++) {
-        for (int k = 0; k <= degree - r; k++) b[k] = 0.5 * (b[k] + b[k + 1]);
-        left[r] = b[0];
-        right[degree - r] = b[degree - r];
-    }
-}
-
+/* The event search's view of event i on the last step's dense output: beyond(s) = whether g at the fraction s of
+   the step (t_old + s h, the step's ends exactly) is past the event from the side `positive` */
 typedef struct {
-    double s_a, s_b;
-    int depth;
-    double b[8];
-} Piece;
+    Dop853 *s;
+    DopRhs rhs;
+    void *ctx;
+    int i, positive;
+    DopReport *r;
+} DenseEvent;
+
+#define BEYOND(positive, g) ((positive) ? !((g) > 0.0) : (g) > 0.0)
+
+/* the time of the fraction s of the last step, as Dop853._first_zero computes it */
+static double fraction_time(const Dop853 *s, double f)
+{
+    if (f == 1.0) return s->t;
+    if (f == 0.0) return s->t_old;
+    return s->t_old + f * (s->t - s->t_old);
+}
+
+static int beyond_on_dense(void *context, double f, int *beyond)
+{
+    DenseEvent *c = context;
+    double y[DOP_MAX_DIM];
+    int code = dop_value_at(c->s, c->rhs, c->ctx, fraction_time(c->s, f), y, c->r);
+    if (code) return code;
+    *beyond = BEYOND(c->positive, dop_event_g(c->s, c->i, y));
+    return DOP_OK;
+}
 
 /* Dop853._first_zero: the earliest time in the last step where event i is reached on the dense output
- * (terminal: g <= 0; other: g on the other side than side[i]); *found = 0 if none. */
+ * (terminal: g <= 0; other: g on the other side than side[i]); *found = 0 if none. The search is roots.c's. */
 static int first_zero(Dop853 *s, DopRhs rhs, void *ctx, int i, int *found, double *t_event, DopReport *r)
 {
     const DopEvent *e = &s->events[i];
     int positive = e->terminal ? 1 : (int)s->side[i], code;
-    double y[DOP_MAX_DIM];
-#define BEYOND(g) (positive ? !((g) > 0.0) : (g) > 0.0)
     *found = 0;
     double g0 = dop_event_g(s, i, s->y_old), g1 = dop_event_g(s, i, s->y);
-    if (BEYOND(g0)) {
+    if (BEYOND(positive, g0)) {
         *found = 1;
         *t_event = s->t_old;
         return DOP_OK;
     }
     double h = s->t - s->t_old;
-    if (!BEYOND(g1)) {
+    if (!BEYOND(positive, g1)) {
         double reach = EVENT_SCREEN * (fabs(g1 - g0) + h * (fabs(event_linear(s, i, s->f_old)) +
                                                             fabs(event_linear(s, i, s->f))));
         if (fabs(g0) > reach && fabs(g1) > reach) return DOP_OK;
@@ -454,58 +451,27 @@ static int first_zero(Dop853 *s, DopRhs rhs, void *ctx, int i, int *found, doubl
         int fault = build_dense(s, rhs, ctx);
         if (fault) return raise_fault(s, r, fault);
     }
-    double G[DOP_DENSE];
+    double G[DOP_DENSE], b[DOP_DENSE + 1];
     for (int j = 0; j < DOP_DENSE; j++) {
         G[j] = event_linear(s, i, s->dense[j]);
     }
-    Piece stack[EVENT_MAX_DEPTH + 2];
-    int top = 0;
-    stack[0].s_a = 0.0;
-    stack[0].s_b = 1.0;
-    stack[0].depth = 0;
     for (int k = 0; k < 8; k++) {
         double sum = 0.0;
         for (int j = 0; j < DOP_DENSE; j++) sum += G[j] * DOP_BERNSTEIN[j][k];
-        stack[0].b[k] = g0 + sum;
+        b[k] = g0 + sum;
     }
-    top = 1;
-    while (top > 0) {
-        Piece piece = stack[--top];
-        double lo = piece.b[0], hi = piece.b[0];
-        for (int k = 1; k < 8; k++) {
-            lo = py_min(lo, piece.b[k]);
-            hi = py_max(hi, piece.b[k]);
-        }
-        if (positive ? lo > 0.0 : !(hi > 0.0)) continue;  /* the hull of g on the piece is on the start side */
-        double t_b = piece.s_b == 1.0 ? s->t : s->t_old + piece.s_b * h;
-        int resolved = piece.depth >= EVENT_MAX_DEPTH;
-        code = dop_value_at(s, rhs, ctx, t_b, y, r);
-        if (code) return code;
-        if (BEYOND(dop_event_g(s, i, y)) && (resolved || dop_monotone(piece.b, DOP_DENSE))) {
-            double t_a = piece.s_a == 0.0 ? s->t_old : s->t_old + piece.s_a * h;
-            code = dop_value_at(s, rhs, ctx, t_a, y, r);
-            if (code) return code;
-            *found = 1;
-            if (BEYOND(dop_event_g(s, i, y))) {  /* a rounding of the hull's verdict on the piece before */
-                *t_event = t_a;
-                return DOP_OK;
-            }
-            return locate(s, rhs, ctx, i, t_a, t_b, t_event, r);  /* one zero in the piece */
-        }
-        if (!resolved) {
-            double middle = 0.5 * (piece.s_a + piece.s_b);
-            Piece *right = &stack[top++], *left = &stack[top++];
-            dop_split(piece.b, DOP_DENSE, left->b, right->b);
-            right->s_a = middle;
-            right->s_b = piece.s_b;
-            left->s_a = piece.s_a;
-            left->s_b = middle;
-            right->depth = left->depth = piece.depth + 1;
-        }
+    DenseEvent c = {s, rhs, ctx, i, positive, r};
+    double s_a, s_b;
+    int at_start;
+    code = bernstein_search(b, DOP_DENSE, positive, beyond_on_dense, &c, found, &s_a, &s_b, &at_start);
+    if (code || !*found) return code;
+    if (at_start) {
+        *t_event = fraction_time(s, s_a);
+        return DOP_OK;
     }
-#undef BEYOND
-    return DOP_OK;
+    return locate(s, rhs, ctx, i, fraction_time(s, s_a), fraction_time(s, s_b), t_event, r);  /* one zero there */
 }
+#undef BEYOND
 
 /* Dop853._move_to_side: the state onto event i's zero, then ulp by ulp onto its side `side`; a new derivative */
 static int move_to_side(Dop853 *s, DopRhs rhs, void *ctx, int i, int side, DopReport *r)
@@ -670,3 +636,31 @@ int dop_advance(Dop853 *s, DopRhs rhs, void *ctx, double t_target, DopReport *r)
     if (s->stopped && s->stop_t <= t_target) return terminal(s, r);
     return DOP_OK;
 }
+
+/* ---- the solver interface (solver.h) ---- */
+
+static int ops_restart(VkSolverSlots s, const VkRhs *f, void *context, double t, const double *y, DopReport *r)
+{
+    return dop_restart(s.adaptive, f->rhs, context, t, y, r);
+}
+
+static int ops_advance(VkSolverSlots s, const VkRhs *f, void *context, double t_target, DopReport *r)
+{
+    return dop_advance(s.adaptive, f->rhs, context, t_target, r);
+}
+
+static int ops_value_at(VkSolverSlots s, const VkRhs *f, void *context, double t, double *y, DopReport *r)
+{
+    return dop_value_at(s.adaptive, f->rhs, context, t, y, r);
+}
+
+static const double *ops_state(VkSolverSlots s, double *t)
+{
+    *t = s.adaptive->t;
+    return s.adaptive->y;
+}
+
+static double ops_max_step(VkSolverSlots s) { return s.adaptive->max_step; }
+
+const VkSolverOps vk_dop853_ops = {"DOP853", ops_restart, 1, ops_advance, ops_value_at, ops_state, ops_max_step,
+                                   NULL};

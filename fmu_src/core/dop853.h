@@ -34,7 +34,6 @@
 
 #define DOP_MAX_DIM 16
 #define DOP_MAX_EVENTS 4
-#define DOP_EVENT_MAX_DEPTH 40  /* integrate.EVENT_MAX_DEPTH: pieces of 2^-40 of a step are not split */
 #define DOP_STAGES 16    /* 12 stages + FSAL + 3 dense-output stages */
 #define DOP_DENSE 7      /* dense-output coefficients per component */
 #define DOP_MESSAGE 480
@@ -95,9 +94,5 @@ int dop_advance(Dop853 *s, DopRhs rhs, void *context, double t_target, DopReport
 int dop_value_at(Dop853 *s, DopRhs rhs, void *context, double t, double *y, DopReport *report);
 /* g of event i at y */
 double dop_event_g(const Dop853 *s, int i, const double *y);
-/* Bernstein coefficients b[0..degree] (degree <= DOP_DENSE) of a polynomial on an interval: whether they rise
-   or fall strictly (then the polynomial is monotone there); their halves by de Casteljau at the middle. */
-int dop_monotone(const double *b, int degree);
-void dop_split(const double *b, int degree, double *left, double *right);
 
 #endif

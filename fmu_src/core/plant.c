@@ -1,6 +1,6 @@
 /*
  * plant.c -- the plant's step logic (plant.h): Plant.do_step, state and outputs of vibromodel/plant.py on the
- * model (model.c) and the solver of the settings (dop853.c or rk4.c).
+ * model (model.c) and the solver of the settings, called through the solver interface (solver.h).
  */
 #include "plant.h"
 
@@ -10,6 +10,7 @@
 #include <string.h>
 
 #include "pyfloat.h"
+#include "solver.h"
 
 enum { CONTACT = 0, UPPER_GAP = 1, LOWER_GAP = 2 };  /* ExactModel.events, in order */
 
@@ -49,13 +50,30 @@ static int solver_error(VkPlant *p, int code, const DopReport *r)
     return set_error(p, code, r->t, r->y[0], r->y[1], "%s", text);
 }
 
+/* The states the solvers may use */
+static inline VkSolverSlots slots_of(VkPlant *p)
+{
+    VkSolverSlots slots = {&p->dop, &p->rk4};
+    return slots;
+}
+
+static void plant_frequencies_of(void *context, double *freq);
+static int plant_rhs(void *context, double t, const double *y, double *f);
+static int plant_rhs_phased(void *context, double t, const double *phases, const double *y, double *f);
+/* The plant's right-hand side for the solvers: plain, and with the drive's phasors */
+static const VkRhs PLANT_RHS = {plant_rhs, plant_rhs_phased, 3, plant_frequencies_of};
+
+/* The solver of the settings */
+static inline const VkSolverOps *ops_of(const VkPlant *p) { return vk_solvers[p->solver]; }
+
 /* The exception a fault raises in Python, at the solver's state. */
 static int raise_fault(VkPlant *p, int fault)
 {
     char text[VK_MESSAGE];
     py_fault_text(fault, text, sizeof text);
-    const double *y = p->solver == VK_RK4 ? p->rk4.y : p->dop.y;
-    return set_error(p, VK_RAISED, p->solver == VK_RK4 ? p->rk4.t : p->dop.t, y[0], y[1], "%s", text);
+    double t;
+    const double *y = ops_of(p)->state(slots_of(p), &t);
+    return set_error(p, VK_RAISED, t, y[0], y[1], "%s", text);
 }
 
 /* The solvers' right-hand side: (x, v)' = (v, x'') at the held input U */
@@ -79,6 +97,7 @@ static int plant_rhs_phased(void *context, double t, const double *phases, const
     return fault;
 }
 
+
 /* The drive's frequencies omega, Omega, 2 Omega (0 for a term the model leaves out: its phasor stays (1, 0)),
    as plant.drive_frequencies */
 static void plant_frequencies(const VkModel *m, double *freq)
@@ -86,6 +105,11 @@ static void plant_frequencies(const VkModel *m, double *freq)
     freq[0] = m->load_forcing ? m->omega : 0.0;
     freq[1] = m->ac ? m->Omega : 0.0;
     freq[2] = m->ac ? 2.0 * m->Omega : 0.0;
+}
+
+static void plant_frequencies_of(void *context, double *freq)
+{
+    plant_frequencies(&((const VkPlant *)context)->model, freq);
 }
 
 double vk_accel(const VkPlant *p, double t, double x, double v, double U)
@@ -128,13 +152,7 @@ int vk_restart(VkPlant *p, double t, double x, double v, double U)
     double y[2] = {x, v};
     DopReport r;
     p->U = U;
-    if (p->solver == VK_RK4) {
-        p->rk4.t = t;
-        p->rk4.y[0] = x;
-        p->rk4.y[1] = v;
-        return VK_OK;
-    }
-    int code = dop_restart(&p->dop, plant_rhs, p, t, y, &r);
+    int code = ops_of(p)->restart(slots_of(p), &PLANT_RHS, p, t, y, &r);
     return code ? solver_error(p, code, &r) : VK_OK;
 }
 
@@ -142,17 +160,7 @@ int vk_value_at(VkPlant *p, double t, double *x, double *v)
 {
     double y[DOP_MAX_DIM];
     DopReport r;
-    if (p->solver == VK_RK4) {  /* Rk4._require_current */
-        if (t != p->rk4.t) {
-            number_text own, asked;
-            return set_error(p, VK_RAISED, p->rk4.t, p->rk4.y[0], p->rk4.y[1], "ValueError: RK4 holds only tau = %s, "
-                             "not %s", py_repr(own, p->rk4.t), py_repr(asked, t));
-        }
-        *x = p->rk4.y[0];
-        *v = p->rk4.y[1];
-        return VK_OK;
-    }
-    int code = dop_value_at(&p->dop, plant_rhs, p, t, y, &r);
+    int code = ops_of(p)->value_at(slots_of(p), &PLANT_RHS, p, t, y, &r);
     if (code) return solver_error(p, code, &r);
     *x = y[0];
     *v = y[1];
@@ -162,11 +170,11 @@ int vk_value_at(VkPlant *p, double t, double *x, double *v)
 int vk_set_input(VkPlant *p, double t, double U)
 {
     double x, v;
-    if (p->solver == VK_RK4) {  /* Rk4.set_input */
+    if (!ops_of(p)->restart_on_input) {  /* Rk4.set_input */
         p->U = U;
         return VK_OK;
     }
-    if (U == p->U) return VK_OK;
+    if (U == p->U) return VK_OK;  /* Dop853.set_input */
     int code = vk_value_at(p, t, &x, &v);
     if (code) return code;
     p->U = U;
@@ -176,14 +184,7 @@ int vk_set_input(VkPlant *p, double t, double U)
 int vk_advance(VkPlant *p, double t_target)
 {
     DopReport r;
-    int code;
-    if (p->solver == VK_RK4) {
-        double freq[3];
-        plant_frequencies(&p->model, freq);
-        code = rk4_advance_phased(&p->rk4, plant_rhs_phased, p, 3, freq, t_target, &r);
-    } else {
-        code = dop_advance(&p->dop, plant_rhs, p, t_target, &r);
-    }
+    int code = ops_of(p)->advance(slots_of(p), &PLANT_RHS, p, t_target, &r);
     return code ? solver_error(p, code, &r) : VK_OK;
 }
 
@@ -223,10 +224,15 @@ int vk_plant_advance(VkPlant *p, double t_end, double *xva)
     return vk_plant_state(p, xva);
 }
 
-/* Plant.do_step's checks (plant.check_step), without messages: vibromodel raises the ParameterError */
-static int check_step(const VkPlant *p, double t, double h)
+double vk_step_ceiling(VkPlant *p)
 {
-    double ceiling = p->solver == VK_RK4 ? p->rk4.max_step : p->dop.max_step;
+    return ops_of(p)->max_step(slots_of(p));
+}
+
+/* Plant.do_step's checks (plant.check_step), without messages: vibromodel raises the ParameterError */
+static int check_step(VkPlant *p, double t, double h)
+{
+    double ceiling = vk_step_ceiling(p);
     if (!(isfinite(h) && h > 0.0)) return VK_BAD_STEP;
     if (!isfinite(p->U_input)) return VK_BAD_INPUT;
     if (h / ceiling > p->max_steps_per_dostep) return VK_TOO_MANY_STEPS;

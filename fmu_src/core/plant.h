@@ -92,6 +92,8 @@ int vk_outputs_at(VkPlant *p, double t, double x, double v, const double *a);
 int vk_plant_state(VkPlant *p, double *xva);
 /* Plant.advance(t_end, U_input): set_input at plant_t, advance, plant_t = t_end, state into xva[0..2]. */
 int vk_plant_advance(VkPlant *p, double t_end, double *xva);
+/* integrator.max_step of the solver in use: its step ceiling (inf: none) */
+double vk_step_ceiling(VkPlant *p);
 /* Plant.do_step(t, h, U_input): pre-checks, Plant.advance(t + h), outputs at t + h, plant_t = t + h. */
 int vk_do_step(VkPlant *p, double t, double h);
 /* The compiled floor: n do_steps of dt, each from plant_t, x after each into x_out; stops at the first error. */

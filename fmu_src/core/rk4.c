@@ -10,6 +10,7 @@
 
 #include "pyfloat.h"
 #include "roots.h"
+#include "solver.h"
 
 /* integrate._rk4_growth: |R(zr + i zi)| */
 static double growth(double zr, double zi)
@@ -26,7 +27,8 @@ static double growth(double zr, double zi)
 }
 
 /* Rk4._check_stability: refuse h if RK4 is unstable on the local linearisation x'' = -k x - c x' */
-static int check_stability(Rk4 *s, DopRhs rhs, void *ctx, double h, DopReport *r)
+static inline __attribute__((always_inline)) int check_stability(Rk4 *s, DopRhs rhs, void *ctx, double h,
+                                                                 DopReport *r)
 {
     int n = (int)s->n;
     double y[DOP_MAX_DIM], f[DOP_MAX_DIM], values[4], t = s->t, x = s->y[0], v = s->y[1];
@@ -107,19 +109,20 @@ static int hermite_root_function(void *context, double s, double *f)
     return 0;
 }
 
-/* integrate._hermite_event: *found and the fraction *s_event of the first point where terminal event e is
-   reached on the step's cubic; DOP_RAISED where Python's brentq raises */
-static int hermite_event(const Rk4 *st, Hermite *c, double t, int *found, double *s_event,
-                         DopReport *r)
+/* The event search's view of a terminal event on the step's cubic: beyond(s) = !(g(x(s)) > 0) */
+static int hermite_beyond(void *context, double s, int *beyond)
 {
-    typedef struct {
-        double s_a, s_b;
-        int depth;
-        double b[4];
-    } Piece;
-    Piece stack[DOP_EVENT_MAX_DEPTH + 2];
-    double b[4];
-    int top;
+    *beyond = !(hermite_g(context, s) > 0.0);
+    return 0;
+}
+
+/* integrate._hermite_event: *found and the fraction *s_event of the first point where terminal event e is
+   reached on the step's cubic (the search: roots.c's bernstein_search); DOP_RAISED where Python's brentq raises */
+static inline __attribute__((always_inline)) int hermite_event(int n, const double *y, Hermite *c, double t, int *found,
+                                                               double *s_event, DopReport *r)
+{
+    double b[4], s_a, s_b;
+    int at_start;
     *found = 0;
     if (!(c->c0 + c->cx * c->x > 0.0)) {
         *found = 1;
@@ -130,49 +133,62 @@ static int hermite_event(const Rk4 *st, Hermite *c, double t, int *found, double
     b[1] = c->c0 + c->cx * (c->x + c->h * c->v / 3.0);
     b[2] = c->c0 + c->cx * (c->x_new - c->h * c->v_new / 3.0);
     b[3] = c->c0 + c->cx * c->x_new;
-    double lo = py_min(py_min(py_min(b[0], b[1]), b[2]), b[3]);
-    if (lo > 0.0) return DOP_OK;
-    stack[0].s_a = 0.0;
-    stack[0].s_b = 1.0;
-    stack[0].depth = 0;
-    memcpy(stack[0].b, b, sizeof b);
-    top = 1;
-    while (top > 0) {
-        Piece piece = stack[--top];
-        lo = py_min(py_min(py_min(piece.b[0], piece.b[1]), piece.b[2]), piece.b[3]);
-        if (lo > 0.0) continue;
-        int resolved = piece.depth >= DOP_EVENT_MAX_DEPTH;
-        if (!(hermite_g(c, piece.s_b) > 0.0) && (resolved || dop_monotone(piece.b, 3))) {
-            *found = 1;
-            if (!(hermite_g(c, piece.s_a) > 0.0)) {
-                *s_event = piece.s_a;
-                return DOP_OK;
+    if (py_min(py_min(py_min(b[0], b[1]), b[2]), b[3]) > 0.0) return DOP_OK;  /* the search's first verdict, inline */
+    bernstein_search(b, 3, 1, hermite_beyond, c, found, &s_a, &s_b, &at_start);
+    if (!*found) return DOP_OK;
+    if (at_start) {
+        *s_event = s_a;
+        return DOP_OK;
+    }
+    int iterations, code = brentq(hermite_root_function, c, s_a, s_b, s_event, &iterations);
+    number_text text;
+    if (code == NAN_FOUND)
+        return dop_report(r, n, DOP_RAISED, t, y, "ValueError: The function value at x=%s is NaN; solver "
+                      "cannot continue.", py_repr(text, c->nan_at));
+    if (code == ROOT_SIGN_ERROR)
+        return dop_report(r, n, DOP_RAISED, t, y, "ValueError: f(a) and f(b) must have different signs");
+    if (code == ROOT_NO_CONVERGENCE)
+        return dop_report(r, n, DOP_RAISED, t, y, "RuntimeError: Failed to converge after %d iterations.",
+                      iterations);
+    return DOP_OK;
+}
+
+static inline __attribute__((always_inline)) int step_events(int n, int n_events, const DopEvent *events, double t,
+                                                             const double *y, double h, const double *y_new,
+                                                             DopReport *r)
+{
+    for (int i = 0; i < n_events; i++) {
+        const DopEvent *e = &events[i];
+        if (!e->terminal) continue;
+        Hermite c = {y[0], y[1], h, y_new[0], y_new[1], e->c0, e->c[0], 0, 0.0};
+        int found, code;
+        double s_event;
+        code = hermite_event(n, y, &c, t, &found, &s_event, r);
+        if (code) return code;
+        if (found) {
+            double xe, ve;
+            if (s_event == 0.0 && !(e->c0 + e->c[0] * y[0] > 0.0)) {  /* on the event at the step's start */
+                xe = y[0];
+                ve = y[1];
+            } else {
+                hermite_state(&c, s_event, &xe, &ve);
             }
-            int iterations, code = brentq(hermite_root_function, c, piece.s_a, piece.s_b, s_event, &iterations);
-            number_text text;
-            if (code == NAN_FOUND)
-                return dop_report(r, st->n, DOP_RAISED, t, st->y, "ValueError: The function value at x=%s is NaN; solver "
-                              "cannot continue.", py_repr(text, c->nan_at));
-            if (code == ROOT_SIGN_ERROR)
-                return dop_report(r, st->n, DOP_RAISED, t, st->y, "ValueError: f(a) and f(b) must have different signs");
-            if (code == ROOT_NO_CONVERGENCE)
-                return dop_report(r, st->n, DOP_RAISED, t, st->y, "RuntimeError: Failed to converge after %d iterations.",
-                              iterations);
-            return DOP_OK;
-        }
-        if (!resolved) {
-            double middle = 0.5 * (piece.s_a + piece.s_b);
-            Piece *right = &stack[top++], *left = &stack[top++];
-            dop_split(piece.b, 3, left->b, right->b);
-            right->s_a = middle;
-            right->s_b = piece.s_b;
-            left->s_a = piece.s_a;
-            left->s_b = middle;
-            right->depth = left->depth = piece.depth + 1;
+            r->t = t + s_event * h;
+            memcpy(r->y, y, sizeof(double) * (size_t)n);
+            r->y[0] = xe;
+            r->y[1] = ve;
+            r->event = i;
+            r->message[0] = '\0';
+            return DOP_TERMINAL;
         }
     }
-    (void)t;
     return DOP_OK;
+}
+
+int rk4_step_events(int n, int n_events, const DopEvent *events, double t, const double *y, double h,
+                    const double *y_new, DopReport *r)
+{
+    return step_events(n, n_events, events, t, y, h, y_new, r);
 }
 
 /* The drive's phasors of a phased advance (Rk4._phases): p[2k], p[2k+1] = cos, sin of freq[k] t */
@@ -207,8 +223,9 @@ static void rotate(const Phases *ph, const double *p, double *p_out)
     }
 }
 
-/* Rk4._step (ph == NULL: rhs; else ph->rhs with the phasors of each stage's time) */
-static int step(Rk4 *s, DopRhs rhs, Phases *ph, void *ctx, double h, DopReport *r)
+/* Rk4._step (ph == NULL: rhs; else ph->rhs with the phasors of each stage's time); inlined into each advance, so
+   that rk4_advance and rk4_advance_phased each get the step of their kind (no ph tests per stage) */
+static inline __attribute__((always_inline)) int step(Rk4 *s, DopRhs rhs, Phases *ph, void *ctx, double h, DopReport *r)
 {
     int n = (int)s->n;
     double t = s->t, *y = s->y, half = 0.5 * h;
@@ -253,31 +270,8 @@ static int step(Rk4 *s, DopRhs rhs, Phases *ph, void *ctx, double h, DopReport *
         return dop_report(r, s->n, DOP_FAILED, t, y, "RK4 unstable: the state became non-finite after tau = %s with h = %s; "
                       "reduce max_step", py_g(t_text, t, 10), py_g(h_text, h, 3));
     }
-    for (int i = 0; i < s->n_events; i++) {
-        const DopEvent *e = &s->events[i];
-        if (!e->terminal) continue;
-        Hermite c = {y[0], y[1], h, y_new[0], y_new[1], e->c0, e->c[0], 0, 0.0};
-        int found, code;
-        double s_event;
-        code = hermite_event(s, &c, t, &found, &s_event, r);
-        if (code) return code;
-        if (found) {
-            double xe, ve;
-            if (s_event == 0.0 && !(e->c0 + e->c[0] * y[0] > 0.0)) {  /* on the event at the step's start */
-                xe = y[0];
-                ve = y[1];
-            } else {
-                hermite_state(&c, s_event, &xe, &ve);
-            }
-            r->t = t + s_event * h;
-            memcpy(r->y, y, sizeof(double) * (size_t)n);
-            r->y[0] = xe;
-            r->y[1] = ve;
-            r->event = i;
-            r->message[0] = '\0';
-            return DOP_TERMINAL;
-        }
-    }
+    int code = step_events(n, (int)s->n_events, s->events, t, y, h, y_new, r);
+    if (code) return code;
     memcpy(s->y, y_new, sizeof(double) * (size_t)n);
     s->n_steps += 1;
     if (ph) {  /* the next step starts from this one's end */
@@ -300,7 +294,8 @@ static int anchor_rhs(void *context, double t, const double *y, double *f)
     return a->ph->rhs(a->ctx, t, a->ph->at_t, y, f);
 }
 
-static int advance(Rk4 *s, DopRhs rhs, Phases *ph, void *ctx, double t_target, DopReport *r)
+static inline __attribute__((always_inline)) int advance(Rk4 *s, DopRhs rhs, Phases *ph, void *ctx, double t_target,
+                                                         DopReport *r)
 {
     double span = t_target - s->t;
     if (span <= 0.0) return DOP_OK;
@@ -335,3 +330,64 @@ int rk4_advance_phased(Rk4 *s, Rk4PhasedRhs rhs, void *ctx, int n_freq, const do
     Phases ph = {rhs, n_freq, freq, {0}, {0}, -1};
     return advance(s, NULL, &ph, ctx, t_target, r);
 }
+
+/* ---- the solver interface (solver.h) ---- */
+
+/* Rk4: the state is taken */
+static int ops_restart(VkSolverSlots s, const VkRhs *f, void *context, double t, const double *y, DopReport *r)
+{
+    (void)f;
+    (void)context;
+    (void)r;
+    s.fixed->t = t;
+    memmove(s.fixed->y, y, sizeof(double) * (size_t)s.fixed->n);
+    return DOP_OK;
+}
+
+/* with the drive's phasors where the container gives them (rk4_advance_phased), else rk4_advance */
+static int ops_advance(VkSolverSlots s, const VkRhs *f, void *context, double t_target, DopReport *r)
+{
+    if (f->phased) {
+        double freq[RK4_MAX_PHASES];
+        f->frequencies(context, freq);
+        return rk4_advance_phased(s.fixed, f->phased, context, f->n_freq, freq, t_target, r);
+    }
+    return rk4_advance(s.fixed, f->rhs, context, t_target, r);
+}
+
+int rk4_value_at(const Rk4 *st, double t, double *y, DopReport *r)
+{
+    if (t != st->t) {  /* Rk4._require_current */
+        number_text own, asked;
+        return dop_report(r, (int)st->n, DOP_RAISED, st->t, st->y, "ValueError: RK4 holds only tau = %s, not %s",
+                          py_repr(own, st->t), py_repr(asked, t));
+    }
+    for (int64_t i = 0; i < st->n; i++) y[i] = st->y[i];  /* a loop: n is 2 in the plant (no memcpy call) */
+    return DOP_OK;
+}
+
+static int ops_value_at(VkSolverSlots s, const VkRhs *f, void *context, double t, double *y, DopReport *r)
+{
+    (void)f;
+    (void)context;
+    return rk4_value_at(s.fixed, t, y, r);
+}
+
+static const double *ops_state(VkSolverSlots s, double *t)
+{
+    *t = s.fixed->t;
+    return s.fixed->y;
+}
+
+static double ops_max_step(VkSolverSlots s) { return s.fixed->max_step; }
+
+double rk4_drive_gain_x(double theta)
+{
+    const double phi = 0.5 * theta, s = sin(phi);
+    if (theta == 0.0) return 1.0;
+    if (fabs(s) < 1e-300) return INFINITY;
+    return theta * theta * (1.0 + 2.0 * cos(phi)) / (12.0 * s * s);
+}
+
+const VkSolverOps vk_rk4_ops = {"RK4", ops_restart, 0, ops_advance, ops_value_at, ops_state, ops_max_step,
+                                rk4_drive_gain_x};

@@ -38,4 +38,19 @@ typedef int (*Rk4PhasedRhs)(void *context, double t, const double *phases, const
 int rk4_advance_phased(Rk4 *s, Rk4PhasedRhs rhs, void *context, int n_freq, const double *freq, double t_target,
                        DopReport *report);
 
+/* Rk4._require_current: y[0..n-1] if t is the solver's time, else DOP_RAISED (ValueError) */
+int rk4_value_at(const Rk4 *s, double t, double *y, DopReport *report);
+
+/* Rk4._finish's event check of one fixed step from (t, y) over h to y_new, for any fixed-step solver: the first
+   terminal event reached on the step's cubic Hermite interpolant of y[0] (integrate._hermite_event: roots.c's
+   search, then brentq): DOP_TERMINAL with report->event, t and y there; DOP_OK if none; DOP_RAISED where Python's
+   brentq raises.  Only the events' y[0] coefficient is read. */
+int rk4_step_events(int n, int n_events, const DopEvent *events, double t, const double *y, double h,
+                    const double *y_new, DopReport *report);
+
+/* integrate.rk4_drive_gains(theta)[0]: G_x, RK4's ripple of x under a drive e^(i nu t) over the true one (theta =
+   nu h), the same operations (the settings' drive warnings of the native FMUs read it; tests/test_compiled.py
+   compares the bits) */
+double rk4_drive_gain_x(double theta);
+
 #endif

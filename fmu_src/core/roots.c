@@ -1,9 +1,12 @@
 /*
- * roots.c -- scipy.optimize.brentq (roots.h).
+ * roots.c -- scipy.optimize.brentq and the Bernstein-bisection event search (roots.h).
  */
 #include "roots.h"
 
 #include <math.h>
+#include <string.h>
+
+#include "pyfloat.h"
 
 /* brentq(f, xa, xb, xtol=ROOT_XTOL, rtol=ROOT_RTOL, maxiter=ROOT_MAXITER) */
 #define ROOT_XTOL 1e-15
@@ -101,3 +104,76 @@ int brentq(RootFunction function, void *context, double xa, double xb, double *r
 
 #undef CALL_F
 #undef MIN
+
+int bernstein_monotone(const double *b, int degree)
+{
+    int rising = 1, falling = 1;
+    for (int k = 0; k < degree; k++) {
+        rising = rising && b[k + 1] > b[k];
+        falling = falling && b[k + 1] < b[k];
+    }
+    return rising || falling;
+}
+
+void bernstein_split(const double *b_in, int degree, double *left, double *right)
+{
+    double b[ROOT_MAX_DEGREE + 1];
+    memcpy(b, b_in, sizeof(double) * (size_t)(degree + 1));
+    left[0] = b[0];
+    right[degree] = b[degree];
+    for (int r = 1; r <= degree; r++) {
+        for (int k = 0; k <= degree - r; k++) b[k] = 0.5 * (b[k] + b[k + 1]);
+        left[r] = b[0];
+        right[degree - r] = b[degree - r];
+    }
+}
+
+typedef struct {
+    double s_a, s_b;
+    int depth;
+    double b[ROOT_MAX_DEGREE + 1];
+} Piece;
+
+int bernstein_search(const double *b, int degree, int positive, BeyondFunction beyond, void *context, int *found,
+                     double *s_a, double *s_b, int *at_start)
+{
+    Piece stack[ROOT_EVENT_MAX_DEPTH + 2];
+    int top = 1, code, past;
+    *found = 0;
+    stack[0].s_a = 0.0;
+    stack[0].s_b = 1.0;
+    stack[0].depth = 0;
+    memcpy(stack[0].b, b, sizeof(double) * (size_t)(degree + 1));
+    while (top > 0) {
+        Piece piece = stack[--top];
+        double lo = piece.b[0], hi = piece.b[0];
+        for (int k = 1; k <= degree; k++) {  /* min(b), max(b): left to right */
+            lo = py_min(lo, piece.b[k]);
+            hi = py_max(hi, piece.b[k]);
+        }
+        if (positive ? lo > 0.0 : !(hi > 0.0)) continue;  /* the hull of g on the piece is on the start side */
+        int resolved = piece.depth >= ROOT_EVENT_MAX_DEPTH;
+        code = beyond(context, piece.s_b, &past);
+        if (code) return code;
+        if (past && (resolved || bernstein_monotone(piece.b, degree))) {
+            code = beyond(context, piece.s_a, &past);  /* a rounding of the hull's verdict on the piece before? */
+            if (code) return code;
+            *found = 1;
+            *at_start = past;
+            *s_a = piece.s_a;
+            *s_b = piece.s_b;
+            return 0;
+        }
+        if (!resolved) {
+            double middle = 0.5 * (piece.s_a + piece.s_b);
+            Piece *right = &stack[top++], *left = &stack[top++];
+            bernstein_split(piece.b, degree, left->b, right->b);
+            right->s_a = middle;
+            right->s_b = piece.s_b;
+            left->s_a = piece.s_a;
+            left->s_b = middle;
+            right->depth = left->depth = piece.depth + 1;
+        }
+    }
+    return 0;
+}

@@ -1,6 +1,8 @@
 /*
- * roots.h -- scipy.optimize.brentq(f, xa, xb, xtol=1e-15, rtol=1e-15) (maxiter 100): scipy/optimize/Zeros/brentq.c
- * (Charles Harris) line for line, the root finder of vibromodel/integrate.py's event location.
+ * roots.h -- the event search of every solver: scipy.optimize.brentq(f, xa, xb, xtol=1e-15, rtol=1e-15) (maxiter
+ * 100), scipy/optimize/Zeros/brentq.c (Charles Harris) line for line, the root finder of vibromodel/integrate.py's
+ * event location; and the one Bernstein-bisection search (integrate._bernstein_search) that brackets the first zero
+ * of an event on a step's interpolant (DOP853's dense output, a fixed step's cubic Hermite): docs/events.md.
  */
 #ifndef VIBRO_ROOTS_H
 #define VIBRO_ROOTS_H
@@ -15,5 +17,25 @@ enum {
 
 /* 0 and the root, or ROOT_SIGN_ERROR / ROOT_NO_CONVERGENCE, or the code function returned */
 int brentq(RootFunction function, void *context, double xa, double xb, double *root, int *iterations);
+
+/* Bernstein coefficients b[0..degree] (degree <= ROOT_MAX_DEGREE) of a polynomial on an interval: whether they rise
+   or fall strictly (then the polynomial is monotone there: integrate._monotone); their halves by de Casteljau at the
+   middle (integrate._split). */
+#define ROOT_MAX_DEGREE 7
+#define ROOT_EVENT_MAX_DEPTH 40  /* integrate.EVENT_MAX_DEPTH: pieces of 2^-40 of a step are not split */
+int bernstein_monotone(const double *b, int degree);
+void bernstein_split(const double *b, int degree, double *left, double *right);
+
+/* Whether the event function at the step fraction s is beyond the event (past it, seen from the side the step
+   starts on) into *beyond; returns 0, or a nonzero code that bernstein_search returns at once */
+typedef int (*BeyondFunction)(void *context, double s, int *beyond);
+
+/* integrate._bernstein_search: the first piece [*s_a, *s_b] of [0, 1] (left half first) whose end s_b is beyond the
+   event and on which g is monotone (or which is 2^-ROOT_EVENT_MAX_DEPTH long), g given by its Bernstein coefficients
+   b[0..degree] on [0, 1]; pieces whose hull lies on the start side (positive: all > 0; else none > 0) are skipped.
+   *found = 0 if there is none; else *found = 1 and *at_start = whether s_a is beyond already (then the event is at
+   s_a, else one zero lies in the piece). 0, or the code `beyond` returned. */
+int bernstein_search(const double *b, int degree, int positive, BeyondFunction beyond, void *context, int *found,
+                     double *s_a, double *s_b, int *at_start);
 
 #endif

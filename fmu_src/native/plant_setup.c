@@ -28,19 +28,11 @@ void native_plant_model(VkModel *m, const State *s, int fidelity)
     }
 }
 
-/* integrate.rk4_drive_gains(theta)[0]: G_x, RK4's ripple of x under a drive e^(i nu t) over the true one
-   (theta = nu h) -- the formula of vibromodel/integrate.py, here only for the warning's number. */
-static double rk4_gain_x(double theta)
+/* plant.rk4_drive_warnings: the forcing terms RK4 steps of max_step do not resolve, logged as fmi2Warning; the gain
+   G_x is the solver's own (core/rk4.c rk4_drive_gain_x), the limits RULE_RK4_DRIVE_* generated from integrate.py. */
+void native_drive_warnings(Instance *inst, const State *s, const VkSolverOps *solver, double max_step)
 {
-    const double phi = 0.5 * theta, s = sin(phi);
-    if (theta == 0.0) return 1.0;
-    if (fabs(s) < 1e-300) return INFINITY;
-    return theta * theta * (1.0 + 2.0 * cos(phi)) / (12.0 * s * s);
-}
-
-/* plant.rk4_drive_warnings: the forcing terms RK4 steps of max_step do not resolve, logged as fmi2Warning. */
-void native_rk4_drive_warnings(Instance *inst, const State *s, double max_step)
-{
+    if (solver->drive_gain_x == NULL) return;
     const double Omega = s->value[VR_Omega], omega = s->value[VR_omega];
     typedef struct { const char *what, *name; double value, nu; const char *term; } Drive;
     Drive drives[2];
@@ -59,7 +51,7 @@ void native_rk4_drive_warnings(Instance *inst, const State *s, double max_step)
     for (int i = 0; i < n; i++) {
         const double theta = drives[i].nu * max_step;
         if (theta <= RULE_RK4_DRIVE_THETA * (1.0 + 1e-12)) continue;
-        const double error = fabs(rk4_gain_x(theta) - 1.0);
+        const double error = fabs(solver->drive_gain_x(theta) - 1.0);
         char wrong[96];
         if (error <= 10.0) snprintf(wrong, sizeof wrong, "by %.0f%%", 100.0 * error);
         else snprintf(wrong, sizeof wrong, "by more than 1000%% (near 2 pi k rad per step, a resonance)");

@@ -16,11 +16,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .control import ERRATA_INITIAL_ESTIMATES, Controller, Gains, Law, validate_estimates, validate_law
-from .integrate import Dop853, Rk4
 from .fidelities import closed_loop_refusal, entry, integrated
 from .parameters import ParameterError, Scene, validate
-from .plant import INTEGRATOR_REBUILT, RK4_DEFAULT_STEP, TIME_TOLERANCE, Settings, Solver, checked_settings
+from .plant import INTEGRATOR_REBUILT, TIME_TOLERANCE, Settings, checked_settings
 from .snapshot import plain_attributes, restore_attributes
+from .solvers import solver_entry
 from .tracking import ReferenceSettings, make_reference
 
 # docs/model.md, Adaptive controller simulation: the plant starts at x(0) = 0.06, x'(0) = 0.01, off the reference.
@@ -62,12 +62,8 @@ class ClosedLoop:
         self.t = t0
         self._stage = (None, None, None, None, None)  # (t, x, v, theta^, U) of the last rates() call
         theta0 = np.array(loop.estimates, dtype=float)
-        if settings.solver == Solver.ADAPTIVE:
-            self.integrator = Dop853(self._accel, self.model.events, t0, scene.x_start, scene.v_start, theta0,
-                                     settings.rtol, settings.max_step or math.inf, rates=self._rates)
-        else:
-            self.integrator = Rk4(self._accel, self.model.events, t0, scene.x_start, scene.v_start, theta0,
-                                  settings.max_step or RK4_DEFAULT_STEP, rates=self._rates)
+        self.integrator = solver_entry(settings.solver).make(self._accel, self.model.events, t0, scene.x_start,
+                                                             scene.v_start, theta0, settings, rates=self._rates)
 
     # The integrators call rates(t, x, v, theta^) and then accel(t, x, v, theta^) at each stage: the control
     # U computed for the first is reused by the second.

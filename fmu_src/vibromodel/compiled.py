@@ -26,7 +26,11 @@ from .fidelities import REGISTRY, CModel, entry
 from .integrate import ATOL_PER_RTOL, IntegrationError, TerminalEvent
 from .models import pull_in_slope
 from .parameters import PULL_IN_GAP, validate
-from .settings import Outputs, Settings, Solver, check_step, checked_settings
+from .settings import Outputs, Settings, check_step, checked_settings
+from .solvers import BY_VALUE as SOLVERS_BY_VALUE, solver_entry
+
+# solvers.SolverEntry.family -> the field of VkPlant and VlLoop that holds that solver family's state
+SOLVER_SLOTS = {"adaptive": "dop", "fixed": "rk4"}
 
 LIBRARY_NAME = "vibrokernel.so"
 
@@ -160,9 +164,10 @@ def load_library(directories) -> tuple[ctypes.CDLL | None, str]:
 
 
 def supports(settings: Settings) -> bool:
-    """CompiledPlant runs the integrated fidelities with a compiled model (fidelities registry) with either solver."""
-    level = entry(settings.fidelity)
-    return level.integrated and level.c_model is not None and settings.solver in (Solver.ADAPTIVE, Solver.RK4)
+    """CompiledPlant runs the integrated fidelities with a compiled model (fidelities registry) with a solver the
+    compiled core has (solvers registry)."""
+    level, solver = entry(settings.fidelity), SOLVERS_BY_VALUE.get(settings.solver)
+    return level.integrated and level.c_model is not None and solver is not None and solver.compiled
 
 
 def _model_fields(scene, model, c_model: CModel) -> dict:
@@ -216,7 +221,7 @@ class CompiledPlant:
 
     @property
     def _solver(self):
-        return self._plant.rk4 if self._plant.solver == Solver.RK4 else self._plant.dop
+        return getattr(self._plant, SOLVER_SLOTS[solver_entry(self._plant.solver).family])
 
     @property
     def max_step(self) -> float:

@@ -16,7 +16,7 @@ import math
 import numpy as np
 
 from . import forces
-from .compiled import check_structure
+from .compiled import SOLVER_SLOTS, check_structure
 # controller.h's and closedloop.h's constants and structures, generated from the headers (core_layouts.py)
 from .core_layouts import (VC_GAINS, VC_N, VC_NON_FINITE, VC_OK, VC_RAISED, VL_BAD_STEP, VL_BAD_TIME, VL_FAILED,
                            VL_OK, VL_RAISED, VL_TERMINAL, VcController, VlLoop)
@@ -241,7 +241,8 @@ class CompiledClosedLoop:
     def __init__(self, python, library):
         from .compiled import ATOL_PER_RTOL, _model_fields
         from .compiled_open_loop import OafmProgram, oafm_hints
-        from .plant import RK4_DEFAULT_STEP, Solver
+        from .plant import RK4_DEFAULT_STEP
+        from .solvers import solver_entry
 
         self.python = python
         self.notes, self.warnings = list(python.notes), python.warnings
@@ -267,7 +268,7 @@ class CompiledClosedLoop:
         l.rk4.max_step = settings.max_step or RK4_DEFAULT_STEP
         l.reference = self._program.struct
         l.enabled = 1
-        self._solver = Solver(settings.solver)
+        self._slot = SOLVER_SLOTS[solver_entry(settings.solver).family]
         y0 = (_double * 11)(python.scene.x_start, python.scene.v_start, *python.loop.estimates)
         self._check(library.vl_init(self.address, python.t, y0))
 
@@ -278,7 +279,7 @@ class CompiledClosedLoop:
     @property
     def integrator(self):
         """The solver's structure (Dop853State or Rk4State: t, y, nfev, n_steps)."""
-        return self._l.rk4 if self._solver == 1 else self._l.dop
+        return getattr(self._l, self._slot)
 
     def do_step(self, t: float, h: float) -> dict:
         """ClosedLoop.do_step: raises ParameterError, IntegrationError (TerminalEvent) as it does."""

@@ -166,6 +166,30 @@ def _split(b):
     return left, right
 
 
+def _bernstein_search(b, positive, beyond):
+    """The event search of both integrators (core/roots.c bernstein_search, the same operations): the first piece
+    (s_a, s_b) of [0, 1], left half first, whose end s_b is beyond the event (beyond(s): g at the step fraction s
+    is past it, seen from the side the step starts on) and on which g, given by its Bernstein coefficients b on
+    [0, 1], is monotone (_monotone) or which is 2^-EVENT_MAX_DEPTH long; pieces whose hull is on the start side
+    (positive: min(b) > 0; else not max(b) > 0) are skipped. None if there is none, else (s_a, s_b, beyond(s_a)):
+    with the last True the event is at s_a (a rounding of the hull's verdict on the piece before), else one zero
+    lies in the piece."""
+    stack = [(0.0, 1.0, 0, b)]
+    while stack:
+        s_a, s_b, depth, b = stack.pop()
+        if (min(b) > 0.0) if positive else not (max(b) > 0.0):
+            continue  # the hull of g on the piece is on the start side
+        resolved = depth >= EVENT_MAX_DEPTH
+        if beyond(s_b) and (resolved or _monotone(b)):
+            return s_a, s_b, beyond(s_a)
+        if not resolved:
+            left, right = _split(b)
+            middle = 0.5 * (s_a + s_b)
+            stack.append((middle, s_b, depth + 1, right))
+            stack.append((s_a, middle, depth + 1, left))
+    return None
+
+
 class Dop853:
     """Adaptive DOP853 with dense output and event location; restartable between doSteps.
     With `rates`, the input slot U carries extra first-order states (see the module docstring).
@@ -184,6 +208,12 @@ class Dop853:
         self.n_steps = 0
         self._restart(t0, x0, v0, U)
         self.h = None  # chosen on the first step
+
+    @classmethod
+    def from_settings(cls, accel, events, t0, x0, v0, U, settings, max_step, *, rates=None, phased=None,
+                      step_budget=math.inf):
+        """solvers.SolverEntry.make: rtol of the settings, max_step the ceiling (phased is not used)."""
+        return cls(accel, events, t0, x0, v0, U, settings.rtol, max_step, rates=rates, step_budget=step_budget)
 
     # -- state ---------------------------------------------------------------------------------
     def _restart(self, t, x, v, U):
@@ -440,24 +470,15 @@ class Dop853:
         _, (fx, _, _) = self._interpolant(self.t_old)
         G = [0.0 + cx * f for f in fx]  # the dense output's coefficients of g - g0
         b = [g0 + _dot(G, [row[k] for row in BERNSTEIN]) for k in range(8)]
-        stack = [(0.0, 1.0, 0, b)]
-        while stack:
-            s_a, s_b, depth, b = stack.pop()
-            if (min(b) > 0.0) if positive else not (max(b) > 0.0):
-                continue  # the hull of g on the piece is on the start side
-            t_b = self.t if s_b == 1.0 else self.t_old + s_b * h
-            resolved = depth >= EVENT_MAX_DEPTH
-            if beyond(c0 + cx * self.value_at(t_b)[0]) and (resolved or _monotone(b)):
-                t_a = self.t_old if s_a == 0.0 else self.t_old + s_a * h
-                if beyond(c0 + cx * self.value_at(t_a)[0]):  # a rounding of the hull's verdict on the piece before
-                    return t_a
-                return self._locate(event, t_a, t_b)  # one zero in the piece: g is monotone there
-            if not resolved:
-                left, right = _split(b)
-                middle = 0.5 * (s_a + s_b)
-                stack.append((middle, s_b, depth + 1, right))
-                stack.append((s_a, middle, depth + 1, left))
-        return None
+
+        def time(s):  # the step's ends exactly
+            return self.t if s == 1.0 else self.t_old if s == 0.0 else self.t_old + s * h
+
+        piece = _bernstein_search(b, positive, lambda s: beyond(c0 + cx * self.value_at(time(s))[0]))
+        if piece is None:
+            return None
+        s_a, s_b, at_start = piece
+        return time(s_a) if at_start else self._locate(event, time(s_a), time(s_b))  # one zero: g monotone there
 
     def _locate(self, event, t_a, t_b):
         """Zero of g(x(t)) on the dense output in [t_a, t_b], where g changes side."""
@@ -587,26 +608,14 @@ def _hermite_event(event, t, x, v, h, x_new, v_new):
         return (t + s * h, *state(s))
     c0, cx = event.affine
     b = [c0 + cx * x, c0 + cx * (x + h * v / 3.0), c0 + cx * (x_new - h * v_new / 3.0), c0 + cx * x_new]
-    if min(b) > 0.0:
+    if min(b) > 0.0:  # the search's first verdict, without it (the C twin's fast exit of most steps)
         return None
-
-    stack = [(0.0, 1.0, 0, b)]
-    while stack:
-        s_a, s_b, depth, b = stack.pop()
-        if min(b) > 0.0:
-            continue
-        resolved = depth >= EVENT_MAX_DEPTH
-        if not g(state(s_b)[0]) > 0.0 and (resolved or _monotone(b)):
-            if not g(state(s_a)[0]) > 0.0:
-                return (t + s_a * h, *state(s_a))
-            s = brentq(lambda s: g(state(s)[0]), s_a, s_b, xtol=1e-15, rtol=1e-15)
-            return (t + s * h, *state(s))
-        if not resolved:
-            left, right = _split(b)
-            middle = 0.5 * (s_a + s_b)
-            stack.append((middle, s_b, depth + 1, right))
-            stack.append((s_a, middle, depth + 1, left))
-    return None
+    piece = _bernstein_search(b, True, lambda s: not g(state(s)[0]) > 0.0)
+    if piece is None:
+        return None
+    s_a, s_b, at_start = piece
+    s = s_a if at_start else brentq(lambda s: g(state(s)[0]), s_a, s_b, xtol=1e-15, rtol=1e-15)
+    return (t + s * h, *state(s))
 
 
 def _rk4_growth(zr, zi):
@@ -669,6 +678,12 @@ class Rk4:
         self.phased = phased
         self._phases = self._rotation = None
         self._since_anchor = -1
+
+    @classmethod
+    def from_settings(cls, accel, events, t0, x0, v0, U, settings, max_step, *, rates=None, phased=None,
+                      step_budget=math.inf):
+        """solvers.SolverEntry.make: steps of max_step (the step budget is not used: the step count is set)."""
+        return cls(accel, events, t0, x0, v0, U, max_step, rates=rates, phased=phased)
 
     def set_input(self, t, U):
         self.U = U

@@ -8,7 +8,7 @@ import math
 import sys
 from dataclasses import asdict, dataclass, fields, replace
 
-from . import forces
+from . import forces, solvers
 
 # Paper example (PAPER §4, docs/model.md, The paper's example reproduced): delta*epsilon is the detuning of omega from sqrt(a1).
 PAPER_DETUNING = 0.02 * 0.01
@@ -178,7 +178,7 @@ _GAIN = (f"Lyapunov weight: the update law divides by it, below {GAIN_MIN:g} the
 RULES: tuple[Rule, ...] = (
     # the plant's settings first: they decide which other rules apply
     Rule("fidelity", 0, 4, reason="0 exact, 1 and 2 polynomial, 3 averaged, 4 analytic", integer=True),
-    Rule("solver", 0, 1, reason="0 adaptive DOP853, 1 fixed-step RK4", integer=True),
+    Rule("solver", 0, len(solvers.SOLVERS) - 1, reason=solvers.RULE_TEXT, integer=True),
     Rule("kernel", 0, 1, reason="0 compiled, 1 pure Python", integer=True),
     Rule("rtol", 0.0, MAX_RTOL, low_inclusive=False,
          reason=f"relative tolerance: above {MAX_RTOL:g} no significant digit is left (below {MIN_RTOL:.3g} it is "

@@ -13,11 +13,12 @@ from . import forces
 from .compiled import CompiledPlant, supports
 from .compiled_open_loop import CompiledOpenLoopPlant
 from .fidelities import entry
-from .integrate import Dop853, IntegrationError, Rk4
+from .integrate import IntegrationError
 from .parameters import ParameterError, Scene, validate
 from .settings import (DEFAULT_EXPERIMENT, MAX_STEPS_PER_DOSTEP, RK4_DEFAULT_STEP, TIME_TOLERANCE, Kernel, Outputs,
                        Settings, Solver, check_step, checked_settings, rk4_drive_warnings)
 from .snapshot import plain_attributes, restore_attributes
+from .solvers import solver_entry
 
 # What a snapshot leaves out: built from the scene and settings by the constructor.
 PLANT_REBUILT = ("scene", "settings", "model", "integrator", "solution", "warnings")
@@ -50,14 +51,10 @@ class Plant:
         if level.open_loop is not None:
             self.solution, notes = level.open_loop(scene, settings, t0, stop_time, cache_dirs)
             self.notes += notes
-        elif settings.solver == Solver.ADAPTIVE:
-            max_step = settings.max_step or math.inf
-            self.integrator = Dop853(self.model.accel, self.model.events, t0, scene.x_start, scene.v_start,
-                                     0.0, settings.rtol, max_step, step_budget=MAX_STEPS_PER_DOSTEP)
-        else:
-            self.integrator = Rk4(self.model.accel, self.model.events, t0, scene.x_start, scene.v_start,
-                                  0.0, settings.max_step or RK4_DEFAULT_STEP,
-                                  phased=(self.model.drive_frequencies, self.model.accel_phased))
+        else:  # the solver of the settings (solvers.SOLVERS)
+            self.integrator = solver_entry(settings.solver).make(
+                self.model.accel, self.model.events, t0, scene.x_start, scene.v_start, 0.0, settings,
+                phased=(self.model.drive_frequencies, self.model.accel_phased), step_budget=MAX_STEPS_PER_DOSTEP)
 
     def do_step(self, t: float, h: float, U: float) -> Outputs:
         """Advance from the communication point t to t + h with input U held constant.
@@ -121,9 +118,6 @@ class Plant:
                        F_electrostatic=f_electrostatic, in_contact=forces.contact_indentation(x) > 0.0)
 
 
-_SOLVER_NAMES = {Solver.ADAPTIVE: "DOP853", Solver.RK4: "RK4"}
-
-
 def make_plant(scene: Scene, settings: Settings, t0: float = 0.0, stop_time: float | None = None,
                cache_dirs: tuple = (), library: tuple = (None, "no library given")):
     """The plant of `settings`: on the compiled kernel (vibromodel.compiled.CompiledPlant) where it applies,
@@ -142,11 +136,11 @@ def make_plant(scene: Scene, settings: Settings, t0: float = 0.0, stop_time: flo
     wanted = settings.kernel == Kernel.COMPILED and supports(settings)
     if wanted and compiled is not None:
         plant = CompiledPlant(scene, settings, compiled, t0)
-        plant.notes.append(f"{_SOLVER_NAMES[settings.solver]} on the {reason}")
+        plant.notes.append(f"{solver_entry(settings.solver).name} on the {reason}")
         return plant
     plant = Plant(scene, settings, t0, stop_time, cache_dirs)
     if wanted:
-        plant.notes.append(f"pure-Python {_SOLVER_NAMES[settings.solver]}: the compiled kernel is not available "
+        plant.notes.append(f"pure-Python {solver_entry(settings.solver).name}: the compiled kernel is not available "
                            f"({reason})")
     return plant
 

@@ -13,16 +13,16 @@ from .fidelities import Fidelity, entry
 from .integrate import RK4_DRIVE_ERROR, RK4_DRIVE_THETA, rk4_drive_gains
 from .parameters import (ParameterError, Scene, check_parameters, clamp_tolerance, validate_max_step,
                          validate_tolerance)
+from .solvers import BY_VALUE as _SOLVERS_BY_VALUE, FIXED_DEFAULT_STEP, must_be, solver_entry
 
 DEFAULT_EXPERIMENT = (0.0, 200.0, 0.1)  # start, stop, communication step of the FMU's DefaultExperiment
-RK4_DEFAULT_STEP = 0.01  # RK4 step when max_step = 0 ("automatic")
+RK4_DEFAULT_STEP = FIXED_DEFAULT_STEP  # RK4 step when max_step = 0 ("automatic"): solvers.FIXED_DEFAULT_STEP
 TIME_TOLERANCE = 1e-9  # relative mismatch allowed between the host's time and the plant's
 MAX_STEPS_PER_DOSTEP = 10**6  # more steps in one doStep: refused up front (step ceiling) or stopped
 
 
-class Solver(IntEnum):
-    ADAPTIVE = 0
-    RK4 = 1
+# The solvers of the registry (solvers.SOLVERS): Solver.ADAPTIVE, Solver.RK4, ...
+Solver = IntEnum("Solver", [(entry.enum, entry.value) for entry in _SOLVERS_BY_VALUE.values()], module=__name__)
 
 
 class Kernel(IntEnum):
@@ -44,7 +44,7 @@ class Settings:
         if level.check_settings is not None:
             level.check_settings(self)
         if self.solver not in set(Solver):
-            raise ParameterError("solver", self.solver, "must be 0 (adaptive) or 1 (RK4)")
+            raise ParameterError("solver", self.solver, must_be())
         if self.kernel not in set(Kernel):
             raise ParameterError("kernel", self.kernel, "must be 0 (compiled) or 1 (pure Python)")
         validate_tolerance(self.rtol)
@@ -63,8 +63,9 @@ def checked_settings(scene: Scene, settings: Settings) -> tuple[Settings, list[s
     check_parameters({**scene.as_dict(), "fidelity": int(settings.fidelity)})  # the fidelity's own ranges (robust)
     rtol, warning = clamp_tolerance(settings.rtol)
     warnings = [] if warning is None else [warning]
-    if settings.solver == Solver.RK4 and entry(settings.fidelity).integrated:
-        warnings += rk4_drive_warnings(scene, settings.max_step or RK4_DEFAULT_STEP)
+    solver = solver_entry(settings.solver)
+    if solver.drive_gains is not None and entry(settings.fidelity).integrated:
+        warnings += rk4_drive_warnings(scene, solver.step(settings.max_step))
     return replace(settings, rtol=rtol), warnings
 
 

@@ -135,7 +135,7 @@ void model_initialise(Instance *inst, State *s)
         native_log(inst, fmi2Warning, "parameter rtol = %s is below %.3g (100 machine epsilons: the error "
                    "control would see only rounding): using rtol = %.3g", requested, RULE_MIN_RTOL, RULE_MIN_RTOL);
     }
-    if (solver == 1) native_rk4_drive_warnings(inst, s, max_step != 0.0 ? max_step : RULE_RK4_DEFAULT_STEP);
+    native_drive_warnings(inst, s, vk_solvers[solver], max_step != 0.0 ? max_step : RULE_RK4_DEFAULT_STEP);
     if (!VK_FIDELITIES[fidelity].integrated) { /* the registry's levels (fidelity.h) */
         native_halt_parameter(inst, "fidelity", fidelity, 1, VK_FIDELITY_CLOSED_LOOP_REFUSAL);
         return;

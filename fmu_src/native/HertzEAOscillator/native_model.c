@@ -20,6 +20,7 @@
 #include "rules.h"
 #include "scene_checks.h"
 #include "series.h"
+#include "solver.h"
 
 #define PYTHONFMU_ALTERNATIVE "use the pythonfmu FMU HertzEAOscillator.fmu (build/HertzEAOscillator.fmu), which runs it in Python"
 
@@ -124,14 +125,14 @@ void model_initialise(Instance *inst, State *s)
     double et, ex, ev, xva[3];
     int code = vk_init(p, s->start_time, s->value[VR_x_start], s->value[VR_v_start]);
     if (code == VK_OK) { /* the slave's _start: notes (fmi2OK), warnings, the first outputs */
-        native_log(inst, fmi2OK, "%s on the native FMU's compiled kernel (no Python)", solver ? "RK4" : "DOP853");
+        native_log(inst, fmi2OK, "%s on the native FMU's compiled kernel (no Python)", vk_solvers[solver]->name);
         if (clamped) {
             char requested[64];
             native_repr(rtol_requested, requested, sizeof requested);
             native_log(inst, fmi2Warning, "parameter rtol = %s is below %.3g (100 machine epsilons: the error "
                        "control would see only rounding): using rtol = %.3g", requested, RULE_MIN_RTOL, RULE_MIN_RTOL);
         }
-        if (solver == 1) native_rk4_drive_warnings(inst, s, p->rk4.max_step);
+        native_drive_warnings(inst, s, vk_solvers[solver], p->rk4.max_step);
         code = vk_plant_state(p, xva);
     }
     if (code == VK_OK) code = vk_outputs_at(p, p->plant_t, xva[0], xva[1], &xva[2]);
@@ -191,7 +192,7 @@ void model_do_step(Instance *inst, State *s, double t, double h)
         native_repr(h, a, sizeof a);
         native_error(inst, "doStep refused: parameter communicationStepSize = %s: needs more than %.0f steps of %g "
                      "(max_step); make smaller communication steps or raise max_step", a,
-                     RULE_MAX_STEPS_PER_DOSTEP, p->solver == 1 ? p->rk4.max_step : p->dop.max_step);
+                     RULE_MAX_STEPS_PER_DOSTEP, vk_step_ceiling(p));
         return;
     case VK_BAD_TIME:
         native_repr(t, a, sizeof a);

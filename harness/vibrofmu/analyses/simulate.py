@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from vibromodel import fidelities
+from vibromodel import fidelities, solvers
 from vibromodel.parameters import ParameterError, Scene, consistency_warning, validate
 from vibromodel.plant import Plant, Settings, checked_settings
 
@@ -17,7 +17,7 @@ from vibrofmu.analyses.reference import REFERENCE_ATOL, REFERENCE_RTOL, Referenc
 from vibrofmu.hosts.run import RunResult, run_fmu
 
 FIDELITIES = fidelities.keys()  # command-line names -> levels (the registry)
-SOLVERS = {"adaptive": 0, "rk4": 1}
+SOLVERS = {entry.option: entry.value for entry in solvers.SOLVERS.values()}  # command-line names -> settings (the registry)
 
 
 def plant_run(scene: Scene, settings: Settings, stop_time: float, interval: float) -> tuple[np.ndarray, np.ndarray, Plant]:

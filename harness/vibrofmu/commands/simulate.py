@@ -4,11 +4,13 @@ from vibrofmu.commands.common import (FMU_HELP, SET_HELP, Command, UserError, bu
 
 
 def options(p):
+    from vibromodel import solvers
+
     from vibrofmu.analyses.simulate import FIDELITIES, SOLVERS
 
     p.add_argument("--fidelity", choices=list(FIDELITIES), default="exact", help="plant model")
     p.add_argument("--solver", choices=list(SOLVERS), default="adaptive",
-                   help="adaptive DOP853 with contact events, or fixed-step RK4")
+                   help=" or ".join(f"{entry.option}: {entry.description}" for entry in solvers.SOLVERS.values()))
     # rtol, stop time and output interval are checked with the scene (simulate.check_inputs: ParameterError)
     p.add_argument("--rtol", type=float, default=1e-8, help="relative tolerance of the adaptive solver")
     p.add_argument("--max-step", type=non_negative, default=0.0, help="RK4 step / adaptive ceiling; 0 = automatic")

@@ -19,6 +19,7 @@ vibrofmu.fmus.kernel) is packed with the core's files: the native models branch 
 from __future__ import annotations
 
 import math
+import re
 import shutil
 import subprocess
 import tempfile
@@ -40,17 +41,29 @@ COMMON_SOURCES = (NATIVE_SRC / "fmi2_native.c", FMI_SRC / "fmi2_layer.c", NATIVE
 COMMON_HEADERS = (NATIVE_SRC / "fmi2_native.h", FMI_SRC / "fmi2_layer.h", FMI_SRC / "fmi2_calls.h",
                   NATIVE_SRC / "pytext.h", NATIVE_SRC / "scene_checks.h", NATIVE_SRC / "series.h",
                   FMU_SRC / "core" / "pyfloat.h")
+CORE = FMU_SRC / "core"
+
+
+def solver_files() -> tuple[Path, ...]:
+    """The compiled core's solvers: the interface core/solver.h with its table solver.c (and the event search
+    roots.c, the DOP853 tableau) and each solver of its VK_SOLVER_LIST, X(<file>): core/<file>.c with <file>.h
+    where there is one. A solver added to the list is packed without an entry here."""
+    listed = re.search(r"#define VK_SOLVER_LIST\(X\)(.*)", (CORE / "solver.h").read_text()).group(1)
+    names = re.findall(r"X\((\w+)\)", listed)
+    files = [CORE / f"{name}{ext}" for name in names for ext in (".c", ".h")]
+    return tuple(CORE / name for name in ("solver.c", "solver.h", "roots.c", "roots.h", "dop853_tableau.h")) + tuple(
+        path for path in files if path.suffix == ".c" or path.is_file())
+
+
 # what each model needs beyond its folder's native_model.c and config.h
 MODEL_FILES = {
-    "HertzEAOscillator": tuple(FMU_SRC / "core" / name for name in (
-        "plant.c", "plant.h", "model.c", "model.h", "dop853.c", "dop853.h", "dop853_tableau.h", "rk4.c", "rk4.h",
-        "roots.c", "roots.h", "fidelity.h")) + (NATIVE_SRC / "plant_setup.c", NATIVE_SRC / "plant_setup.h"),
-    "AdaptiveLyapunovController": (FMU_SRC / "core" / "controller.c", FMU_SRC / "core" / "controller.h",
+    "HertzEAOscillator": tuple(CORE / name for name in ("plant.c", "plant.h", "model.c", "model.h", "fidelity.h"))
+    + solver_files() + (NATIVE_SRC / "plant_setup.c", NATIVE_SRC / "plant_setup.h"),
+    "AdaptiveLyapunovController": (CORE / "controller.c", CORE / "controller.h",
                                    NATIVE_SRC / "controller_setup.c", NATIVE_SRC / "controller_setup.h"),
-    "HertzEAClosedLoop": tuple(FMU_SRC / "core" / name for name in (
+    "HertzEAClosedLoop": tuple(CORE / name for name in (
         "closedloop.c", "closedloop.h", "controller.c", "controller.h", "oafm_eval.c", "oafm_eval.h", "plant.c",
-        "plant.h", "model.c", "model.h", "dop853.c", "dop853.h", "dop853_tableau.h", "rk4.c", "rk4.h", "roots.c",
-        "roots.h", "fidelity.h")) + tuple(NATIVE_SRC / name for name in (
+        "plant.h", "model.c", "model.h", "fidelity.h")) + solver_files() + tuple(NATIVE_SRC / name for name in (
             "plant_setup.c", "plant_setup.h", "controller_setup.c", "controller_setup.h")),
 }
 # The compiler commands (vibrofmu.fmus.toolchain: NATIVE_LINUX64 with $CC, NATIVE_WIN64 with mingw-w64).

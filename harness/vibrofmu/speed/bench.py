@@ -28,7 +28,7 @@ from fmpy import extract
 from fmpy.fmi1 import FMICallException
 from scipy.integrate import solve_ivp
 
-from vibromodel import fidelities
+from vibromodel import fidelities, solvers
 from vibromodel.fidelities import Fidelity, make_model
 from vibromodel.integrate import ATOL_PER_RTOL, IntegrationError
 from vibromodel.parameters import ParameterError, Scene
@@ -63,7 +63,10 @@ QUICK_RK4_STEPS = (0.1, 0.02, 0.005)
 SOLVE_IVP_METHODS = ("RK45", "DOP853", "LSODA")
 KERNEL_NAMES = {Kernel.COMPILED: "C kernel", Kernel.PYTHON: "Python"}
 KERNELS = tuple(KERNEL_NAMES)  # the FMU's adaptive cases run on both
-SOLVER_NAMES = {Solver.ADAPTIVE: "DOP853", Solver.RK4: "RK4"}
+SOLVER_NAMES = {entry.value: entry.name for entry in solvers.SOLVERS.values()}  # the solver registry's
+# adaptive solvers run at every rtol (on both kernels), the fixed-step ones at every step (RK4_STEPS)
+ADAPTIVE_SOLVERS = tuple(entry.value for entry in solvers.SOLVERS.values() if not entry.fixed_step)
+FIXED_STEP_SOLVERS = tuple(entry.value for entry in solvers.SOLVERS.values() if entry.fixed_step)
 # The levels of the fidelity registry: integrated ones run with every solver and setting; the open-loop ones
 # (approximations whose error is the model's) once with their defaults, labelled with the registry's name.
 INTEGRATED = fidelities.integrated()
@@ -105,7 +108,7 @@ class Case:
     def setting(self) -> str:
         if self.kind == "fmu" and self.fidelity in APPROXIMATIONS:
             return "default settings"
-        if self.kind == "fmu" and self.solver == Solver.RK4:
+        if self.kind == "fmu" and solvers.solver_entry(self.solver).fixed_step:
             return f"max_step {self.max_step:g}"
         return f"rtol {self.rtol:.3g}"
 
@@ -138,9 +141,10 @@ def make_plan(quick: bool, repeats: int | None = None) -> Plan:
             rtols = {level: DECADES if level in BELOW_TARGET else near for level in INTEGRATED}
             rk4_steps = dict.fromkeys(rtols, RK4_STEPS)
         for fidelity in rtols:
-            cases += [Case("fmu", interval, fidelity, Solver.ADAPTIVE, rtol, kernel=kernel)
-                      for kernel in KERNELS for rtol in rtols[fidelity]]
-            cases += [Case("fmu", interval, fidelity, Solver.RK4, max_step=h) for h in rk4_steps.get(fidelity, ())]
+            cases += [Case("fmu", interval, fidelity, solver, rtol, kernel=kernel)
+                      for solver in ADAPTIVE_SOLVERS for kernel in KERNELS for rtol in rtols[fidelity]]
+            cases += [Case("fmu", interval, fidelity, solver, max_step=h)
+                      for solver in FIXED_STEP_SOLVERS for h in rk4_steps.get(fidelity, ())]
         cases += [Case("fmu", interval, fidelity, kernel=Kernel.COMPILED) for fidelity in APPROXIMATIONS]  # C evaluators
         cases += [Case("solve_ivp", interval, rtol=rtol, method=method) for method in SOLVE_IVP_METHODS
                   for rtol in near]
