@@ -205,7 +205,7 @@ RULES: tuple[Rule, ...] = (
     Rule("tau_star", 0.0, MAX_FIT_SPAN, low_inclusive=False, automatic=0.0,
          reason=f"end of the transient domain, inside the fit (at most {MAX_FIT_SPAN:g})"),
     Rule("oafm_tau_end", 0.0, MAX_FIT_SPAN, low_inclusive=False, automatic=0.0,
-         reason=f"end of the fit: its memory and set-up time grow with its span (1e4: 19 s, 635 MB)"),
+         reason="end of the fit: its memory and set-up time grow with its span (1e4: 19 s, 635 MB)"),
     # the controller (docs/model.md, Adaptive controller) and the closed loop's reference
     Rule("law", 0, 2, reason="0 paper-corrected, 1 damped, 2 paper-literal", integer=True),
     *(Rule(f"lambda{i}", GAIN_MIN, GAIN_MAX, reason=_GAIN) for i in range(1, 12)),

@@ -6,8 +6,6 @@ directly (no FMI) to measure what the FMI layer costs.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, replace
-from enum import IntEnum
 
 from . import forces
 from .compiled import CompiledPlant, supports
