@@ -75,7 +75,7 @@ def _starter_fixture(name):
 
 def _native_fixture(name):
     """native_<name>_fmu: the native FMU (fmu_src/native/) built once per session from the pythonfmu one (shared by
-    tests/test_native.py, test_fuzz.py and test_robust_nonfinite.py)."""
+    tests/fmus/test_native.py, test_fuzz.py and test_nonfinite_outputs.py)."""
 
     @pytest.fixture(scope="session", name=f"native_{name}_fmu")
     def native(request, tmp_path_factory):

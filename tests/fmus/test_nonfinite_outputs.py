@@ -32,7 +32,7 @@ def test_compiled_closed_loop_names_the_non_finite_output_as_the_python_loop(sol
     steps: V (and V') overflow while the dynamics (which use lambda2 Lambda^-1, computed at set-up) stay as they
     were. The compiled loop raises NonFiniteOutput naming the first output that is not finite in the pure-Python
     loop's outputs of the same step, with the same value; its published outputs stay the last finite ones."""
-    # the scene of test_closed_loop_compiled's bit-for-bit test: the reference is exactly 0 in both twins
+    # the scene of test_closed_loop_kernel's bit-for-bit test: the reference is exactly 0 in both twins
     scene = ERRATA_SCENE.with_values(Delta=0.0, gamma=0.0)
     loop = LoopSettings(reference=ReferenceSettings(kind=ReferenceKind.ERRATA, x_start=0.0, v_start=0.0))
     settings = Settings(fidelity=0, solver=solver, rtol=1e-9)

@@ -1,6 +1,6 @@
 """RK4 with the drive's phasors by rotation (integrate.Rk4 with `phased`, the twin of core/rk4.c's
 rk4_advance_phased): the phasors each stage receives are cos and sin of f t up to rounding, and the method keeps
-order 4. (C == Python bit for bit on the plant: tests/test_compiled.py's RK4 scenes run this path.)"""
+order 4. (C == Python bit for bit on the plant: tests/core/test_plant_kernel.py's RK4 scenes run this path.)"""
 import math
 
 from vibromodel.integrate import PHASE_RESYNC, Rk4

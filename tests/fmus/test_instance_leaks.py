@@ -12,7 +12,7 @@ from fmpy import extract, read_model_description
 from vibrofmu.fmus.build import FMU_SRC
 from vibrofmu.hosts.doctor import host_environment
 
-SOURCE = Path(__file__).parent / "c_host" / "instance_cycles.c"
+SOURCE = Path(__file__).resolve().parents[1] / "c_host" / "instance_cycles.c"
 FMUS = ("plant", "controller", "closed_loop", "native_plant", "native_controller", "native_closed_loop")
 
 

@@ -28,7 +28,7 @@ from fmpy.validation import validate_fmu
 
 from vibrofmu.fmus.shim import install_status_shim
 
-DATA = Path(__file__).parent / "data"
+DATA = Path(__file__).resolve().parents[1] / "data"
 OK, DISCARD, ERROR, FATAL = 0, 2, 3, 4
 
 

@@ -9,7 +9,7 @@ import pytest
 from vibrofmu.output import report
 from vibrofmu.cli import main
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 DOCS = report.documents(ROOT)
 LINK = re.compile(r"(?<!!)\[[^\]]*\]\(([^)\s]+)\)")
 PLACEHOLDER = "(run `vibrofmu report"

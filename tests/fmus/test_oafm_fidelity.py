@@ -23,7 +23,7 @@ def test_default_scene_uses_the_packed_fit_and_matches_the_harness(run_plant):
         if kernel == 1:  # same closed form, same C_i, same times (the FMU's clock t + h), same summation: same bits
             for name, values in zip(("x", "v", "a"), expected):
                 assert np.array_equal(run.outputs[name], values), name
-        else:  # the C evaluator's recurrences: within their derived bound (tests/test_rungs.py)
+        else:  # the C evaluator's recurrences: within their derived bound (tests/core/test_open_loop_kernel.py)
             program = OafmProgram(solution, *oafm_hints(scene))
             bound = np.array([program.error_bound(t) for t in run.time])
             for name, values in zip(("x", "v", "a"), expected):

@@ -16,7 +16,7 @@ from fmpy.validation import validate_fmu
 
 from vibrofmu.hosts.run import run_fmu
 
-REPOSITORY = Path(__file__).resolve().parents[1]
+REPOSITORY = Path(__file__).resolve().parents[2]
 # what a fresh clone does not have: copied trees leave it out
 NOT_IN_A_CLONE = shutil.ignore_patterns(".git", ".venv", ".setuptools-build", "*.egg-info", "__pycache__", ".benchmarks",
                                         ".pytest_cache")

@@ -16,7 +16,7 @@ from fmpy import extract, simulate_fmu
 from vibrofmu.cli import main
 from vibrofmu.hosts.doctor import compile_host, host_environment, run_host
 
-VALGRIND_SUPPRESSIONS = Path(__file__).parent / "c_host" / "valgrind.supp"
+VALGRIND_SUPPRESSIONS = Path(__file__).resolve().parents[1] / "c_host" / "valgrind.supp"
 FMI2_ERROR = 3
 
 
