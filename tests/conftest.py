@@ -153,3 +153,37 @@ native_plant_unzipped, native_controller_unzipped, native_closed_loop_unzipped =
 start_native_plant, start_native_controller, start_native_closed_loop = map(_starter_fixture, NATIVE_NAMES)
 plant_unzipped, controller_unzipped, closed_loop_unzipped = map(_unzipped_fixture, FMU_NAMES)
 start_plant, start_controller, start_closed_loop = map(_starter_fixture, FMU_NAMES)
+
+
+# The tiers. A test that needs a built FMU is marked `fmu`: automatically when it uses an FMU fixture (directly or
+# through other fixtures: item.fixturenames is the closure), by hand (@pytest.mark.fmu) when it asks for one with
+# request.getfixturevalue or builds FMUs itself; a test that asks for an FMU fixture without the mark fails at
+# set-up (FmuTierGuard), so that the fast tier cannot start building one. A test that takes seconds without an
+# FMU (a study, a Dask cluster, a subprocess per case, a compile) is marked `long` by hand. Every other test not
+# marked `slow` is marked `fast`: `pytest -m fast -n 2` is the tier that builds no FMU (under a minute).
+# start_<name> and <name>_unzipped ask for <name>_fmu with getfixturevalue: not in the closure, so listed too.
+FMU_FIXTURES = {f"{prefix}{name}{suffix}" for name in (*FMU_NAMES, *NATIVE_NAMES)
+                for prefix, suffix in (("", "_fmu"), ("", "_unzipped"), ("start_", ""))}
+
+
+def pytest_collection_modifyitems(config, items):
+    for item in items:
+        if FMU_FIXTURES & set(getattr(item, "fixturenames", ())):
+            item.add_marker(pytest.mark.fmu)
+        if not any(item.get_closest_marker(name) for name in ("fmu", "long", "slow")):
+            item.add_marker(pytest.mark.fast)
+
+
+class FmuTierGuard:
+    """A plugin, not a conftest hook: conftest hooks are not called for the set-up of session fixtures."""
+
+    @pytest.hookimpl(tryfirst=True)
+    def pytest_fixture_setup(self, fixturedef, request):
+        item = getattr(request, "_pyfuncitem", None)
+        if fixturedef.argname in FMU_FIXTURES and item is not None and item.get_closest_marker("fmu") is None:
+            raise pytest.UsageError(f"{item.nodeid} asks for {fixturedef.argname} but is not marked fmu: add "
+                                    f"@pytest.mark.fmu (tests/conftest.py, the tiers)")
+
+
+def pytest_configure(config):
+    config.pluginmanager.register(FmuTierGuard(), "vibrofmu-fmu-tier-guard")

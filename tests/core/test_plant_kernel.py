@@ -379,6 +379,7 @@ def test_a_missing_library_is_reported(tmp_path):
     assert found is None and "no vibrokernel.so" in reason
 
 
+@pytest.mark.long  # compiles the kernel
 def test_the_kernel_compiles_without_warnings(tmp_path):
     kernel.compile_kernel(tmp_path / "vibrokernel.so")  # the build command itself
     command = [*kernel.GCC_COMMAND, "-pedantic", "-Werror", "-o", str(tmp_path / "strict.so"),

@@ -14,6 +14,8 @@ from fmpy.fmi1 import FMICallException
 from test_fmu_state import check_round_trips
 from vibromodel.control import ESTIMATE_NAMES
 
+pytestmark = pytest.mark.fmu  # every test here asks for FMUs by name (request.getfixturevalue)
+
 ERROR = 3
 TAU1, TAU2 = 7.3, 14.1
 STOP = 200.0  # the default experiment: the closed loop's OAFM reference is the one packed in the FMU

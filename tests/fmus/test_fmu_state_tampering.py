@@ -18,6 +18,8 @@ from fmpy.fmi1 import FMICallException
 from vibromodel import snapshot
 from vibromodel.compiled import DOP_STAGES, VkPlant
 
+pytestmark = pytest.mark.fmu  # every test here asks for FMUs by name (request.getfixturevalue)
+
 OK, ERROR, FATAL = 0, 3, 4
 STEP = 0.1
 BEFORE, AFTER = 6, 6  # doSteps before the save and after it (the result compared)

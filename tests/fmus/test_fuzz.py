@@ -27,6 +27,8 @@ from vibromodel.control import ERRATA_INITIAL_ESTIMATES, ESTIMATE_NAMES, GAIN_NA
 from vibromodel.parameters import Scene
 from vibromodel.tracking import ReferenceSettings
 
+pytestmark = pytest.mark.fmu  # every test here asks for FMUs by name (request.getfixturevalue)
+
 OK, WARNING, ERROR, FATAL = 0, 1, 3, 4
 MIN_CASES = 2000  # the plant's; the controller and the closed loop (no OAFM fit, few parameters) get fewer
 MIN_CONTROL_CASES = 300

@@ -12,6 +12,8 @@ from fmpy import extract, read_model_description
 from vibrofmu.fmus.build import FMU_SRC
 from vibrofmu.hosts.doctor import host_environment
 
+pytestmark = pytest.mark.fmu  # every test here asks for FMUs by name (request.getfixturevalue)
+
 SOURCE = Path(__file__).resolve().parents[1] / "c_host" / "instance_cycles.c"
 FMUS = ("plant", "controller", "closed_loop", "native_plant", "native_controller", "native_closed_loop")
 

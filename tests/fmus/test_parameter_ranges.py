@@ -18,6 +18,7 @@ def parameter_names(fmu):
     return [v.name for v in read_model_description(str(fmu)).modelVariables if v.causality == "parameter"]
 
 
+@pytest.mark.fmu  # asks for its FMU by name (request.getfixturevalue)
 @pytest.mark.parametrize("which", FMUS)
 def test_every_parameter_of_every_fmu_has_a_rule(request, which):
     ruled = {rule.name for rule in RULES}
@@ -25,6 +26,7 @@ def test_every_parameter_of_every_fmu_has_a_rule(request, which):
     assert missing == []
 
 
+@pytest.mark.fmu  # asks for its FMU by name (request.getfixturevalue)
 @pytest.mark.parametrize("which", FMUS)
 def test_the_default_parameters_obey_the_rules(request, which):
     variables = read_model_description(str(request.getfixturevalue(f"{which}_fmu"))).modelVariables
@@ -122,6 +124,7 @@ ISSUE_CASES = [
 ]
 
 
+@pytest.mark.fmu  # asks for its FMU by name (request.getfixturevalue)
 @pytest.mark.parametrize("which,values,tolerance,name", ISSUE_CASES)
 def test_issue_cases_are_refused_up_front_naming_the_parameter(request, which, values, tolerance, name):
     message = initialisation_error(request, which, values, tolerance)

@@ -8,6 +8,8 @@ import math
 import pytest
 from fmpy.fmi1 import FMICallException
 
+pytestmark = pytest.mark.fmu  # every test here asks for FMUs by name (request.getfixturevalue)
+
 OK, ERROR = 0, 3
 FMUS = {  # fixture prefix, start values, an output, an input or None
     "plant_fast": ("plant", {"kernel": 0}, "x", "U"),

@@ -29,6 +29,7 @@ from fmpy.validation import validate_fmu
 from vibrofmu.fmus.shim import install_status_shim
 
 DATA = Path(__file__).resolve().parents[1] / "data"
+pytestmark = pytest.mark.fmu  # every test here builds the probe FMU
 OK, DISCARD, ERROR, FATAL = 0, 2, 3, 4
 
 

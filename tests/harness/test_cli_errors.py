@@ -88,6 +88,7 @@ def _assert_one_line(code, stderr, fragment, folder):
     assert not (folder / "build").exists() and not (folder / "o").exists()  # nothing built or written
 
 
+@pytest.mark.long  # one vibrofmu subprocess per case
 @pytest.mark.parametrize("argv, fragment", ISSUE_MISTAKES, ids=[" ".join(a) for a, _ in ISSUE_MISTAKES])
 def test_a_mistake_is_one_line_and_exit_2(argv, fragment, tmp_path, not_plant):
     argv, fragment = _filled(argv, fragment, tmp_path, not_plant)

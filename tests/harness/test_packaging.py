@@ -76,6 +76,7 @@ def test_build_without_a_c_compiler(tmp_path, plant_fmu):
     assert np.array_equal(python_only.outputs["x"], compiled.outputs["x"])
 
 
+@pytest.mark.fmu  # builds the FMUs
 def test_the_wheel_alone_builds_the_fmus(tmp_path):
     """The wheel's files suffice: unpacked, and imported without this checkout (python -S: no .pth files, so
     not the editable install; the dependencies from this venv's site-packages), `vibrofmu build` makes

@@ -56,6 +56,7 @@ def _env_file(tmp_path: Path, recorded: dict, **changes) -> Path:
     return path
 
 
+@pytest.mark.fmu  # asks for its FMU by name (request.getfixturevalue)
 @pytest.mark.parametrize("name", ["plant", "controller", "closed_loop"])
 def test_every_fmu_runs_in_an_empty_environment(name, request, c_host, tmp_path):
     fmu = request.getfixturevalue(f"{name}_fmu")
@@ -151,6 +152,7 @@ def test_doctor_env_file_refuses_a_python_without_scipy(tmp_path, capsys):
     assert not out.exists()
 
 
+@pytest.mark.fmu  # asks for its FMU by name (request.getfixturevalue)
 @pytest.mark.parametrize("name", ["plant", "controller", "closed_loop"])
 def test_validate_fmu_is_silent(name, request):
     """FMPy's validation of the pythonfmu FMUs (with the recorded environment in resources/)."""

@@ -160,6 +160,7 @@ def test_graze_reference_period_is_the_quadratures():
     assert reference.x(np.array([reference.period]))[0] == pytest.approx(reference.x_max, abs=1e-9)
 
 
+@pytest.mark.long  # a 200-scene campaign
 # -- the campaign's sample -----------------------------------------------------------------------------------------
 def test_contact_loss_campaign_sample_has_no_halt(library):
     """200 random contact-loss scenes (campaigns.contact_loss_campaign, tau <= 5): no halt other than pull-in for

@@ -93,6 +93,7 @@ def test_grid_is_converged(harmonic, paper_reference):
     assert check["converged"] and max(check["relative_change"]) < 0.01
 
 
+@pytest.mark.long  # OAFM fits
 @pytest.mark.parametrize("values", [{"x_start": 0.2, "mu": 0.05}, {"x_start": 0.5}])
 def test_larger_nonlinearity(values):
     """Scenes 40x (A = 0.2, mu = 0.05) and 160x (A = 0.5) further into the nonlinearity (x^k, k >= 2)."""
@@ -107,6 +108,7 @@ def test_larger_nonlinearity(values):
     assert verdict({**report, "tau_end": tau_end}).startswith("OAFM valid")
 
 
+@pytest.mark.long  # OAFM fits
 def test_light_damping_breaks_down_beyond_the_fit():
     """mu = 0.002: the transient outlives the automatic fit horizon (1000); the summary says so."""
     scene = Scene(mu=0.002)

@@ -33,12 +33,14 @@ def runs():
     return {kind: estimate_errors(kind) for kind in (ReferenceKind.MULTITONE, ReferenceKind.ERRATA)}
 
 
+@pytest.mark.long  # two closed-loop runs (the module fixture)
 def test_bounded_without_and_with_excitation(runs):
     """V' <= 0 => theta~^T Lambda theta~ <= 2 V(0): each |theta~_i| <= sqrt(2 V(0)/lambda_i) (lambda_i = 1)."""
     for V0, errors in runs.values():
         assert np.max(np.abs(errors)) <= np.sqrt(2.0 * V0)
 
 
+@pytest.mark.long  # two closed-loop runs (the module fixture)
 def test_excitation_makes_mu_and_a1_converge(runs):
     """Measured at tau = 400 (README): mu~ 5e-2 -> 2e-4, a1~ 9.7e-2 -> 4e-3 with excitation; asserted: at least a
     10x reduction. Without excitation they move by less than 10 % (e2 ~ 4e-4 and |phi| ~ 7e-3 give

@@ -157,6 +157,7 @@ def check_energy_row(row, tau):
     assert row["settings"]["tau"] == tau
 
 
+@pytest.mark.long  # tau = 1000 at three tolerances
 def test_undamped_energy_drift_quick():
     check_energy_row(ex.energy_drift(quick=True), 1e3)
 

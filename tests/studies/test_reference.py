@@ -1,10 +1,12 @@
 """The DOP853 reference is cross-checked against an implicit method (Radau)."""
 import numpy as np
+import pytest
 
 from vibromodel.parameters import Scene
 from vibrofmu.analyses.reference import reference_solution
 
 
+@pytest.mark.long  # a Radau solve at tight tolerance
 def test_dop853_reference_agrees_with_radau():
     tau = np.linspace(0, 200, 2001)
     dop = reference_solution(Scene(), 0, 200.0)(tau)

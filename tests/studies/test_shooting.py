@@ -185,6 +185,7 @@ def strong_branch():
     return sh.frequency_response(sh.PeriodicModel(STRONG), OMEGA_E - 0.004, OMEGA_E)
 
 
+@pytest.mark.long  # a continuation along the strong branch (the module fixture)
 def test_continuation_finds_two_folds_where_a_multiplier_crosses_one(strong_branch):
     """Both fold frequencies are located twice by Brent (tangent omega-component, multiplier = 1, on the
     same arclength bracket, xtol 1e-12 relative): they agree to ~1e-12. Independently, the sampled branch
@@ -205,6 +206,7 @@ def test_continuation_finds_two_folds_where_a_multiplier_crosses_one(strong_bran
     assert {fr.kind[i] for i in range(changes[0] + 1, changes[1] + 1)} == {"saddle"}
 
 
+@pytest.mark.long  # a continuation along the strong branch (the module fixture)
 def test_continuation_branch_is_consistent(strong_branch):
     """Ends in the unique-response range: stable; omega passes hi; Liouville on every point (<= 1e-9)."""
     fr = strong_branch
@@ -213,6 +215,7 @@ def test_continuation_branch_is_consistent(strong_branch):
     assert np.all(fr.x_max > fr.x_min)
 
 
+@pytest.mark.long  # a continuation along the strong branch (the module fixture)
 def test_peak_amplitude_of_errata(strong_branch):
     """docs/model.md, Averaging and slow flow peak-amplitude table: shooting r = 0.3387 at sigma = -0.002 (upper branch, past both
     folds). The orbit there is shot from the nearest branch point; tolerance: rounding 5e-5 + truncation

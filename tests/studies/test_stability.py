@@ -35,12 +35,14 @@ def test_three_branches_match_shooting_and_floquet_at_sigma_minus_0_0024():
         assert orbit.liouville_error <= 1e-9  # rho1 rho2 = exp(-mu T), from rtol 1e-11 of the period map
 
 
+@pytest.mark.long  # the strong study: shooting and Floquet on 201 frequencies
 def test_classification_agrees_with_floquet_on_201_frequencies(strong_study):
     agreement = strong_study["summary"]["classification_agreement"]
     assert agreement["points_compared"] >= 190  # only points next to the two folds are left out
     assert agreement["fraction"] >= 0.98  # acceptance 2
 
 
+@pytest.mark.long  # the strong study: shooting and Floquet on 201 frequencies
 def test_fold_frequencies_of_slow_flow_and_continuation_agree(strong_study):
     rows = strong_study["summary"]["fold_frequencies"]["folds"]
     assert len(rows) == 2
@@ -104,6 +106,7 @@ def test_paper_example_single_stable_branch_and_fmu_amplitude_within_one_percent
         shutil.rmtree(unzip_dir, ignore_errors=True)
 
 
+@pytest.mark.long  # a stability study and its plot
 def test_cli_writes_summary_and_plot(tmp_path):
     out = tmp_path / "stability"
     omega_e = av.averaged(Scene()).omega_e

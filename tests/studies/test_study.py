@@ -78,6 +78,7 @@ def test_engines_give_the_same_bits(plant_fmu):
         assert a["engine"] == "core" and b["engine"] == "fmu"
 
 
+@pytest.mark.long  # a Dask cluster
 def test_resume_recomputes_nothing_written(tmp_path, capsys, cluster):
     address = cluster.scheduler_address
     code, out = study(tmp_path, "--scheduler", address, "--set", "samples=10")
@@ -106,6 +107,7 @@ def test_resume_recomputes_nothing_written(tmp_path, capsys, cluster):
             assert row["r"] == first[row["case"]]["r"]  # deterministic: the recomputed case gives the same bits
 
 
+@pytest.mark.long  # a Dask cluster
 def test_a_killed_worker_loses_and_duplicates_no_row(tmp_path, cluster):
     pids = worker_pids(cluster, 2)
     out = tmp_path / "out"
@@ -133,6 +135,7 @@ def test_a_killed_worker_loses_and_duplicates_no_row(tmp_path, cluster):
     assert pids[0] not in worker_pids(cluster, 2)  # the nanny replaced the killed worker
 
 
+@pytest.mark.long  # a study in a subprocess
 def test_ctrl_c_leaves_a_readable_parquet_file(tmp_path):
     out = tmp_path / "out"
     process = subprocess.Popen([str(BIN / "vibrofmu"), "study", "monte-carlo", "--engine", "core", "--workers", "1",

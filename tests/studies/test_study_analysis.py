@@ -56,6 +56,7 @@ def test_the_boundary_map_inverts_the_averaged_models_initial_state(bistable):
         assert back == pytest.approx((A, B), abs=1e-12)
 
 
+@pytest.mark.long  # fold continuations to the cusp
 def test_the_cusp_is_where_the_two_folds_meet():
     """Just above the bisected cusp the two folds exist and lie close together in omega (they are born
     together); just below there are none."""
