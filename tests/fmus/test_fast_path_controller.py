@@ -34,6 +34,8 @@ def test_compiled_estimator_equals_python_bit_for_bit(law):
         python.advance(t, h, x, v, ref)
         compiled.advance(t, h, x, v, ref)
         t += h
+        # core/controller.c performs HeldInputEstimator's operations in the same order (-ffp-contract=off, no
+        # -ffast-math: kernel.GCC_COMMAND): the same bits
         assert np.array_equal(python.theta_hat, compiled.theta_hat) and python.t == compiled.t
         for name, value in zip(("x", "v", "x_ref", "v_ref", "a_ref"), (x, v, *ref)):
             compiled.set_value(name, value)
@@ -80,6 +82,7 @@ def drive(controller_fmu, kernel: int, steps: int = 300):
 def test_controller_fast_path_equals_the_python_fmu(controller_fmu):
     compiled, n_fast = drive(controller_fmu, 0)
     python, n_python = drive(controller_fmu, 1)
+    # the compiled controller is bit-identical to the Python one (test above), and the shim copies doubles: equal
     assert np.array_equal(compiled, python)
     assert n_fast == 300 + 150  # every doStep went through the fast path, also after fmi2SetFMUstate
     assert n_python == 0

@@ -1,6 +1,10 @@
 """The plant FMU's C fast path (fmi2_status_shim.c "Fast path", fast_path.py): with kernel = 0 the shim steps the
 compiled plant and reads its outputs without Python. It must change nothing but the speed: every output, every
-stop and every message equals the pure-Python FMU (kernel = 1) bit for bit, and it must actually be used."""
+stop and every message equals the pure-Python FMU (kernel = 1) bit for bit, and it must actually be used.
+
+Why bit for bit: the compiled plant performs the Python plant's operations in the same order, compiled with
+-ffp-contract=off and without -ffast-math (tests/core/test_plant_kernel.py), and the shim passes the same
+doubles in and out, so equality is the expectation, not luck."""
 import math
 
 import numpy as np

@@ -76,6 +76,10 @@ def test_timing_host_runs_each_specification_repeats_times_with_its_own_grid(sta
     for record, step in zip(records, (0.1, 0.25, 1.0)):
         grid = ladder.communication_points(1.0, step)
         assert len(record["loop"]) == len(record["init"]) == 2 and record["outputs"] == len(grid)
+        # t: the host's n * step (printed with %.17g, which round-trips) against the grid's n * step, values <= 1:
+        # atol 1e-15 (about 9 ulps of 1.0) admits only rounding and no wrong point (the points are >= 0.1 apart);
+        # x == t exactly: the stand-in returns t + (next - t), and next - t is exact (Sterbenz: t <= next <= 2t,
+        # or t = 0), so the sum is next
         assert np.allclose(record["t"], grid, rtol=0, atol=1e-15) and np.array_equal(record["x"], record["t"])
     with pytest.raises(RuntimeError, match="3 run specifications, not 2"):
         ladder.parse_host_output(proc.stdout, 2)

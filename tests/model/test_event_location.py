@@ -41,6 +41,8 @@ def test_the_halting_reproducers_complete_in_both_kernels(name, library):
             for make in (Plant, lambda s, st: CompiledPlant(s, st, library))]
     for times, x, stop in runs:
         assert stop is None and times[-1] == pytest.approx(40.0)
+    # the compiled plant performs the Python plant's operations in the same order (-ffp-contract=off, no
+    # -ffast-math; tests/core/test_plant_kernel.py): the same bits
     assert runs[0][1].tobytes() == runs[1][1].tobytes()
 
 
@@ -135,6 +137,7 @@ def test_grazes_match_the_independent_reference(depth, library):
         if depth >= 10.0 * rtol:
             assert exits == reference.exits(stop_time) == 3
         compiled_run = run_plant(CompiledPlant(graze_scene(reference), Settings(rtol=rtol), library), stop_time, 0.1)
+        # the compiled plant is the Python plant's operations in the same order (see above): the same bits
         assert compiled_run[1].tobytes() == x.tobytes()
 
 
@@ -149,6 +152,7 @@ def test_worst_graze_of_the_sweep_is_within_the_acceptance_bound(library):
     assert exits == reference.exits(20.0) == 3
     assert np.max(np.abs(x - x_ref)) <= GRAZE_BOUND * 1e-8 * np.max(np.abs(x_ref))
     compiled_run = run_plant(CompiledPlant(graze_scene(reference), Settings(rtol=1e-8), library), 20.0, 0.1)
+    # the compiled plant is the Python plant's operations in the same order (see above): the same bits
     assert compiled_run[1].tobytes() == x.tobytes()
 
 

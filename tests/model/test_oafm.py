@@ -143,6 +143,7 @@ def test_cache_round_trip_is_exact(tmp_path):
     assert source.endswith(".json")
     tau = np.linspace(0.0, 400.0, 2001)
     assert np.array_equal(fitted(tau), loaded(tau))  # same bits: the C_i round-trip exactly through JSON
+    # assemble with the fit's own C_i builds the same solution object: the same operations, the same bits
     assert np.array_equal(assemble(scene, settings, 0.0, fitted.C)(tau), fitted(tau))
 
 
