@@ -29,6 +29,8 @@ def test_reference_reproduces_the_design_numbers(reference):
 
 
 def test_adaptive_rtol_1e10_is_within_1e9_of_the_reference(run_plant, reference):
+    # the test's bound, 1e-9 = 10 rtol on |x| <= 0.04 over tau = 200: the global error of a tolerance-
+    # proportional method is a small multiple of rtol (the same 10 rtol max|x| as GRAZE_BOUND, issue 15)
     run = run_plant(rtol=1e-10)
     assert max_error(run, reference) <= 1e-9
     # the demo's table: the FMU agrees with the reference numbers to 1e-10
@@ -48,12 +50,14 @@ def test_rk4_error_falls_with_order_four(run_plant, reference):
     steps = [0.1, 0.05, 0.025]
     errs = [max_error(run_plant(solver=1, max_step=h), reference) for h in steps]
     slopes = np.diff(np.log(errs)) / np.diff(np.log(steps))
+    # observed order of a 4th-order method between neighbouring steps: the next term shifts it by O(h) = 0.1
     assert np.all(np.abs(slopes - 4.0) <= 0.3), (errs, slopes)
 
 
 def test_setup_experiment_tolerance_takes_precedence(plant_fmu, reference):
     from vibrofmu.hosts.run import run_fmu
 
+    # the bound of the rtol 1e-10 run above: met only if the tolerance 1e-10 won over rtol = 1e-4
     loose = run_fmu(plant_fmu, {"rtol": 1e-4}, 200.0, 0.1, tolerance=1e-10)
     assert max_error(loose, reference) <= 1e-9
 

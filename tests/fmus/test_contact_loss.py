@@ -31,5 +31,7 @@ def test_fmu_leaves_the_contact_and_matches_the_phase_reference(run_plant, refer
     assert np.all(1 + 2 * run.outputs["x"][free] / 3 <= 0)
     assert np.all(run.outputs["F_contact"][free] == 0.0)
     err = errors(run.time, run.outputs["x"], run.outputs["v"], reference)
+    # set by the looser rtol (1e-8): 10 rtol on |x| ~ 1 over tau = 100 with a contact kink every period (the
+    # 10 rtol max|x| of GRAZE_BOUND, tests/model/test_event_location.py); a missed re-impact is off by O(0.1)
     assert err["max_abs_error_x"] <= 1e-7
     assert err["max_abs_error_v"] <= 1e-7

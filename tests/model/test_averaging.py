@@ -34,6 +34,8 @@ def test_fast_moments_match_period_averages():
         q_j = period_average(lambda t: (beta * np.sin(Omega * t) - gamma * np.cos(2 * Omega * t))
                              * psi(t, beta, gamma, Omega) ** j, Omega)
         scale = max(abs(m_j), (beta / Omega**2) ** j)  # size of the terms being averaged
+        # the trapezoid rule is exact here (period_average), so only rounding remains: 64 samples of terms of size
+        # <= scale, one rounding per addition: <= 64 EPS scale; q's terms carry the drive, of size ~beta
         assert m[j] == pytest.approx(m_j, abs=64 * EPS * scale)
         assert q[j] == pytest.approx(q_j, abs=64 * EPS * scale * beta)
 
@@ -51,6 +53,8 @@ def test_averaged_coefficients_equal_the_period_average_of_the_polynomial_model(
         drive = scene.beta * math.sin(scene.Omega * tk) - scene.gamma * math.cos(2 * scene.Omega * tk)
         for n, c in enumerate(a - drive * f):
             total += np.pad(c * P.polypow(shift, n), (0, 5 - n))
+    # 64 samples x 6 polynomial terms of size <= ~1 (|X + psi| coefficients, a_k <= 1): random rounding
+    # ~sqrt(384) x 1.1e-16 = 2e-15; atol 1e-14 is 5x that, and far below a wrong coefficient (O(alpha) = 1e-2)
     np.testing.assert_allclose(av.averaged_coefficients(scene), total / len(t), rtol=0, atol=1e-14)
 
 
@@ -69,6 +73,8 @@ def test_paper_example_numbers_of_errata():
 def test_shifted_coefficients_are_the_taylor_coefficients_at_the_equilibrium():
     eq = av.equilibrium(STRONG)
     y = 0.013
+    # two degree-5 Horner evaluations (about 10 roundings each) of coefficients <= 1 at arguments < 0.1, plus the
+    # rounding of the shifted coefficients k: a few EPS each; 16 EPS with margin
     assert P.polyval(eq.x_e + y, eq.A) == pytest.approx(P.polyval(y, eq.k), abs=16 * EPS)
 
 

@@ -40,6 +40,8 @@ def test_the_halting_reproducers_complete_in_both_kernels(name, library):
     runs = [run_plant(make(scene, Settings(rtol=rtol)), 40.0, interval)
             for make in (Plant, lambda s, st: CompiledPlant(s, st, library))]
     for times, x, stop in runs:
+        # default rel 1e-6: times[-1] is the last grid point (n x interval, rounding ~1e-14); the check is that the
+        # run reached tau = 40 and did not halt
         assert stop is None and times[-1] == pytest.approx(40.0)
     # the compiled plant performs the Python plant's operations in the same order (-ffp-contract=off, no
     # -ffast-math; tests/core/test_plant_kernel.py): the same bits
@@ -105,6 +107,8 @@ def test_a_touch_that_stays_on_its_side_is_no_event():
         if reached:
             with pytest.raises(TerminalEvent) as stop:
                 ig.advance(1.0)
+            # near the peak the zero of 1e-9 - (t - 0.5)^2 moves by dg / (2 sqrt(1e-9)) = 1.6e4 dg: a rounding of g
+            # (~2e-16) moves it ~4e-12; abs 1e-9 is still 3e4 times below the distance to the peak (3.2e-5)
             assert stop.value.t == pytest.approx(0.5 - math.sqrt(1e-9), abs=1e-9)
         else:
             ig.advance(1.0)

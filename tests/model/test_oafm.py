@@ -90,6 +90,7 @@ def test_grid_is_converged(harmonic, paper_reference):
     _, report = harmonic
     errors = [d["error"]["max_abs_error"] for d in report["domains"]]
     check = grid_check(Scene(), PAPER_DOMAINS, paper_reference, errors)
+    # refining the grid changes the error by < 1 %: the measured error is that of the basis, not of the grid
     assert check["converged"] and max(check["relative_change"]) < 0.01
 
 

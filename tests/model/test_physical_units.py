@@ -22,6 +22,8 @@ def physical_example():
 def test_mapping_formulas():
     p = physical_example()
     scene = p.to_scene(z_start=p.z_s * (1 + 2 * 0.04 / 3), zdot_start=0.0)
+    # each mapped quantity is a few powers, products and square roots (each rounding by <= 1.1e-16 relative):
+    # rel_tol 1e-12 allows ~10^4 roundings, so it catches a wrong exponent or factor, never rounding
     assert math.isclose(p.z_s, 1e-4, rel_tol=1e-12)
     assert math.isclose(p.omega0**2, 1.5 * p.k / p.m * p.z_s**0.5, rel_tol=1e-12)  # corrected Eq. (4): z_s^(1/2)
     assert math.isclose(scene.mu, 0.1, rel_tol=1e-12)
