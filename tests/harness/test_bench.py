@@ -66,6 +66,8 @@ def test_every_case_has_finite_errors_or_a_stated_reason(quick):
         assert all(math.isfinite(e[k]) and e[k] >= 0 for k in ("linf_x", "l2_x", "final_x")), r
         assert e["l2_x"] <= e["linf_x"] and e["final_x"] <= e["linf_x"]
         n = round(r["stop_time"] / r["output_interval"])
+        # the record's own numbers divided again: one rounding (1.1e-16 relative) at most; approx's default rel
+        # 1e-6 checks the formula (a wrong divisor is off by a factor), not the rounding
         assert r["wall_seconds"] > 0 and r["seconds_per_step"] == pytest.approx(r["wall_seconds"] / n)
         assert r["seconds_per_0.1_tau"] == pytest.approx(r["wall_seconds"] / (r["stop_time"] / 0.1))
         assert r["error_is_model_error"] == (r["kind"] == "fmu" and r["fidelity"] in (3, 4))
@@ -125,6 +127,8 @@ def test_fmu_error_equals_the_plants_computed_directly(quick):
              and r["rtol"] == 1e-8 and r["output_interval"] == h]
     assert len(cases) == len(summary["bench"]["kernels"]) >= 1
     for r in cases:
+        # the FMU gives the plant's bits (tests/fmus/test_fast_path_plant.py) and the reference is the same solve;
+        # the error is ~1e-8 (rtol 1e-8), so 1e-12 = 1e-4 of it admits only the reference's interpolation rounding
         assert abs(r["errors"]["linf_x"] - error) <= 1e-12, (r["method"], r["errors"]["linf_x"], error)
         assert r["nfev"] == plant.integrator.nfev
 
@@ -133,11 +137,14 @@ def test_reference_is_accurate_far_below_the_threshold(quick):
     summary, *_ = quick
     check = summary["reference"]["self_check"]
     assert summary["reference"]["rtol"] == 1e-13 and check["rtol"] == 1e-12
+    # the reference must be 1000x more accurate than the accuracy the bench grades (THRESHOLD)
     assert 0 < check["max_abs_difference_x"] < 1e-3 * bench.THRESHOLD
     # and that number is what the two references give here
     stop, h = summary["bench"]["stop_time"], check["output_interval"]
     grid = h * np.arange(round(stop / h) + 1)
     fine, coarse = (reference_solution(Scene(), 0, stop, rtol=r, atol=1e-2 * r)(grid)[0] for r in (1e-13, 1e-12))
+    # the same two solve_ivp runs on the same grid: the same numbers; rel 1e-6 checks that the bench reports this
+    # difference (another rtol pair differs by a factor ~10), not its last digits
     assert float(np.max(np.abs(fine - coarse))) == pytest.approx(check["max_abs_difference_x"], rel=1e-6)
 
 
@@ -171,6 +178,7 @@ def test_targets_are_the_ratios_of_the_cheapest_cases_recomputed(quick):
     n = round(summary["bench"]["stop_time"] / 0.1)  # communication steps of the FMU = tenths of tau of solve_ivp
     ratio = (cases[fmu]["wall_seconds"] / n) / (cases[ivp]["wall_seconds"] / n)
     check = targets["fmu_step_over_solve_ivp"]
+    # ratios of the record's own times recomputed: a few roundings of 1.1e-16 relative, rel 1e-12 with margin
     assert check["ratio"] == pytest.approx(ratio, rel=1e-12) and check["limit"] == 0.25
     assert check["met"] == (ratio <= 0.25)
     floor = targets["fmu_step_over_floor"]
@@ -233,6 +241,7 @@ def test_ladder_has_every_rung_in_both_hosts_with_its_error_and_the_acceptance_r
             assert len(c["loop_seconds_runs"]) == len(c["cost_per_output_seconds_runs"]) == ladder["rounds"]
             assert len(c["cpu_per_output_seconds_runs"]) == ladder["rounds"]
             assert c["cpu_per_output_seconds"] == min(c["cpu_per_output_seconds_runs"]) > 0
+            # the record's own numbers divided again: one rounding; approx's default rel 1e-6 checks the formula
             assert c["cost_per_output_seconds"] == pytest.approx(min(c["loop_seconds_runs"]) / c["outputs"])
             assert math.isfinite(c["linf_x"]) and c["linf_x"] >= 0
             assert c["repeatable"], (rung["rung"], c["host"], c["interval"])  # every round gives the same x
@@ -264,6 +273,7 @@ def test_ladder_has_every_rung_in_both_hosts_with_its_error_and_the_acceptance_r
             runs = {(c["host"], c["interval"]): c[key] for c in rung["columns"]}[a["host"], a["interval"]]
             base_runs = {(c["host"], c["interval"]): c[key] for c in base["columns"]}[a["host"], a["interval"]]
             per_round = [x / y for x, y in zip(runs, base_runs)]
+            # the record's own runs divided again (one rounding each); approx's default rel 1e-6 checks the formula
             assert a[per_round_key] == pytest.approx(per_round)
             assert a[ratio] == pytest.approx(float(np.median(per_round)))
             assert a[best] == pytest.approx(min(runs) / min(base_runs))

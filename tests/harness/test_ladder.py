@@ -158,10 +158,13 @@ def test_rounds_interleave_every_rung_in_every_column(monkeypatch):
                     (c["host"], c["interval"], rung["rung"])]
             kept = [1.0 + 1 + i for i, o in enumerate(order) if o["round"] > 0 and (o["host"], o["interval"], o["rung"])
                     == (c["host"], c["interval"], rung["rung"])]
+            # the stand-in's seconds are small integers divided by the outputs: one rounding (half an ulp, 1.1e-16
+            # relative) per value; rel 1e-15 admits a few such roundings and no other run's value
             assert len(warm) == 1 and c["cost_per_output_seconds_runs"] == pytest.approx(kept, rel=1e-15)
             assert c["cost_per_output_seconds"] == min(c["cost_per_output_seconds_runs"])
             base = next(b for b in record["rungs"][0]["columns"] if (b["host"], b["interval"]) == (c["host"], c["interval"]))
             expected = [a / b for a, b in zip(c["cost_per_output_seconds_runs"], base["cost_per_output_seconds_runs"])]
+            # the same quotients of the same doubles recomputed: at most a rounding or two, inside rel 1e-15
             assert c["over_exact_f0_per_round"] == pytest.approx(expected, rel=1e-15)
             assert c["over_exact_f0_median"] == pytest.approx(sorted(expected)[1], rel=1e-15)
             cpu = [a / b for a, b in zip(c["cpu_per_output_seconds_runs"], base["cpu_per_output_seconds_runs"])]
@@ -171,6 +174,7 @@ def test_rounds_interleave_every_rung_in_every_column(monkeypatch):
                                       "intervals": [], "what": ladder.INSTRUCTIONS_NOTE}
     assert all("instructions" not in rung for rung in record["rungs"])
     for a in record["acceptance"]:
+        # the median of the record's own ratios: the same doubles; approx's default rel 1e-6 checks the formula
         assert a["met"] == (a["ratio"] <= a["limit"]) and a["ratio"] == pytest.approx(np.median(a["ratios_per_round"]))
         column = next(c for r in record["rungs"] if r["rung"] == a["rung"] for c in r["columns"]
                       if (c["host"], c["interval"]) == (a["host"], a["interval"]))
@@ -184,6 +188,7 @@ def test_rounds_interleave_every_rung_in_every_column(monkeypatch):
     for rung in record["rungs"]:
         own = [a - b for a, b in zip(rung["columns"][fmpy]["cpu_per_output_seconds_runs"],
                                      rung["columns"][c_host]["cpu_per_output_seconds_runs"])]
+        # the same differences of the same doubles recomputed: at most a rounding or two, inside rel 1e-15
         assert floor["fmpy_own_per_output_seconds"][rung["rung"]] == pytest.approx(sorted(own)[1], rel=1e-15)
     assert floor["floor_seconds"] == min(floor["fmpy_own_per_output_seconds"].values())
     f0 = sorted(record["rungs"][0]["columns"][fmpy]["cpu_per_output_seconds_runs"])[1]

@@ -45,6 +45,8 @@ def test_x_plot_shades_each_contact_loss_and_keeps_legend_and_title_clear():
     assert len(intervals) == 4  # cos(tau) > 15/16 around tau = 0 (the start), 2 pi, 4 pi, 6 pi
     assert len(spans) == len(intervals)
     for span, (start, end) in zip(spans, intervals):
+        # the span is drawn from the interval's own ends (x + width rounds once); approx's default rel 1e-6 checks
+        # the placement, which a wrong interval misses by a grid step (0.1 / 6.3 = 1.6e-2 relative or more)
         assert span.get_x() == pytest.approx(start) and span.get_x() + span.get_width() == pytest.approx(end)
     _legends_cover_no_axes(fig)
     assert _inside_figure(fig, ax.title)

@@ -139,7 +139,10 @@ def test_energy_closed_form_is_the_potential_of_the_hertz_force():
         d = 1e-6
         slope = (ex.energy(x + d, 0.0) - ex.energy(x - d, 0.0)) / (2 * d)
         s = 1 + 2 * x / 3
+        # central differences, d = 1e-6: truncation d^2 |E'''| / 6 ~ 1e-13, rounding eps |E| / d ~ 2e-10 (|E| <= ~1):
+        # abs 1e-8 has a margin of 50; a wrong force is off by O(1)
         assert slope == pytest.approx((s**1.5 if s > 0 else 0.0) - 1.0, abs=1e-8), x
+    # E(-1.5) = 0.6 (0 - 1) + 1.5 = 0.9 in doubles: rounding only; approx's default rel 1e-6
     assert ex.energy(0.0, 0.0) == 0.0 and ex.energy(-1.5, 0.0) == pytest.approx(0.9)
 
 

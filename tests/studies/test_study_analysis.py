@@ -96,6 +96,7 @@ def test_projection_is_bounded_by_workers_and_scheduler():
     run = {"case_cost_s_mean": 0.1, "scheduler_s_per_task": 0.002, "batch_size": 1}
     projected = projection(run, 64)
     p = projected["at_this_batch_size"]
+    # the projection's formula recomputed from its inputs: one or two roundings; approx's default rel 1e-6
     assert p["worker_bound"] == pytest.approx(64 / 0.102)
     assert p["scheduler_bound"] == pytest.approx(500.0)
     assert p["cases_per_s"] == pytest.approx(500.0)  # b = 1: the scheduler is the bottleneck
