@@ -73,8 +73,6 @@ def test_band_rows_count_the_bistable_points():
 def test_aitken_extrapolates_a_geometric_approach():
     for limit, a, q in ((0.3, 0.2, 0.5), (0.0, 0.5, 0.9), (0.05, -0.02, 0.3)):
         d = [limit + a * q**k for k in range(3)]
-        # Aitken is exact on a geometric sequence; in doubles the values (<= 0.5) and their differences round by
-        # <= 5.6e-17 each, and the quotient of second differences amplifies that by at most ~1/(1 - q) = 10: ~1e-16
         assert cusp.aitken(*d) == pytest.approx(limit, abs=1e-15)
     assert cusp.aitken(0.1, 0.1, 0.1) == 0.1  # no change: the last value
     assert cusp.aitken(0.1, 0.2, 0.4) == 0.4  # diverging: the last value
