@@ -133,15 +133,15 @@ def _starter_fixture(name):
 
 
 def _native_fixture(name):
-    """native_<name>_fmu: the native FMU (fmu_src/native/) built once per session from the pythonfmu one (shared by
-    tests/fmus/test_native.py, test_fuzz.py and test_nonfinite_outputs.py)."""
+    """native_<name>_fmu: the native FMU (fmu_src/native/) built once per test run from the pythonfmu one (shared
+    by tests/fmus/test_native.py, test_fuzz.py and test_nonfinite_outputs.py)."""
 
     @pytest.fixture(scope="session", name=f"native_{name}_fmu")
     def native(request, shared_dir):
         from vibrofmu.fmus.native import build_native
 
-        pythonfmu = request.getfixturevalue(f"{name}_fmu")
-        return built_once(shared_dir, f"native_{name}", lambda: build_native(pythonfmu, shared_dir / f"native_{name}"))
+        pythonfmu, folder = request.getfixturevalue(f"{name}_fmu"), shared_dir / f"native_{name}"
+        return built_once(shared_dir, f"native_{name}", lambda: build_native(pythonfmu, folder))
 
     return native
 
