@@ -174,15 +174,29 @@ def pytest_collection_modifyitems(config, items):
             item.add_marker(pytest.mark.fast)
 
 
+def _unmarked(item, names) -> None:
+    if names and item.get_closest_marker("fmu") is None:
+        raise pytest.UsageError(f"{item.nodeid} asks for {', '.join(sorted(names))} but is not marked fmu: add "
+                                f"@pytest.mark.fmu (tests/conftest.py, the tiers)")
+
+
 class FmuTierGuard:
-    """A plugin, not a conftest hook: conftest hooks are not called for the set-up of session fixtures."""
+    """Fails a test that asks for an FMU fixture without the fmu mark: when the fixture is set up (so that the
+    fast tier builds nothing), and after the test's call, from every fixture it asked for, set up now or cached
+    earlier (so that a full run fails the same way). A plugin, not conftest hooks: those are not called for the
+    set-up of session fixtures."""
 
     @pytest.hookimpl(tryfirst=True)
     def pytest_fixture_setup(self, fixturedef, request):
         item = getattr(request, "_pyfuncitem", None)
-        if fixturedef.argname in FMU_FIXTURES and item is not None and item.get_closest_marker("fmu") is None:
-            raise pytest.UsageError(f"{item.nodeid} asks for {fixturedef.argname} but is not marked fmu: add "
-                                    f"@pytest.mark.fmu (tests/conftest.py, the tiers)")
+        if item is not None and fixturedef.argname in FMU_FIXTURES:
+            _unmarked(item, {fixturedef.argname})
+
+    @pytest.hookimpl(wrapper=True)
+    def pytest_runtest_call(self, item):
+        result = yield
+        _unmarked(item, FMU_FIXTURES & set(getattr(getattr(item, "_request", None), "_fixture_defs", ())))
+        return result
 
 
 def pytest_configure(config):
