@@ -192,11 +192,9 @@ class FmuTierGuard:
         if item is not None and fixturedef.argname in FMU_FIXTURES:
             _unmarked(item, {fixturedef.argname})
 
-    @pytest.hookimpl(wrapper=True)
+    @pytest.hookimpl(trylast=True)  # after pytest's own, which runs the test (and stops here if it failed)
     def pytest_runtest_call(self, item):
-        result = yield
         _unmarked(item, FMU_FIXTURES & set(getattr(getattr(item, "_request", None), "_fixture_defs", ())))
-        return result
 
 
 def pytest_configure(config):
