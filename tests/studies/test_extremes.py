@@ -65,6 +65,8 @@ def test_rk4_drive_gains_are_what_rk4_does_to_a_pure_drive(theta):
 
 
 def test_rk4_drive_bound_is_one_percent_of_the_ripple():
+    # theta is bisected to round-off, so 1 - G_x there is 0.01 up to the rounding of G_x (~1e-16 absolute,
+    # 1e-14 relative to 0.01); rel 1e-9 checks that the bisection converged on the 1 % criterion
     assert 1.0 - rk4_drive_gains(RK4_DRIVE_THETA)[0] == pytest.approx(RK4_DRIVE_ERROR, rel=1e-9)
     assert 2 * math.pi / RK4_DRIVE_THETA == pytest.approx(3.7, abs=0.05)  # steps per period of the drive
     assert abs(rk4_drive_gains(RK4_DRIVE_THETA)[1] - 1.0) < RK4_DRIVE_ERROR  # v's ripple is the better one
@@ -106,6 +108,9 @@ def test_rk4_locates_a_terminal_event_inside_its_step():
     ig = Rk4(lambda t, x, v, U: 1.0, (Event("wall", lambda x: 1.0 - x, True),), 0.0, 0.0, 0.0, 0.0, 0.5)
     with pytest.raises(TerminalEvent) as stop:
         ig.advance(2.0)
+    # the interpolant is exact (a cubic), so only the root finder's tolerance remains: brentq on s = t/h in [0, 1]
+    # with xtol = rtol = 1e-15 (integrate.py), |dt| <= h (1e-15 + 1e-15 s) = 1e-15 at h = 0.5; x = 1 to
+    # v |dt| = 1.4e-15 plus rounding, inside abs 1e-14; t and v are asserted looser, to 1e-12
     assert stop.value.t == pytest.approx(math.sqrt(2), abs=1e-12)
     assert stop.value.x == pytest.approx(1.0, abs=1e-14)
     assert stop.value.v == pytest.approx(math.sqrt(2), abs=1e-12)
