@@ -132,6 +132,8 @@ def test_steady_states_are_equilibria_and_the_jacobian_is_right(index):
     np.testing.assert_allclose(J, fd, atol=1e-9)
     assert np.trace(J) == pytest.approx(-flow.mu, abs=8 * EPS)  # docs/model.md, Averaging and slow flow: tr J = -mu
     assert np.linalg.det(J) == pytest.approx(s.det, rel=1e-9)
+    # |J| <= 5e-3 and the eigenvalues are ~1e-3 apart: LAPACK and the closed form (trace, det, a square root)
+    # each round at ~EPS |J| = 1e-18; atol 1e-12 is 1e-9 of the eigenvalues and catches any wrong formula
     np.testing.assert_allclose(sorted(np.linalg.eigvals(J), key=lambda z: (z.real, z.imag)),
                                sorted(s.eigenvalues, key=lambda z: (z.real, z.imag)), atol=1e-12)
 
@@ -141,6 +143,8 @@ def test_folds_bound_the_three_branch_interval():
     folds = av.folds(model)
     assert len(folds) == 2
     for fold in folds:
+        # a fold is a zero of det, located to round-off (measured |det| ~ 5e-21); det is ~1e-6 on the branches
+        # (|J| ~ 1e-3), so abs 1e-14 is 1e-8 of it: a fold misplaced by more than round-off shows
         assert av.steady_state(model.flow(fold.omega), fold.r).det == pytest.approx(0.0, abs=1e-14)
     (lo, hi), d = (f.omega for f in folds), 1e-7
     count = [len(av.steady_states(model.flow(w), model.r_max)) for w in (lo - d, lo + d, hi - d, hi + d)]
