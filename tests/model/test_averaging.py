@@ -144,7 +144,7 @@ def test_folds_bound_the_three_branch_interval():
     assert len(folds) == 2
     for fold in folds:
         # a fold is a zero of det, located to round-off (measured |det| ~ 5e-21); det is ~1e-6 on the branches
-        # (|J| ~ 1e-3), so abs 1e-14 is 1e-8 of it: a fold misplaced by more than round-off shows
+        # (|J| ~ 1e-3), so abs 1e-14 is 1e-8 of that: far above round-off, far below a point off the fold
         assert av.steady_state(model.flow(fold.omega), fold.r).det == pytest.approx(0.0, abs=1e-14)
     (lo, hi), d = (f.omega for f in folds), 1e-7
     count = [len(av.steady_states(model.flow(w), model.r_max)) for w in (lo - d, lo + d, hi - d, hi + d)]
