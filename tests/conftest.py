@@ -1,31 +1,90 @@
-"""Shared fixtures: the plant FMU is built once per test session into a temporary folder.
+"""Shared fixtures: the FMUs (pythonfmu and native) and the compiled kernel are built once per test session,
+also under pytest-xdist: the first worker that needs one builds it into a folder all workers share (the
+session's base temporary folder), under a file lock; the others wait for the lock and reuse it.
 
-OAFM solutions fitted during the tests go to a fresh cache folder, never the user's cache.
+OAFM solutions fitted during the tests go to a fresh cache folder of this process, never the user's cache; only
+the kernel's folder in it is shared between the workers (a link to the shared folder).
 """
+import contextlib
+import fcntl
 import os
 import tempfile
+from pathlib import Path
 
 import pytest
 
 os.environ["VIBROFMU_CACHE_DIR"] = tempfile.mkdtemp(prefix="vibrofmu-test-cache-")
 
+from vibrofmu.fmus import kernel
 from vibrofmu.fmus.build import build_closed_loop, build_controller, build_plant
 from vibrofmu.hosts.run import run_fmu
 
 
 @pytest.fixture(scope="session")
-def plant_fmu(tmp_path_factory):
-    return build_plant(tmp_path_factory.mktemp("fmu"))
+def shared_dir(tmp_path_factory) -> Path:
+    """A folder every process of this test run sees: the master's base temporary folder under pytest-xdist (each
+    worker's own is a sub-folder of it), else this session's."""
+    base = tmp_path_factory.getbasetemp()
+    return base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base
+
+
+@contextlib.contextmanager
+def exclusive(lock_file: Path):
+    """Hold an exclusive lock on lock_file (created if missing): one process at a time, across xdist workers."""
+    with open(lock_file, "a") as handle:
+        fcntl.flock(handle, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(handle, fcntl.LOCK_UN)
+
+
+def built_once(shared_dir: Path, name: str, build) -> Path:
+    """build() -> path, called by the first process of the test run that asks for `name`; the others wait for it
+    and get the same path. A build that raised is retried by the next process (its marker is never written)."""
+    done = shared_dir / f"{name}.built"
+    with exclusive(shared_dir / f"{name}.lock"):
+        if done.exists():
+            return Path(done.read_text())
+        path = Path(build())
+        done.write_text(str(path))
+        return path
+
+
+@pytest.fixture(scope="session", autouse=True)
+def shared_kernel_folder(shared_dir):
+    """Points this process's kernel cache (kernel.library_folder(), in the fresh cache folder above) at one folder
+    shared by the workers, so that the kernel is compiled once per test run; kernel.kernel_library() compiles it
+    under that folder's lock when a test first asks for it (nothing is compiled here)."""
+    folder = kernel.library_folder()
+    shared = shared_dir / folder.name
+    shared.mkdir(exist_ok=True)
+    folder.parent.mkdir(parents=True, exist_ok=True)
+    if not folder.exists():
+        folder.symlink_to(shared, target_is_directory=True)
+    return shared
+
+
+def fmu_dir(shared_dir: Path) -> Path:
+    """The folder of the three pythonfmu FMUs (some tests pass it as --fmu-dir)."""
+    folder = shared_dir / "fmu"
+    folder.mkdir(exist_ok=True)
+    return folder
 
 
 @pytest.fixture(scope="session")
-def controller_fmu(plant_fmu):
-    return build_controller(plant_fmu.parent)
+def plant_fmu(shared_dir):
+    return built_once(shared_dir, "plant", lambda: build_plant(fmu_dir(shared_dir)))
 
 
 @pytest.fixture(scope="session")
-def closed_loop_fmu(plant_fmu):
-    return build_closed_loop(plant_fmu.parent)
+def controller_fmu(plant_fmu, shared_dir):
+    return built_once(shared_dir, "controller", lambda: build_controller(plant_fmu.parent))
+
+
+@pytest.fixture(scope="session")
+def closed_loop_fmu(plant_fmu, shared_dir):
+    return built_once(shared_dir, "closed_loop", lambda: build_closed_loop(plant_fmu.parent))
 
 
 @pytest.fixture(scope="session")
@@ -74,14 +133,15 @@ def _starter_fixture(name):
 
 
 def _native_fixture(name):
-    """native_<name>_fmu: the native FMU (fmu_src/native/) built once per session from the pythonfmu one (shared by
-    tests/test_native.py, test_fuzz.py and test_robust_nonfinite.py)."""
+    """native_<name>_fmu: the native FMU (fmu_src/native/) built once per test run from the pythonfmu one (shared
+    by tests/fmus/test_native.py, test_fuzz.py and test_nonfinite_outputs.py)."""
 
     @pytest.fixture(scope="session", name=f"native_{name}_fmu")
-    def native(request, tmp_path_factory):
+    def native(request, shared_dir):
         from vibrofmu.fmus.native import build_native
 
-        return build_native(request.getfixturevalue(f"{name}_fmu"), tmp_path_factory.mktemp(f"native_{name}"))
+        pythonfmu, folder = request.getfixturevalue(f"{name}_fmu"), shared_dir / f"native_{name}"
+        return built_once(shared_dir, f"native_{name}", lambda: build_native(pythonfmu, folder))
 
     return native
 
@@ -93,3 +153,49 @@ native_plant_unzipped, native_controller_unzipped, native_closed_loop_unzipped =
 start_native_plant, start_native_controller, start_native_closed_loop = map(_starter_fixture, NATIVE_NAMES)
 plant_unzipped, controller_unzipped, closed_loop_unzipped = map(_unzipped_fixture, FMU_NAMES)
 start_plant, start_controller, start_closed_loop = map(_starter_fixture, FMU_NAMES)
+
+
+# The tiers. A test that needs a built FMU is marked `fmu`: automatically when it uses an FMU fixture (directly or
+# through other fixtures: item.fixturenames is the closure), by hand (@pytest.mark.fmu) when it asks for one with
+# request.getfixturevalue or builds FMUs itself; a test that asks for an FMU fixture without the mark fails at
+# set-up (FmuTierGuard), so that the fast tier cannot start building one. A test that takes seconds without an
+# FMU (a study, a Dask cluster, a subprocess per case, a compile) is marked `long` by hand. Every other test not
+# marked `slow` is marked `fast`: `pytest -m fast -n 2` is the tier that builds no FMU (under a minute).
+# start_<name> and <name>_unzipped ask for <name>_fmu with getfixturevalue: not in the closure, so listed too.
+FMU_FIXTURES = {f"{prefix}{name}{suffix}" for name in (*FMU_NAMES, *NATIVE_NAMES)
+                for prefix, suffix in (("", "_fmu"), ("", "_unzipped"), ("start_", ""))}
+
+
+def pytest_collection_modifyitems(config, items):
+    for item in items:
+        if FMU_FIXTURES & set(getattr(item, "fixturenames", ())):
+            item.add_marker(pytest.mark.fmu)
+        if not any(item.get_closest_marker(name) for name in ("fmu", "long", "slow")):
+            item.add_marker(pytest.mark.fast)
+
+
+def _unmarked(item, names) -> None:
+    if names and item.get_closest_marker("fmu") is None:
+        raise pytest.UsageError(f"{item.nodeid} asks for {', '.join(sorted(names))} but is not marked fmu: add "
+                                f"@pytest.mark.fmu (tests/conftest.py, the tiers)")
+
+
+class FmuTierGuard:
+    """Fails a test that asks for an FMU fixture without the fmu mark: when the fixture is set up (so that the
+    fast tier builds nothing), and after the test's call, from every fixture it asked for, set up now or cached
+    earlier (so that a full run fails the same way). A plugin, not conftest hooks: those are not called for the
+    set-up of session fixtures."""
+
+    @pytest.hookimpl(tryfirst=True)
+    def pytest_fixture_setup(self, fixturedef, request):
+        item = getattr(request, "_pyfuncitem", None)
+        if item is not None and fixturedef.argname in FMU_FIXTURES:
+            _unmarked(item, {fixturedef.argname})
+
+    @pytest.hookimpl(trylast=True)  # after pytest's own, which runs the test (and stops here if it failed)
+    def pytest_runtest_call(self, item):
+        _unmarked(item, FMU_FIXTURES & set(getattr(getattr(item, "_request", None), "_fixture_defs", ())))
+
+
+def pytest_configure(config):
+    config.pluginmanager.register(FmuTierGuard(), "vibrofmu-fmu-tier-guard")

@@ -1,7 +1,7 @@
 /*
  * series.c -- vibromodel/forces.py's series_g1, series_g1_printed, series_g2, series_g3, coefficients and
  * coefficients_printed (the series (5) and a0..a5 of Eq. 7/8, docs/model.md, Series and polynomial model) in C for the native FMUs, the
- * same operations in the same order so that they give the same bits (tests/test_native.py checks it).
+ * same operations in the same order so that they give the same bits (tests/fmus/test_native.py checks it).
  * The Python module stays the one the pythonfmu FMUs and the harness use; this is its compiled twin for an
  * FMU without Python.
  */

@@ -123,7 +123,7 @@ GAIN_MIN, GAIN_MAX = 1e-6, 1e6
 MAX_ESTIMATE = 1e12
 MAX_INPUT_RATE = 1e8  # speeds and accelerations the controller accepts as inputs
 # The status shim's fast path sets inputs within [-1e6, 1e6] itself and hands any other value to the slave, which
-# applies the rule: every input rule must contain that interval (tests/test_robust_ranges.py checks it).
+# applies the rule: every input rule must contain that interval (tests/fmus/test_parameter_ranges.py checks it).
 FAST_INPUT_LIMIT = 1e6
 
 
@@ -228,7 +228,7 @@ RULES: tuple[Rule, ...] = (
 
 def check_parameters(values: dict) -> None:
     """Raise ParameterError for the first of `values` (name -> value) that breaks its rule, in the table's order.
-    Names without a rule are left alone (an FMU's parameters all have one: tests/test_robust_ranges.py)."""
+    Names without a rule are left alone (an FMU's parameters all have one: tests/fmus/test_parameter_ranges.py)."""
     for rule in RULES:
         if rule.name in values and rule.applies(values):
             reason = rule.refusal(values[rule.name])

@@ -7,7 +7,7 @@
 
 All are `AnalyticSolution`s (sums of damped harmonics), so state(t) gives (x~, x~', x~'').
 
-Persistent excitation (acceptance 4, tests/test_estimates.py): `regressor_gram` measures it along a reference,
+Persistent excitation (acceptance 4, tests/model/test_parameter_estimates.py): `regressor_gram` measures it along a reference,
 G = (1/T) int phi phi^T dt with x1 = x~, x2 = x~'; `excitation_gains` are the adaptation gains lambda_i = G_ii
 (i = 3..11) that make every direction adapt at a comparable rate; `on_reference` starts the plant on x~.
 """
@@ -28,7 +28,7 @@ from .parameters import ParameterError, Scene
 # G is averaged over [GRAM_START, GRAM_START + GRAM_SPAN] (after the free part of x0 has decayed) every GRAM_STEP.
 GRAM_START, GRAM_SPAN, GRAM_STEP = 50.0, 2000.0, 0.05
 
-# Persistent excitation (tests/test_closed_loop.py, README): tones incommensurate with each other and with
+# Persistent excitation (tests/fmus/test_closed_loop.py, README): tones incommensurate with each other and with
 # omega, Omega, 2 Omega, large enough that x1^4 and x1^5 are not negligible.
 MULTITONE_TONES = ((0.2, 0.37), (0.15, 1.53), (0.1, 2.71))  # (amplitude, frequency)
 

@@ -1,6 +1,6 @@
 /*
  * instance_cycles.c -- instantiate/free cycles of one FMU binary from C, measuring the resident set size
- * (issue 15: instances must not leak).  Compiled by tests/test_robust_resources.py; run in the environment
+ * (issue 15: instances must not leak).  Compiled by tests/fmus/test_instance_leaks.py; run in the environment
  * `vibrofmu doctor` works out (libpython preloaded, PYTHONHOME, PYTHONPATH) for pythonfmu FMUs.
  *
  * Usage: instance_cycles LIBRARY RESOURCE_URI GUID CYCLES WARMUP [run]

@@ -1,4 +1,4 @@
-"""Tiny pythonfmu slave exercising the fmi2 status shim (see tests/test_status_shim.py).
+"""Tiny pythonfmu slave exercising the fmi2 status shim (see tests/fmus/test_status_shim.py).
 
 Behaviour selected by the parameter ``p``:
   p < 0   exit_initialization_mode flags an error (fmi_status = 3)

@@ -10,6 +10,7 @@ tests/test_fidelities.py checks that it is current. Regenerate both with `python
 """
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import os
 import subprocess
@@ -72,14 +73,32 @@ def library_folder() -> Path:
     return cache_dir() / f"vibrokernel-{sources_digest()}"
 
 
+@contextlib.contextmanager
+def _exclusive(lock_file: Path):
+    """An exclusive lock on lock_file (fcntl.flock; no lock where there is no fcntl, as on Windows)."""
+    try:
+        import fcntl
+    except ImportError:
+        yield
+        return
+    with open(lock_file, "a") as handle:
+        fcntl.flock(handle, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(handle, fcntl.LOCK_UN)
+
+
 def kernel_library():
     """The kernel library, compiled once per source version into library_folder(), loaded with the layout
     check of vibromodel.compiled; raises RuntimeError if it cannot be loaded."""
     folder = library_folder()
     if not (folder / compiled.LIBRARY_NAME).exists():
         folder.mkdir(parents=True, exist_ok=True)
-        with tempfile.TemporaryDirectory(dir=folder) as tmp:  # concurrent builders: each renames a whole file
-            os.replace(compile_kernel(Path(tmp) / compiled.LIBRARY_NAME), folder / compiled.LIBRARY_NAME)
+        with _exclusive(folder / ".lock"):  # concurrent builders (test workers, commands): the first compiles
+            if not (folder / compiled.LIBRARY_NAME).exists():
+                with tempfile.TemporaryDirectory(dir=folder) as tmp:  # a reader sees no file or a whole one
+                    os.replace(compile_kernel(Path(tmp) / compiled.LIBRARY_NAME), folder / compiled.LIBRARY_NAME)
     library, reason = compiled.load_library([folder])
     if library is None:
         raise RuntimeError(f"the compiled kernel in {folder} cannot be used: {reason}")

@@ -6,7 +6,8 @@
 
 Both run the plant at fidelity 0 (exact contact force, adaptive DOP853, rtol 1e-8) through the same
 settling loop (sweep.settle_loop: the complex first harmonic settled over windows of forcing periods), so
-the FMU's C fast path and the core step the same kernel and give the same bits (tests/test_study_engines.py).
+the FMU's C fast path and the core step the same kernel and give the same bits
+(tests/studies/test_study.py::test_engines_give_the_same_bits).
 
 An engine is made once per worker process (`engine_for`) and kept: the FMU is unpacked once per process,
 the kernel compiled/loaded once per process.

@@ -62,7 +62,7 @@ class Spec:
         return hashlib.sha256(json.dumps(content, sort_keys=True).encode()).hexdigest()[:16]
 
 
-# mu = 0.002: the bistable scene of the stability study (tests/test_stability.py, docs/model.md, Averaging and slow flow)
+# mu = 0.002: the bistable scene of the stability study (tests/studies/test_stability.py, docs/model.md, Averaging and slow flow)
 DEFAULTS = {
     "response-map": dict(scene={"mu": 0.002},
                          # omega = omega_e + offset; the slow flow's cusp lies near Delta = 0.00055 and its

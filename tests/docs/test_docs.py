@@ -1,0 +1,88 @@
+"""README.md and docs/*.md: every link stays inside the repository and resolves (file, and anchor if any); the
+generated blocks (<!-- report:NAME --> markers) are well-formed and filled; the deterministic ones equal a fresh
+`vibrofmu report --check` run."""
+import re
+from pathlib import Path
+
+import pytest
+
+from vibrofmu import report
+from vibrofmu.cli import main
+
+ROOT = Path(__file__).resolve().parents[2]
+DOCS = report.documents(ROOT)
+LINK = re.compile(r"(?<!!)\[[^\]]*\]\(([^)\s]+)\)")
+PLACEHOLDER = "(run `vibrofmu report"
+
+
+def slug(heading: str) -> str:
+    """GitHub's anchor of a heading: lower case, punctuation dropped, spaces to hyphens."""
+    text = re.sub(r"[`*_]", "", heading.strip().lower())
+    text = re.sub(r"[^\w\- ]", "", text)
+    return text.replace(" ", "-")
+
+
+def anchors(path: Path) -> set[str]:
+    text = re.sub(r"```.*?```", "", path.read_text(), flags=re.S)
+    return {slug(m.group(1)) for m in re.finditer(r"^#{1,6}\s+(.*)$", text, re.M)}
+
+
+def links():
+    for doc in DOCS:
+        text = re.sub(r"```.*?```", "", doc.read_text(), flags=re.S)
+        for target in LINK.findall(text):
+            yield doc, target
+
+
+def test_documents_exist():
+    names = {d.relative_to(ROOT).as_posix() for d in DOCS}
+    assert {"README.md", "docs/model.md", "docs/numerics.md", "docs/fmu-reference.md",
+            "docs/architecture.md"} <= names
+
+
+def test_slug_matches_github():
+    assert slug("The plant (`HertzEAOscillator.fmu`)") == "the-plant-hertzeaoscillatorfmu"
+    assert slug("Fidelity 4: the OAFM analytic solution") == "fidelity-4-the-oafm-analytic-solution"
+
+
+@pytest.mark.parametrize("doc,target", list(links()), ids=lambda v: str(v)[-40:])
+def test_link_resolves_inside_the_repository(doc, target):
+    assert not re.match(r"^[a-z][a-z0-9+.-]*:", target, re.I), f"{doc.name}: link leaves the repository: {target}"
+    path, _, anchor = target.partition("#")
+    file = (doc.parent / path).resolve() if path else doc
+    assert file.is_file(), f"{doc.name}: no file {path}"
+    assert ROOT in file.parents, f"{doc.name}: {path} is outside the repository"
+    if anchor:
+        assert file.suffix == ".md" and anchor in anchors(file), f"{doc.name}: no heading #{anchor} in {file.name}"
+
+
+def test_no_reference_to_material_outside_the_repository():
+    for doc in DOCS:
+        text = doc.read_text()
+        for word in ("../shared", "ERRATA", "PAPER.md", "DESIGN.md", "issue 6", "issue 1"):
+            assert word not in text, f"{doc.name} mentions {word}"
+
+
+def test_report_blocks_are_well_formed_and_filled():
+    seen = {}
+    for doc in DOCS:
+        for name, body in report.parse_blocks(doc.read_text(), doc.name).items():
+            seen[name] = doc.name
+            if name not in report.FROM_SUMMARIES:  # filled from bench/oafm/stability summaries (`report --from`)
+                assert PLACEHOLDER not in body and body.strip(), f"{doc.name}: block {name} not generated"
+    assert set(report.DETERMINISTIC) | {"machine"} <= set(seen)
+
+
+def test_parse_blocks_rejects_malformed_markers():
+    with pytest.raises(report.ReportError):
+        report.parse_blocks("<!-- report:accuracy -->\nx\n")
+    with pytest.raises(report.ReportError):
+        report.parse_blocks("<!-- report:nonsense -->\nx\n<!-- /report:nonsense -->")
+    body = "<!-- report:ssp -->\nold\n<!-- /report:ssp -->"
+    assert report.replace_blocks(body, {"ssp": "new"}) == "<!-- report:ssp -->\nnew\n<!-- /report:ssp -->"
+
+
+def test_report_check_matches_a_fresh_run(plant_fmu, controller_fmu, closed_loop_fmu, capsys):
+    """The accuracy and SSP numbers are deterministic on one machine: a fresh run must print the same text."""
+    assert main(["report", "--check", "--fmu-dir", str(plant_fmu.parent), "--root", str(ROOT)]) == 0, \
+        capsys.readouterr().err

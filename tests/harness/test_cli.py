@@ -1,0 +1,197 @@
+"""The vibrofmu command. End to end: simulate writes CSV, JSON and PNG; demo prints the table.
+
+User mistakes on the command line: each ends with one line `error: ...` on stderr, exit code 2, no traceback,
+before anything long runs. The commands run as a user runs them, in a subprocess, from an empty folder (so
+that no ./build is found and nothing is built). Also: `import vibrofmu.cli` imports no heavy module, and every
+option has help text that states its default."""
+import argparse
+import json
+import subprocess
+import sys
+import zipfile
+
+import numpy as np
+import pytest
+
+from vibrofmu.cli import commands, main, make_parser
+from vibrofmu.commands.closed_loop import study_cell as _study_cell
+from vibrofmu.commands.common import HelpFormatter
+
+
+def test_simulate_with_compare_writes_all_results(tmp_path, plant_fmu, capsys):
+    from vibrofmu.analyses import simulate
+
+    simulate._NOTED.clear()  # the note is printed once per process: forget earlier tests' runs
+    out = tmp_path / "run"
+    code = main(["simulate", "--fmu", str(plant_fmu), "--fidelity", "polynomial", "--solver", "rk4",
+                 "--max-step", "0.05", "--set", "Delta=0.001", "--stop-time", "20", "--output-interval", "0.1",
+                 "--compare", "--out", str(out)])
+    assert code == 0
+    err = capsys.readouterr().err
+    # the paper's set violates beta^2 = 8 alpha gamma: an explained note, not a warning
+    assert "note: beta^2" in err and "no pair of bias and AC voltages" in err and "warning: beta" not in err
+    header = (out / "result.csv").read_text().splitlines()[0].split(",")
+    assert header == ["time", "x", "v", "a", "F_contact", "F_electrostatic", "in_contact"]
+    data = np.loadtxt(out / "result.csv", delimiter=",", skiprows=1)
+    # the last time is the FMU's clock t + h = 19.9 + 0.1: within one rounding of 20
+    assert data.shape == (201, 7) and data[-1, 0] == pytest.approx(20.0, rel=1e-15)
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["notes"] and summary["notes"][0].startswith("beta^2")
+    assert summary["parameters"]["Delta"] == 0.001
+    assert summary["settings"]["fidelity"] == 1 and summary["settings"]["solver"] == 1
+    assert summary["completed"] and summary["wall_time_s"] > 0
+    # RK4 at h = 0.05 on the polynomial model: ~1e-8 (test_accuracy measures the order)
+    assert 0 < summary["error"]["max_abs_error_x"] < 1e-6
+    assert (out / "x.png").stat().st_size > 10_000
+
+
+def test_simulate_reports_an_early_stop(tmp_path, plant_fmu, capsys):
+    code = main(["simulate", "--fmu", str(plant_fmu), "--set", "x_start=0.29", "--set", "R=0.2",
+                 "--stop-time", "5", "--out", str(tmp_path / "pull")])
+    assert code == 1
+    err = capsys.readouterr().err
+    assert "stopped at tau = " in err and "pull-in" in err
+    summary = json.loads((tmp_path / "pull" / "summary.json").read_text())
+    assert not summary["completed"] and "pull-in" in summary["stop_reason"]
+
+
+def test_the_beta_note_is_printed_once_per_process(tmp_path, plant_fmu, capsys):
+    from vibrofmu.analyses import simulate
+
+    simulate._NOTED.clear()
+    for run in ("a", "b"):
+        assert main(["simulate", "--fmu", str(plant_fmu), "--stop-time", "1", "--out", str(tmp_path / run)]) == 0
+    assert capsys.readouterr().err.count("note: beta^2") == 1
+
+
+def run_cli(args, cwd):
+    return subprocess.run([sys.executable, "-m", "vibrofmu.cli", *args], cwd=cwd, capture_output=True, text=True,
+                          timeout=120)
+
+
+@pytest.fixture(scope="module")
+def not_plant(tmp_path_factory):
+    """A zip with a modelDescription.xml of another model: an FMU, but not the plant's."""
+    path = tmp_path_factory.mktemp("other") / "Other.fmu"
+    with zipfile.ZipFile(path, "w") as archive:
+        archive.writestr("modelDescription.xml", '<fmiModelDescription fmiVersion="2.0" modelName="Other"/>')
+    return path
+
+
+# (command line, a fragment the one line must contain); {readme} and {other} are filled in below.
+# The mistakes the issue names run as a user runs them, in a subprocess (about 1 s each: Python starts and
+# imports the command's modules); the others run in this process through main(), which shows the same line
+# and code (a traceback there would be an exception failing the test).
+ISSUE_MISTAKES = [
+    (["simulate", "--fmu", "/nonexist.fmu", "--out", "o"], "no FMU at /nonexist.fmu"),
+    (["doctor", "/nonexist.fmu"], "no FMU at /nonexist.fmu"),
+    (["simulate", "--fmu", "{readme}", "--out", "o"], "is not an FMU"),
+    (["simulate", "--out", "/etc/hostname/sub"], "cannot create the output folder /etc/hostname/sub"),
+    (["stability", "--sweep-points", "0", "--out", "o"], "--sweep-points: must be an integer >= 1, got 0"),
+    (["bench", "--repeats", "0", "--out", "o"], "--repeats: must be an integer >= 1, got 0"),
+    (["closed-loop", "--H", "-1", "--out", "o"], "--H: must be a finite number > 0, got -1"),
+    (["closed-loop", "--stop-time", "0", "--out", "o"], "--stop-time: must be a finite number > 0, got 0"),
+    (["simulate", "--set", "R", "--out", "o"], "--set R: expected NAME=VALUE"),
+]
+MORE_MISTAKES = [
+    (["doctor", "."], "is not a file"),
+    (["simulate", "--fmu", "{other}", "--out", "o"], "needs HertzEAOscillator"),
+    (["demo", "--out", "/etc/hostname/sub"], "cannot create the output folder"),
+    (["build", "--out-dir", "/etc/hostname"], "a file of that name exists"),
+    (["stability", "--omega-range", "1.1", "0.9", "11", "--out", "o"], "--omega-range"),
+    (["stability", "--omega-range", "0.9", "1.1", "2.5", "--out", "o"], "integer N >= 3"),
+    (["closed-loop", "--fmu-dir", "{readme}", "--out", "o"], "is not a folder"),
+    (["closed-loop", "--mode", "cosim", "--scene", "/nonexist.toml", "--out", "o"], "no scene file at /nonexist.toml"),
+    (["simulate", "--set", "R=abc", "--out", "o"], "parameter R = 'abc': not a number"),
+    (["simulate", "--set", "Q=1", "--out", "o"], "unknown parameter"),
+    (["simulate", "--set", "R=-1", "--out", "o"], "parameter R = -1.0"),
+    (["simulate", "--rtol", "0", "--out", "o"], "parameter rtol = 0.0"),
+    (["simulate", "--stop-time", "nan", "--out", "o"], "parameter stop-time = nan"),
+    (["simulate", "--stop-time", "inf", "--out", "o"], "parameter stop-time = inf"),
+    (["simulate", "--stop-time", "0", "--out", "o"], "parameter stop-time = 0.0"),
+    (["simulate", "--max-step", "-0.1", "--out", "o"], "--max-step: must be a finite number >= 0"),
+    (["simulate", "--output-interval", "5", "--stop-time", "1", "--out", "o"], "longer than --stop-time"),
+    (["simulate", "--fidelity", "bogus", "--out", "o"], "invalid choice: 'bogus'"),
+    (["simulate"], "required: --out"),
+    (["stability", "--set", "omega=0", "--out", "o"], "needs a forcing frequency omega > 0"),
+    (["stability", "--set", "R=0", "--out", "o"], "parameter R = 0.0"),
+    (["oafm", "--set", "R=0", "--out", "o"], "parameter R = 0.0"),
+    (["closed-loop", "--H", "300", "--out", "o"], "--H 300 is longer than the stop time 200"),
+    (["oafm", "--order", "0", "--out", "o"], "--order: must be an integer >= 1"),
+    (["oafm", "--order", "x", "--out", "o"], "'x' is not an integer"),
+    (["oafm", "--nodes", "0", "--out", "o"], "--nodes: must be an integer >= 1"),
+    (["oafm", "--panel", "-1", "--out", "o"], "--panel: must be a finite number > 0"),
+    (["nosuch"], "invalid choice: 'nosuch'"),
+    ([], "required: COMMAND"),
+]
+
+
+def _filled(argv, fragment, tmp_path, other):
+    readme = tmp_path / "README.md"
+    readme.write_text("# not an FMU\n")
+    return [arg.format(readme=readme, other=other) for arg in argv], fragment.format(readme=readme, other=other)
+
+
+def _assert_one_line(code, stderr, fragment, folder):
+    lines = stderr.splitlines()
+    assert code == 2, stderr
+    assert len(lines) == 1 and lines[0].startswith("error: "), stderr
+    assert fragment in lines[0] and "Traceback" not in stderr
+    assert not (folder / "build").exists() and not (folder / "o").exists()  # nothing built or written
+
+
+@pytest.mark.long  # one vibrofmu subprocess per case
+@pytest.mark.parametrize("argv, fragment", ISSUE_MISTAKES, ids=[" ".join(a) for a, _ in ISSUE_MISTAKES])
+def test_a_mistake_is_one_line_and_exit_2(argv, fragment, tmp_path, not_plant):
+    argv, fragment = _filled(argv, fragment, tmp_path, not_plant)
+    proc = run_cli(argv, tmp_path)
+    _assert_one_line(proc.returncode, proc.stderr, fragment, tmp_path)
+
+
+@pytest.mark.parametrize("argv, fragment", MORE_MISTAKES, ids=[" ".join(a) or "(none)" for a, _ in MORE_MISTAKES])
+def test_more_mistakes_in_process(argv, fragment, tmp_path, not_plant, monkeypatch, capsys):
+    argv, fragment = _filled(argv, fragment, tmp_path, not_plant)
+    monkeypatch.chdir(tmp_path)
+    code = main(argv)
+    _assert_one_line(code, capsys.readouterr().err, fragment, tmp_path)
+
+
+def test_importing_the_cli_imports_no_heavy_module():
+    """`vibrofmu --help` must not pay for scipy, matplotlib, FMPy or numpy (each command imports its own)."""
+    heavy = ("scipy", "matplotlib", "fmpy", "numpy")
+    code = f"import sys, vibrofmu.cli; print(','.join(m for m in {heavy!r} if m in sys.modules))"
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert proc.stdout.strip() == ""
+
+
+def test_top_level_help_lists_every_command(tmp_path):
+    proc = run_cli(["--help"], tmp_path)
+    assert proc.returncode == 0
+    assert all(command.name in proc.stdout for command in commands())
+
+
+def _options():
+    parser = make_parser()
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    for name, command in sub.choices.items():
+        for action in command._actions:
+            if action.option_strings and action.dest != "help":
+                yield name, action
+
+
+@pytest.mark.parametrize("command, action", list(_options()),
+                         ids=[f"{name} {a.option_strings[0]}" for name, a in _options()])
+def test_every_option_has_help_with_its_default(command, action):
+    text = HelpFormatter("vibrofmu")._get_help_string(action)
+    assert text.strip()
+    # a flag is off by default and a required option has none; every other option names its default
+    assert isinstance(action, argparse._StoreTrueAction) or action.required or "default" in text
+
+
+def test_the_convergence_table_shows_a_stopped_run():
+    """A Jacobi run of the study that stops at pull-in has no error to print (None): the cell says so instead of
+    failing on None's format (the crash of `closed-loop --mode cosim`)."""
+    stopped = {"H": 0.5, "max_abs_error_x": None, "completed": False, "stop_reason": "plant: pull-in at tau = 3"}
+    assert _study_cell(stopped) == "H=0.5: stopped (plant: pull-in at tau = 3)"
+    done = {"H": 0.2, "max_abs_error_x": 1.5e-3, "completed": True, "stop_reason": None, "order": 1.02}
+    assert _study_cell(done) == "H=0.2: 1.50e-03 (order 1.02)"
