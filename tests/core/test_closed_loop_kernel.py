@@ -5,6 +5,7 @@ import math
 
 import numpy as np
 import pytest
+from fmpy.fmi1 import FMICallException
 
 from vibrofmu.fmus.kernel import kernel_library
 from vibrofmu.hosts.run import FmuInstance, run_fmu
@@ -113,7 +114,7 @@ def test_refused_step_and_pull_in_on_the_fast_path(closed_loop_fmu):
         fmu.exitInitializationMode()
         fmu.doStep(0.0, H)
         assert instance.fast_path_steps() == 1
-        with pytest.raises(Exception):
+        with pytest.raises(FMICallException):
             fmu.doStep(5.0, H)
         assert instance.fast_path_steps() == 1
         assert any("currentCommunicationPoint" in m for m in instance.log.errors())

@@ -6,7 +6,6 @@ Before: the compiled closed loop and controller kept their previous outputs and 
 """
 import math
 
-import numpy as np
 import pytest
 from fmpy.fmi1 import FMICallException
 from message_text import canonical_tree
@@ -51,7 +50,7 @@ def test_compiled_closed_loop_names_the_non_finite_output_as_the_python_loop(sol
     with pytest.raises(NonFiniteOutput) as raised:
         compiled.do_step(0.3, 0.1)
     assert (raised.value.name, repr(raised.value.value)) == (bad, repr(float(expected[bad])))
-    assert str(raised.value).startswith(f"output V = inf is not finite")
+    assert str(raised.value).startswith("output V = inf is not finite")
     assert _flat(compiled._outputs()) == before
 
 

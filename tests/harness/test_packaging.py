@@ -106,7 +106,10 @@ def test_wheel_installs_and_builds_anywhere(tmp_path):
     and `vibrofmu demo` (which builds its plant FMU into ./build). $VIBROFMU_WHEEL_PYTHON picks the
     interpreter of the venv (default: this one), so CI runs the same test for 3.12 and 3.13."""
     python = os.environ.get("VIBROFMU_WHEEL_PYTHON", sys.executable)
-    run = lambda cmd, cwd=tmp_path: subprocess.run(cmd, cwd=cwd, capture_output=True, text=True, timeout=1800)
+
+    def run(cmd, cwd=tmp_path):
+        return subprocess.run(cmd, cwd=cwd, capture_output=True, text=True, timeout=1800)
+
     wheel = build_wheel(tmp_path)
     assert wheel.returncode == 0, wheel.stderr
     venv = tmp_path / "venv"

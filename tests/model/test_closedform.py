@@ -105,7 +105,7 @@ def test_merged_terms_are_the_same_function():
 
 def test_operator_must_be_oscillatory():
     with pytest.raises(ValueError, match="not underdamped"):
-        LinearOperator(3.0, 1.0).q
+        _ = LinearOperator(3.0, 1.0).q
 
 
 def test_general_closed_form_sympy():

@@ -39,7 +39,7 @@ def test_the_halting_reproducers_complete_in_both_kernels(name, library):
     scene, rtol, interval = REPRODUCERS[name]
     runs = [run_plant(make(scene, Settings(rtol=rtol)), 40.0, interval)
             for make in (Plant, lambda s, st: CompiledPlant(s, st, library))]
-    for times, x, stop in runs:
+    for times, _x, stop in runs:
         # default rel 1e-6: times[-1] is the last grid point (n x interval, rounding ~1e-14); the check is that the
         # run reached tau = 40 and did not halt
         assert stop is None and times[-1] == pytest.approx(40.0)

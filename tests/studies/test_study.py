@@ -17,7 +17,6 @@ from pathlib import Path
 import pyarrow.parquet as pq
 import pytest
 
-from vibromodel.parameters import Scene
 from vibrofmu.cli import main
 from vibrofmu.study.cases import make_cases, run_case
 from vibrofmu.study.engines import CoreEngine, FmuEngine

@@ -1,7 +1,6 @@
 """Issue 16: the averaged predictions the studies are compared with, checked against independent evidence."""
 import math
 
-import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 

@@ -1,0 +1,36 @@
+"""The structure's guards (docs/architecture.md): the import contracts of pyproject.toml hold (the model below the
+harness and free of host libraries, the harness's layers, no import cycle at any depth, imports inside functions
+included), and the pythonfmu slaves import only the model, their support modules and their run-time libraries.
+
+.ci/run runs `lint-imports` too; here the same contracts run with the test suite, so that a change that breaks
+one fails the README's test command as well."""
+import ast
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+SLAVES = sorted((ROOT / "fmu_src").glob("*.py"))
+# what a slave may import: the model, what the slaves share, pythonfmu, numpy, and Python's standard library
+SLAVE_IMPORTS = {"vibromodel", "slave_support", "fast_path", "pythonfmu", "numpy", *sys.stdlib_module_names}
+
+
+def test_the_import_contracts_hold():
+    lint = Path(sys.executable).with_name("lint-imports")
+    proc = subprocess.run([str(lint) if lint.exists() else "lint-imports", "--no-cache"], cwd=ROOT,
+                          capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-2000:]
+
+
+@pytest.mark.parametrize("slave", SLAVES, ids=[path.name for path in SLAVES])
+def test_the_slaves_import_only_the_model_and_their_run_time(slave):
+    imported = set()
+    for node in ast.walk(ast.parse(slave.read_text())):
+        if isinstance(node, ast.Import):
+            imported.update(alias.name.split(".")[0] for alias in node.names)
+        elif isinstance(node, ast.ImportFrom) and node.level == 0:
+            imported.add(node.module.split(".")[0])
+    assert SLAVES and imported, slave
+    assert imported <= SLAVE_IMPORTS, f"{slave.name} imports {sorted(imported - SLAVE_IMPORTS)}"
