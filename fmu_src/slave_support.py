@@ -31,7 +31,7 @@ ERROR = "error"  # after a call ended in fmi2Error (kept by the C layer; a Pytho
 # The FMI 2.0 co-simulation state machine, ONE table: the states in which each call is allowed (cf. the Modelica
 # Reference-FMUs' ASSERT_STATE masks). Getters and setters are allowed in every phase at this level; the rules per
 # variable follow in _get_values and _set_refusal. The slaves read it here (_allowed); the C layer reads it as
-# fmu_src/fmi/fmi2_calls.h, generated from it (python3 -m vibrofmu.fmus.fmi_calls; tests/test_c_toolchain.py checks
+# fmu_src/fmi/fmi2_calls.h, generated from it (python3 -m vibrofmu.fmus.fmi_calls; tests/fmus/test_c_toolchain.py checks
 # that the header is current). A Python-only FMU (built without a C compiler) has only this Python side.
 _ANYWHERE = (*PHASES, ERROR)
 CALLS = {

@@ -63,7 +63,7 @@ typedef struct {
    one C derivation of them, used by the native FMUs (native/controller_setup.c) and by the pythonfmu FMUs'
    compiled models (vibromodel/compiled_loop.fill_controller). poly = a0..a5 (forces.coefficients, corrected),
    g3 = series G3 (forces.series_g3), law 0/1/2 (control.Law), lambdas = lambda1..lambda11 (control.Gains). The
-   same operations as control.Controller, so the same bits (tests/test_controller_constants.py). */
+   same operations as control.Controller, so the same bits (tests/core/test_controller_constants.py). */
 void vc_constants(VcController *c, double mu, double Delta, double omega, double Omega, double beta, double gamma,
                   const double *poly, const double *g3, int64_t law, const double *lambdas, double k_damping,
                   double time_tolerance);

@@ -84,9 +84,35 @@ def raise_from(code: int) -> None:
         raise RuntimeError(f"the compiled controller returned code {code} (a kernel bug)")
 
 
-class CompiledEstimator:
+class _FastPath:
+    """What the FMU's C fast path reads and writes of a compiled controller or closed loop: the kernel structure
+    `_struct` at `address`, its `enabled` flag (the kernel clears it at an error), and the address of the kernel's
+    doStep function named STEP_FUNCTION (f(struct *, t, h))."""
+
+    STEP_FUNCTION = ""
+
+    @property
+    def enabled_address(self) -> int:
+        return self.address + type(self._struct).enabled.offset
+
+    @property
+    def step_function(self) -> int:
+        return ctypes.cast(getattr(self._library, self.STEP_FUNCTION), ctypes.c_void_p).value
+
+    @property
+    def fast_path_enabled(self) -> bool:
+        return bool(self._struct.enabled)
+
+    @fast_path_enabled.setter
+    def fast_path_enabled(self, value: bool) -> None:
+        self._struct.enabled = bool(value)
+
+
+class CompiledEstimator(_FastPath):
     """control.HeldInputEstimator on the kernel `library` (declared by `declare`), plus the controller FMU's
     inputs and outputs. Raises ParameterError for bad arguments."""
+
+    STEP_FUNCTION = "vc_do_step"  # vc_do_step(VcController *, t, h)
 
     def __init__(self, scene: Scene, gains: Gains, law: int, estimates: tuple[float, ...], library,
                  t0: float = 0.0):
@@ -95,7 +121,7 @@ class CompiledEstimator:
         validate_estimates(estimates)
         self.controller = Controller(scene, gains, law)
         self._library = library
-        self._c = VcController()
+        self._c = self._struct = VcController()
         self.address = ctypes.addressof(self._c)
         fill_controller(self._c, self.controller, scene, library)
         self._c.t = t0
@@ -146,26 +172,9 @@ class CompiledEstimator:
         return self.address + getattr(VcController, field).offset + index * ctypes.sizeof(_double)
 
     @property
-    def enabled_address(self) -> int:
-        return self.address + VcController.enabled.offset
-
-    @property
-    def step_function(self) -> int:
-        """Address of vc_do_step(VcController *, t, h)."""
-        return ctypes.cast(self._library.vc_do_step, ctypes.c_void_p).value
-
-    @property
     def inputs_function(self) -> int:
         """Address of vc_publish(VcController *): the outputs after the inputs changed (fmi2SetReal in C)."""
         return ctypes.cast(self._library.vc_publish, ctypes.c_void_p).value
-
-    @property
-    def fast_path_enabled(self) -> bool:
-        return bool(self._c.enabled)
-
-    @fast_path_enabled.setter
-    def fast_path_enabled(self, value: bool) -> None:
-        self._c.enabled = bool(value)
 
     # -- snapshots -----------------------------------------------------------------------------------------
     def snapshot(self) -> dict:
@@ -234,9 +243,11 @@ def declare_loop(library) -> str | None:
     return None
 
 
-class CompiledClosedLoop:
+class CompiledClosedLoop(_FastPath):
     """closedloop.ClosedLoop on the kernel: built from a ClosedLoop that did the set-up (validation, warnings,
     model, controller, reference); `problem` says why it cannot run (then use the Python loop)."""
+
+    STEP_FUNCTION = "vl_do_step"  # vl_do_step(VlLoop *, t, h)
 
     def __init__(self, python, library):
         from .compiled import ATOL_PER_RTOL, _model_fields
@@ -252,7 +263,7 @@ class CompiledClosedLoop:
             self.problem = f"the reference's sums cannot be evaluated by recurrence: {self._program.reason}"
             return
         self._structure = VlLoop
-        self._l = self._structure()
+        self._l = self._struct = self._structure()
         self.address = ctypes.addressof(self._l)
         l, settings = self._l, python.settings
         c_model = entry(settings.fidelity).c_model  # the plant level's compiled model
@@ -325,23 +336,6 @@ class CompiledClosedLoop:
 
     def variable_address(self, name: str) -> int:
         return self.address + self._structure.out.offset + LOOP_OUTPUTS.index(name) * ctypes.sizeof(_double)
-
-    @property
-    def enabled_address(self) -> int:
-        return self.address + self._structure.enabled.offset
-
-    @property
-    def step_function(self) -> int:
-        """Address of vl_do_step(VlLoop *, t, h)."""
-        return ctypes.cast(self._library.vl_do_step, ctypes.c_void_p).value
-
-    @property
-    def fast_path_enabled(self) -> bool:
-        return bool(self._l.enabled)
-
-    @fast_path_enabled.setter
-    def fast_path_enabled(self, value: bool) -> None:
-        self._l.enabled = bool(value)
 
     # -- snapshots: the structure's bytes up to the reference (which holds pointers and is rebuilt) -------------
     def snapshot(self) -> dict:

@@ -1,5 +1,5 @@
 """The compiled core's constants and structures as ctypes: GENERATED from fmu_src/core/*.h by
-harness/vibrofmu/fmus/layouts.py (python3 -m vibrofmu.fmus.layouts); do not edit. tests/test_core_layouts.py
+harness/vibrofmu/fmus/layouts.py (python3 -m vibrofmu.fmus.layouts); do not edit. tests/core/test_core_layouts.py
 checks that this module is current and that every size and offset is the C compiler's."""
 import ctypes
 
@@ -84,10 +84,7 @@ class Dop853(ctypes.Structure):
     _fields_ = [
         ("n", ctypes.c_int64),
         ("n_events", ctypes.c_int64),
-        ("rtol", ctypes.c_double),
-        ("atol", ctypes.c_double),
-        ("max_step", ctypes.c_double),
-        ("step_budget", ctypes.c_double),
+        *[(name, ctypes.c_double) for name in ("rtol", "atol", "max_step", "step_budget")],
         ("events", DopEvent * DOP_MAX_EVENTS),
         ("t", ctypes.c_double),
         ("h", ctypes.c_double),
@@ -100,10 +97,7 @@ class Dop853(ctypes.Structure):
         ("dense", (ctypes.c_double * DOP_MAX_DIM) * DOP_DENSE),
         ("stop_t", ctypes.c_double),
         ("stop_y", ctypes.c_double * DOP_MAX_DIM),
-        ("has_old", ctypes.c_int64),
-        ("n_stages", ctypes.c_int64),
-        ("dense_ready", ctypes.c_int64),
-        ("stopped", ctypes.c_int64),
+        *[(name, ctypes.c_int64) for name in ("has_old", "n_stages", "dense_ready", "stopped")],
         ("side", ctypes.c_int64 * DOP_MAX_EVENTS),
         ("nfev", ctypes.c_int64),
         ("n_steps", ctypes.c_int64),
@@ -137,33 +131,18 @@ class Rk4(ctypes.Structure):
 class VkModel(ctypes.Structure):
     """model.h's VkModel."""
     _fields_ = [
-        ("mu", ctypes.c_double),
-        ("Delta", ctypes.c_double),
-        ("omega", ctypes.c_double),
-        ("alpha", ctypes.c_double),
-        ("beta", ctypes.c_double),
-        ("gamma", ctypes.c_double),
-        ("Omega", ctypes.c_double),
-        ("R", ctypes.c_double),
-        ("poly", ctypes.c_double * 6),
-        ("g1", ctypes.c_double * 6),
-        ("g2", ctypes.c_double * 6),
-        ("g3", ctypes.c_double * 6),
+        *[(name, ctypes.c_double) for name in ("mu", "Delta", "omega", "alpha", "beta", "gamma", "Omega", "R")],
+        *[(name, ctypes.c_double * 6) for name in ("poly", "g1", "g2", "g3")],
         ("pull_in_c", ctypes.c_double),
         ("pull_in_gap", ctypes.c_double),
-        ("polynomial", ctypes.c_int64),
-        ("load_forcing", ctypes.c_int64),
-        ("electrostatics", ctypes.c_int64),
-        ("ac", ctypes.c_int64),
+        *[(name, ctypes.c_int64) for name in ("polynomial", "load_forcing", "electrostatics", "ac")],
     ]
 
 
 class VmDrive(ctypes.Structure):
     """model.h's VmDrive."""
     _fields_ = [
-        ("cos_omega_t", ctypes.c_double),
-        ("sin_Omega_t", ctypes.c_double),
-        ("cos_2Omega_t", ctypes.c_double),
+        *[(name, ctypes.c_double) for name in ("cos_omega_t", "sin_Omega_t", "cos_2Omega_t")],
     ]
 
 
@@ -176,16 +155,10 @@ class VkPlant(ctypes.Structure):
         ("solver", ctypes.c_int64),
         ("dop", Dop853),
         ("rk4", Rk4),
-        ("U", ctypes.c_double),
-        ("plant_t", ctypes.c_double),
-        ("U_input", ctypes.c_double),
+        *[(name, ctypes.c_double) for name in ("U", "plant_t", "U_input")],
         ("out", ctypes.c_double * 5),
-        ("in_contact", ctypes.c_int64),
-        ("enabled", ctypes.c_int64),
-        ("error", ctypes.c_int64),
-        ("error_t", ctypes.c_double),
-        ("error_x", ctypes.c_double),
-        ("error_v", ctypes.c_double),
+        *[(name, ctypes.c_int64) for name in ("in_contact", "enabled", "error")],
+        *[(name, ctypes.c_double) for name in ("error_t", "error_x", "error_v")],
         ("message", ctypes.c_char * VK_MESSAGE),
     ]
 
@@ -193,18 +166,9 @@ class VkPlant(ctypes.Structure):
 class SfTable(ctypes.Structure):
     """slowflow_eval.h's SfTable."""
     _fields_ = [
-        ("t0", ctypes.c_double),
-        ("spacing", ctypes.c_double),
-        ("omega", ctypes.c_double),
-        ("x_e", ctypes.c_double),
-        ("harmonic", ctypes.c_double),
-        ("mean_shift", ctypes.c_double),
-        ("Omega", ctypes.c_double),
-        ("psi_sin", ctypes.c_double),
-        ("psi_cos", ctypes.c_double),
-        ("ac", ctypes.c_int64),
-        ("first", ctypes.c_int64),
-        ("n_cells", ctypes.c_int64),
+        *[(name, ctypes.c_double) for name in ("t0", "spacing", "omega", "x_e", "harmonic", "mean_shift", "Omega",
+    "psi_sin", "psi_cos")],
+        *[(name, ctypes.c_int64) for name in ("ac", "first", "n_cells")],
         ("t_end", ctypes.c_double),
         ("cells", ctypes.POINTER(ctypes.c_double)),
     ]
@@ -218,22 +182,14 @@ class OePiece(ctypes.Structure):
         ("n_freq_bases", ctypes.c_int64),
         ("decay_base", ctypes.c_double * OE_BASES),
         ("freq_base", ctypes.c_double * OE_BASES),
-        ("decay_top", ctypes.c_int64 * OE_BASES),
-        ("decay_bottom", ctypes.c_int64 * OE_BASES),
-        ("decay_zero", ctypes.c_int64 * OE_BASES),
-        ("freq_top", ctypes.c_int64 * OE_BASES),
-        ("freq_zero", ctypes.c_int64 * OE_BASES),
-        ("n_decay_table", ctypes.c_int64),
-        ("n_decay_rows", ctypes.c_int64),
-        ("n_freq_table", ctypes.c_int64),
-        ("n_freq_rows", ctypes.c_int64),
+        *[(name, ctypes.c_int64 * OE_BASES) for name in ("decay_top", "decay_bottom", "decay_zero", "freq_top",
+    "freq_zero")],
+        *[(name, ctypes.c_int64) for name in ("n_decay_table", "n_decay_rows", "n_freq_table", "n_freq_rows")],
         ("decay_chain", ctypes.POINTER(ctypes.c_int64)),
         ("freq_chain", ctypes.POINTER(ctypes.c_int64)),
         ("n_groups", ctypes.c_int64),
-        ("group_decay", ctypes.POINTER(ctypes.c_int64)),
-        ("group_secular", ctypes.POINTER(ctypes.c_int64)),
-        ("group_end", ctypes.POINTER(ctypes.c_int64)),
-        ("term_freq", ctypes.POINTER(ctypes.c_int64)),
+        *[(name, ctypes.POINTER(ctypes.c_int64)) for name in ("group_decay", "group_secular", "group_end",
+    "term_freq")],
         ("term_coefficient", ctypes.POINTER(ctypes.c_double)),
     ]
 
@@ -243,15 +199,8 @@ class OeCache(ctypes.Structure):
     _fields_ = [
         ("piece", ctypes.c_int64),
         ("count", ctypes.c_int64),
-        ("s", ctypes.c_double),
-        ("rotation_h", ctypes.c_double),
-        ("seen_h", ctypes.c_double),
-        ("wre", ctypes.c_double * OE_ITEMS),
-        ("wim", ctypes.c_double * OE_ITEMS),
-        ("D", ctypes.c_double * OE_ITEMS),
-        ("rwre", ctypes.c_double * OE_ITEMS),
-        ("rwim", ctypes.c_double * OE_ITEMS),
-        ("rD", ctypes.c_double * OE_ITEMS),
+        *[(name, ctypes.c_double) for name in ("s", "rotation_h", "seen_h")],
+        *[(name, ctypes.c_double * OE_ITEMS) for name in ("wre", "wim", "D", "rwre", "rwim", "rD")],
     ]
 
 
@@ -277,10 +226,7 @@ class OlPlant(ctypes.Structure):
 class VcRegressor(ctypes.Structure):
     """controller.h's VcRegressor."""
     _fields_ = [
-        ("w_delta", ctypes.c_double),
-        ("delta_sign", ctypes.c_double),
-        ("w_beta", ctypes.c_double),
-        ("w_gamma", ctypes.c_double),
+        *[(name, ctypes.c_double) for name in ("w_delta", "delta_sign", "w_beta", "w_gamma")],
     ]
 
 
@@ -295,10 +241,7 @@ class VcController(ctypes.Structure):
         ("l2", ctypes.c_double),
         ("Lambda", ctypes.c_double * VC_N),
         ("adaptation", ctypes.c_double * VC_N),
-        ("c", ctypes.c_double),
-        ("k_damping", ctypes.c_double),
-        ("promised_e1", ctypes.c_double),
-        ("true_delta", ctypes.c_double),
+        *[(name, ctypes.c_double) for name in ("c", "k_damping", "promised_e1", "true_delta")],
         ("law", ctypes.c_int64),
         ("time_tolerance", ctypes.c_double),
         ("t", ctypes.c_double),
@@ -322,9 +265,7 @@ class VlLoop(ctypes.Structure):
         ("out", ctypes.c_double * VL_OUTPUTS),
         ("enabled", ctypes.c_int64),
         ("error", ctypes.c_int64),
-        ("error_t", ctypes.c_double),
-        ("error_x", ctypes.c_double),
-        ("error_v", ctypes.c_double),
+        *[(name, ctypes.c_double) for name in ("error_t", "error_x", "error_v")],
         ("message", ctypes.c_char * VL_MESSAGE),
         ("reference", OeSolution),
     ]

@@ -6,7 +6,7 @@ numbers: plant.Plant, compiled.CompiledPlant, compiled_open_loop, compiled_loop,
 slaves, the harness's simulate, bench and ladder, and the C (core/fidelity.h, generated from here by c_header()).
 
 Adding a fidelity: a model (or solution) it evaluates, one entry here, and core/fidelity.h regenerated
-(`python3 -m vibrofmu.fmus.kernel`); parameters.RULES's `fidelity` rule must equal rule() (tests/test_fidelities.py
+(`python3 -m vibrofmu.fmus.kernel`); parameters.RULES's `fidelity` rule must equal rule() (tests/model/test_fidelity_registry.py
 says when it does not: parameters cannot import this module, whose factories validate scenes with those rules).
 """
 from __future__ import annotations
@@ -227,7 +227,7 @@ def open_loop_rule_levels() -> tuple[int, ...]:
 
 def c_header() -> str:
     """core/fidelity.h: the registry for the C of fmu_src/core and fmu_src/native (they branch on these properties,
-    never on level numbers). Committed; tests/test_fidelities.py checks that it is current."""
+    never on level numbers). Committed; tests/model/test_fidelity_registry.py checks that it is current."""
     rows = []
     for e in REGISTRY.values():
         refusal = native_refusal(e.level)

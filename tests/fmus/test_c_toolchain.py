@@ -56,6 +56,7 @@ def test_compiles_without_warnings(unit):
     assert code == 0, output
 
 
+@pytest.mark.fmu
 @pytest.mark.parametrize("which", ("plant", "controller", "closed_loop"))
 def test_native_fmu_sources_compile_without_warnings(request, which, tmp_path):
     with zipfile.ZipFile(request.getfixturevalue(f"{which}_fmu")) as fmu:

@@ -1,6 +1,6 @@
 """The FMI 2.0 state table in C: fmu_src/fmi/fmi2_calls.h, generated from slave_support.CALLS (the one table of the
 states in which each FMI call is allowed) and committed, so that the C layer (fmu_src/fmi/fmi2_layer.c: the status
-shim and the native FMUs) builds without Python; tests/test_c_toolchain.py checks that it is current. Regenerate it
+shim and the native FMUs) builds without Python; tests/fmus/test_c_toolchain.py checks that it is current. Regenerate it
 with `python3 -m vibrofmu.fmus.fmi_calls`.
 """
 from __future__ import annotations

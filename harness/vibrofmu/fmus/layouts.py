@@ -5,7 +5,7 @@ structures field by field. Their layouts are not typed by hand: `layouts_module(
 declarations, the integer and float `#define`s and the `enum` constants of the headers and writes them as the
 Python module fmu_src/vibromodel/core_layouts.py, which is committed (the FMUs carry it with vibromodel, so they
 need neither this generator nor any C parser at run time, and a checkout works without a build step).
-tests/test_core_layouts.py fails when the committed module is not what the headers give, and checks every size
+tests/core/test_core_layouts.py fails when the committed module is not what the headers give, and checks every size
 and offset against the C compiler's own sizeof/offsetof. Regenerate with `python3 -m vibrofmu.fmus.layouts`.
 
 Why a small parser of our own and not pycparser or cffi: the headers include <stdint.h> and <stddef.h>, which
@@ -120,7 +120,7 @@ def layouts_module(directory: Path = CORE, headers=HEADERS) -> str:
     constants, structs = read_headers(directory, headers)
     lines = [
         '"""The compiled core\'s constants and structures as ctypes: GENERATED from fmu_src/core/*.h by',
-        "harness/vibrofmu/fmus/layouts.py (python3 -m vibrofmu.fmus.layouts); do not edit. tests/test_core_layouts.py",
+        "harness/vibrofmu/fmus/layouts.py (python3 -m vibrofmu.fmus.layouts); do not edit. tests/core/test_core_layouts.py",
         'checks that this module is current and that every size and offset is the C compiler\'s."""',
         "import ctypes",
         "",
@@ -133,12 +133,29 @@ def layouts_module(directory: Path = CORE, headers=HEADERS) -> str:
         lines.append(f"{name} = {value}")
     known: set[str] = set()
     for struct in structs:
-        rows = [f'        ("{field.name}", {_ctype(field, known)}),' for field in struct.fields]
+        rows = _rows([(field.name, _ctype(field, known)) for field in struct.fields])
         lines += ["", "", f"class {struct.name}(ctypes.Structure):", f'    """{struct.header}\'s {struct.name}."""',
                   "    _fields_ = [", *rows, "    ]"]
         known.add(struct.name)
     lines += ["", "", "STRUCTURES = (" + ", ".join(struct.name for struct in structs) + ",)"]
     return _wrap("\n".join(lines) + "\n")
+
+
+def _rows(fields: list[tuple[str, str]]) -> list[str]:
+    """The lines of a _fields_ list: a run of consecutive fields of one ctypes type is one line
+    `*[(name, type) for name in (...)]` (the same fields in the same order), any other field a tuple of its own."""
+    rows, i = [], 0
+    while i < len(fields):
+        j = i
+        while j < len(fields) and fields[j][1] == fields[i][1]:
+            j += 1
+        if j - i >= 3:
+            names = ", ".join(f'"{name}"' for name, _ in fields[i:j])
+            rows.append(f"        *[(name, {fields[i][1]}) for name in ({names})],")
+        else:
+            rows += [f'        ("{name}", {ctype}),' for name, ctype in fields[i:j]]
+        i = j
+    return rows
 
 
 def _wrap(text: str, width: int = 120) -> str:

@@ -2,7 +2,7 @@
 sets of every C build of the project (the compiled core, the status shim, the native FMUs for linux64 and win64,
 the C hosts).
 
-Every flag set warns with -Wall -Wextra; tests/test_c_toolchain.py compiles every C translation unit of the project
+Every flag set warns with -Wall -Wextra; tests/fmus/test_c_toolchain.py compiles every C translation unit of the project
 with these sets plus -Werror, so a new warning fails there. The flags that decide numbers stay exactly as they
 were: the compiled core and the native FMUs compute in IEEE double arithmetic as written (-ffp-contract=off: no
 FMA contraction, no -ffast-math; math errno stays on -- the kernel reads pow's errno as CPython's float_pow does),
