@@ -14,7 +14,6 @@
 #include "dop853_tableau.h"
 #include "pyfloat.h"
 #include "roots.h"
-#include "solver.h"
 
 /* integrate.py's step control constants */
 #define SAFETY 0.9
@@ -636,31 +635,3 @@ int dop_advance(Dop853 *s, DopRhs rhs, void *ctx, double t_target, DopReport *r)
     if (s->stopped && s->stop_t <= t_target) return terminal(s, r);
     return DOP_OK;
 }
-
-/* ---- the solver interface (solver.h) ---- */
-
-static int ops_restart(VkSolverSlots s, const VkRhs *f, void *context, double t, const double *y, DopReport *r)
-{
-    return dop_restart(s.adaptive, f->rhs, context, t, y, r);
-}
-
-static int ops_advance(VkSolverSlots s, const VkRhs *f, void *context, double t_target, DopReport *r)
-{
-    return dop_advance(s.adaptive, f->rhs, context, t_target, r);
-}
-
-static int ops_value_at(VkSolverSlots s, const VkRhs *f, void *context, double t, double *y, DopReport *r)
-{
-    return dop_value_at(s.adaptive, f->rhs, context, t, y, r);
-}
-
-static const double *ops_state(VkSolverSlots s, double *t)
-{
-    *t = s.adaptive->t;
-    return s.adaptive->y;
-}
-
-static double ops_max_step(VkSolverSlots s) { return s.adaptive->max_step; }
-
-const VkSolverOps vk_dop853_ops = {"DOP853", ops_restart, 1, ops_advance, ops_value_at, ops_state, ops_max_step,
-                                   NULL};

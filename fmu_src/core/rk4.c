@@ -10,7 +10,6 @@
 
 #include "pyfloat.h"
 #include "roots.h"
-#include "solver.h"
 
 /* integrate._rk4_growth: |R(zr + i zi)| */
 static double growth(double zr, double zi)
@@ -331,30 +330,6 @@ int rk4_advance_phased(Rk4 *s, Rk4PhasedRhs rhs, void *ctx, int n_freq, const do
     return advance(s, NULL, &ph, ctx, t_target, r);
 }
 
-/* ---- the solver interface (solver.h) ---- */
-
-/* Rk4: the state is taken */
-static int ops_restart(VkSolverSlots s, const VkRhs *f, void *context, double t, const double *y, DopReport *r)
-{
-    (void)f;
-    (void)context;
-    (void)r;
-    s.fixed->t = t;
-    memmove(s.fixed->y, y, sizeof(double) * (size_t)s.fixed->n);
-    return DOP_OK;
-}
-
-/* with the drive's phasors where the container gives them (rk4_advance_phased), else rk4_advance */
-static int ops_advance(VkSolverSlots s, const VkRhs *f, void *context, double t_target, DopReport *r)
-{
-    if (f->phased) {
-        double freq[RK4_MAX_PHASES];
-        f->frequencies(context, freq);
-        return rk4_advance_phased(s.fixed, f->phased, context, f->n_freq, freq, t_target, r);
-    }
-    return rk4_advance(s.fixed, f->rhs, context, t_target, r);
-}
-
 int rk4_value_at(const Rk4 *st, double t, double *y, DopReport *r)
 {
     if (t != st->t) {  /* Rk4._require_current */
@@ -366,21 +341,6 @@ int rk4_value_at(const Rk4 *st, double t, double *y, DopReport *r)
     return DOP_OK;
 }
 
-static int ops_value_at(VkSolverSlots s, const VkRhs *f, void *context, double t, double *y, DopReport *r)
-{
-    (void)f;
-    (void)context;
-    return rk4_value_at(s.fixed, t, y, r);
-}
-
-static const double *ops_state(VkSolverSlots s, double *t)
-{
-    *t = s.fixed->t;
-    return s.fixed->y;
-}
-
-static double ops_max_step(VkSolverSlots s) { return s.fixed->max_step; }
-
 double rk4_drive_gain_x(double theta)
 {
     const double phi = 0.5 * theta, s = sin(phi);
@@ -388,6 +348,3 @@ double rk4_drive_gain_x(double theta)
     if (fabs(s) < 1e-300) return INFINITY;
     return theta * theta * (1.0 + 2.0 * cos(phi)) / (12.0 * s * s);
 }
-
-const VkSolverOps vk_rk4_ops = {"RK4", ops_restart, 0, ops_advance, ops_value_at, ops_state, ops_max_step,
-                                rk4_drive_gain_x};
