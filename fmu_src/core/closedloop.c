@@ -113,13 +113,11 @@ static int raise_fault(VlLoop *l, int fault, double t, const double *y)
     return set_error(l, VL_RAISED, t, y, text);
 }
 
-/* vl_publish on the given ops (always_inline: written once, instantiated per solver below; solver.h) */
-static inline __attribute__((always_inline)) int publish_with(VlLoop *l, const VkSolverOps *ops)
+/* vl_publish's part after the solver: the outputs at l->t from the state y there, written when all are finite.  One
+   function whatever the solver (each publish_with calls it): the outputs are inlined into it once. */
+static int publish_state(VlLoop *l, const double *y)
 {
-    double y[DOP_MAX_DIM], out[VL_OUTPUTS];
-    DopReport r;
-    int code = ops->value_at(slots_of(l), &LOOP_RHS, l, l->t, y, &r);  /* RK4 ends every advance on its target: t */
-    if (code) return solver_error(l, code, &r);
+    double out[VL_OUTPUTS];
     int fault = vl_outputs_at(l, l->t, y, out);
     if (fault) return raise_fault(l, fault, l->t, y);
     static const char *const names[VL_OUTPUTS] = {"x", "v", "x_ref", "U", "e1", "e2", "V", "V_rate",
@@ -134,6 +132,16 @@ static inline __attribute__((always_inline)) int publish_with(VlLoop *l, const V
     }
     memcpy(l->out, out, sizeof out);
     return VL_OK;
+}
+
+/* vl_publish on the given ops (always_inline: written once, instantiated per solver below; solver.h) */
+static inline __attribute__((always_inline)) int publish_with(VlLoop *l, const VkSolverOps *ops)
+{
+    double y[DOP_MAX_DIM];
+    DopReport r;
+    int code = ops->value_at(slots_of(l), &LOOP_RHS, l, l->t, y, &r);  /* RK4 ends every advance on its target: t */
+    if (code) return solver_error(l, code, &r);
+    return publish_state(l, y);
 }
 
 int vl_publish(VlLoop *l) { return publish_with(l, ops_of(l)); }

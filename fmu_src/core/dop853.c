@@ -616,8 +616,11 @@ static int terminal(const Dop853 *s, DopReport *r)
     return DOP_TERMINAL;
 }
 
-/* Dop853.advance: step until t_target is covered */
-int dop_advance(Dop853 *s, DopRhs rhs, void *ctx, double t_target, DopReport *r)
+/* Dop853.advance: step until t_target is covered.  Inline (always_inline, across files under -flto; an external
+   definition all the same, dop853.h declaring it plainly): a container's per-solver doStep (solver.h) runs the step
+   loop itself, as the plant's and the loop's doStep did before the solver interface (a call less per doStep). */
+inline __attribute__((always_inline)) int dop_advance(Dop853 *s, DopRhs rhs, void *ctx, double t_target,
+                                                      DopReport *r)
 {
     long long steps = 0;
     while (s->t < t_target) {
