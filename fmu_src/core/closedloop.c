@@ -113,12 +113,11 @@ static int raise_fault(VlLoop *l, int fault, double t, const double *y)
     return set_error(l, VL_RAISED, t, y, text);
 }
 
-int vl_publish(VlLoop *l)
+/* vl_publish's part after the solver: the outputs at l->t from the state y there, written when all are finite.  One
+   function whatever the solver (each publish_with calls it): the outputs are inlined into it once. */
+static int publish_state(VlLoop *l, const double *y)
 {
-    double y[DOP_MAX_DIM], out[VL_OUTPUTS];
-    DopReport r;
-    int code = ops_of(l)->value_at(slots_of(l), &LOOP_RHS, l, l->t, y, &r);  /* RK4 ends every advance on its target: t */
-    if (code) return solver_error(l, code, &r);
+    double out[VL_OUTPUTS];
     int fault = vl_outputs_at(l, l->t, y, out);
     if (fault) return raise_fault(l, fault, l->t, y);
     static const char *const names[VL_OUTPUTS] = {"x", "v", "x_ref", "U", "e1", "e2", "V", "V_rate",
@@ -135,6 +134,18 @@ int vl_publish(VlLoop *l)
     return VL_OK;
 }
 
+/* vl_publish on the given ops (always_inline: written once, instantiated per solver below; solver.h) */
+static inline __attribute__((always_inline)) int publish_with(VlLoop *l, const VkSolverOps *ops)
+{
+    double y[DOP_MAX_DIM];
+    DopReport r;
+    int code = ops->value_at(slots_of(l), &LOOP_RHS, l, l->t, y, &r);  /* RK4 ends every advance on its target: t */
+    if (code) return solver_error(l, code, &r);
+    return publish_state(l, y);
+}
+
+int vl_publish(VlLoop *l) { return publish_with(l, ops_of(l)); }
+
 int vl_init(VlLoop *l, double t0, const double *y0)
 {
     DopReport r;
@@ -148,17 +159,35 @@ int vl_init(VlLoop *l, double t0, const double *y0)
     return vl_publish(l);
 }
 
-int vl_do_step(VlLoop *l, double t, double h)
+/* ClosedLoop.do_step on the given ops (always_inline), instantiated per solver of VK_SOLVER_LIST on its ops
+   VK_OPS_<name> (a constant: every op resolved and inlined; solver.h): one indirect call per doStep, no branch on the
+   solver */
+static inline __attribute__((always_inline)) int do_step_with(VlLoop *l, const VkSolverOps *ops, double t, double h)
 {
     DopReport r;
     if (l->error) return (int)l->error;
     if (!(isfinite(h) && h > 0.0)) return VL_BAD_STEP;
     if (!(isfinite(t) && fabs(t - l->t) <= l->time_tolerance * py_max(1.0, fabs(t)))) return VL_BAD_TIME;
-    int code = ops_of(l)->advance(slots_of(l), &LOOP_RHS, l, t + h, &r);
+    int code = ops->advance(slots_of(l), &LOOP_RHS, l, t + h, &r);
     if (code) return solver_error(l, code, &r);
     l->t = t + h;
-    return vl_publish(l);
+    return publish_with(l, ops);
 }
+
+typedef int (*LoopDoStep)(VlLoop *l, double t, double h);
+#define VL_DO_STEP(name)                                         \
+    static int do_step_##name(VlLoop *l, double t, double h)     \
+    {                                                            \
+        static const VkSolverOps ops = VK_OPS_##name;            \
+        return do_step_with(l, &ops, t, h);                      \
+    }
+VK_SOLVER_LIST(VL_DO_STEP)
+#undef VL_DO_STEP
+#define VL_DO_STEP_ENTRY(name) do_step_##name,
+static const LoopDoStep DO_STEP[] = {VK_SOLVER_LIST(VL_DO_STEP_ENTRY)};
+#undef VL_DO_STEP_ENTRY
+
+int vl_do_step(VlLoop *l, double t, double h) { return DO_STEP[l->solver](l, t, h); }
 
 void vl_layout(size_t *sizes)
 {

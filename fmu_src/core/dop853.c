@@ -14,7 +14,6 @@
 #include "dop853_tableau.h"
 #include "pyfloat.h"
 #include "roots.h"
-#include "solver.h"
 
 /* integrate.py's step control constants */
 #define SAFETY 0.9
@@ -617,8 +616,11 @@ static int terminal(const Dop853 *s, DopReport *r)
     return DOP_TERMINAL;
 }
 
-/* Dop853.advance: step until t_target is covered */
-int dop_advance(Dop853 *s, DopRhs rhs, void *ctx, double t_target, DopReport *r)
+/* Dop853.advance: step until t_target is covered.  Inline (always_inline, across files under -flto; an external
+   definition all the same, dop853.h declaring it plainly): a container's per-solver doStep (solver.h) runs the step
+   loop itself, as the plant's and the loop's doStep did before the solver interface (a call less per doStep). */
+inline __attribute__((always_inline)) int dop_advance(Dop853 *s, DopRhs rhs, void *ctx, double t_target,
+                                                      DopReport *r)
 {
     long long steps = 0;
     while (s->t < t_target) {
@@ -636,31 +638,3 @@ int dop_advance(Dop853 *s, DopRhs rhs, void *ctx, double t_target, DopReport *r)
     if (s->stopped && s->stop_t <= t_target) return terminal(s, r);
     return DOP_OK;
 }
-
-/* ---- the solver interface (solver.h) ---- */
-
-static int ops_restart(VkSolverSlots s, const VkRhs *f, void *context, double t, const double *y, DopReport *r)
-{
-    return dop_restart(s.adaptive, f->rhs, context, t, y, r);
-}
-
-static int ops_advance(VkSolverSlots s, const VkRhs *f, void *context, double t_target, DopReport *r)
-{
-    return dop_advance(s.adaptive, f->rhs, context, t_target, r);
-}
-
-static int ops_value_at(VkSolverSlots s, const VkRhs *f, void *context, double t, double *y, DopReport *r)
-{
-    return dop_value_at(s.adaptive, f->rhs, context, t, y, r);
-}
-
-static const double *ops_state(VkSolverSlots s, double *t)
-{
-    *t = s.adaptive->t;
-    return s.adaptive->y;
-}
-
-static double ops_max_step(VkSolverSlots s) { return s.adaptive->max_step; }
-
-const VkSolverOps vk_dop853_ops = {"DOP853", ops_restart, 1, ops_advance, ops_value_at, ops_state, ops_max_step,
-                                   NULL};

@@ -147,47 +147,6 @@ int vk_init(VkPlant *p, double t0, double x0, double v0)
     return vk_restart(p, t0, x0, v0, 0.0);
 }
 
-int vk_restart(VkPlant *p, double t, double x, double v, double U)
-{
-    double y[2] = {x, v};
-    DopReport r;
-    p->U = U;
-    int code = ops_of(p)->restart(slots_of(p), &PLANT_RHS, p, t, y, &r);
-    return code ? solver_error(p, code, &r) : VK_OK;
-}
-
-int vk_value_at(VkPlant *p, double t, double *x, double *v)
-{
-    double y[DOP_MAX_DIM];
-    DopReport r;
-    int code = ops_of(p)->value_at(slots_of(p), &PLANT_RHS, p, t, y, &r);
-    if (code) return solver_error(p, code, &r);
-    *x = y[0];
-    *v = y[1];
-    return VK_OK;
-}
-
-int vk_set_input(VkPlant *p, double t, double U)
-{
-    double x, v;
-    if (!ops_of(p)->restart_on_input) {  /* Rk4.set_input */
-        p->U = U;
-        return VK_OK;
-    }
-    if (U == p->U) return VK_OK;  /* Dop853.set_input */
-    int code = vk_value_at(p, t, &x, &v);
-    if (code) return code;
-    p->U = U;
-    return vk_restart(p, t, x, v, U);
-}
-
-int vk_advance(VkPlant *p, double t_target)
-{
-    DopReport r;
-    int code = ops_of(p)->advance(slots_of(p), &PLANT_RHS, p, t_target, &r);
-    return code ? solver_error(p, code, &r) : VK_OK;
-}
-
 /* Plant.outputs_at */
 int vk_outputs_at(VkPlant *p, double t, double x, double v, const double *a)
 {
@@ -204,35 +163,86 @@ int vk_outputs_at(VkPlant *p, double t, double x, double v, const double *a)
     return VK_OK;
 }
 
-/* Plant.state */
-int vk_plant_state(VkPlant *p, double *xva)
+/* ---- the step, written once on a solver's ops ----
+ * Each *_with function below takes the solver's ops as an argument and is inlined (always_inline) into its callers:
+ * into the public vk_* functions with ops_of(p), the solver of the settings (an indirect call per operation), and
+ * into one do-step per solver (DO_STEP, below) with that solver's ops (solver.h's VK_OPS_<name>), a constant there:
+ * the compiler resolves and inlines every op, so a doStep costs one indirect call (DO_STEP[p->solver]) whatever
+ * the solver.  No branch on the solver either way. */
+
+static inline __attribute__((always_inline)) int restart_with(VkPlant *p, const VkSolverOps *ops, double t, double x,
+                                                              double v, double U)
 {
-    int fault, code = vk_value_at(p, p->plant_t, &xva[0], &xva[1]);
+    double y[2] = {x, v};
+    DopReport r;
+    p->U = U;
+    int code = ops->restart(slots_of(p), &PLANT_RHS, p, t, y, &r);
+    return code ? solver_error(p, code, &r) : VK_OK;
+}
+
+static inline __attribute__((always_inline)) int value_at_with(VkPlant *p, const VkSolverOps *ops, double t,
+                                                               double *x, double *v)
+{
+    double y[DOP_MAX_DIM];
+    DopReport r;
+    int code = ops->value_at(slots_of(p), &PLANT_RHS, p, t, y, &r);
+    if (code) {  /* solver_error returns code: said here, so the compiler sees *x and *v written when 0 is returned */
+        solver_error(p, code, &r);
+        return code;
+    }
+    *x = y[0];
+    *v = y[1];
+    return VK_OK;
+}
+
+static inline __attribute__((always_inline)) int set_input_with(VkPlant *p, const VkSolverOps *ops, double t,
+                                                                double U)
+{
+    double x, v;
+    if (!ops->restart_on_input) {  /* Rk4.set_input */
+        p->U = U;
+        return VK_OK;
+    }
+    if (U == p->U) return VK_OK;  /* Dop853.set_input */
+    int code = value_at_with(p, ops, t, &x, &v);
+    if (code) return code;
+    p->U = U;
+    return restart_with(p, ops, t, x, v, U);
+}
+
+static inline __attribute__((always_inline)) int advance_with(VkPlant *p, const VkSolverOps *ops, double t_target)
+{
+    DopReport r;
+    int code = ops->advance(slots_of(p), &PLANT_RHS, p, t_target, &r);
+    return code ? solver_error(p, code, &r) : VK_OK;
+}
+
+/* Plant.state */
+static inline __attribute__((always_inline)) int plant_state_with(VkPlant *p, const VkSolverOps *ops, double *xva)
+{
+    int fault, code = value_at_with(p, ops, p->plant_t, &xva[0], &xva[1]);
     if (code) return code;
     xva[2] = vm_accel(&p->model, p->plant_t, xva[0], xva[1], p->U_input, &fault);
     return fault ? raise_fault(p, fault) : VK_OK;
 }
 
 /* Plant.advance(t_end, U_input) */
-int vk_plant_advance(VkPlant *p, double t_end, double *xva)
+static inline __attribute__((always_inline)) int plant_advance_with(VkPlant *p, const VkSolverOps *ops, double t_end,
+                                                                    double *xva)
 {
     if (p->error) return (int)p->error;
-    int code = vk_set_input(p, p->plant_t, p->U_input);  /* at the old time: U changes there */
-    if (!code) code = vk_advance(p, t_end);
+    int code = set_input_with(p, ops, p->plant_t, p->U_input);  /* at the old time: U changes there */
+    if (!code) code = advance_with(p, ops, t_end);
     if (code) return code;
     p->plant_t = t_end;
-    return vk_plant_state(p, xva);
-}
-
-double vk_step_ceiling(VkPlant *p)
-{
-    return ops_of(p)->max_step(slots_of(p));
+    return plant_state_with(p, ops, xva);
 }
 
 /* Plant.do_step's checks (plant.check_step), without messages: vibromodel raises the ParameterError */
-static int check_step(VkPlant *p, double t, double h)
+static inline __attribute__((always_inline)) int check_step_with(VkPlant *p, const VkSolverOps *ops, double t,
+                                                                 double h)
 {
-    double ceiling = vk_step_ceiling(p);
+    double ceiling = ops->max_step(slots_of(p));
     if (!(isfinite(h) && h > 0.0)) return VK_BAD_STEP;
     if (!isfinite(p->U_input)) return VK_BAD_INPUT;
     if (h / ceiling > p->max_steps_per_dostep) return VK_TOO_MANY_STEPS;
@@ -241,21 +251,56 @@ static int check_step(VkPlant *p, double t, double h)
 }
 
 /* Plant.do_step(t, h, U_input) */
-int vk_do_step(VkPlant *p, double t, double h)
+static inline __attribute__((always_inline)) int do_step_with(VkPlant *p, const VkSolverOps *ops, double t, double h)
 {
     double xva[3];
     if (p->error) return (int)p->error;
-    int code = check_step(p, t, h);
+    int code = check_step_with(p, ops, t, h);
     if (code) return code;
-    code = vk_plant_advance(p, t + h, xva);
+    code = plant_advance_with(p, ops, t + h, xva);
     if (code) return code;
     return vk_outputs_at(p, p->plant_t, xva[0], xva[1], &xva[2]);  /* every output at the new point t + h */
 }
 
+/* One do-step per solver of VK_SOLVER_LIST, on its ops VK_OPS_<name> (a constant: resolved and inlined), in the
+   list's order */
+typedef int (*PlantDoStep)(VkPlant *p, double t, double h);
+#define VK_PLANT_DO_STEP(name)                                   \
+    static int do_step_##name(VkPlant *p, double t, double h)    \
+    {                                                            \
+        static const VkSolverOps ops = VK_OPS_##name;            \
+        return do_step_with(p, &ops, t, h);                      \
+    }
+VK_SOLVER_LIST(VK_PLANT_DO_STEP)
+#undef VK_PLANT_DO_STEP
+#define VK_PLANT_DO_STEP_ENTRY(name) do_step_##name,
+static const PlantDoStep DO_STEP[] = {VK_SOLVER_LIST(VK_PLANT_DO_STEP_ENTRY)};
+#undef VK_PLANT_DO_STEP_ENTRY
+
+int vk_restart(VkPlant *p, double t, double x, double v, double U) { return restart_with(p, ops_of(p), t, x, v, U); }
+
+int vk_value_at(VkPlant *p, double t, double *x, double *v) { return value_at_with(p, ops_of(p), t, x, v); }
+
+int vk_set_input(VkPlant *p, double t, double U) { return set_input_with(p, ops_of(p), t, U); }
+
+int vk_advance(VkPlant *p, double t_target) { return advance_with(p, ops_of(p), t_target); }
+
+int vk_plant_state(VkPlant *p, double *xva) { return plant_state_with(p, ops_of(p), xva); }
+
+int vk_plant_advance(VkPlant *p, double t_end, double *xva) { return plant_advance_with(p, ops_of(p), t_end, xva); }
+
+double vk_step_ceiling(VkPlant *p)
+{
+    return ops_of(p)->max_step(slots_of(p));
+}
+
+int vk_do_step(VkPlant *p, double t, double h) { return DO_STEP[p->solver](p, t, h); }
+
 int vk_run(VkPlant *p, double dt, size_t n, double *x_out)
 {
+    PlantDoStep do_step = DO_STEP[p->solver];
     for (size_t i = 0; i < n; i++) {
-        int code = vk_do_step(p, p->plant_t, dt);
+        int code = do_step(p, p->plant_t, dt);
         if (code) return code;
         x_out[i] = p->out[0];
     }

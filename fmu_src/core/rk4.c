@@ -10,7 +10,6 @@
 
 #include "pyfloat.h"
 #include "roots.h"
-#include "solver.h"
 
 /* integrate._rk4_growth: |R(zr + i zi)| */
 static double growth(double zr, double zi)
@@ -116,10 +115,26 @@ static int hermite_beyond(void *context, double s, int *beyond)
     return 0;
 }
 
+/* The Bernstein coefficients b[0..3] of an event's g = c0 + cx x(s) on one fixed step's cubic Hermite interpolant of
+   x (integrate._hermite_event's, the same operations) */
+static inline __attribute__((always_inline)) void hermite_bernstein(double c0, double cx, double x, double v, double h,
+                                                                    double x_new, double v_new, double *b)
+{
+    b[0] = c0 + cx * x;
+    b[1] = c0 + cx * (x + h * v / 3.0);
+    b[2] = c0 + cx * (x_new - h * v_new / 3.0);
+    b[3] = c0 + cx * x_new;
+}
+
+/* The search's first verdict on coefficients b[0..3]: every one > 0, so g > 0 over the whole step (no event) */
+static inline __attribute__((always_inline)) int hermite_clear(const double *b)
+{
+    return py_min(py_min(py_min(b[0], b[1]), b[2]), b[3]) > 0.0;
+}
+
 /* integrate._hermite_event: *found and the fraction *s_event of the first point where terminal event e is
    reached on the step's cubic (the search: roots.c's bernstein_search); DOP_RAISED where Python's brentq raises */
-static inline __attribute__((always_inline)) int hermite_event(int n, const double *y, Hermite *c, double t, int *found,
-                                                               double *s_event, DopReport *r)
+static int hermite_event(int n, const double *y, Hermite *c, double t, int *found, double *s_event, DopReport *r)
 {
     double b[4], s_a, s_b;
     int at_start;
@@ -129,11 +144,8 @@ static inline __attribute__((always_inline)) int hermite_event(int n, const doub
         *s_event = 0.0;
         return DOP_OK;
     }
-    b[0] = c->c0 + c->cx * c->x;
-    b[1] = c->c0 + c->cx * (c->x + c->h * c->v / 3.0);
-    b[2] = c->c0 + c->cx * (c->x_new - c->h * c->v_new / 3.0);
-    b[3] = c->c0 + c->cx * c->x_new;
-    if (py_min(py_min(py_min(b[0], b[1]), b[2]), b[3]) > 0.0) return DOP_OK;  /* the search's first verdict, inline */
+    hermite_bernstein(c->c0, c->cx, c->x, c->v, c->h, c->x_new, c->v_new, b);
+    if (hermite_clear(b)) return DOP_OK;  /* the search's first verdict, inline */
     bernstein_search(b, 3, 1, hermite_beyond, c, found, &s_a, &s_b, &at_start);
     if (!*found) return DOP_OK;
     if (at_start) {
@@ -160,6 +172,11 @@ static inline __attribute__((always_inline)) int step_events(int n, int n_events
     for (int i = 0; i < n_events; i++) {
         const DopEvent *e = &events[i];
         if (!e->terminal) continue;
+        double b[4];  /* hermite_event's verdict "no event in this step" (g > 0 at the step's start, then every
+                         coefficient > 0: its first two checks, the same operations) before its state is built: the
+                         common step stores nothing (b stays in registers) */
+        hermite_bernstein(e->c0, e->c[0], y[0], y[1], h, y_new[0], y_new[1], b);
+        if (b[0] > 0.0 && hermite_clear(b)) continue;
         Hermite c = {y[0], y[1], h, y_new[0], y_new[1], e->c0, e->c[0], 0, 0.0};
         int found, code;
         double s_event;
@@ -331,30 +348,6 @@ int rk4_advance_phased(Rk4 *s, Rk4PhasedRhs rhs, void *ctx, int n_freq, const do
     return advance(s, NULL, &ph, ctx, t_target, r);
 }
 
-/* ---- the solver interface (solver.h) ---- */
-
-/* Rk4: the state is taken */
-static int ops_restart(VkSolverSlots s, const VkRhs *f, void *context, double t, const double *y, DopReport *r)
-{
-    (void)f;
-    (void)context;
-    (void)r;
-    s.fixed->t = t;
-    memmove(s.fixed->y, y, sizeof(double) * (size_t)s.fixed->n);
-    return DOP_OK;
-}
-
-/* with the drive's phasors where the container gives them (rk4_advance_phased), else rk4_advance */
-static int ops_advance(VkSolverSlots s, const VkRhs *f, void *context, double t_target, DopReport *r)
-{
-    if (f->phased) {
-        double freq[RK4_MAX_PHASES];
-        f->frequencies(context, freq);
-        return rk4_advance_phased(s.fixed, f->phased, context, f->n_freq, freq, t_target, r);
-    }
-    return rk4_advance(s.fixed, f->rhs, context, t_target, r);
-}
-
 int rk4_value_at(const Rk4 *st, double t, double *y, DopReport *r)
 {
     if (t != st->t) {  /* Rk4._require_current */
@@ -366,21 +359,6 @@ int rk4_value_at(const Rk4 *st, double t, double *y, DopReport *r)
     return DOP_OK;
 }
 
-static int ops_value_at(VkSolverSlots s, const VkRhs *f, void *context, double t, double *y, DopReport *r)
-{
-    (void)f;
-    (void)context;
-    return rk4_value_at(s.fixed, t, y, r);
-}
-
-static const double *ops_state(VkSolverSlots s, double *t)
-{
-    *t = s.fixed->t;
-    return s.fixed->y;
-}
-
-static double ops_max_step(VkSolverSlots s) { return s.fixed->max_step; }
-
 double rk4_drive_gain_x(double theta)
 {
     const double phi = 0.5 * theta, s = sin(phi);
@@ -388,6 +366,3 @@ double rk4_drive_gain_x(double theta)
     if (fabs(s) < 1e-300) return INFINITY;
     return theta * theta * (1.0 + 2.0 * cos(phi)) / (12.0 * s * s);
 }
-
-const VkSolverOps vk_rk4_ops = {"RK4", ops_restart, 0, ops_advance, ops_value_at, ops_state, ops_max_step,
-                                rk4_drive_gain_x};

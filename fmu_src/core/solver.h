@@ -5,14 +5,19 @@
  *
  * A container (plant.c's VkPlant, closedloop.c's VlLoop) holds every solver family's state (Dop853 for the
  * adaptive solvers, Rk4 for the fixed-step ones: pointer-free, so its bytes are the FMU state) and calls the solver
- * of its `solver` setting through vk_solvers[solver], never branching on the solver: an indirect call per doStep
- * operation, the hot loops (stages, steps, events) inside each solver.
+ * of its `solver` setting through the ops, never branching on the solver.  Its doStep is written once on
+ * `const VkSolverOps *` (always_inline) and instantiated per solver from VK_SOLVER_LIST with that solver's ops
+ * VK_OPS_<name>, a constant there: the compiler resolves and inlines every op, so a doStep costs one indirect call
+ * (the container's table of instances, indexed by `solver`); its other operations call through vk_solvers[solver].
+ * The hot loops (stages, steps, events) are inside each solver.
  *
- * Adding a solver: its ops in its own .c file (on the Dop853 or Rk4 state), one entry in VK_SOLVER_LIST below, one
- * entry in vibromodel/solvers.py.
+ * Adding a solver: its functions in its own .c file (on the Dop853 or Rk4 state), its ops below (adaptors and
+ * VK_OPS_<name>), one entry in VK_SOLVER_LIST, one entry in vibromodel/solvers.py.
  */
 #ifndef VIBRO_SOLVER_H
 #define VIBRO_SOLVER_H
+
+#include <string.h>
 
 #include "dop853.h"
 #include "rk4.h"
@@ -56,8 +61,82 @@ typedef struct {
     double (*drive_gain_x)(double theta);
 } VkSolverOps;
 
+/* ---- each solver's ops: adaptors of its functions (core/<name>.h) to the interface, static inline here so that a
+   container's per-solver doStep sees them (VK_OPS_<name>: the ops as an initializer) ---- */
+
+/* DOP853 (dop853.c) */
+static inline int vk_dop853_restart(VkSolverSlots s, const VkRhs *f, void *context, double t, const double *y,
+                                    DopReport *r)
+{
+    return dop_restart(s.adaptive, f->rhs, context, t, y, r);
+}
+
+static inline int vk_dop853_advance(VkSolverSlots s, const VkRhs *f, void *context, double t_target, DopReport *r)
+{
+    return dop_advance(s.adaptive, f->rhs, context, t_target, r);
+}
+
+static inline int vk_dop853_value_at(VkSolverSlots s, const VkRhs *f, void *context, double t, double *y,
+                                     DopReport *r)
+{
+    return dop_value_at(s.adaptive, f->rhs, context, t, y, r);
+}
+
+static inline const double *vk_dop853_state(VkSolverSlots s, double *t)
+{
+    *t = s.adaptive->t;
+    return s.adaptive->y;
+}
+
+static inline double vk_dop853_max_step(VkSolverSlots s) { return s.adaptive->max_step; }
+
+#define VK_OPS_dop853 {"DOP853", vk_dop853_restart, 1, vk_dop853_advance, vk_dop853_value_at, vk_dop853_state, \
+                       vk_dop853_max_step, NULL}
+
+/* RK4 (rk4.c) */
+/* Rk4: the state is taken */
+static inline int vk_rk4_restart(VkSolverSlots s, const VkRhs *f, void *context, double t, const double *y,
+                                 DopReport *r)
+{
+    (void)f;
+    (void)context;
+    (void)r;
+    s.fixed->t = t;
+    memmove(s.fixed->y, y, sizeof(double) * (size_t)s.fixed->n);
+    return DOP_OK;
+}
+
+/* with the drive's phasors where the container gives them (rk4_advance_phased), else rk4_advance */
+static inline int vk_rk4_advance(VkSolverSlots s, const VkRhs *f, void *context, double t_target, DopReport *r)
+{
+    if (f->phased) {
+        double freq[RK4_MAX_PHASES];
+        f->frequencies(context, freq);
+        return rk4_advance_phased(s.fixed, f->phased, context, f->n_freq, freq, t_target, r);
+    }
+    return rk4_advance(s.fixed, f->rhs, context, t_target, r);
+}
+
+static inline int vk_rk4_value_at(VkSolverSlots s, const VkRhs *f, void *context, double t, double *y, DopReport *r)
+{
+    (void)f;
+    (void)context;
+    return rk4_value_at(s.fixed, t, y, r);
+}
+
+static inline const double *vk_rk4_state(VkSolverSlots s, double *t)
+{
+    *t = s.fixed->t;
+    return s.fixed->y;
+}
+
+static inline double vk_rk4_max_step(VkSolverSlots s) { return s.fixed->max_step; }
+
+#define VK_OPS_rk4 {"RK4", vk_rk4_restart, 0, vk_rk4_advance, vk_rk4_value_at, vk_rk4_state, vk_rk4_max_step, \
+                    rk4_drive_gain_x}
+
 /* Every solver, in the order of vibromodel/solvers.py's SOLVERS (position = the `solver` setting): X(name) for each,
-   its ops vk_<name>_ops defined in core/<name>.c.  Adding a solver: one entry here. */
+   its ops VK_OPS_<name> above (vk_<name>_ops in solver.c).  Adding a solver: one entry here. */
 #define VK_SOLVER_LIST(X) X(dop853) X(rk4)
 
 #define VK_DECLARE_OPS(name) extern const VkSolverOps vk_##name##_ops;
