@@ -33,6 +33,10 @@ from vibrofmu.hosts.run import FmuInstance, FmuLog, _reason
 from vibrofmu.hosts.scene import (ORDERINGS, Connection, CosimScene, FmuSpec, SceneError, read_scene,  # noqa: F401
                                   scene_fmu)
 from vibrofmu.hosts.ssp import load_ssp
+
+# the scene's types are scene.py's; cosim.py re-exports them for the master's callers (ORDERINGS, CosimScene ...)
+
+
 @dataclass
 class CosimResult:
     time: np.ndarray
@@ -44,7 +48,6 @@ class CosimResult:
 
 
 # ------------------------------------------------------------------------------------------- scene files
-
 
 def load_scene(path: Path | str, fmu_dir: Path) -> CosimScene:
     """Read an SSP (.ssp, see ssp.py), TOML (.toml) or JSON scene (scene.read_scene). Relative FMU paths are resolved
