@@ -5,8 +5,6 @@ session's base temporary folder), under a file lock; the others wait for the loc
 OAFM solutions fitted during the tests go to a fresh cache folder of this process, never the user's cache; only
 the kernel's folder in it is shared between the workers (a link to the shared folder).
 """
-import contextlib
-import fcntl
 import os
 import tempfile
 from pathlib import Path
@@ -28,15 +26,7 @@ def shared_dir(tmp_path_factory) -> Path:
     return base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base
 
 
-@contextlib.contextmanager
-def exclusive(lock_file: Path):
-    """Hold an exclusive lock on lock_file (created if missing): one process at a time, across xdist workers."""
-    with open(lock_file, "a") as handle:
-        fcntl.flock(handle, fcntl.LOCK_EX)
-        try:
-            yield
-        finally:
-            fcntl.flock(handle, fcntl.LOCK_UN)
+exclusive = kernel.exclusive  # one process at a time across the xdist workers (fcntl.flock)
 
 
 def built_once(shared_dir: Path, name: str, build) -> Path:

@@ -174,18 +174,9 @@ static inline __attribute__((always_inline)) int do_step_with(VlLoop *l, const V
     return publish_with(l, ops);
 }
 
-typedef int (*LoopDoStep)(VlLoop *l, double t, double h);
-#define VL_DO_STEP(name)                                         \
-    static int do_step_##name(VlLoop *l, double t, double h)     \
-    {                                                            \
-        static const VkSolverOps ops = VK_OPS_##name;            \
-        return do_step_with(l, &ops, t, h);                      \
-    }
-VK_SOLVER_LIST(VL_DO_STEP)
-#undef VL_DO_STEP
-#define VL_DO_STEP_ENTRY(name) do_step_##name,
-static const LoopDoStep DO_STEP[] = {VK_SOLVER_LIST(VL_DO_STEP_ENTRY)};
-#undef VL_DO_STEP_ENTRY
+#define VK_DO_STEP_CONTAINER VlLoop
+#define VK_DO_STEP_GENERIC do_step_with
+VK_DO_STEP_TABLE(DO_STEP)
 
 int vl_do_step(VlLoop *l, double t, double h) { return DO_STEP[l->solver](l, t, h); }
 

@@ -265,17 +265,9 @@ static inline __attribute__((always_inline)) int do_step_with(VkPlant *p, const 
 /* One do-step per solver of VK_SOLVER_LIST, on its ops VK_OPS_<name> (a constant: resolved and inlined), in the
    list's order */
 typedef int (*PlantDoStep)(VkPlant *p, double t, double h);
-#define VK_PLANT_DO_STEP(name)                                   \
-    static int do_step_##name(VkPlant *p, double t, double h)    \
-    {                                                            \
-        static const VkSolverOps ops = VK_OPS_##name;            \
-        return do_step_with(p, &ops, t, h);                      \
-    }
-VK_SOLVER_LIST(VK_PLANT_DO_STEP)
-#undef VK_PLANT_DO_STEP
-#define VK_PLANT_DO_STEP_ENTRY(name) do_step_##name,
-static const PlantDoStep DO_STEP[] = {VK_SOLVER_LIST(VK_PLANT_DO_STEP_ENTRY)};
-#undef VK_PLANT_DO_STEP_ENTRY
+#define VK_DO_STEP_CONTAINER VkPlant
+#define VK_DO_STEP_GENERIC do_step_with
+VK_DO_STEP_TABLE(DO_STEP)
 
 int vk_restart(VkPlant *p, double t, double x, double v, double U) { return restart_with(p, ops_of(p), t, x, v, U); }
 

@@ -143,6 +143,21 @@ static inline double vk_rk4_max_step(VkSolverSlots s) { return s.fixed->max_step
 VK_SOLVER_LIST(VK_DECLARE_OPS)
 #undef VK_DECLARE_OPS
 
+/* A container's doStep per solver, written once: VK_DO_STEP_TABLE(Container, generic, table) defines
+   `static int do_step_<name>(Container *c, double t, double h)` for every solver of VK_SOLVER_LIST, each calling
+   generic(c, &ops, t, h) with its ops VK_OPS_<name> as a constant (so the compiler resolves and inlines every op
+   of an always_inline generic), and `table`, those functions in the list's order (indexed by the solver setting). */
+#define VK_DO_STEP_DEFINE(name)                                                   \
+    static int do_step_##name(VK_DO_STEP_CONTAINER *c, double t, double h)        \
+    {                                                                             \
+        static const VkSolverOps ops = VK_OPS_##name;                             \
+        return VK_DO_STEP_GENERIC(c, &ops, t, h);                                 \
+    }
+#define VK_DO_STEP_ENTRY(name) do_step_##name,
+#define VK_DO_STEP_TABLE(table)                                                   \
+    VK_SOLVER_LIST(VK_DO_STEP_DEFINE)                                             \
+    static int (*const table[])(VK_DO_STEP_CONTAINER *, double, double) = {VK_SOLVER_LIST(VK_DO_STEP_ENTRY)};
+
 /* The table, indexed by the `solver` setting (0 <= solver < vk_n_solvers: the parameter rules and the FMU state's
    constant bytes keep it there) */
 extern const VkSolverOps *const vk_solvers[];

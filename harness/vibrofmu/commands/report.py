@@ -49,8 +49,12 @@ def run_studies(fmu_dir: Path, work_dir: Path, quick: bool) -> list[Path] | None
 def run(args) -> int:
     import tempfile
 
-    from vibrofmu.report import (DETERMINISTIC, FROM_SUMMARIES, ReportError, documents, generate,
-                                        parse_blocks, replace_blocks)
+    # pythonfmu's builder imported before any FMU runs in this process: an FMU run first would make `pythonfmu`
+    # the copy packed in its resources (no builder binaries), and the bench's own closed-loop build would fail
+    # ("has no binaries/linux64/HertzEAClosedLoop.so")
+    import vibrofmu.fmus.build  # noqa: F401
+    from vibrofmu.report import (DETERMINISTIC, FROM_SUMMARIES, ReportError, documents, generate, parse_blocks,
+                                 replace_blocks)
 
     root = Path(args.root)
     if not (root / "README.md").is_file() or not (root / "docs").is_dir():

@@ -74,7 +74,7 @@ def library_folder() -> Path:
 
 
 @contextlib.contextmanager
-def _exclusive(lock_file: Path):
+def exclusive(lock_file: Path):
     """An exclusive lock on lock_file (fcntl.flock; no lock where there is no fcntl, as on Windows)."""
     try:
         import fcntl
@@ -95,7 +95,7 @@ def kernel_library():
     folder = library_folder()
     if not (folder / compiled.LIBRARY_NAME).exists():
         folder.mkdir(parents=True, exist_ok=True)
-        with _exclusive(folder / ".lock"):  # concurrent builders (test workers, commands): the first compiles
+        with exclusive(folder / ".lock"):  # concurrent builders (test workers, commands): the first compiles
             if not (folder / compiled.LIBRARY_NAME).exists():
                 with tempfile.TemporaryDirectory(dir=folder) as tmp:  # a reader sees no file or a whole one
                     os.replace(compile_kernel(Path(tmp) / compiled.LIBRARY_NAME), folder / compiled.LIBRARY_NAME)

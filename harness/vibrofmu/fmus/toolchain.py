@@ -81,3 +81,15 @@ def host_includes() -> list[str]:
     from vibrofmu import paths
 
     return [f"-I{paths.FMU_SRC / 'fmi'}", fmi_include()]
+
+
+def compile_host(source: Path, out: Path) -> Path:
+    """Compile the C host `source` (an FMI host on fmi/fmi2_host_api.h) to the program `out`; RuntimeError with the
+    command and the compiler's messages when that fails."""
+    import subprocess
+
+    cmd = [*c_compiler(), *HOST, *host_includes(), "-o", str(out), str(source), *HOST_LIBS]
+    proc = subprocess.run(cmd, capture_output=True, text=True)
+    if proc.returncode != 0:
+        raise RuntimeError(f"compiling {Path(source).name} failed ({' '.join(cmd)}):\n{proc.stderr}")
+    return Path(out)

@@ -89,13 +89,7 @@ def export_lines(env: dict[str, str]) -> str:
 
 
 def compile_host(out_dir: Path) -> Path:
-    host = Path(out_dir) / "fmi2_host"
-    cmd = [*toolchain.c_compiler(), *toolchain.HOST, *toolchain.host_includes(), "-o", str(host), str(HOST_SOURCE),
-           *toolchain.HOST_LIBS]
-    proc = subprocess.run(cmd, capture_output=True, text=True)
-    if proc.returncode != 0:
-        raise RuntimeError(f"compiling the C host failed ({' '.join(cmd)}):\n{proc.stderr}")
-    return host
+    return toolchain.compile_host(HOST_SOURCE, Path(out_dir) / "fmi2_host")
 
 
 def compile_windows_host(out_dir: Path) -> Path:

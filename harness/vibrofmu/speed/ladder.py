@@ -96,13 +96,7 @@ INSTRUCTIONS_NOTE = ("instructions executed in doStep + getReal(x) and everythin
 
 
 def compile_timing_host(out_dir: Path) -> Path:
-    host = Path(out_dir) / "timing_host"
-    cmd = [*toolchain.c_compiler(), *toolchain.HOST, *toolchain.host_includes(), "-o", str(host), str(TIMING_HOST_SOURCE),
-           *toolchain.HOST_LIBS]
-    proc = subprocess.run(cmd, capture_output=True, text=True)
-    if proc.returncode != 0:
-        raise RuntimeError(f"compiling the timing host failed ({' '.join(cmd)}):\n{proc.stderr}")
-    return host
+    return toolchain.compile_host(TIMING_HOST_SOURCE, Path(out_dir) / "timing_host")
 
 
 def host_command(host: Path, unzip_dir: Path, specs: list[tuple[dict, float]], stop: float,
