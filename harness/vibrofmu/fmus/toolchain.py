@@ -5,8 +5,8 @@ the C hosts).
 Every flag set warns with -Wall -Wextra; tests/fmus/test_c_toolchain.py compiles every C translation unit of the project
 with these sets plus -Werror, so a new warning fails there. The flags that decide numbers stay exactly as they
 were: the compiled core and the native FMUs compute in IEEE double arithmetic as written (-ffp-contract=off: no
-FMA contraction, no -ffast-math; math errno stays on -- the kernel reads pow's errno as CPython's float_pow does),
-which is what makes them bit-identical to the Python model; their speed comes from -O2 and -flto.
+FMA contraction, no -ffast-math), which is what makes them bit-identical to the Python model; their speed comes
+from -O2 and -flto.
 
 The FMI 2.0 headers (fmi2Functions.h, fmi2FunctionTypes.h, fmi2TypesPlatform.h) are the standard's own, read from
 FMPy's installed package (fmpy/c-code, FMPy's `build_platform_binary` compiles FMU sources against the same
