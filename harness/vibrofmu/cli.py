@@ -43,7 +43,11 @@ def main(argv=None) -> int:
         args = make_parser({command}).parse_args(argv)
     except SystemExit as stop:  # --help (0) or a bad command line (2, one line printed by Parser.error)
         return stop.code
-    return run(args.func, args)
+    try:
+        return run(args.func, args)
+    except KeyboardInterrupt:
+        print("error: interrupted", file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":

@@ -195,3 +195,32 @@ def test_the_convergence_table_shows_a_stopped_run():
     assert _study_cell(stopped) == "H=0.5: stopped (plant: pull-in at tau = 3)"
     done = {"H": 0.2, "max_abs_error_x": 1.5e-3, "completed": True, "stop_reason": None, "order": 1.02}
     assert _study_cell(done) == "H=0.2: 1.50e-03 (order 1.02)"
+
+
+def _interrupted(args):
+    raise KeyboardInterrupt
+
+
+def test_ctrl_c_stops_a_command_run_by_another(monkeypatch, tmp_path):
+    """Ctrl-C inside a study that `report` runs stops the report (nothing rewritten), instead of being answered by
+    the study (exit 130) and the report going on to the next one."""
+    from dataclasses import replace
+
+    from vibrofmu.commands import oafm, report, stability
+
+    ran = []
+    monkeypatch.setattr(oafm, "COMMAND", replace(oafm.COMMAND, run=_interrupted))
+    monkeypatch.setattr(stability, "COMMAND", replace(stability.COMMAND, run=lambda args: ran.append(args) or 0))
+    with pytest.raises(KeyboardInterrupt):
+        report.run_studies(tmp_path, tmp_path, quick=True)
+    assert ran == []
+
+
+def test_ctrl_c_is_one_line_and_exit_130(monkeypatch, capsys):
+    from dataclasses import replace
+
+    from vibrofmu.commands import build
+
+    monkeypatch.setattr(build, "COMMAND", replace(build.COMMAND, run=_interrupted))
+    assert main(["build"]) == 130
+    assert capsys.readouterr().err == "error: interrupted\n"

@@ -66,7 +66,8 @@ class Parser(argparse.ArgumentParser):
 
 
 def run(command: Callable[[argparse.Namespace], int], args: argparse.Namespace) -> int:
-    """Run one command: a user mistake is one line `error: ...` and exit code 2, Ctrl-C exit code 130."""
+    """Run one command: a user mistake is one line `error: ...` and exit code 2. Ctrl-C is not caught here: it
+    stops the whole `vibrofmu` process (cli.main answers it), also when one command runs another (invoke)."""
     try:
         return command(args)
     except (UserError, ParameterError) as error:
@@ -75,9 +76,6 @@ def run(command: Callable[[argparse.Namespace], int], args: argparse.Namespace) 
     except NoCompiler as error:
         print(f"error: {error} (set $CC or install gcc)", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        print("error: interrupted", file=sys.stderr)
-        return 130
 
 
 def invoke(command: Command, argv: list[str]) -> int:

@@ -37,6 +37,7 @@ def run_studies(fmu_dir: Path, work_dir: Path, quick: bool) -> list[Path] | None
         try:
             code = invoke(command, argv + ["--out", str(folder)])
         except Exception as error:  # a failing study must not lose the other blocks: say which and go on
+            # (Ctrl-C is no Exception: it stops the report before any document is rewritten)
             code = f"{type(error).__name__}: {error}"
         if code != 0:
             print(f"error: vibrofmu {name} failed ({code}); the blocks from its summary are not updated",

@@ -1,4 +1,5 @@
 """`vibrofmu ssp`: the shipped co-simulation scenes as SSP files, optionally checked with FMPy's simulate_ssp."""
+import sys
 from pathlib import Path
 
 from vibrofmu import paths
@@ -24,7 +25,7 @@ def run(args) -> int:
     try:
         written = write_scene_ssps(scenes, fmu_dir, Path(args.out_dir or fmu_dir))
     except SceneError as error:
-        print(f"error: {error}")
+        print(f"error: {error}", file=sys.stderr)
         return 2
     for path in written:
         print(f"wrote {path}")
