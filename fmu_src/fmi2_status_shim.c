@@ -420,7 +420,7 @@ EXPORT fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, 
     pthread_once(&load_once, load_inner);
     if (inner_handle == NULL) {
         if (functions != NULL && functions->logger != NULL)
-            fmi2_log_to(functions, instanceName, fmi2Fatal, "logStatusFatal", load_error);
+            fmi2_log_to(functions, instanceName, fmi2Error, "logStatusError", load_error); /* shown by default */
         return NULL;
     }
     Shim *s = calloc(1, sizeof *s);

@@ -6,7 +6,12 @@
  * (FMPy) has all that; a C host (fmusim, Dymola, a plain C program started with an empty environment) has
  * none of it.  The status shim calls vibro_python_prepare() before it loads pythonfmu's library:
  *
- *   1. Python already in the process (a Python host, or another FMU loaded it): it is used as it is.
+ *   1. Python already in the process (a Python host, or another FMU loaded it): it is used, if its version
+ *      (major.minor) is the recorded python_version; when a recorded module does not import there (a host
+ *      in a venv without numpy, scipy or pythonfmu), the recorded folders (`path`) missing from sys.path are
+ *      appended to it, under the GIL, and the import is tried again.  Another version cannot run pythonfmu's
+ *      library (built for one Python): one line says both versions and names the native FMU
+ *      (build/native/<id>.fmu, no Python) as the working alternative.
  *   2. Otherwise the environment recorded at build time is read: the FMU's resources/python_env.txt
  *      (written by harness/vibrofmu/fmus/pythonenv.py), or the file $VIBROFMU_PYTHON_ENV names instead (for
  *      another machine; `vibrofmu doctor --env-file` writes one).  Lines "key=value":
@@ -27,8 +32,9 @@
  *   3. Each recorded module is imported (under the GIL) and, in the Python the FMU started, its version
  *      compared with the recorded one (major.minor); Python's own version in either case (pythonfmu's
  *      library is built for one).
- * Anything missing gives one line naming it and `vibrofmu doctor` (the shim logs it and fmi2Instantiate
- * returns NULL), never a Python traceback.
+ * Anything missing gives one line naming it and `vibrofmu doctor` (the shim logs it with status fmi2Error and
+ * fmi2Instantiate returns NULL), never a Python traceback.  In a Python host (step 1) the line names the native
+ * FMU instead, and is also written to stderr: some hosts log an FMU's messages at their debug level only.
  *
  * All Python functions are looked up with dlsym: this file needs no Python headers and no Python at build
  * time beyond what wrote the environment file.
@@ -138,6 +144,10 @@ typedef struct {
     PyObject *(*GetAttrString)(PyObject *, const char *);
     const char *(*AsUTF8)(PyObject *);
     void (*DecRef)(PyObject *);
+    PyObject *(*SysGetObject)(const char *);
+    PyObject *(*UnicodeFromString)(const char *);
+    int (*ListAppend)(PyObject *, PyObject *);
+    int (*SequenceContains)(PyObject *, PyObject *);
     int *NoSiteFlag, *NoUserSiteDirectory;
 } PyApi;
 
@@ -150,13 +160,15 @@ static int python_api(void *scope, PyApi *api)
     GET(GetVersion, "Py_GetVersion"); GET(ImportModule, "PyImport_ImportModule");
     GET(ErrFetch, "PyErr_Fetch"); GET(ErrNormalize, "PyErr_NormalizeException"); GET(ErrClear, "PyErr_Clear");
     GET(Str, "PyObject_Str"); GET(GetAttrString, "PyObject_GetAttrString"); GET(AsUTF8, "PyUnicode_AsUTF8");
-    GET(DecRef, "Py_DecRef");
+    GET(DecRef, "Py_DecRef"); GET(SysGetObject, "PySys_GetObject"); GET(UnicodeFromString, "PyUnicode_FromString");
+    GET(ListAppend, "PyList_Append"); GET(SequenceContains, "PySequence_Contains");
     api->NoSiteFlag = dlsym(scope, "Py_NoSiteFlag");
     api->NoUserSiteDirectory = dlsym(scope, "Py_NoUserSiteDirectory");
 #undef GET
     return api->IsInitialized && api->InitializeEx && api->SaveThread && api->GILState_Ensure
            && api->GILState_Release && api->GetVersion && api->ImportModule && api->ErrFetch && api->ErrNormalize
-           && api->ErrClear && api->Str && api->GetAttrString && api->AsUTF8 && api->DecRef;
+           && api->ErrClear && api->Str && api->GetAttrString && api->AsUTF8 && api->DecRef && api->SysGetObject
+           && api->UnicodeFromString && api->ListAppend && api->SequenceContains;
 }
 
 /* str(obj), first line, into out; "" when it cannot be had.  Needs the GIL. */
@@ -181,45 +193,107 @@ static int same_minor(const char *a, const char *b)
            && strncmp(da + 1, db + 1, na) == 0;
 }
 
-/* Import every recorded module and compare its version.  Needs the GIL. */
-static int check_modules(const PyApi *api, const PyEnv *env, int host, char *message, size_t size)
+/* Length of "3.12" in "3.12.1 (main, ...)" */
+static int minor_length(const char *version)
+{
+    const char *dot = strchr(version, '.');
+    if (dot == NULL) return (int)strcspn(version, " ");
+    return (int)(dot + 1 - version) + (int)strcspn(dot + 1, ". +abrc");
+}
+
+/* The FMU's model identifier, from its binary's file name (binaries/<platform>/<id>.so). */
+static void model_identifier(const char *binary_path, char *out, size_t size)
+{
+    const char *base = strrchr(binary_path, '/');
+    base = base ? base + 1 : binary_path;
+    size_t n = strcspn(base, ".");
+    snprintf(out, size, "%.*s", (int)n, base);
+}
+
+/* Append each folder of the ':'-separated list to sys.path that is not in it; the number appended.  Needs the
+   GIL. */
+static int append_to_sys_path(const PyApi *api, const char *folders)
+{
+    PyObject *sys_path = api->SysGetObject("path"); /* borrowed */
+    if (sys_path == NULL) return 0;
+    char list[4 * LINE];
+    snprintf(list, sizeof list, "%s", folders);
+    int added = 0;
+    char *save = NULL;
+    for (char *dir = strtok_r(list, ":", &save); dir != NULL; dir = strtok_r(NULL, ":", &save)) {
+        PyObject *item = api->UnicodeFromString(dir);
+        if (item == NULL) { api->ErrClear(); continue; }
+        if (api->SequenceContains(sys_path, item) == 0 && api->ListAppend(sys_path, item) == 0) added++;
+        api->DecRef(item);
+        api->ErrClear();
+    }
+    return added;
+}
+
+/* Import module `name`: NULL with the reason in why (one line) when it fails.  Needs the GIL. */
+static PyObject *import_module(const PyApi *api, const char *name, char *why, size_t size)
+{
+    PyObject *module = api->ImportModule(name);
+    if (module != NULL) return module;
+    PyObject *type = NULL, *value = NULL, *tb = NULL;
+    api->ErrFetch(&type, &value, &tb);
+    api->ErrNormalize(&type, &value, &tb);
+    text_of(api, value, why, size);
+    if (!why[0]) snprintf(why, size, "no reason given");
+    if (type) api->DecRef(type);
+    if (value) api->DecRef(value);
+    if (tb) api->DecRef(tb);
+    api->ErrClear();
+    return NULL;
+}
+
+/* Import every recorded module and compare its version.  host: the host's own Python (step 1).  Needs the GIL. */
+static int check_modules(const PyApi *api, const PyEnv *env, const char *binary_path, int host, char *message,
+                         size_t size)
 {
     const char *version = api->GetVersion();
-    char where[2 * LINE];
+    int vlen = (int)strcspn(version, " ");
+    char where[2 * LINE], id[256];
+    model_identifier(binary_path, id, sizeof id);
     if (host)
-        snprintf(where, sizeof where, "the host's Python %.*s", (int)strcspn(version, " "), version);
+        snprintf(where, sizeof where, "the host's Python %.*s", vlen, version);
     else
-        snprintf(where, sizeof where, "the Python %.*s of this FMU (environment %s)", (int)strcspn(version, " "),
-                 version, env->source);
+        snprintf(where, sizeof where, "the Python %.*s of this FMU (environment %s)", vlen, version, env->source);
     if (!same_minor(version, env->python_version)) {
-        say(message, size, "vibrofmu: version mismatch: %s is loaded but this FMU needs Python %s" HINT, where,
-            env->python_version);
+        if (host) /* pythonfmu's library runs in the Python it was built for only: no file or variable helps */
+            say(message, size, "vibrofmu: this FMU (%s, pythonfmu) needs Python %s but the host runs Python %.*s, "
+                "and a pythonfmu FMU runs only in a Python host of the version it was built with: use the native "
+                "FMU build/native/%s.fmu (no Python at run time), or rebuild this one with Python %.*s "
+                "(`vibrofmu build`)", id, env->python_version, vlen, version, id, minor_length(version), version);
+        else
+            say(message, size, "vibrofmu: version mismatch: %s is loaded but this FMU needs Python %s" HINT, where,
+                env->python_version);
         return 1;
     }
+    int path_added = 0;
     char list[LINE];
     snprintf(list, sizeof list, "%s", env->modules);
     char *save = NULL;
     for (char *item = strtok_r(list, " ", &save); item != NULL; item = strtok_r(NULL, " ", &save)) {
         char *wanted = strstr(item, "==");
         if (wanted != NULL) { *wanted = '\0'; wanted += 2; }
-        PyObject *module = api->ImportModule(item);
+        char why[512];
+        PyObject *module = import_module(api, item, why, sizeof why);
+        if (module == NULL && host && !path_added && env->path[0]) {
+            /* the host's Python is the FMU's version but lacks the module: the site-packages the FMU was built
+               with are added (once) */
+            path_added = 1;
+            if (append_to_sys_path(api, env->path) > 0) module = import_module(api, item, why, sizeof why);
+        }
         if (module == NULL) {
-            PyObject *type = NULL, *value = NULL, *tb = NULL;
-            char why[512];
-            api->ErrFetch(&type, &value, &tb);
-            api->ErrNormalize(&type, &value, &tb);
-            text_of(api, value, why, sizeof why);
-            if (type) api->DecRef(type);
-            if (value) api->DecRef(value);
-            if (tb) api->DecRef(tb);
-            api->ErrClear();
-            if (host) /* the host's own Python: the environment file does not apply */
-                say(message, size, "vibrofmu: %s is missing, or broken: %s cannot import %s (%s); install it into "
-                    "the Python that runs the host (pip install %s), see `vibrofmu doctor`", item, where, item,
-                    why[0] ? why : "no reason given", item);
+            if (host)
+                say(message, size, "vibrofmu: %s is missing, or broken: %s cannot import %s (%s), not even from "
+                    "the folders this FMU was built with (%s); install it into the Python that runs the host (pip "
+                    "install %s), or use the native FMU build/native/%s.fmu (no Python at run time)", item, where,
+                    item, why, env->path[0] ? env->path : "none recorded", item, id);
             else
                 say(message, size, "vibrofmu: %s is missing, or broken: %s cannot import %s (%s)" HINT, item, where,
-                    item, why[0] ? why : "no reason given");
+                    item, why);
             return 1;
         }
         PyObject *v = api->GetAttrString(module, "__version__");
@@ -267,8 +341,14 @@ int vibro_python_prepare(const char *binary_path, char *message, size_t size)
             goto done;
         }
         int gil = api.GILState_Ensure();
-        failed = check_modules(&api, env, 1, message, size);
+        failed = check_modules(&api, env, binary_path, 1, message, size);
         api.GILState_Release(gil);
+        /* A Python host may show the FMU's log at its debug level only (ecospy 0.7.2 logs every FMU message,
+           fmi2Fatal included, at debug) and then run on with no instance: the line also goes to stderr, once. */
+        if (failed) {
+            fprintf(stderr, "%s\n", message);
+            fflush(stderr);
+        }
         goto done;
     }
     if (read_env(binary_path, env, message, size) != 0) goto done; /* 2. */
@@ -301,7 +381,7 @@ int vibro_python_prepare(const char *binary_path, char *message, size_t size)
     api.InitializeEx(0);
     pop_env("PYTHONHOME", old_home);
     pop_env("PYTHONPATH", old_path);
-    failed = check_modules(&api, env, 0, message, size); /* 3. (Py_InitializeEx left us holding the GIL) */
+    failed = check_modules(&api, env, binary_path, 0, message, size); /* 3. (Py_InitializeEx left us holding the GIL) */
     api.SaveThread();
 done:
     free(env);

@@ -19,6 +19,7 @@ from vibrofmu.hosts import container, ssp
 from vibrofmu.analyses import container_check
 from vibrofmu.paths import DEFAULT_SCENE
 from vibrofmu.hosts.cosim import SceneError, load_scene, run_cosim
+from zip_entries import assert_regular_0644
 
 STOP = 20.0  # 200 communication steps at H = 0.1: every FMU and connection is exercised, about 1 s per run
 
@@ -88,6 +89,7 @@ def container_fmu(fmu_dir, tmp_path_factory):
 
 def test_container_validates_and_runs_its_default_experiment(container_fmu):
     assert validate_fmu(str(container_fmu)) == []
+    assert_regular_0644(container_fmu)  # FMPy's container writer leaves 0600 entries: normalized (issue 23)
     from fmpy import read_model_description, simulate_fmu
 
     md = read_model_description(str(container_fmu))
@@ -138,3 +140,4 @@ def test_vibrofmu_ssp_writes_the_shipped_scene(fmu_dir, tmp_path, capsys):
     shipped, scene = ssp.load_ssp(path), load_scene(DEFAULT_SCENE, fmu_dir)
     assert shipped.connections == scene.connections and shipped.step == scene.step
     assert path.stat().st_mode & 0o777 == 0o644
+    assert_regular_0644(path)  # and so are its entries (issue 23)

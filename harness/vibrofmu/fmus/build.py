@@ -1,7 +1,7 @@
 """Build the FMUs: pythonfmu packs the slave, slave_support, fast_path and the vibromodel package; the status shim
 goes on top; each FMU also gets the compiled kernel (vibrokernel.so) in its resources; the reference result of
 the default experiment goes into the documentation; finally every variable gets its description and unit
-(fmu_variables.annotate) and the file is made readable by all (0644).
+(fmu_variables.annotate), the file is made readable by all (0644) and so is each of its entries (archive.normalize_entries).
 
 Without a C compiler (toolchain.c_compiler) the FMUs are built without their compiled parts: no kernel (the plant
 integrates in Python, the same numbers, slower) and no status shim (pythonfmu's own binary: a failing call
@@ -21,6 +21,7 @@ from vibromodel.parameters import Scene
 from vibromodel.plant import DEFAULT_EXPERIMENT
 
 from vibrofmu import paths
+from vibrofmu.fmus.archive import normalize_entries
 from vibrofmu.fmus.entry import importable, pythonfmu_entry
 from vibrofmu.fmus.fmu_variables import annotate
 from vibrofmu.fmus.kernel import compile_kernel
@@ -68,6 +69,7 @@ def build_fmu(slave: Path, out_dir: Path | None = None, extra_resources: tuple[P
         pack_python_env(fmu)  # the Python the FMU finds in a C host (resources/python_env.txt; read by the shim)
     pack_reference(fmu)
     annotate(fmu)
+    normalize_entries(fmu)  # pythonfmu's builder and zipfile.writestr leave entries 0600 without a file type
     os.chmod(fmu, FMU_MODE)
     return fmu
 

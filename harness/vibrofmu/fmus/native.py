@@ -334,7 +334,9 @@ def build_native(pythonfmu_fmu: Path, out_dir: Path, win64: bool | None = None, 
         from vibrofmu.fmus.refresult import pack_reference
 
         pack_reference(fmu)
-    return fmu
+    from vibrofmu.fmus.archive import normalize_entries
+
+    return normalize_entries(fmu)  # entries 0644, regular files
 
 
 def series_probe_library(out_dir: Path):

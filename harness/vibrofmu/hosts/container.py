@@ -20,6 +20,8 @@ import shutil
 import tempfile
 from pathlib import Path
 
+from vibrofmu.fmus.archive import normalize_entries
+
 
 CONTAINER_NAME = "HertzEAClosedLoopContainer"
 DEFAULT_STEP = 0.1
@@ -113,6 +115,7 @@ def build_container(fmu_dir: Path, out: Path, step: float = DEFAULT_STEP) -> Pat
         if out.exists():
             out.unlink()
         create_container_fmu(configuration, unzip_dir, out.resolve())
+    normalize_entries(out)
     out.chmod(0o644)
     return out
 

@@ -26,6 +26,7 @@ import tempfile
 import zipfile
 from pathlib import Path
 
+from vibrofmu.fmus.archive import normalize_entries
 from vibrofmu.hosts.scene import (Connection, CosimScene, FmuSpec, SceneError, check_numbers, fmu_spec,
                                   read_scene)
 
@@ -124,6 +125,7 @@ def write_ssp(scene: CosimScene, path: Path, name: str = "closed_loop") -> Path:
         archive.writestr(SSD_NAME, scene_to_ssd(scene, name))
         for fmu in dict.fromkeys(spec.path for spec in scene.fmus):
             archive.write(fmu, f"resources/{fmu.name}")
+    normalize_entries(path)
     path.chmod(0o644)
     return path
 

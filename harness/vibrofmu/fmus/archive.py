@@ -1,0 +1,50 @@
+"""The entries of an FMU (or any zip the project ships) as a user's unzip expects them: regular files 0644,
+folders 0755, made by Unix.
+
+Python's zipfile gives `writestr(name, data)` entries mode 0600 and no file type (external_attr 0o600 << 16),
+and pythonfmu's builder writes its own zip the same way; `unzip` then makes files only their owner can read,
+and tools that look at the type bits (a file or a folder?) see neither. `normalize_entries` rewrites the archive
+once it is complete: every entry keeps its name, bytes, date, compression and order; only its attributes change.
+"""
+from __future__ import annotations
+
+import os
+import tempfile
+import zipfile
+from pathlib import Path
+
+FILE_ATTR = 0o100644 << 16  # S_IFREG | rw-r--r--
+DIR_ATTR = (0o40755 << 16) | 0x10  # S_IFDIR | rwxr-xr-x, and MS-DOS's directory bit
+UNIX = 3  # ZipInfo.create_system: the high 16 bits of external_attr are a Unix mode
+
+
+def entry_attributes(info: zipfile.ZipInfo) -> int:
+    return DIR_ATTR if info.is_dir() else FILE_ATTR
+
+
+def normalize_entries(path: Path) -> Path:
+    """Rewrite the zip `path` in place with every entry 0644 regular file (0755 folder); returns path."""
+    path = Path(path)
+    with zipfile.ZipFile(path) as zin:
+        infos = zin.infolist()
+        if all(i.create_system == UNIX and i.external_attr == entry_attributes(i) for i in infos):
+            return path
+        fd, tmp = tempfile.mkstemp(suffix=path.suffix, dir=path.parent)
+        os.close(fd)
+        try:
+            with zipfile.ZipFile(tmp, "w") as zout:
+                for info in infos:
+                    data = zin.read(info)
+                    new = zipfile.ZipInfo(info.filename, date_time=info.date_time)
+                    new.compress_type = info.compress_type
+                    new.create_system = UNIX
+                    new.external_attr = entry_attributes(info)
+                    new.comment = info.comment
+                    zout.writestr(new, data)
+            mode = path.stat().st_mode & 0o777
+            os.chmod(tmp, mode)
+            os.replace(tmp, path)
+        except BaseException:
+            Path(tmp).unlink(missing_ok=True)
+            raise
+    return path
