@@ -9,7 +9,7 @@ def options(p):
 def run(args) -> int:
     from vibrofmu.fmus.build import build_all
 
-    say_compiled_parts()
+    say_compiled_parts(natives=True)
     for fmu in build_all(out_folder(args.out_dir)):
         print(f"built {fmu}")
     return 0

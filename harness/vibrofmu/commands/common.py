@@ -159,17 +159,18 @@ def built_all(fmu_dir: Path, names=(PLANT_NAME, CONTROLLER_NAME, CLOSED_LOOP_NAM
         from vibrofmu.fmus.build import build_all
 
         print(f"building the FMUs into {fmu_dir} ...", file=sys.stderr)
-        say_compiled_parts()
+        say_compiled_parts(natives=True)
         build_all(fmu_dir)
     return fmu_dir
 
 
-def say_compiled_parts() -> None:
-    from vibrofmu.fmus.build import compiled_parts
+def say_compiled_parts(natives: bool = False) -> None:
+    """The line saying what the FMUs are built without, if anything; natives: also whether win64 is skipped."""
+    from vibrofmu.fmus.build import compiled_parts, win64_skipped
 
-    line = compiled_parts()
-    if line:
-        print(line, file=sys.stderr)
+    for line in (compiled_parts(), win64_skipped() if natives else None):
+        if line:
+            print(line, file=sys.stderr)
 
 
 def writable_folder(path: str) -> Path:

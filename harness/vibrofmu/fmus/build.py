@@ -51,6 +51,16 @@ def compiled_parts() -> str | None:
                 f"integrates in Python, slower; no status shim: failures return fmi2Discard/fmi2Fatal, not fmi2Error)")
 
 
+def win64_skipped() -> str | None:
+    """None when the native FMUs get their win64 binaries; else the one line that says why they do not."""
+    from vibrofmu.fmus.native import win64_available
+
+    if compiled_parts() is not None or win64_available():
+        return None  # no native FMUs at all (compiled_parts says so), or win64 is built
+    return (f"warning: {toolchain.WIN64_COMPILER} is not on PATH: the native FMUs are built without win64 binaries "
+            "(linux64 only; apt-get install gcc-mingw-w64-x86-64 adds them)")
+
+
 def build_fmu(slave: Path, out_dir: Path | None = None, extra_resources: tuple[Path, ...] = ()) -> Path:
     """Build out_dir/<slave name>.fmu with vibromodel, slave_support (and extra_resources) in its resources,
     the status shim installed and the reference result packed. It declares state save/restore and serialization:
