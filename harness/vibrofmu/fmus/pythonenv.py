@@ -3,7 +3,9 @@
 The FMU's C layer (fmu_src/pyloader.c, linked into the status shim) reads it in a host that is not Python:
 it loads `libpython` globally, starts Python with PYTHONHOME = `home` and PYTHONPATH = `path` (without the
 site module: sys.path is the standard library plus exactly these folders) and imports every module of
-`modules`, comparing versions, before pythonfmu's library is loaded.  The environment variable
+`modules`, comparing versions, before pythonfmu's library is loaded.  In a Python host of the recorded
+`python_version` it appends `path` to the host's sys.path when a module does not import there; in a host of
+another version it refuses with one line naming the native FMU.  The environment variable
 VIBROFMU_PYTHON_ENV names another file of the same format instead (another machine, another Python);
 `vibrofmu doctor --env-file FILE [--python PYTHON]` writes one.
 
