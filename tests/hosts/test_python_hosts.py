@@ -19,8 +19,8 @@ grid (n·h): libcosim counts integer nanoseconds and steps from t = n·10⁸/10�
 accumulates t += h (7e-12 off n·h at τ = 200); x then differs from simulate_fmu's by |ẋ|·δt (libcosimpy 2e-16,
 ecospy 5e-14 on the paper scene, measured: docs/using-the-fmus-in-other-tools.md).
 
-Default suite: libcosimpy in a venv without numpy on the pythonfmu plant (about a second), and a forged record of
-another Python version. The rest is slow: `python3 -m pytest -m slow tests/hosts/test_python_hosts.py`.
+Default suite: libcosimpy in a venv without numpy on the pythonfmu plant (about 2 s), and two forged records (another
+Python version; recorded folders without scipy), a fraction of a second each. The rest is slow: `python3 -m pytest -m slow tests/hosts/test_python_hosts.py`.
 """
 from __future__ import annotations
 
@@ -212,6 +212,27 @@ def test_a_python_host_of_another_version_gets_one_line(bare_venv, plant_fmu, pl
     # libcosim shows the FMU's log at its default level, on stdout: the same line, with status error
     logged = one_line(proc.stdout, "HertzEAOscillator")
     assert len(logged) == 1 and "[error]" in logged[0] and "status=error" in logged[0], proc.stdout[-3000:]
+
+
+def test_a_module_missing_from_host_and_record_is_one_line(bare_venv, plant_unzipped, plant_fmu, tmp_path):
+    """The host's version, but scipy neither in the host nor in the recorded folders (a record whose `path` holds
+    numpy only): one line naming scipy, the host's Python and the native FMU."""
+    site = tmp_path / "numpy_only"
+    site.mkdir()
+    home = _installed("numpy").parent
+    for entry in home.iterdir():
+        if entry.name == "numpy" or entry.name.startswith(("numpy.libs", "numpy-")):
+            (site / entry.name).symlink_to(entry)
+    record = parse_env((Path(plant_unzipped) / "resources" / ENV_FILE).read_text())
+    forged = tmp_path / ENV_FILE
+    forged.write_text("".join(f"{key}={site if key == 'path' else value}\n" for key, value in record.items()))
+    proc, _ = run_host(bare_venv, "libcosimpy", plant_fmu, ["x"], env={"PATH": "/usr/bin:/bin",
+                                                                         ENV_VARIABLE: str(forged)})
+    raw = [line for line in proc.stderr.splitlines() if line.startswith("vibrofmu: ")]
+    assert len(raw) == 1, proc.stderr[-3000:]
+    assert raw[0].startswith("vibrofmu: scipy is missing") and "No module named 'scipy'" in raw[0], raw[0]
+    assert "the host's Python %d.%d.%d" % sys.version_info[:3] in raw[0] and str(site) in raw[0], raw[0]
+    assert "build/native/HertzEAOscillator.fmu" in raw[0] and "Traceback" not in proc.stderr
 
 
 # ---- slow: every FMU in both hosts, with and without numpy, and in other Pythons ----
