@@ -22,7 +22,7 @@ and `vibrofmu report` rewrites the text between them (the markers stay). Blocks:
 
 Without --from, the oafm, stability and speed blocks come from fresh runs of `vibrofmu oafm`, `stability` and
 `bench` (quick: oafm study to order 3, `bench --quick`). `--check` regenerates the deterministic blocks
-(accuracy, ssp) and compares them with the documents' text: exit 1 naming the block that differs.
+(accuracy, ssp, container) and compares them with the documents' text: exit 1 naming the block that differs.
 `--quick` also skips the container's H = 0.01.
 """
 from __future__ import annotations
@@ -41,7 +41,9 @@ OPEN = re.compile(r"<!-- report:([a-z_]+) -->")
 CLOSE = re.compile(r"<!-- /report:([a-z_]+) -->")
 NAMES = ("machine", "accuracy", "ssp", "ssp_orderings", "container", "oafm", "stability", "speed")
 FROM_SUMMARIES = ("oafm", "stability", "speed")  # filled from the --from folders only
-DETERMINISTIC = ("accuracy", "ssp")
+DETERMINISTIC = ("accuracy", "ssp", "container")
+SOURCE_FILES = {"oafm": "an oafm summary.json", "stability": "a stability summary.json",
+                "speed": "a bench.json or an oafm/stability summary.json"}  # what a FROM_SUMMARIES block reads
 ACCURACY_TAUS = (10.0, 25.0, 50.0, 100.0, 200.0)
 ACCURACY_RTOLS = (1e-4, 1e-6, 1e-8, 1e-10, 1e-12)
 ACCURACY_RK4_STEPS = (0.1, 0.05, 0.025)
@@ -85,14 +87,21 @@ def replace_blocks(text: str, bodies: dict[str, str]) -> str:
 
 # ---------------------------------------------------------------------------------------------- the blocks
 
-def machine_block() -> str:
+def start_record() -> tuple[float, tuple[float, float, float]]:
+    """(time, load average) now: taken when `vibrofmu report` starts, before its studies load the machine."""
+    return time.time(), os.getloadavg()
+
+
+def machine_block(start: tuple[float, tuple[float, float, float]] | None = None) -> str:
+    """`start`: start_record() of the report (None: now)."""
     import numpy
     import scipy
 
+    when, loads = start or start_record()
     cpu = next((line.split(":", 1)[1].strip() for line in _read("/proc/cpuinfo").splitlines()
                 if line.startswith("model name")), platform.processor() or "unknown CPU")
-    load = ", ".join(f"{x:.2f}" for x in os.getloadavg())
-    return (f"Numbers below taken on {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}: {cpu}, "
+    load = ", ".join(f"{x:.2f}" for x in loads)
+    return (f"Numbers below taken on {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime(when))}: {cpu}, "
             f"{os.cpu_count()} logical CPUs (nproc), load average {load} (1, 5, 15 min) at the start of "
             f"`vibrofmu report`; Python {platform.python_version()}, numpy {numpy.__version__}, "
             f"scipy {scipy.__version__}. Timings depend on the machine and its load; accuracy numbers do not "
@@ -293,12 +302,19 @@ def speed_block(sources: list[Path]) -> str | None:
 
 # ---------------------------------------------------------------------------------------------- the command
 
-def generate(names, fmu_dir: Path, sources: list[Path], quick: bool, work_dir: Path) -> dict[str, str]:
+def summary_block(name: str, sources: list[Path]) -> str | None:
+    """The body of the FROM_SUMMARIES block `name` from the summaries in `sources` (None: none there)."""
+    return {"oafm": oafm_block, "stability": stability_block, "speed": speed_block}[name](sources)
+
+
+def generate(names, fmu_dir: Path, sources: list[Path], quick: bool, work_dir: Path, start=None) -> dict[str, str]:
+    """{name: body} of the blocks `names`; a block of FROM_SUMMARIES whose summary is in none of `sources` is left
+    out (the caller says so). `start`: start_record() of the report, for the machine block."""
     bodies = {}
     for name in names:
         print(f"report: {name} ...", file=sys.stderr, flush=True)
         if name == "machine":
-            bodies[name] = machine_block()
+            bodies[name] = machine_block(start)
         elif name == "accuracy":
             bodies[name] = accuracy_block(fmu_dir / "HertzEAOscillator.fmu")
         elif name == "ssp":
@@ -308,7 +324,7 @@ def generate(names, fmu_dir: Path, sources: list[Path], quick: bool, work_dir: P
         elif name == "container":
             bodies[name] = container_block(fmu_dir, quick)
         elif name in FROM_SUMMARIES:
-            body = {"oafm": oafm_block, "stability": stability_block, "speed": speed_block}[name](sources)
+            body = summary_block(name, sources)
             if body is not None:
                 bodies[name] = body
     return bodies
