@@ -17,12 +17,14 @@ and `vibrofmu report` rewrites the text between them (the markers stay). Blocks:
 - container: the container FMU against the monolithic closed-loop FMU and the master, per H.
 - oafm:      the paper's OAFM formulas and our harmonic basis against the reference, from an oafm summary.json.
 - stability: slow flow against shooting and the FMU sweeps, from a stability summary.json.
+- ranges:    the valid range of every FMU parameter and input, from vibromodel.parameters.RULES (the table the
+             FMUs and the command line check against; deterministic).
 - speed:     ratios from the summaries of `bench`, `oafm` and `stability` found in the --from folders
              (bench.json, summary.json); timings, so never compared by --check.
 
 Without --from, the oafm, stability and speed blocks come from fresh runs of `vibrofmu oafm`, `stability` and
 `bench` (quick: oafm study to order 3, `bench --quick`). `--check` regenerates the deterministic blocks
-(accuracy, ssp, container) and compares them with the documents' text: exit 1 naming the block that differs.
+(accuracy, ssp, container, ranges) and compares them with the documents' text: exit 1 naming the block that differs.
 `--quick` also skips the container's H = 0.01.
 """
 from __future__ import annotations
@@ -39,9 +41,9 @@ REPO_ROOT = Path(__file__).resolve().parents[2]  # the checkout (README.md, docs
 BLOCK = re.compile(r"<!-- report:(?P<name>[a-z_]+) -->\n(?P<body>.*?)<!-- /report:(?P=name) -->", re.S)
 OPEN = re.compile(r"<!-- report:([a-z_]+) -->")
 CLOSE = re.compile(r"<!-- /report:([a-z_]+) -->")
-NAMES = ("machine", "accuracy", "ssp", "ssp_orderings", "container", "oafm", "stability", "speed")
+NAMES = ("machine", "accuracy", "ssp", "ssp_orderings", "container", "oafm", "stability", "speed", "ranges")
 FROM_SUMMARIES = ("oafm", "stability", "speed")  # filled from the --from folders only
-DETERMINISTIC = ("accuracy", "ssp", "container")
+DETERMINISTIC = ("accuracy", "ssp", "container", "ranges")
 SOURCE_FILES = {"oafm": "an oafm summary.json", "stability": "a stability summary.json",
                 "speed": "a bench.json or an oafm/stability summary.json"}  # what a FROM_SUMMARIES block reads
 ACCURACY_TAUS = (10.0, 25.0, 50.0, 100.0, 200.0)
@@ -198,6 +200,29 @@ def container_block(fmu_dir: Path, quick: bool) -> str:
                       *container.table_lines(rows)])
 
 
+def ranges_block() -> str:
+    """The valid ranges as a Markdown table, straight from vibromodel.parameters.RULES (one source for the FMUs,
+    the command line's checks and this document): consecutive rules with the same range and reason share a row."""
+    from vibromodel.parameters import RULES
+
+    rows: list[tuple[list[str], str, str]] = []
+    for rule in RULES:
+        valid = rule.describe().removeprefix("must be ")
+        if rule.when is not None:
+            valid += f" when {rule.when[0]} is {' or '.join(str(v) for v in rule.when[1])}"
+        if rule.causality == "input":
+            valid += " (input)"
+        if rows and rows[-1][1:] == (valid, rule.reason):
+            rows[-1][0].append(rule.name)
+        else:
+            rows.append(([rule.name], valid, rule.reason))
+    lines = ["| parameter | valid values | why |", "|---|---|---|"]
+    for names, valid, reason in rows:
+        shown = f"`{names[0]}` … `{names[-1]}`" if len(names) > 2 else ", ".join(f"`{n}`" for n in names)
+        lines.append(f"| {shown} | {valid} | {reason.replace('|', '/')} |")
+    return "\n".join(lines)
+
+
 def _summaries(sources: list[Path], key: str) -> list[dict]:
     """The summary.json files in the folders that have `key` (oafm: paper_reproduction, stability: folds...)."""
     found = []
@@ -323,6 +348,8 @@ def generate(names, fmu_dir: Path, sources: list[Path], quick: bool, work_dir: P
             bodies[name] = ssp_orderings_block(fmu_dir)
         elif name == "container":
             bodies[name] = container_block(fmu_dir, quick)
+        elif name == "ranges":
+            bodies[name] = ranges_block()
         elif name in FROM_SUMMARIES:
             body = summary_block(name, sources)
             if body is not None:
