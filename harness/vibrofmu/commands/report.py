@@ -13,7 +13,7 @@ def options(p):
                    help="folder with a bench.json or an oafm/stability summary.json for the oafm, stability and "
                         "speed blocks (repeatable; default: run oafm, stability and bench now)")
     p.add_argument("--quick", action="store_true", help="container comparison at H = 0.1, 0.05 only; oafm study to "
-                                                        "order 3; bench --quick (default: off, about 20 min)")
+                                                        "order 3; bench --quick (default: off: the full runs)")
     p.add_argument("--check", action="store_true",
                    help="re-compute the deterministic blocks (accuracy, ssp, container) and compare with the documents; "
                         "write nothing (default: off)")
