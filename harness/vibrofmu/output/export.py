@@ -15,7 +15,7 @@ import numpy as np
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
-from matplotlib.ticker import LogFormatterSciNotation  # noqa: E402
+from matplotlib.ticker import FuncFormatter, LogFormatterSciNotation, LogLocator, NullFormatter  # noqa: E402
 
 TAU = r"time $\tau$"
 DPI = 110
@@ -268,7 +268,11 @@ def figures_closed_loop(time, series: dict, theta: dict, title: str) -> dict:
     V = np.asarray(series["V"], dtype=float)
     ax.semilogy(time, np.where(V > 0, V, np.nan), lw=1.0)  # V >= 0 decays: a log axis shows its decay rate
     positive = V[np.isfinite(V) & (V > 0)]
-    if positive.size and positive.max() < 100 * positive.min():  # within two decades: label the minor ticks too
+    if positive.size and positive.max() < 10 * positive.min():  # within a decade: ticks at 1, 1.5, 2, ... x 10^k
+        ax.yaxis.set_major_locator(LogLocator(subs=np.arange(1.0, 10.0, 0.5)))
+        ax.yaxis.set_major_formatter(FuncFormatter(lambda value, _: f"{value:.3g}"))
+        ax.yaxis.set_minor_formatter(NullFormatter())
+    elif positive.size and positive.max() < 100 * positive.min():  # within two decades: label the minor ticks
         ax.yaxis.set_minor_formatter(LogFormatterSciNotation(labelOnlyBase=False, minor_thresholds=(2, 2)))
     _finish(fig, ax, title, r"Lyapunov function $V$")
     figures["lyapunov.png"] = fig
