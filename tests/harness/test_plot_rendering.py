@@ -283,3 +283,13 @@ def test_monte_carlo_counts_have_integer_ticks(tmp_path, captured):
     ticks = [t for t in counts.get_yticks() if counts.get_ylim()[0] <= t <= counts.get_ylim()[1]]
     assert len(ticks) >= 2 and all(float(t).is_integer() for t in ticks), ticks
     assert_readable(fig)
+
+
+def test_basins_headline_says_what_the_margin_leaves_out():
+    from vibrofmu.study.analysis import headline
+
+    summary = {"kind": "basins", "cases": 64, "cases_in_study": 64, "computed_this_run": 64, "workers": 2,
+               "wall_s": 79.0, "agreement": {"fraction": 1.0, "agreeing": 56, "compared": 56, "margin": 0.03,
+                                             "by_margin": {"0": {"agreeing": 59, "compared": 64}}}}
+    assert ("agreement with the averaged prediction 1.000 (56/56) farther than 0.03 from the predicted boundary; "
+            "all points 59/64") in headline(summary)

@@ -70,7 +70,7 @@ def basins(spec: Spec, d: dict, result: dict, path: Path) -> Path:
     ax.plot(d["x_start"][wrong & far], d["v_start"][wrong & far], "kx", ms=6, mew=1.5,
             label=(f"run differs from the averaged prediction (counted: farther than {margin:g} from the boundary)"
                    if np.any(wrong & far) else None))
-    ax.plot(d["x_start"][wrong & ~far], d["v_start"][wrong & ~far], "+", color="w", ms=8, mew=2,
+    ax.plot(d["x_start"][wrong & ~far], d["v_start"][wrong & ~far], "P", mfc="w", mec="k", ms=9, mew=0.8,
             label=f"run differs, within {margin:g} of the boundary (not counted)" if np.any(wrong & ~far) else None)
     for k, branch in enumerate(result["boundary"]):
         ax.plot(branch[:, 0], branch[:, 1], "k-", lw=1.2, label="predicted boundary (saddle's stable manifold)" if k == 0 else None)
