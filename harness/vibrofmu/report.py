@@ -300,7 +300,8 @@ def speed_block(sources: list[Path]) -> str | None:
             data = json.loads(bench_file.read_text())
             machine = data.get("machine", {})
             load = machine.get("load_average_at_start")
-            when = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime(bench_file.stat().st_mtime))
+            when = machine.get("started_utc") or time.strftime("%Y-%m-%d %H:%M UTC",  # older files: their end
+                                                               time.gmtime(bench_file.stat().st_mtime))
             flags = "".join(flag for flag, key in ((" --quick", "quick"), (" --ladder-only", "ladder_only"))
                             if data.get("bench", {}).get(key))
             lines.append(f"- `vibrofmu bench{flags}` ({when}, "

@@ -45,6 +45,10 @@ def monte_carlo(d: dict, result: dict, path: Path) -> Path:
         values.append(p)
         errors.append([max(0.0, p - lo), max(0.0, hi - p)])
     axes[1].bar(labels, values, yerr=np.array(errors).T, capsize=8, color=["C2", "C3"])
+    n = len(d["case"])
+    for k, p in enumerate(values):  # the count, so that a probability of 0 (no bar) is read as "0 of n"
+        axes[1].annotate(f"{p:.3g} ({round(p * n)}/{n})", (k, p), textcoords="offset points", xytext=(12, 4),
+                         fontsize=9)
     axes[1].set_ylabel("probability (95 % Wilson interval)")
     axes[1].set_ylim(0, max(0.05, max(hi for _, hi in (summary[k]["ci95_wilson"] for k in ("contact_loss", "pull_in"))) * 1.2))
     axes[1].set_title(f"{len(d['case'])} samples")
