@@ -557,6 +557,7 @@ def plot_ladder(path: Path, ladder: dict) -> None:
     ratio_ax.set_yscale("log")
     shown = [v for _, values in series if None not in values for v in values if v and v > 0]
     shown += [LIMITS[n] for n in names] + [f["lowest_reachable_ratio"] for f in ladder.get("fmpy_floor", [])]
+    shown = [v for v in shown if v > 0]  # a log axis: a stand-in's zero floor cannot be shown
     if shown:  # the bars, the limits and the floors, with a margin; the legend sits below the axes, not above
         ratio_ax.set_ylim(min(shown) / 1.5, max(shown) * 1.5)
     _readable_log_ticks(ratio_ax.yaxis)
