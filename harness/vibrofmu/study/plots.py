@@ -104,7 +104,7 @@ def basins(spec: Spec, d: dict, result: dict, path: Path) -> Path:
 
 def response_map(result: dict, path: Path) -> Path:
     omegas, deltas = result["omegas"], result["deltas"]
-    fig, axes = plt.subplots(1, 3, figsize=(16, 5), sharey=True)
+    fig, axes = plt.subplots(1, 3, figsize=(16, 5), sharey=True, layout="constrained")
     dw = (omegas[1] - omegas[0]) / 2 if len(omegas) > 1 else 1e-4
     dd = (deltas[1] - deltas[0]) / 2 if len(deltas) > 1 else 1e-5
     extent = [omegas[0] - dw, omegas[-1] + dw, deltas[0] - dd, deltas[-1] + dd]
