@@ -52,12 +52,13 @@ class Settings:
             validate_max_step(self.max_step)
 
 
-def checked_settings(scene: Scene, settings: Settings) -> tuple[Settings, list[str]]:
+def checked_settings(scene: Scene, settings: Settings, interval: float | None = None) -> tuple[Settings, list[str]]:
     """(the settings a plant runs with, warnings about them). Raises ParameterError for bad settings.
 
     rtol below MIN_RTOL is clamped to it (parameters.clamp_tolerance); an RK4 step that does not resolve a
     forcing term of Eq. 3 or 7 is warned about (rk4_drive_warnings). Every plant implementation (and the closed
-    loop) calls this one function.
+    loop) calls this one function. `interval`: the communication step when the caller knows it (a host): a
+    doStep no longer than max_step is one RK4 step, so the warnings are about the step RK4 really takes.
     """
     settings.validate()
     check_parameters({**scene.as_dict(), "fidelity": int(settings.fidelity)})  # the fidelity's own ranges (robust)
@@ -65,17 +66,22 @@ def checked_settings(scene: Scene, settings: Settings) -> tuple[Settings, list[s
     warnings = [] if warning is None else [warning]
     solver = solver_entry(settings.solver)
     if solver.drive_gains is not None and entry(settings.fidelity).integrated:
-        warnings += rk4_drive_warnings(scene, solver.step(settings.max_step))
+        step = solver.step(settings.max_step)
+        warnings += rk4_drive_warnings(scene, step if interval is None else min(step, interval),
+                                       None if interval is None or interval >= step else settings.max_step)
     return replace(settings, rtol=rtol), warnings
 
 
-def rk4_drive_warnings(scene: Scene, max_step: float) -> list[str]:
+def rk4_drive_warnings(scene: Scene, max_step: float, ceiling: float | None = None) -> list[str]:
     """Warnings for the forcing terms that RK4 steps of max_step do not resolve (integrate.RK4_DRIVE_THETA).
 
     The electrostatic AC terms oscillate at Omega (beta sin Omega t) and 2 Omega (gamma cos 2 Omega t), the load
     at omega (Delta cos omega t); a term with zero amplitude needs no resolving. Steps are at most max_step (a
-    communication step that is not a multiple of it gets shorter steps), so the check is on max_step.
+    communication step that is not a multiple of it gets shorter steps), so the check is on max_step. `ceiling`:
+    the setting max_step when max_step here is the (shorter) communication step, named in the text.
     """
+    what_step = (f"RK4 max_step = {max_step:g}" if ceiling is None else
+                 f"RK4 steps of {max_step:g} (the output interval; max_step = {ceiling:g} is longer)")
     ac = ([(2.0 * scene.Omega, "gamma cos(2 Omega tau)")] if scene.gamma != 0.0 else []) + \
          ([(scene.Omega, "beta sin(Omega tau)")] if scene.beta != 0.0 else [])
     drives = [("AC drive", "Omega", scene.Omega, ac[0][0], ac[0][1])] if ac else []
@@ -90,7 +96,7 @@ def rk4_drive_warnings(scene: Scene, max_step: float) -> list[str]:
         error = abs(gain - 1.0)  # inf at theta = 2 pi k: every step samples the drive at the same phase
         wrong = f"by {error:.0%}" if error <= 10.0 else "by more than 1000% (near 2 pi k rad per step, a resonance)"
         warnings.append(
-            f"RK4 max_step = {max_step:g} does not resolve the {what} at {name} = {value:g}: its term {term} "
+            f"{what_step} do{'es' if ceiling is None else ''} not resolve the {what} at {name} = {value:g}: its term {term} "
             f"turns by {theta:.3g} rad per step (more than {RK4_DRIVE_THETA:.3g}, i.e. fewer than "
             f"{2.0 * math.pi / RK4_DRIVE_THETA:.2g} steps per period), so RK4 gets the ripple it drives in x wrong "
             f"{wrong}; the largest step that resolves it (ripple within {RK4_DRIVE_ERROR:.0%}) is "

@@ -17,12 +17,14 @@ and `vibrofmu report` rewrites the text between them (the markers stay). Blocks:
 - container: the container FMU against the monolithic closed-loop FMU and the master, per H.
 - oafm:      the paper's OAFM formulas and our harmonic basis against the reference, from an oafm summary.json.
 - stability: slow flow against shooting and the FMU sweeps, from a stability summary.json.
+- ranges:    the valid range of every FMU parameter and input, from vibromodel.parameters.RULES (the table the
+             FMUs and the command line check against; deterministic).
 - speed:     ratios from the summaries of `bench`, `oafm` and `stability` found in the --from folders
              (bench.json, summary.json); timings, so never compared by --check.
 
 Without --from, the oafm, stability and speed blocks come from fresh runs of `vibrofmu oafm`, `stability` and
 `bench` (quick: oafm study to order 3, `bench --quick`). `--check` regenerates the deterministic blocks
-(accuracy, ssp) and compares them with the documents' text: exit 1 naming the block that differs.
+(accuracy, ssp, container, ranges) and compares them with the documents' text: exit 1 naming the block that differs.
 `--quick` also skips the container's H = 0.01.
 """
 from __future__ import annotations
@@ -39,9 +41,11 @@ REPO_ROOT = Path(__file__).resolve().parents[2]  # the checkout (README.md, docs
 BLOCK = re.compile(r"<!-- report:(?P<name>[a-z_]+) -->\n(?P<body>.*?)<!-- /report:(?P=name) -->", re.S)
 OPEN = re.compile(r"<!-- report:([a-z_]+) -->")
 CLOSE = re.compile(r"<!-- /report:([a-z_]+) -->")
-NAMES = ("machine", "accuracy", "ssp", "ssp_orderings", "container", "oafm", "stability", "speed")
+NAMES = ("machine", "accuracy", "ssp", "ssp_orderings", "container", "oafm", "stability", "speed", "ranges")
 FROM_SUMMARIES = ("oafm", "stability", "speed")  # filled from the --from folders only
-DETERMINISTIC = ("accuracy", "ssp")
+DETERMINISTIC = ("accuracy", "ssp", "container", "ranges")
+SOURCE_FILES = {"oafm": "an oafm summary.json", "stability": "a stability summary.json",
+                "speed": "a bench.json or an oafm/stability summary.json"}  # what a FROM_SUMMARIES block reads
 ACCURACY_TAUS = (10.0, 25.0, 50.0, 100.0, 200.0)
 ACCURACY_RTOLS = (1e-4, 1e-6, 1e-8, 1e-10, 1e-12)
 ACCURACY_RK4_STEPS = (0.1, 0.05, 0.025)
@@ -85,14 +89,21 @@ def replace_blocks(text: str, bodies: dict[str, str]) -> str:
 
 # ---------------------------------------------------------------------------------------------- the blocks
 
-def machine_block() -> str:
+def start_record() -> tuple[float, tuple[float, float, float]]:
+    """(time, load average) now: taken when `vibrofmu report` starts, before its studies load the machine."""
+    return time.time(), os.getloadavg()
+
+
+def machine_block(start: tuple[float, tuple[float, float, float]] | None = None) -> str:
+    """`start`: start_record() of the report (None: now)."""
     import numpy
     import scipy
 
+    when, loads = start or start_record()
     cpu = next((line.split(":", 1)[1].strip() for line in _read("/proc/cpuinfo").splitlines()
                 if line.startswith("model name")), platform.processor() or "unknown CPU")
-    load = ", ".join(f"{x:.2f}" for x in os.getloadavg())
-    return (f"Numbers below taken on {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}: {cpu}, "
+    load = ", ".join(f"{x:.2f}" for x in loads)
+    return (f"Numbers below taken on {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime(when))}: {cpu}, "
             f"{os.cpu_count()} logical CPUs (nproc), load average {load} (1, 5, 15 min) at the start of "
             f"`vibrofmu report`; Python {platform.python_version()}, numpy {numpy.__version__}, "
             f"scipy {scipy.__version__}. Timings depend on the machine and its load; accuracy numbers do not "
@@ -189,6 +200,29 @@ def container_block(fmu_dir: Path, quick: bool) -> str:
                       *container.table_lines(rows)])
 
 
+def ranges_block() -> str:
+    """The valid ranges as a Markdown table, straight from vibromodel.parameters.RULES (one source for the FMUs,
+    the command line's checks and this document): consecutive rules with the same range and reason share a row."""
+    from vibromodel.parameters import RULES
+
+    rows: list[tuple[list[str], str, str]] = []
+    for rule in RULES:
+        valid = rule.describe().removeprefix("must be ")
+        if rule.when is not None:
+            valid += f" when {rule.when[0]} is {' or '.join(str(v) for v in rule.when[1])}"
+        if rule.causality == "input":
+            valid += " (input)"
+        if rows and rows[-1][1:] == (valid, rule.reason):
+            rows[-1][0].append(rule.name)
+        else:
+            rows.append(([rule.name], valid, rule.reason))
+    lines = ["| parameter | valid values | why |", "|---|---|---|"]
+    for names, valid, reason in rows:
+        shown = f"`{names[0]}` … `{names[-1]}`" if len(names) > 2 else ", ".join(f"`{n}`" for n in names)
+        lines.append(f"| {shown} | {valid} | {reason.replace('|', '/')} |")
+    return "\n".join(lines)
+
+
 def _summaries(sources: list[Path], key: str) -> list[dict]:
     """The summary.json files in the folders that have `key` (oafm: paper_reproduction, stability: folds...)."""
     found = []
@@ -266,7 +300,8 @@ def speed_block(sources: list[Path]) -> str | None:
             data = json.loads(bench_file.read_text())
             machine = data.get("machine", {})
             load = machine.get("load_average_at_start")
-            when = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime(bench_file.stat().st_mtime))
+            when = machine.get("started_utc") or time.strftime("%Y-%m-%d %H:%M UTC",  # older files: their end
+                                                               time.gmtime(bench_file.stat().st_mtime))
             flags = "".join(flag for flag, key in ((" --quick", "quick"), (" --ladder-only", "ladder_only"))
                             if data.get("bench", {}).get(key))
             lines.append(f"- `vibrofmu bench{flags}` ({when}, "
@@ -293,12 +328,19 @@ def speed_block(sources: list[Path]) -> str | None:
 
 # ---------------------------------------------------------------------------------------------- the command
 
-def generate(names, fmu_dir: Path, sources: list[Path], quick: bool, work_dir: Path) -> dict[str, str]:
+def summary_block(name: str, sources: list[Path]) -> str | None:
+    """The body of the FROM_SUMMARIES block `name` from the summaries in `sources` (None: none there)."""
+    return {"oafm": oafm_block, "stability": stability_block, "speed": speed_block}[name](sources)
+
+
+def generate(names, fmu_dir: Path, sources: list[Path], quick: bool, work_dir: Path, start=None) -> dict[str, str]:
+    """{name: body} of the blocks `names`; a block of FROM_SUMMARIES whose summary is in none of `sources` is left
+    out (the caller says so). `start`: start_record() of the report, for the machine block."""
     bodies = {}
     for name in names:
         print(f"report: {name} ...", file=sys.stderr, flush=True)
         if name == "machine":
-            bodies[name] = machine_block()
+            bodies[name] = machine_block(start)
         elif name == "accuracy":
             bodies[name] = accuracy_block(fmu_dir / "HertzEAOscillator.fmu")
         elif name == "ssp":
@@ -307,8 +349,10 @@ def generate(names, fmu_dir: Path, sources: list[Path], quick: bool, work_dir: P
             bodies[name] = ssp_orderings_block(fmu_dir)
         elif name == "container":
             bodies[name] = container_block(fmu_dir, quick)
+        elif name == "ranges":
+            bodies[name] = ranges_block()
         elif name in FROM_SUMMARIES:
-            body = {"oafm": oafm_block, "stability": stability_block, "speed": speed_block}[name](sources)
+            body = summary_block(name, sources)
             if body is not None:
                 bodies[name] = body
     return bodies

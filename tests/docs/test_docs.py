@@ -82,7 +82,20 @@ def test_parse_blocks_rejects_malformed_markers():
     assert report.replace_blocks(body, {"ssp": "new"}) == "<!-- report:ssp -->\nnew\n<!-- /report:ssp -->"
 
 
-def test_report_check_matches_a_fresh_run(plant_fmu, controller_fmu, closed_loop_fmu, capsys):
-    """The accuracy and SSP numbers are deterministic on one machine: a fresh run must print the same text."""
+SLOW_CHECKS = ("container",)  # ~26 s of FMU runs (three H down to 0.01): checked by the slow test below
+
+
+def test_report_check_matches_a_fresh_run(plant_fmu, controller_fmu, closed_loop_fmu, capsys, monkeypatch):
+    """The accuracy, SSP and ranges blocks are deterministic on one machine: a fresh run must print the same text."""
+    monkeypatch.setattr(report, "DETERMINISTIC", tuple(n for n in report.DETERMINISTIC if n not in SLOW_CHECKS))
     assert main(["report", "--check", "--fmu-dir", str(plant_fmu.parent), "--root", str(ROOT)]) == 0, \
         capsys.readouterr().err
+    assert "accuracy, ranges, ssp" in capsys.readouterr().out
+
+
+@pytest.mark.slow
+def test_report_check_of_every_deterministic_block(plant_fmu, controller_fmu, closed_loop_fmu, capsys):
+    """`vibrofmu report --check` as a user runs it: every deterministic block, the container's table too."""
+    assert main(["report", "--check", "--fmu-dir", str(plant_fmu.parent), "--root", str(ROOT)]) == 0, \
+        capsys.readouterr().err
+    assert "accuracy, container, ranges, ssp" in capsys.readouterr().out

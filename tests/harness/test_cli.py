@@ -121,6 +121,18 @@ MORE_MISTAKES = [
     (["oafm", "--order", "x", "--out", "o"], "'x' is not an integer"),
     (["oafm", "--nodes", "0", "--out", "o"], "--nodes: must be an integer >= 1"),
     (["oafm", "--panel", "-1", "--out", "o"], "--panel: must be a finite number > 0"),
+    (["simulate", "--fidelity", "analytic", "--stop-time", "3000", "--out", "o"],
+     "--stop-time 3000: --fidelity analytic fits its solution over the whole experiment, at most tau = 2000"),
+    (["simulate", "--fidelity", "analytic", "--stop-time", "3000", "--out", "o"], "add --set oafm_tau_end=2000"),
+    (["simulate", "--fidelity", "analytic", "--set", "oafm_order=1.5", "--out", "o"], "parameter oafm_order = 1.5"),
+    (["simulate", "--fidelity", "analytic", "--set", "oafm_order=9", "--out", "o"], "parameter oafm_order = 9"),
+    (["simulate", "--fidelity", "analytic", "--set", "oafm_tau_end=-1", "--out", "o"], "parameter oafm_tau_end = -1"),
+    (["stability", "--set", "oafm_tau_end=10", "--out", "o"], "`vibrofmu simulate --fidelity analytic --set` takes"),
+    (["doctor", "--env-file", "e", "--python", "/nonexist"], "--python /nonexist: no such file"),
+    (["doctor", "--env-file", "e", "--python", "{dir}"], "is a folder"),
+    (["doctor", "--env-file", "e", "--python", "{readme}"], "not executable"),
+    (["doctor", "--python", "/nonexist"], "--python /nonexist: only with --env-file"),
+    (["report", "--from", "{dir}", "--only", "speed"], "no summary for the block asked for (speed needs a bench.json"),
     (["nosuch"], "invalid choice: 'nosuch'"),
     ([], "required: COMMAND"),
 ]
@@ -129,7 +141,8 @@ MORE_MISTAKES = [
 def _filled(argv, fragment, tmp_path, other):
     readme = tmp_path / "README.md"
     readme.write_text("# not an FMU\n")
-    return [arg.format(readme=readme, other=other) for arg in argv], fragment.format(readme=readme, other=other)
+    fill = {"readme": readme, "other": other, "dir": tmp_path}
+    return [arg.format(**fill) for arg in argv], fragment.format(**fill)
 
 
 def _assert_one_line(code, stderr, fragment, folder):
@@ -167,7 +180,9 @@ def test_importing_the_cli_imports_no_heavy_module():
 def test_top_level_help_lists_every_command(tmp_path):
     proc = run_cli(["--help"], tmp_path)
     assert proc.returncode == 0
-    assert all(command.name in proc.stdout for command in commands())
+    text = " ".join(proc.stdout.split())  # argparse wraps the descriptions
+    for command in commands():  # each command, followed by its one-line description
+        assert f"{command.name} {' '.join(command.help.split())}" in text, command.name
 
 
 def _options():
@@ -224,3 +239,66 @@ def test_ctrl_c_is_one_line_and_exit_130(monkeypatch, capsys):
     monkeypatch.setattr(build, "COMMAND", replace(build.COMMAND, run=_interrupted))
     assert main(["build"]) == 130
     assert capsys.readouterr().err == "error: interrupted\n"
+
+
+def test_a_failing_command_leaves_no_empty_output_folder(tmp_path):
+    """The folder out_folder made for a command that then fails is removed (with the parents it made); a folder
+    that existed before, or that holds a file, stays."""
+    from vibrofmu.commands.common import UserError, out_folder, run
+
+    def fails_after(folder, write=False):
+        def command(args):
+            out = out_folder(str(folder))
+            if write:
+                (out / "partial.csv").write_text("time\n")
+            raise UserError("late mistake")
+        return command
+
+    assert run(fails_after(tmp_path / "new" / "deeper"), None) == 2
+    assert not (tmp_path / "new").exists()
+    (tmp_path / "old").mkdir()
+    assert run(fails_after(tmp_path / "old"), None) == 2
+    assert (tmp_path / "old").is_dir()
+    assert run(fails_after(tmp_path / "kept", write=True), None) == 2
+    assert (tmp_path / "kept" / "partial.csv").is_file()
+
+
+def test_summary_json_is_always_valid_json(tmp_path):
+    """NaN and infinities become null: the file parses with a parser that refuses NaN/Infinity tokens."""
+    from vibrofmu.output.export import write_json
+
+    write_json(tmp_path / "s.json", {"end_time": float("nan"), "r": [1.0, float("inf"), np.float64(-np.inf)],
+                                     "n": np.int64(3), "ok": np.bool_(True), "a": np.array([0.5, np.nan])})
+
+    def refuse(token):
+        raise ValueError(f"not JSON: {token}")
+
+    data = json.loads((tmp_path / "s.json").read_text(), parse_constant=refuse)
+    assert data == {"end_time": None, "r": [1.0, None, None], "n": 3, "ok": True, "a": [0.5, None]}
+
+
+def test_the_rk4_warning_is_about_the_step_rk4_takes():
+    """max_step 5 at output interval 0.1: every doStep is one RK4 step of 0.1, so the result is bit for bit that of
+    max_step 0.1 and no warning is due; at output interval 1 the steps are 1 long and the warning names them."""
+    from vibromodel.parameters import Scene
+    from vibromodel.plant import Settings
+    from vibromodel.settings import checked_settings
+
+    from vibrofmu.analyses.simulate import SOLVERS, plant_run
+
+    scene = Scene()
+    long_ceiling = Settings(solver=SOLVERS["rk4"], max_step=5.0)
+    assert checked_settings(scene, long_ceiling, interval=0.1)[1] == []
+    warned = checked_settings(scene, long_ceiling, interval=1.0)[1]
+    assert warned and all(w.startswith("RK4 steps of 1 (the output interval; max_step = 5") for w in warned)
+    assert checked_settings(scene, long_ceiling)[1]  # without the interval (the FMU): about max_step itself
+    _, five, _ = plant_run(scene, long_ceiling, 5.0, 0.1)
+    _, tenth, _ = plant_run(scene, Settings(solver=SOLVERS["rk4"], max_step=0.1), 5.0, 0.1)
+    assert np.array_equal(five, tenth)
+
+
+def test_the_machine_block_reports_the_start_of_the_report():
+    from vibrofmu.report import machine_block
+
+    text = machine_block((0.0, (1.0, 2.5, 3.25)))
+    assert "1970-01-01 00:00 UTC" in text and "load average 1.00, 2.50, 3.25" in text

@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from vibromodel import fidelities, solvers
+from vibromodel.analytic import covering
 from vibromodel.parameters import ParameterError, Scene, consistency_warning, validate
 from vibromodel.plant import Plant, Settings, checked_settings
 
@@ -50,10 +51,12 @@ def check_inputs(scene: Scene, settings: Settings, stop_time: float, output_inte
     ones too: rtol clamped, an RK4 step that does not resolve the forcing). A parameter set no voltages can
     produce (beta^2 != 8 alpha gamma) is printed once as a note, not returned as a warning."""
     validate(scene)
-    _, warnings = checked_settings(scene, settings)
     for name, value in (("stop-time", stop_time), ("output-interval", output_interval)):
         if not (np.isfinite(value) and value > 0):
             raise ParameterError(name, value, "must be a finite number > 0")
+    _, warnings = checked_settings(scene, settings, interval=output_interval)  # the RK4 step really taken
+    if fidelities.entry(settings.fidelity).key == "analytic":  # the FMU's own check, before it is started
+        covering(scene, settings.oafm, stop_time, strict=True)
     note = consistency_warning(scene)
     if note and note not in _NOTED:  # an explanation, not a problem: once per process, as a note
         _NOTED.add(note)
@@ -95,7 +98,9 @@ def simulate(fmu: Path, scene: Scene, settings: Settings, stop_time: float, outp
     export.write_json(out_dir / "summary.json", summary)
     fidelity = {v: k for k, v in FIDELITIES.items()}[settings.fidelity]
     solver = {v: k for k, v in SOLVERS.items()}[settings.solver]
-    export.plot_x(out_dir / "x.png", run.time, run.outputs["x"],
-                  f"HertzEAOscillator: fidelity {fidelity}, solver {solver}, rtol {settings.rtol:g}",
-                  reference_x=reference_x, in_contact=run.outputs.get("in_contact"))
+    if len(run.time) >= 2:  # an FMU that failed before its first step has nothing to plot: no empty figure
+        export.plot_x(out_dir / "x.png", run.time, run.outputs["x"],
+                      f"HertzEAOscillator: fidelity {fidelity}, solver {solver}, rtol {settings.rtol:g}",
+                      reference_x=reference_x, in_contact=run.outputs.get("in_contact"),
+                      stop=None if run.completed else (run.end_time, run.stop_reason))
     return run, summary, reference

@@ -67,15 +67,35 @@ class Parser(argparse.ArgumentParser):
 
 def run(command: Callable[[argparse.Namespace], int], args: argparse.Namespace) -> int:
     """Run one command: a user mistake is one line `error: ...` and exit code 2. Ctrl-C is not caught here: it
-    stops the whole `vibrofmu` process (cli.main answers it), also when one command runs another (invoke)."""
+    stops the whole `vibrofmu` process (cli.main answers it), also when one command runs another (invoke).
+    An output folder the command created (out_folder) and left empty is removed when the command fails."""
+    created = len(_CREATED)
+    code = 2
     try:
-        return command(args)
+        code = command(args)
+        return code
     except (UserError, ParameterError) as error:
         print(f"error: {error}", file=sys.stderr)
         return 2
     except NoCompiler as error:
         print(f"error: {error} (set $CC or install gcc)", file=sys.stderr)
         return 2
+    finally:
+        if code != 0:
+            _remove_empty(_CREATED[created:])
+        del _CREATED[created:]
+
+
+_CREATED: list[Path] = []  # folders out_folder created in this process (innermost last), for run's clean-up
+
+
+def _remove_empty(folders: list[Path]) -> None:
+    """Remove each of `folders` (and the parents created with it) that is still empty."""
+    for folder in reversed(folders):
+        try:
+            folder.rmdir()  # only an empty folder goes
+        except OSError:
+            pass
 
 
 def invoke(command: Command, argv: list[str]) -> int:
@@ -112,6 +132,10 @@ non_negative_int = _number(int, lambda v: v >= 0, "an integer >= 0")
 FMU_HELP = f"plant FMU (default: ./build/{PLANT_NAME}, built when missing)"
 SET_HELP = ("scene parameter, repeatable: mu, Delta, omega, Omega, alpha, beta, gamma, R, x_start, v_start "
             "(default: the paper's example)")
+# FMU settings of fidelity 4 (the OAFM fit) that the FMU's messages name: `simulate --set` takes them too
+OAFM_SETTINGS = {"oafm_order": "order", "tau_star": "tau_star", "oafm_tau_end": "tau_end"}
+SIMULATE_SET_HELP = (SET_HELP[:-len(" (default: the paper's example)")] + "; or an OAFM setting of fidelity "
+                     "analytic: " + ", ".join(OAFM_SETTINGS) + " (default: the paper's example, automatic fit)")
 
 
 # -- checks of user-given paths --------------------------------------------------------------------------
@@ -191,17 +215,31 @@ def writable_folder(path: str) -> Path:
 def out_folder(path: str) -> Path:
     """The output folder, created now (a folder that cannot be made is a UserError before anything runs)."""
     folder = Path(path)
+    new = [p for p in (folder, *folder.parents) if not p.exists()]
     try:
         folder.mkdir(parents=True, exist_ok=True)
     except FileExistsError:
         raise UserError(f"cannot use {folder} as the output folder: a file of that name exists") from None
     except OSError as error:
         raise UserError(f"cannot create the output folder {folder}: {error.strerror}") from None
+    _CREATED.extend(reversed(new))  # outermost first
     return folder
 
 
-def parse_set(items: list[str]) -> dict[str, float]:
-    """NAME=VALUE pairs -> {name: float}; a missing '=', unknown names and non-numbers raise UserError."""
+def split_set(items: list[str]) -> tuple[dict[str, float], dict[str, float]]:
+    """`simulate --set`: (scene values, OAFM settings {OafmSettings field: value}) of NAME=VALUE pairs whose name
+    is a scene parameter or one of OAFM_SETTINGS."""
+    scene = [item for item in items if item.partition("=")[0].strip() not in OAFM_SETTINGS]
+    settings = parse_set([item for item in items if item not in scene], names=OAFM_SETTINGS)
+    if "oafm_order" in settings and settings["oafm_order"] != int(settings["oafm_order"]):
+        raise ParameterError("oafm_order", settings["oafm_order"], "must be an integer 1..8")
+    return parse_set(scene), {OAFM_SETTINGS[name]: (int(value) if name == "oafm_order" else value)
+                              for name, value in settings.items()}
+
+
+def parse_set(items: list[str], names=None) -> dict[str, float]:
+    """NAME=VALUE pairs -> {name: float}; a missing '=', unknown names and non-numbers raise UserError.
+    `names`: the names allowed (None: the scene's parameters)."""
     from vibromodel.parameters import Scene
 
     values = {}
@@ -213,7 +251,11 @@ def parse_set(items: list[str]) -> dict[str, float]:
             values[name.strip()] = float(text)
         except ValueError:
             raise ParameterError(name.strip(), text, "not a number") from None
-    Scene().with_values(**values)  # unknown names fail here (ParameterError)
+        if name.strip() in OAFM_SETTINGS and names is None:
+            raise UserError(f"--set {item}: {name.strip()} is an FMU setting of fidelity analytic; "
+                            "`vibrofmu simulate --fidelity analytic --set` takes it")
+    if names is None:
+        Scene().with_values(**values)  # unknown names fail here (ParameterError)
     return values
 
 

@@ -13,9 +13,10 @@ def options(p):
                    help="folder with a bench.json or an oafm/stability summary.json for the oafm, stability and "
                         "speed blocks (repeatable; default: run oafm, stability and bench now)")
     p.add_argument("--quick", action="store_true", help="container comparison at H = 0.1, 0.05 only; oafm study to "
-                                                        "order 3; bench --quick (default: off, about 20 min)")
+                                                        "order 3; bench --quick (default: off: the full runs)")
     p.add_argument("--check", action="store_true",
-                   help="re-compute the deterministic blocks (accuracy, ssp) and compare with the documents; "
+                   help="re-compute the deterministic blocks (accuracy, ssp, container, ranges) and compare with the "
+                        "documents; "
                         "write nothing (default: off)")
     p.add_argument("--only", nargs="+", choices=NAMES, default=None, help="regenerate these blocks only (default: all)")
     p.add_argument("--fmu-dir", default=None, help="where the FMUs are (default: build/; built when missing)")
@@ -54,9 +55,10 @@ def run(args) -> int:
     # the copy packed in its resources (no builder binaries), and the bench's own closed-loop build would fail
     # ("has no binaries/linux64/HertzEAClosedLoop.so")
     import vibrofmu.fmus.build  # noqa: F401
-    from vibrofmu.report import (DETERMINISTIC, FROM_SUMMARIES, ReportError, documents, generate, parse_blocks,
-                                 replace_blocks)
+    from vibrofmu.report import (DETERMINISTIC, FROM_SUMMARIES, SOURCE_FILES, ReportError, documents, generate,
+                                 parse_blocks, replace_blocks, start_record, summary_block)
 
+    start = start_record()  # the machine block's time and load: before the studies load the machine
     root = Path(args.root)
     if not (root / "README.md").is_file() or not (root / "docs").is_dir():
         print(f"error: --root {root}: no README.md and docs/ there (run report in a checkout of vibrofmu, or give "
@@ -73,14 +75,26 @@ def run(args) -> int:
     except ReportError as error:
         print(f"error: {error}", file=sys.stderr)
         return 2
-    fmu_dir = built_all(Path(args.fmu_dir or paths.build_dir()))
     names = DETERMINISTIC if args.check else (args.only or NAMES)
+    if sources and args.only:  # a block asked for by name whose summary is in no --from folder: say so now
+        missing = [name for name in names if name in FROM_SUMMARIES and summary_block(name, sources) is None]
+        if missing:
+            text = "; ".join(f"{name} needs {SOURCE_FILES[name]}" for name in missing)
+            print(f"error: --from {', '.join(args.sources)}: no summary for the block{'s' * (len(missing) > 1)} "
+                  f"asked for ({text})", file=sys.stderr)
+            return 2
+    fmu_dir = built_all(Path(args.fmu_dir or paths.build_dir()))
     with tempfile.TemporaryDirectory() as work_dir:
         if not sources and any(name in FROM_SUMMARIES for name in names):
             sources = run_studies(fmu_dir, Path(work_dir), args.quick)
             if sources is None:
                 return 1
-        bodies = generate(names, fmu_dir, sources, args.quick, Path(work_dir))
+        bodies = generate(names, fmu_dir, sources, args.quick, Path(work_dir), start)
+    missing = [name for name in names if name not in bodies]  # never silent (a failed study said why above)
+    if missing:
+        where = ("--from " + ", ".join(args.sources)) if args.sources else "the studies' runs"
+        text = "; ".join(f"{name} needs {SOURCE_FILES[name]}" for name in missing)
+        print(f"warning: {where}: blocks {', '.join(missing)} not regenerated ({text})", file=sys.stderr)
     if args.check:
         stale = [f"{doc.relative_to(root)}: {name}" for doc, blocks in found.items() for name, body in blocks.items()
                  if name in bodies and body.rstrip() != bodies[name].rstrip()]
@@ -91,11 +105,15 @@ def run(args) -> int:
         checked = sorted({name for blocks in found.values() for name in blocks if name in bodies})
         print(f"report --check: blocks {', '.join(checked) or 'none'} match a fresh run")
         return 0
+    updated = 0
     for doc, text in texts.items():
         new = replace_blocks(text, bodies)
         if new != text:
             doc.write_text(new)
+            updated += 1
             print(f"updated {doc.relative_to(root)}: " + ", ".join(n for n in found[doc] if n in bodies))
+    if not updated:
+        print(f"report: blocks {', '.join(bodies) or 'none'} regenerated; the documents already hold them")
     return 0
 
 

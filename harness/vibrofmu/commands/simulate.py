@@ -1,6 +1,6 @@
 """`vibrofmu simulate`: the plant FMU under FMPy, exported, optionally against the reference."""
-from vibrofmu.commands.common import (FMU_HELP, SET_HELP, Command, UserError, built_plant, non_negative, out_folder,
-                                      parse_set, plant_fmu, progress_printer, writable_folder)
+from vibrofmu.commands.common import (FMU_HELP, SIMULATE_SET_HELP, Command, UserError, built_plant, non_negative,
+                                      out_folder, plant_fmu, progress_printer, split_set, writable_folder)
 
 
 def options(p):
@@ -14,7 +14,7 @@ def options(p):
     # rtol, stop time and output interval are checked with the scene (simulate.check_inputs: ParameterError)
     p.add_argument("--rtol", type=float, default=1e-8, help="relative tolerance of the adaptive solver")
     p.add_argument("--max-step", type=non_negative, default=0.0, help="RK4 step / adaptive ceiling; 0 = automatic")
-    p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", help=SET_HELP)
+    p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", help=SIMULATE_SET_HELP)
     p.add_argument("--stop-time", type=float, default=200.0, help="end of the run, tau")
     p.add_argument("--output-interval", type=float, default=0.1, help="communication step (doStep size)")
     p.add_argument("--compare", action="store_true", help="compare with the DOP853 rtol 1e-12 reference")
@@ -23,24 +23,34 @@ def options(p):
 
 
 def run(args) -> int:
-    from vibromodel.parameters import Scene
+    from vibromodel.analytic import OafmSettings
+    from vibromodel.parameters import ParameterError, Scene
     from vibromodel.plant import Settings
 
     from vibrofmu.analyses.simulate import FIDELITIES, SOLVERS, check_inputs, simulate
 
-    scene = Scene().with_values(**parse_set(args.set))
+    scene_values, oafm_values = split_set(args.set)
+    scene = Scene().with_values(**scene_values)
     settings = Settings(fidelity=FIDELITIES[args.fidelity], solver=SOLVERS[args.solver], rtol=args.rtol,
-                        max_step=args.max_step)
+                        max_step=args.max_step, oafm=OafmSettings(**oafm_values))
     fmu = plant_fmu(args.fmu)
     writable_folder(args.out)
     if 0 < args.stop_time < args.output_interval:
         raise UserError(f"--output-interval {args.output_interval:g} is longer than --stop-time {args.stop_time:g}")
     # bad values raise ParameterError now; the last check (it may print the one-time note on the scene)
-    check_inputs(scene, settings, args.stop_time, args.output_interval)
+    try:
+        check_inputs(scene, settings, args.stop_time, args.output_interval)
+    except ParameterError as error:
+        if error.name != "stopTime":
+            raise
+        advice = (error.reason.replace("set oafm_tau_end <= ", "add --set oafm_tau_end=")  # the FMU's names -> options
+                  .replace("fidelity 0-3", "another --fidelity").replace("fidelity 4", "--fidelity analytic"))
+        raise UserError(f"--stop-time {args.stop_time:g}: {advice}") from None
     out = out_folder(args.out)
     result, summary, _ = simulate(built_plant(fmu), scene, settings, args.stop_time, args.output_interval, out,
                                   compare=args.compare, progress=progress_printer("simulate"))
-    print(f"wrote {out}/result.csv, summary.json, x.png ({len(result.time)} points, "
+    plotted = ", x.png" if (out / "x.png").exists() else " (no x.png: no run to plot)"
+    print(f"wrote {out}/result.csv, summary.json{plotted} ({len(result.time)} points, "
           f"wall time {result.wall_time:.3f} s)")
     if "error" in summary:
         e = summary["error"]
@@ -49,8 +59,11 @@ def run(args) -> int:
     if not result.completed:
         import sys
 
-        print(f"error: the FMU stopped at tau = {result.end_time:g} before the stop time {args.stop_time:g}: "
-              f"{result.stop_reason}", file=sys.stderr)
+        import math
+
+        where = (f"stopped at tau = {result.end_time:g} before the stop time {args.stop_time:g}"
+                 if math.isfinite(result.end_time) else "failed before its first step")
+        print(f"error: the FMU {where}: {result.stop_reason}", file=sys.stderr)
         return 1
     return 0
 

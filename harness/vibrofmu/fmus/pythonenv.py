@@ -87,7 +87,10 @@ def describe(modules: list[str], python: str | None = None) -> dict:
     if proc.returncode != 0:
         last = (proc.stderr.strip().splitlines() or ["no output"])[-1]
         raise RuntimeError(f"cannot run {cmd[0]}: {last}")
-    return json.loads(proc.stdout)
+    try:
+        return json.loads(proc.stdout)
+    except json.JSONDecodeError:  # it ran, but is no Python (or printed something else)
+        raise RuntimeError(f"{cmd[0]} is not a Python interpreter (it did not answer the probe)") from None
 
 
 def env_text(record: dict) -> str:

@@ -15,7 +15,7 @@ import numpy as np
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
-from matplotlib.ticker import ScalarFormatter  # noqa: E402
+from matplotlib.ticker import FuncFormatter, LogFormatterSciNotation, LogLocator, NullFormatter  # noqa: E402
 
 TAU = r"time $\tau$"
 DPI = 110
@@ -27,8 +27,27 @@ def write_csv(path: Path, time: np.ndarray, columns: dict[str, np.ndarray]) -> N
     np.savetxt(path, data, delimiter=",", header=",".join(names), comments="", fmt="%.17g")
 
 
+def json_safe(value):
+    """`value` with every non-finite number (NaN, +-inf) replaced by None (JSON null) and NumPy values made plain
+    Python: JSON has no NaN or Infinity, and a file with such tokens is not JSON (most readers refuse it)."""
+    if isinstance(value, dict):
+        return {str(key): json_safe(item) for key, item in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [json_safe(item) for item in value]
+    if isinstance(value, np.ndarray):
+        return json_safe(value.tolist())
+    if isinstance(value, (bool, np.bool_)):
+        return bool(value)
+    if isinstance(value, (int, np.integer)):
+        return int(value)
+    if isinstance(value, (float, np.floating)):
+        return float(value) if np.isfinite(value) else None
+    return value
+
+
 def write_json(path: Path, data: dict) -> None:
-    path.write_text(json.dumps(data, indent=2, default=float) + "\n")
+    """`data` as JSON, non-finite numbers written as null (json_safe): always valid JSON (allow_nan=False)."""
+    path.write_text(json.dumps(json_safe(data), indent=2, default=float, allow_nan=False) + "\n")
 
 
 def wrapped(title: str, width_inches: float, fontsize: float) -> str:
@@ -86,34 +105,58 @@ def contact_loss_intervals(time, in_contact) -> list[tuple[float, float]]:
             for i, j in zip(starts, ends)]
 
 
-def figure_x(time, x, title: str, reference_x=None, in_contact=None):
-    """x(tau), the contact-loss intervals shaded; with a reference, the reference dashed and |x - x_ref| on a
-    log second axis."""
-    fig, ax = plt.subplots(figsize=(10, 5), layout="constrained")
+def figure_x(time, x, title: str, reference_x=None, in_contact=None, stop=None):
+    """x(tau), the contact-loss intervals shaded; with a reference, the reference dashed and |x - x_ref| on a log
+    axis in a panel of its own below (so it covers no x curve); `stop` = (tau, reason) of a run that stopped early
+    (pull-in, a failing FMU): a vertical line and a marker at the last point, labelled with the reason."""
+    if reference_x is None:
+        fig, ax = plt.subplots(figsize=(10, 5), layout="constrained")
+        below = None
+    else:
+        fig, (ax, below) = plt.subplots(2, 1, figsize=(10, 6.5), sharex=True, height_ratios=[3, 1.4],
+                                        layout="constrained")
     for k, (start, end) in enumerate(contact_loss_intervals(time, in_contact) if in_contact is not None else ()):
         ax.axvspan(start, end, color="0.85", lw=0, label=r"contact lost ($1 + 2x/3 \leq 0$)" if k == 0 else None)
     ax.plot(time, x, lw=1.0, color="tab:blue", label="FMU")
-    ax.set_xlabel(TAU)
     ax.set_ylabel(r"displacement $x$")
-    axes = [ax]
     if reference_x is not None:
         ax.plot(time, reference_x, "--", lw=1.0, color="tab:orange", label="reference (DOP853, rtol 1e-12)")
-        err = np.abs(np.asarray(x) - np.asarray(reference_x))
-        ax2 = ax.twinx()
-        ax2.semilogy(time, np.maximum(err, 1e-18), color="tab:red", lw=0.5, alpha=0.5,
-                     label=r"$|x - x_\mathrm{ref}|$ (right axis)")
-        ax2.set_ylabel(r"$|x - x_\mathrm{ref}|$", color="tab:red")
-        ax.set_zorder(ax2.get_zorder() + 1)  # the solution in front of the error
-        ax.patch.set_visible(False)
-        axes.append(ax2)
-    ax.set_xlim(time[0], time[-1]) if len(time) > 1 else None
+        err = np.abs(np.asarray(x, dtype=float) - np.asarray(reference_x, dtype=float))
+        # exact agreement (the start value) leaves a gap: a floor value would stretch the axis by decades
+        below.semilogy(time, np.where(err > 0, err, np.nan), color="tab:red", lw=0.6)
+        below.set_ylabel(r"$|x - x_\mathrm{ref}|$")
+        below.grid(True, which="major", alpha=0.3)
+    end = time[-1] if len(time) else 0.0
+    if stop is not None and len(time):
+        tau, x_stop, what = stop_point(*stop)
+        tau = end if tau is None else tau  # the FMU's message names no time: the last output
+        end = max(end, tau)
+        for panel in (ax, below) if below is not None else (ax,):
+            panel.axvline(tau, color="k", lw=1.0, ls="--", label=f"{what} at $\\tau$ = {tau:.6g}" if panel is ax
+                          else None)
+        ax.plot(tau, x[-1] if x_stop is None else x_stop, "X", ms=10, color="k", zorder=5)
+    (below if below is not None else ax).set_xlabel(TAU)
+    if len(time) > 1:  # a stopped run: room after its end, so that the line marking the stop is not the frame
+        ax.set_xlim(time[0], end + (0.03 * (end - time[0]) if stop is not None else 0.0))
     _title(fig, ax, title)
-    _legend_below(fig, axes)
+    _legend_below(fig, [ax])
     return fig
 
 
-def plot_x(path: Path, time, x, title: str, reference_x=None, in_contact=None) -> None:
-    _save(figure_x(time, x, title, reference_x, in_contact), path)
+def stop_point(end_time: float, reason: str | None) -> tuple[float | None, float | None, str]:
+    """(tau, x, what) of an early stop from the FMU's message ("pull-in: ... at tau = 0.1346, x = 0.2997"): the
+    time and displacement it names (None where it names none) and "pull-in" or "run stopped"."""
+    import re
+
+    reason = reason or ""
+    tau = re.search(r"at tau = ([-+0-9.eE]+)", reason)
+    x = re.search(r"\bx = ([-+0-9.eE]+)", reason)
+    what = "pull-in" if "pull-in" in reason else "run stopped"
+    return (float(tau[1]) if tau else None), (float(x[1]) if x else None), what
+
+
+def plot_x(path: Path, time, x, title: str, reference_x=None, in_contact=None, stop=None) -> None:
+    _save(figure_x(time, x, title, reference_x, in_contact, stop), path)
 
 
 def plot_analytic(path: Path, tau, x, x_ref, boundaries, title: str) -> None:
@@ -168,16 +211,24 @@ def figure_frequency_response(curve, continuation, sweeps, folds, omega_range, t
     fig, axes = plt.subplots(1, len(panels), figsize=(7 * len(panels), 6), squeeze=False, layout="constrained")
     omega, r, stable = (np.asarray(a) for a in curve)
     c_omega, c_r, c_stable = (np.asarray(a) for a in continuation)
+    def label(text, shown):  # a legend entry only for what is drawn (an empty branch gets none)
+        return text if np.any(shown) else None
+
     for ax, (lo, hi) in zip(axes[0], panels):
-        ax.plot(omega, np.where(stable, r, np.nan), "-", color="tab:blue", lw=1.6, label="slow flow, stable")
-        ax.plot(omega, np.where(stable, np.nan, r), "--", color="tab:blue", lw=1.2, label="slow flow, unstable")
-        ax.plot(c_omega[c_stable], c_r[c_stable], "o", ms=3, color="k", label="shooting, stable (Floquet)")
+        ax.plot(omega, np.where(stable, r, np.nan), "-", color="tab:blue", lw=1.6,
+                label=label("slow flow, stable", stable & (omega >= lo) & (omega <= hi)))
+        ax.plot(omega, np.where(stable, np.nan, r), "--", color="tab:blue", lw=1.2,
+                label=label("slow flow, unstable", ~stable & (omega >= lo) & (omega <= hi)))
+        shown = (c_omega >= lo) & (c_omega <= hi)
+        ax.plot(c_omega[c_stable], c_r[c_stable], "o", ms=3, color="k",
+                label=label("shooting, stable (Floquet)", c_stable & shown))
         ax.plot(c_omega[~c_stable], c_r[~c_stable], "o", ms=3, mfc="none", color="k",
-                label="shooting, unstable (Floquet)")
+                label=label("shooting, unstable (Floquet)", ~c_stable & shown))
         for sweep, marker, color in zip(sweeps, ("^", "v"), ("tab:red", "tab:green")):
             ax.plot(sweep.omega, sweep.r, marker, ms=7, mfc="none", color=color, label=f"FMU sweep {sweep.direction}")
-        for k, fold in enumerate(folds):
-            ax.axvline(fold, color="0.5", lw=0.7, ls=":", label="fold" if k == 0 else None)
+        inside_folds = [fold for fold in folds if lo <= fold <= hi]
+        for k, fold in enumerate(inside_folds):
+            ax.axvline(fold, color="0.5", lw=0.7, ls=":", label="fold (slow flow)" if k == 0 else None)
         inside = (omega >= lo) & (omega <= hi)
         top = max(np.max(r[inside], initial=0.0), np.max(c_r, initial=0.0))
         ax.set_xlim(lo, hi)
@@ -188,7 +239,7 @@ def figure_frequency_response(curve, continuation, sweeps, folds, omega_range, t
     if len(panels) > 1:
         axes[0][1].set_title("zoom: hysteresis interval", fontsize=10)
     fig.suptitle(wrapped(title, fig.get_figwidth(), 11), fontsize=11)
-    _legend_below(fig, axes[0][:1], columns=2 * len(panels))  # two entries fit in 7 inches
+    _legend_below(fig, axes[0], columns=2 * len(panels))  # the entries of every panel; two fit in 7 inches
     return fig
 
 
@@ -215,14 +266,14 @@ def figures_closed_loop(time, series: dict, theta: dict, title: str) -> dict:
     figures["errors.png"] = fig
     fig, ax = plt.subplots(figsize=(10, 5), layout="constrained")
     V = np.asarray(series["V"], dtype=float)
-    ax.plot(time, V, lw=1.0)
+    ax.semilogy(time, np.where(V > 0, V, np.nan), lw=1.0)  # V >= 0 decays: a log axis shows its decay rate
     positive = V[np.isfinite(V) & (V > 0)]
-    if positive.size and positive.max() > 100 * positive.min():  # a log axis only over two decades or more
-        ax.set_yscale("log")
-    else:  # within two decades a log axis shows one or two labels at best: linear, scientific notation
-        formatter = ScalarFormatter(useMathText=True)
-        formatter.set_powerlimits((-2, 3))
-        ax.yaxis.set_major_formatter(formatter)
+    if positive.size and positive.max() < 10 * positive.min():  # within a decade: ticks at 1, 1.5, 2, ... x 10^k
+        ax.yaxis.set_major_locator(LogLocator(subs=np.arange(1.0, 10.0, 0.5)))
+        ax.yaxis.set_major_formatter(FuncFormatter(lambda value, _: f"{value:.3g}"))
+        ax.yaxis.set_minor_formatter(NullFormatter())
+    elif positive.size and positive.max() < 100 * positive.min():  # within two decades: label the minor ticks
+        ax.yaxis.set_minor_formatter(LogFormatterSciNotation(labelOnlyBase=False, minor_thresholds=(2, 2)))
     _finish(fig, ax, title, r"Lyapunov function $V$")
     figures["lyapunov.png"] = fig
     fig, axes = plt.subplots(3, 3, figsize=(12, 8.5), sharex=True, layout="constrained")

@@ -492,7 +492,8 @@ def machine_info() -> dict:
     return {"platform": platform.platform(), "processor": platform.processor() or platform.machine(),
             "python": platform.python_version(), "numpy": np.__version__, "scipy": scipy.__version__,
             "fmpy": fmpy.__version__, "matplotlib": matplotlib.__version__, "cpu_count": os.cpu_count(),
-            "load_average_at_start": list(os.getloadavg()) if hasattr(os, "getloadavg") else None}
+            "load_average_at_start": list(os.getloadavg()) if hasattr(os, "getloadavg") else None,
+            "started_utc": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())}
 
 
 def build_references(scene: Scene, stop_time: float, fidelities) -> tuple[dict, dict]:
@@ -542,6 +543,7 @@ def run_bench(fmu: Path, out_dir: Path, quick: bool = False, repeats: int | None
             return run_bench(fmu, out_dir, quick, repeats, extreme_rows, progress, build_closed_loop(Path(tmp)),
                              ladder_rounds, instructions)
     bench_started = time.perf_counter()
+    machine = machine_info()  # at the start: its load average and time are the run's start, as their names say
     say = progress or (lambda line: None)
     scene = Scene()
     fmu = Path(fmu)
@@ -589,7 +591,7 @@ def run_bench(fmu: Path, out_dir: Path, quick: bool = False, repeats: int | None
                   "timing": "wall time of the doStep + getReal loop (FMU), of solve_ivp (baselines), of "
                             "CompiledPlant.run (floor): minimum of the repeats after a warm-up run; the warm-up "
                             "run's output gives the errors"},
-        "machine": machine_info(),
+        "machine": machine,
         "reference": reference_record,
         "notes": [MODEL_ERROR_NOTE,
                   "solve_ivp: the exact model's right-hand side (ExactModel.accel) called directly, atol = 1e-2 rtol "

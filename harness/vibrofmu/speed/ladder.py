@@ -474,6 +474,19 @@ def ladder_lines(ladder: dict) -> list[str]:
     return lines
 
 
+def _readable_log_ticks(axis) -> None:
+    """A log axis labelled at 1, 2, 5 x 10^k in plain numbers ("0.2", "5", "2e+04"), unlabelled minor ticks: the
+    default labels every minor tick of a short axis as "2 x 10^0", "3 x 10^0", ..., which run into each other."""
+    from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
+
+    low, high = axis.get_view_interval()
+    decades = math.log10(high / low) if low > 0 and high > low else 1.0
+    axis.set_major_locator(LogLocator(subs=(1.0,) if decades > 2.5 else (1.0, 2.0, 5.0) if decades > 1 else
+                                      (1.0, 1.5, 2.0, 3.0, 5.0, 7.0)))
+    axis.set_major_formatter(FuncFormatter(lambda value, _: f"{value:g}"))
+    axis.set_minor_formatter(NullFormatter())
+
+
 def plot_ladder(path: Path, ladder: dict) -> None:
     """Error of x against cost per output, one marker per rung: the time columns in the top row; below, the
     instruction counts per interval (when measured) and the ratios to exact f0 that the acceptance reads."""
@@ -500,6 +513,7 @@ def plot_ladder(path: Path, ladder: dict) -> None:
         ax.grid(True, which="both", alpha=0.3)
         lo, hi = ax.get_xlim()
         ax.set_xlim(lo, hi * 4)  # room for the labels right of the markers
+        _readable_log_ticks(ax.xaxis)
 
     for ax, (host, interval) in zip(axes[0], columns):
         points = []
@@ -541,13 +555,18 @@ def plot_ladder(path: Path, ladder: dict) -> None:
         ratio_ax.axhline(floor["lowest_reachable_ratio"], color="0.4", ls="--", lw=1,
                          label=f"FMPy, interval {floor['interval']:g}: lowest reachable ratio (FMPy's own cost)")
     ratio_ax.set_yscale("log")
-    low, high = ratio_ax.get_ylim()
-    ratio_ax.set_ylim(low, high * 30)  # room for the legend above the bars
+    shown = [v for _, values in series if None not in values for v in values if v and v > 0]
+    shown += [LIMITS[n] for n in names] + [f["lowest_reachable_ratio"] for f in ladder.get("fmpy_floor", [])]
+    shown = [v for v in shown if v > 0]  # a log axis: a stand-in's zero floor cannot be shown
+    if shown:  # the bars, the limits and the floors, with a margin; the legend sits below the axes, not above
+        ratio_ax.set_ylim(min(shown) / 1.5, max(shown) * 1.5)
+    _readable_log_ticks(ratio_ax.yaxis)
     ratio_ax.set_xticks(range(len(names)), names, fontsize=8)
     ratio_ax.set_ylabel("cost per output / exact f0's")
     ratio_ax.set_title("ratios to exact f0 (the acceptance reads the CPU-time ones)", fontsize=10)
     ratio_ax.grid(True, axis="y", which="both", alpha=0.3)
-    ratio_ax.legend(fontsize=7, loc="upper left")
+    ratio_ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.08), ncols=1, frameon=False,
+                    markerscale=0.5)  # the limit marker (s=900) would run into its text
     for ax in axes[1][len(intervals) + 1:]:
         ax.axis("off")
     fig.suptitle(f"Speed-accuracy ladder, paper example, tau in [0, {ladder['stop_time']:g}], "

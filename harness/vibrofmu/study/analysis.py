@@ -328,6 +328,10 @@ def headline(summary: dict) -> str:
     if agreement:
         text += (f"; agreement with the averaged prediction {agreement.get('fraction', math.nan):.3f} "
                  f"({agreement.get('agreeing')}/{agreement.get('compared')})")
+        everywhere = (agreement.get("by_margin") or {}).get("0")
+        if isinstance(agreement.get("margin"), (int, float)) and everywhere:  # basins: say what was not counted
+            text += (f" farther than {agreement['margin']:g} from the predicted boundary; all points "
+                     f"{everywhere['agreeing']}/{everywhere['compared']}")
     cusp = summary.get("cusp")
     if cusp:
         text += "\n" + cusp_headline(cusp)

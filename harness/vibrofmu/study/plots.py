@@ -8,6 +8,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+from matplotlib.ticker import MaxNLocator  # noqa: E402
 
 from vibrofmu.study.spec import Spec  # noqa: E402
 
@@ -34,6 +35,7 @@ def monte_carlo(d: dict, result: dict, path: Path) -> Path:
     axes[0].axvspan(lo, hi, color="C1", alpha=0.3, label="95 % CI of the mean")
     axes[0].set_xlabel("settled amplitude r (first harmonic)")
     axes[0].set_ylabel("samples")
+    axes[0].yaxis.set_major_locator(MaxNLocator(integer=True))  # counts: no half-integer ticks
     axes[0].legend(fontsize=8)
     axes[0].set_title(f"amplitude; agreement with the slow flow {summary['agreement']['fraction']:.3f}")
     labels, values, errors = [], [], []
@@ -43,6 +45,10 @@ def monte_carlo(d: dict, result: dict, path: Path) -> Path:
         values.append(p)
         errors.append([max(0.0, p - lo), max(0.0, hi - p)])
     axes[1].bar(labels, values, yerr=np.array(errors).T, capsize=8, color=["C2", "C3"])
+    n = len(d["case"])
+    for k, p in enumerate(values):  # the count, so that a probability of 0 (no bar) is read as "0 of n"
+        axes[1].annotate(f"{p:.3g} ({round(p * n)}/{n})", (k, p), textcoords="offset points", xytext=(12, 4),
+                         fontsize=9)
     axes[1].set_ylabel("probability (95 % Wilson interval)")
     axes[1].set_ylim(0, max(0.05, max(hi for _, hi in (summary[k]["ci95_wilson"] for k in ("contact_loss", "pull_in"))) * 1.2))
     axes[1].set_title(f"{len(d['case'])} samples")
@@ -56,29 +62,41 @@ def basins(spec: Spec, d: dict, result: dict, path: Path) -> Path:
     x0, v0 = np.array(spec.axis("x0")), np.array(spec.axis("v0"))
     grid = np.full((len(x0), len(v0)), np.nan)
     grid[d["i"], d["j"]] = result["measured"]
-    fig, ax = plt.subplots(figsize=(8, 7))
+    fig, ax = plt.subplots(figsize=(8, 7.5), layout="constrained")
     cmap = matplotlib.colors.ListedColormap(["0.6", "C0", "C3"])
     dx, dv = (x0[1] - x0[0] if len(x0) > 1 else 1) / 2, (v0[1] - v0[0] if len(v0) > 1 else 1) / 2
     ax.imshow(grid.T, origin="lower", extent=[x0[0] - dx, x0[-1] + dx, v0[0] - dv, v0[-1] + dv], cmap=cmap,
               vmin=-1.5, vmax=1.5, aspect="auto", interpolation="nearest")
+    agreement = result["summary"]["agreement"]
+    margin = agreement["margin"]
     wrong = (result["measured"] != result["predicted"])
-    ax.plot(d["x_start"][wrong], d["v_start"][wrong], "kx", ms=4, label="run differs from the averaged prediction")
+    far = np.asarray(result["distance"]) > margin
+    ax.plot(d["x_start"][wrong & far], d["v_start"][wrong & far], "kx", ms=6, mew=1.5,
+            label=(f"run differs from the averaged prediction (counted: farther than {margin:g} from the boundary)"
+                   if np.any(wrong & far) else None))
+    ax.plot(d["x_start"][wrong & ~far], d["v_start"][wrong & ~far], "P", mfc="w", mec="k", ms=9, mew=0.8,
+            label=f"run differs, within {margin:g} of the boundary (not counted)" if np.any(wrong & ~far) else None)
     for k, branch in enumerate(result["boundary"]):
         ax.plot(branch[:, 0], branch[:, 1], "k-", lw=1.2, label="predicted boundary (saddle's stable manifold)" if k == 0 else None)
     stable = result["stable"]
     names = ["low-amplitude vibration", "high-amplitude vibration"]
-    for k, colour in enumerate(("C0", "C3")):
-        ax.plot([], [], "s", color=colour, label=f"runs reach {names[k]} (r = {stable[k].r:.3f})" if k < len(stable) else None)
-    ax.plot([], [], "s", color="0.6", label="unsettled / other")
+    for k, colour in enumerate(("C0", "C3")):  # legend entries for the colours the map shows (gid: the value)
+        if k < len(stable) and np.any(result["measured"] == k):
+            ax.plot([], [], "s", color=colour, label=f"runs reach {names[k]} (r = {stable[k].r:.3f})",
+                    gid=f"image value {k}")
+    if np.any(result["measured"] == -1):
+        ax.plot([], [], "s", color="0.6", label="unsettled / other", gid="image value -1")
     ax.set_xlim(x0[0] - dx, x0[-1] + dx)
     ax.set_ylim(v0[0] - dv, v0[-1] + dv)
-    ax.set_xlabel("x0")
-    ax.set_ylabel("v0")
-    agreement = result["summary"]["agreement"]
-    ax.set_title(f"basins at omega = {result['omega']:.6f}, mu = {spec.base_scene().mu:g}: agreement "
-                 f"{agreement['fraction']:.3f} beyond {agreement['margin']:g} of the boundary", fontsize=9)
-    ax.legend(fontsize=7, loc="upper right", framealpha=0.85)
-    fig.tight_layout()
+    ax.set_xlabel(r"initial displacement $x_0$")
+    ax.set_ylabel(r"initial velocity $v_0$")
+    everywhere = agreement.get("by_margin", {}).get("0") or {}
+    overall = (f"all points: {everywhere['agreeing']}/{everywhere['compared']} agree"
+               if everywhere else "")
+    ax.set_title(f"basins at $\\omega$ = {result['omega']:.6f}, $\\mu$ = {spec.base_scene().mu:g}\n"
+                 f"{overall}; farther than {margin:g} from the predicted boundary: "
+                 f"{agreement['agreeing']}/{agreement['compared']} agree ({agreement['fraction']:.3f})", fontsize=9)
+    fig.legend(*ax.get_legend_handles_labels(), fontsize=7, loc="outside lower center", ncols=2, frameon=False)
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
@@ -86,7 +104,7 @@ def basins(spec: Spec, d: dict, result: dict, path: Path) -> Path:
 
 def response_map(result: dict, path: Path) -> Path:
     omegas, deltas = result["omegas"], result["deltas"]
-    fig, axes = plt.subplots(1, 3, figsize=(16, 5), sharey=True)
+    fig, axes = plt.subplots(1, 3, figsize=(16, 5), sharey=True, layout="constrained")
     dw = (omegas[1] - omegas[0]) / 2 if len(omegas) > 1 else 1e-4
     dd = (deltas[1] - deltas[0]) / 2 if len(deltas) > 1 else 1e-5
     extent = [omegas[0] - dw, omegas[-1] + dw, deltas[0] - dd, deltas[-1] + dd]
@@ -105,8 +123,10 @@ def response_map(result: dict, path: Path) -> Path:
         axes[2].plot(omegas[kept[:, 1]], deltas[kept[:, 0]], "k+", ms=5, label="bistable by the two-start test")
     near = np.argwhere(result["near"])
     axes[2].plot(omegas[near[:, 1]], deltas[near[:, 0]], ".", color="0.5", ms=3, label="within the fold margin")
-    for label, colour in (("bistable: runs only", "C1"), ("bistable: slow flow only", "C0"), ("bistable: both", "C2")):
-        axes[2].plot([], [], "s", color=colour, label=label)
+    for value, label, colour in ((1, "bistable: runs only", "C1"), (2, "bistable: slow flow only", "C0"),
+                                 (3, "bistable: both", "C2")):
+        if np.any(code == value):  # a legend entry for the colours the map shows (gid: the image value it names)
+            axes[2].plot([], [], "s", color=colour, label=label, gid=f"image value {value}")
     axes[2].set_title("bistability: runs vs slow flow")
     for ax in axes:
         for side, style in ((0, "w--"), (-1, "w-")):
@@ -127,10 +147,11 @@ def response_map(result: dict, path: Path) -> Path:
             if e:
                 ax.errorbar(e["omega"], e["Delta"], xerr=e["omega_stderr"], yerr=e["Delta_stderr"], fmt=style,
                             ms=6, mfc="none", capsize=3, label=label)
-        ax.set_xlabel("omega")
+        ax.set_xlabel(r"forcing frequency $\omega$")
+        ax.xaxis.set_major_locator(MaxNLocator(nbins=4))  # labels like 0.9975 need room: four at most per panel
         ax.set_xlim(extent[0], extent[1])
         ax.set_ylim(extent[2], extent[3])
-    axes[0].set_ylabel("Delta")
+    axes[0].set_ylabel(r"load amplitude $\Delta$")
     axes[2].legend(fontsize=7, loc="lower left")
     agreement = result["summary"]["agreement"]
     fig.suptitle(f"response map: bistability agreement {agreement['fraction']:.3f} "
