@@ -21,6 +21,8 @@ import numpy as np
 from pythonfmu import DefaultExperiment, Fmi2Causality, Integer, Real
 
 import fast_path
+
+fast_path.use_packed_packages(Path(__file__).parent)  # before any vibromodel import
 from slave_support import MODEL_PARAMETERS, StatusSlave
 from vibromodel.compiled import load_library
 from vibromodel.compiled_loop import CONTROLLER_INPUTS, CONTROLLER_OUTPUTS, make_estimator

@@ -13,6 +13,8 @@ from pathlib import Path
 from pythonfmu import DefaultExperiment, Integer, Real
 
 import fast_path
+
+fast_path.use_packed_packages(Path(__file__).parent)  # before any vibromodel import
 from slave_support import StatusSlave
 from vibromodel.closedloop import ERRATA_SCENE, LoopSettings
 from vibromodel.compiled import load_library

@@ -15,6 +15,8 @@ from pythonfmu import Boolean, DefaultExperiment, Fmi2Causality, Fmi2Variability
 from pythonfmu.enums import Fmi2Initial
 
 import fast_path
+
+fast_path.use_packed_packages(Path(__file__).parent)  # before any vibromodel import
 from slave_support import StatusSlave
 from vibromodel.analytic import OafmSettings
 from vibromodel.compiled import CompiledPlant, load_library

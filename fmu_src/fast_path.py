@@ -11,7 +11,25 @@ host driving the slave object directly) attaching does nothing and every call ta
 from __future__ import annotations
 
 import ctypes
+import sys
 from pathlib import Path
+
+
+def use_packed_packages(resources: Path, names=("vibromodel",)) -> None:
+    """Let this FMU's packed copy of each package in `names` serve the modules not yet imported.
+
+    Every pythonfmu FMU packs vibromodel in its resources, and a Python process has one `vibromodel` in
+    sys.modules: the first FMU's (or the host's own). A second, different FMU in the same process imports its
+    modules from that package's folder, which the host may already have deleted with the first FMU (FMPy's
+    simulate_fmu does): then `vibromodel.compiled_loop`, which the plant never imported, is not found and the
+    controller failed to instantiate. Appending this FMU's folder to the package's search path keeps the modules
+    already imported (the host's, or the first FMU's, in memory) and finds every other one here. The slaves call
+    this before their first vibromodel import (fast_path itself imports only the standard library)."""
+    for name in names:
+        package = sys.modules.get(name)
+        folder = str(Path(resources) / name)
+        if package is not None and hasattr(package, "__path__") and folder not in list(package.__path__):
+            package.__path__.append(folder)
 
 FAST_MAX = 32  # the shim's FAST_MAX: most Real (and Boolean) outputs it serves
 _vr_array = ctypes.c_uint * FAST_MAX
