@@ -1,0 +1,430 @@
+"""Continuation of the periodic orbits of the exact model in one parameter, through contact loss (issue 24).
+
+Model: shooting.PeriodicModel (Eq. 3 with the AC drive at its mean; docs/continuation.md), with the Hertz force
+zero once the contact opens. A branch is a curve of fixed points of the n-period map P^n(z; p) (n = 1, or 2 on
+a branch switched to at a period doubling), continued in one parameter p (PARAMETERS) by Keller's
+pseudo-arclength method, exactly as shooting.continue_branch does in omega, generalised to any p:
+
+- the state and its variational equations Phi' = J Phi, z_p' = J z_p + df/dp are integrated together with
+  DOP853 (rtol 1e-11, the accuracy argument of shooting.py), restarted at each contact crossing;
+- multipliers: eig of the monodromy M = Phi(nT); stable when max |rho| < 1;
+- test functions, each evaluated at every point and located by Brent's method on the arclength where it
+  changes sign between two accepted points:
+    fold             the p-component of the branch tangent (= det(M - I) up to normalisation),
+    period-doubling  det(M + I) = (1 + rho1)(1 + rho2) (a real multiplier through -1),
+    neimark-sacker   det M - 1 while the pair is complex (|rho|^2 = det M = exp(-mu nT) < 1 for mu > 0:
+                     it can only fire when mu itself is continued through 0; kept for that case),
+    grazing          min over the orbit of 1 + 2x/3 (contact first lost), i.e. x_min + 3/2;
+- at a period doubling the branch of doubled orbits (fixed points of P^2 off the P-branch) is reached by the
+  pitchfork's tangent: predictor z* + h v (v the multiplier -1 eigenvector, p = p*), corrector on P^2 with
+  the hyperplane v . (z - z* - h v) = 0, then continued like any branch.
+
+Saltation: at contact loss the vector field is C^1 (H = s^{3/2} and H' = s^{1/2} both vanish at s = 1 + 2x/3 = 0),
+so the fundamental matrix is continuous across the crossing: the saltation matrix is the identity
+(docs/continuation.md; checked by tests/studies/test_continuation.py against a finite-difference monodromy).
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field, replace
+from typing import Callable
+
+import numpy as np
+from scipy.integrate import solve_ivp
+from scipy.optimize import brentq
+
+from vibromodel import forces
+from vibromodel.parameters import Scene
+
+from vibrofmu.analyses.shooting import ATOL, NEWTON_TOL, RTOL, TWO_PI, PeriodicModel, ShootingError, _events
+
+PARAMETERS = ("omega", "Delta", "mu", "alpha", "gamma")  # what a branch can be continued in
+EVENTS = ("fold", "period-doubling", "neimark-sacker", "grazing")
+CONTACT_EDGE = -1.5  # 1 + 2x/3 = 0
+
+
+# ----- the n-period map with the sensitivity to one parameter -------------------------------------------
+
+def _parameter_field(scene: Scene, param: str) -> Callable[[float, float, float], tuple[float, float]]:
+    """df/dp (x, v, s) of the rescaled field f = (v/omega, (Delta cos s - mu v - g(x))/omega), p != omega
+    (omega's is -f/omega, handled in _rhs). g is linear in alpha and gamma: dg/dalpha = -F_em,mean(x; 1, 0)."""
+    w, R = 1.0 / scene.omega, scene.R
+    em = forces.electrostatic_mean
+    if param == "Delta":
+        return lambda x, v, s: (0.0, math.cos(s) * w)
+    if param == "mu":
+        return lambda x, v, s: (0.0, -v * w)
+    if param == "alpha":
+        return lambda x, v, s: (0.0, em(x, 1.0, 0.0, R) * w)
+    if param == "gamma":
+        return lambda x, v, s: (0.0, em(x, 0.0, 1.0, R) * w)
+    raise ValueError(f"parameter {param!r}: continuation supports {', '.join(PARAMETERS)}")
+
+
+def _rhs(scene: Scene, param: str):
+    """f(s, y), y = (x, v, Phi11, Phi21, Phi12, Phi22, x_p, v_p), s = omega tau (shooting._variational_rhs
+    with dz/domega replaced by dz/dp for any p of PARAMETERS)."""
+    g, g_x = PeriodicModel(scene).restoring()
+    mu, Delta, w = scene.mu, scene.Delta, 1.0 / scene.omega
+    cos = math.cos
+    dfdp = None if param == "omega" else _parameter_field(scene, param)
+
+    def rhs(s, y):
+        x, v, p11, p21, p12, p22, xp, vp = y
+        dx = v * w
+        dv = (Delta * cos(s) - mu * v - g(x)) * w
+        kx, kv = -g_x(x) * w, -mu * w
+        if dfdp is None:
+            fx, fv = -dx * w, -dv * w
+        else:
+            fx, fv = dfdp(x, v, s)
+        return [dx, dv, p21 * w, kx * p11 + kv * p21, p22 * w, kx * p12 + kv * p22,
+                vp * w + fx, kx * xp + kv * vp + fv]
+
+    return rhs
+
+
+@dataclass
+class MapResult:
+    end: np.ndarray  # P^n(z0)
+    monodromy: np.ndarray
+    d_param: np.ndarray  # dP^n/dp
+    x_min: float
+    x_max: float
+    crossings: int  # contact crossings over the n periods
+    segments: list = field(repr=False)  # dense outputs (s, y)
+
+
+def n_period_map(scene: Scene, param: str, z0, periods: int = 1, rtol: float = RTOL) -> MapResult:
+    """Integrate s in [0, 2 pi n] from z0 with the variational equations, restarting at contact crossings
+    (shooting.period_map's integration, for any parameter and n periods)."""
+    rhs = _rhs(scene, param)
+    contact, upper_gap, lower_gap, turning_point = _events(scene.R)
+    y = np.concatenate([np.asarray(z0, dtype=float), [1.0, 0.0, 0.0, 1.0, 0.0, 0.0]])
+    s, s_end, segments, extrema, crossings = 0.0, TWO_PI * periods, [], [float(y[0])], 0
+    contact.direction = -1.0 if contact(0.0, y) > 0.0 else 1.0
+    while True:
+        sol = solve_ivp(rhs, (s, s_end), y, method="DOP853", rtol=rtol, atol=ATOL, dense_output=True,
+                        events=(contact, upper_gap, lower_gap, turning_point))
+        if sol.status < 0:
+            raise ShootingError(f"DOP853 failed at s = {sol.t[-1]:.6g}: {sol.message}")
+        segments.append(sol.sol)
+        extrema.extend(float(y_event[0]) for y_event in sol.y_events[3])
+        if sol.t_events[1].size or sol.t_events[2].size:
+            raise ShootingError(f"pull-in (an electrode gap below 1e-3) at x = {sol.y[0, -1]:.6g}")
+        y, s = sol.y[:, -1], sol.t[-1]
+        if sol.status == 0:
+            break
+        crossings += 1
+        contact.direction = -contact.direction
+    extrema.append(float(y[0]))
+    return MapResult(end=y[:2].copy(), monodromy=np.array([[y[2], y[4]], [y[3], y[5]]]), d_param=y[6:8].copy(),
+                     x_min=min(extrema), x_max=max(extrema), crossings=crossings, segments=segments)
+
+
+# ----- points of a branch ---------------------------------------------------------------------------------
+
+@dataclass
+class Point:
+    """One periodic orbit: the fixed point z0 of P^n at parameter value p, its multipliers and test functions."""
+
+    p: float
+    z0: np.ndarray
+    periods: int
+    period: float  # n T = 2 pi n / omega
+    monodromy: np.ndarray
+    d_param: np.ndarray
+    multipliers: np.ndarray  # sorted by modulus
+    x_min: float
+    x_max: float
+    crossings: int
+    residual: float
+    liouville_error: float  # |det M - exp(-mu nT)|
+    event: str = ""
+    tangent: np.ndarray | None = field(default=None, repr=False)
+
+    @property
+    def rho_max(self) -> float:
+        return float(np.max(np.abs(self.multipliers)))
+
+    @property
+    def stable(self) -> bool:
+        return self.rho_max < 1.0
+
+    def tests(self) -> dict:
+        """Test functions (module doc); a sign change between two points is an event."""
+        M = self.monodromy
+        complex_pair = abs(self.multipliers[0].imag) > 1e-12 * abs(self.multipliers[0])
+        return {"fold": float(self.tangent[2]) if self.tangent is not None else math.nan,
+                "period-doubling": float(np.linalg.det(M + np.eye(2))),
+                "neimark-sacker": float(np.linalg.det(M) - 1.0) if complex_pair else math.nan,
+                "grazing": self.x_min - CONTACT_EDGE}
+
+
+def _point(scene: Scene, param: str, p: float, z0, periods: int, result: MapResult) -> Point:
+    s = scene if param is None else scene.with_values(**{param: p})
+    rho = np.linalg.eigvals(result.monodromy).astype(complex)
+    rho = rho[np.argsort(np.abs(rho))]
+    period = TWO_PI * periods / s.omega
+    return Point(p=p, z0=np.asarray(z0, dtype=float).copy(), periods=periods, period=period,
+                 monodromy=result.monodromy, d_param=result.d_param, multipliers=rho, x_min=result.x_min,
+                 x_max=result.x_max, crossings=result.crossings,
+                 residual=float(np.max(np.abs(result.end - z0))),
+                 liouville_error=float(abs(np.linalg.det(result.monodromy) - math.exp(-s.mu * period))))
+
+
+@dataclass(frozen=True)
+class Problem:
+    """Periodic orbits of `scene` with parameter `param` free, as fixed points of the `periods`-period map."""
+
+    scene: Scene
+    param: str
+    periods: int = 1
+    rtol: float = RTOL
+    tol: float = NEWTON_TOL
+
+    def __post_init__(self):
+        if self.param not in PARAMETERS:
+            raise ValueError(f"parameter {self.param!r}: continuation supports {', '.join(PARAMETERS)}")
+
+    def at(self, p: float) -> Scene:
+        return self.scene.with_values(**{self.param: float(p)})
+
+    def map(self, z0, p: float) -> MapResult:
+        return n_period_map(self.at(p), self.param, z0, self.periods, self.rtol)
+
+    def point(self, z0, p: float, result: MapResult | None = None) -> Point:
+        result = result or self.map(z0, p)
+        return _point(self.at(p), self.param, p, z0, self.periods, result)
+
+    def shoot(self, p: float, z_guess, max_iter: int = 25) -> Point:
+        """Newton on P^n(z) - z = 0 at fixed p (shooting.shoot for n periods and any parameter)."""
+        z = np.asarray(z_guess, dtype=float)
+        for _ in range(max_iter):
+            result = self.map(z, p)
+            residual = result.end - z
+            if np.max(np.abs(residual)) <= self.tol:
+                return self.point(z, p, result)
+            z = z - np.linalg.solve(result.monodromy - np.eye(2), residual)
+        raise ShootingError(f"Newton shooting did not converge in {max_iter} iterations at {self.param} = {p:.10g}")
+
+    def linear_guess(self, p: float) -> np.ndarray:
+        """z0 of the linearised response about the equilibrium (shooting.linear_guess)."""
+        s = self.at(p)
+        model = PeriodicModel(s)
+        x_e, k1 = model.equilibrium()
+        c = s.Delta / complex(k1 - s.omega**2, s.mu * s.omega)
+        return np.array([x_e + c.real, -s.omega * c.imag])
+
+
+class Continuation:
+    """Pseudo-arclength continuation on u = (x0, v0, p / scale) (shooting._Branch for any parameter)."""
+
+    def __init__(self, problem: Problem, scale: float):
+        self.problem, self.scale = problem, scale
+
+    def u_of(self, point: Point) -> np.ndarray:
+        return np.array([point.z0[0], point.z0[1], point.p / self.scale])
+
+    def tangent(self, point: Point, previous: np.ndarray) -> np.ndarray:
+        jac = np.column_stack([point.monodromy - np.eye(2), point.d_param * self.scale])
+        t = np.cross(jac[0], jac[1])
+        norm = np.linalg.norm(t)
+        if norm == 0.0:
+            raise ShootingError(f"singular branch Jacobian at {self.problem.param} = {point.p:.10g}")
+        t /= norm
+        return t if np.dot(t, previous) >= 0.0 else -t
+
+    def correct(self, u_pred: np.ndarray, normal: np.ndarray, max_iter: int = 8) -> tuple[Point, int]:
+        """Newton on (P^n(z, p) - z, normal . (u - u_pred)) = 0."""
+        u = u_pred.copy()
+        for iteration in range(max_iter):
+            p = u[2] * self.scale
+            result = self.problem.map(u[:2], p)
+            residual = result.end - u[:2]
+            if np.max(np.abs(residual)) <= self.problem.tol:
+                return self.problem.point(u[:2], p, result), iteration
+            jac = np.zeros((3, 3))
+            jac[:2, :2] = result.monodromy - np.eye(2)
+            jac[:2, 2] = result.d_param * self.scale
+            jac[2] = normal
+            u = u - np.linalg.solve(jac, np.append(residual, np.dot(normal, u - u_pred)))
+            if not np.all(np.isfinite(u)):
+                break
+        raise ShootingError(f"corrector did not converge at {self.problem.param} ~ {u[2] * self.scale:.10g}")
+
+    def point_at(self, u0: np.ndarray, t0: np.ndarray, h: float) -> Point:
+        point, _ = self.correct(u0 + h * t0, t0)
+        point.tangent = self.tangent(point, t0)
+        return point
+
+
+def _test_value(point: Point, name: str) -> float:
+    return point.tests()[name]
+
+
+def _locate(cont: Continuation, u0: np.ndarray, t0: np.ndarray, h: float, name: str) -> Point:
+    """Brent on the arclength in (0, h) for the zero of the test function `name` (module doc)."""
+    cache: dict[float, Point] = {}
+
+    def point(hh):
+        if hh not in cache:
+            cache[hh] = cont.point_at(u0, t0, hh)
+        return cache[hh]
+
+    def value(hh):
+        v = _test_value(point(hh), name)
+        return 0.0 if math.isnan(v) else v
+
+    h_event = brentq(value, 0.0, h, xtol=1e-12 * max(h, 1e-300), rtol=1e-12)
+    located = replace(point(h_event), event=name)
+    return located
+
+
+@dataclass
+class Branch:
+    """Points in arclength order (events are points of their own, with `event` set); `doubled` branches
+    switched to at period doublings."""
+
+    problem: Problem
+    points: list
+    doubled: list = field(default_factory=list)  # Branch per switched period doubling
+    stop_reason: str = ""
+    seconds: float = 0.0
+
+    def events(self) -> list[Point]:
+        return [pt for pt in self.points if pt.event]
+
+
+def continue_from(problem: Problem, start: Point, p_stop: float, *, scale: float, step: float = 0.01,
+                  max_step: float = 0.02, min_step: float = 1e-7, max_points: int = 5000,
+                  direction: np.ndarray | None = None, p_bounds: tuple[float, float] | None = None,
+                  progress: Callable[[int, Point], None] | None = None) -> tuple[list[Point], str]:
+    """Pseudo-arclength continuation from `start` until p passes p_stop (or leaves p_bounds, or max_points),
+    locating every event between consecutive points (shooting.continue_branch's step control).
+    Returns (points, stop reason)."""
+    cont = Continuation(problem, scale)
+    sign = 1.0 if p_stop >= start.p else -1.0
+    reference = direction if direction is not None else np.array([0.0, 0.0, sign])
+    u = cont.u_of(start)
+    t = cont.tangent(start, reference)
+    start.tangent = t
+    points, h = [start], step
+    lo, hi = p_bounds if p_bounds is not None else (-math.inf, math.inf)
+    reason = "reached the end of the range"
+    while True:
+        last = points[-1]
+        if direction is None and sign * (last.p - p_stop) >= 0.0:
+            break
+        if not lo <= last.p <= hi:
+            reason = "left the parameter range"
+            break
+        if len(points) >= max_points:
+            reason = f"stopped at {max_points} points"
+            break
+        try:
+            point, iterations = cont.correct(u + h * t, t)
+            t_new = cont.tangent(point, t)
+            accepted = iterations <= 5 and np.dot(t, t_new) >= math.cos(0.2)
+        except (ShootingError, np.linalg.LinAlgError):
+            accepted, iterations = False, None
+        if not accepted:
+            h *= 0.5
+            if h < min_step:
+                reason = f"step below {min_step:g} at {problem.param} = {last.p:.10g}"
+                break
+            continue
+        point.tangent = t_new
+        old, new = last.tests(), point.tests()
+        located = []
+        for name in EVENTS:
+            a, b = old[name], new[name]
+            if math.isfinite(a) and math.isfinite(b) and a * b < 0.0:
+                try:
+                    located.append(_locate(cont, u, t, h, name))
+                except (ShootingError, ValueError):  # not bracketed after all: keep going, unmarked
+                    pass
+        located.sort(key=lambda pt: np.dot(cont.u_of(pt) - u, t))
+        points.extend(located)
+        points.append(point)
+        if progress is not None:
+            progress(len(points) - 1, point)
+        u, t = cont.u_of(point), t_new
+        h = min(max_step, 1.5 * h) if iterations <= 2 else h
+    return points, reason
+
+
+def switch_to_doubled(problem: Problem, pd: Point, scale: float, h: float = 0.02) -> Point:
+    """The first point of the doubled branch at the period doubling `pd` (module doc): corrector on P^2 from
+    z* + h v along the pitchfork's tangent (v, 0); the result must not be the P-orbit itself."""
+    rho, vectors = np.linalg.eig(pd.monodromy)
+    k = int(np.argmin(np.abs(rho + 1.0)))
+    v = np.real(vectors[:, k])
+    v /= np.linalg.norm(v)
+    doubled = replace(problem, periods=2 * problem.periods)
+    cont = Continuation(doubled, scale)
+    u0 = cont.u_of(pd)
+    normal = np.array([v[0], v[1], 0.0])
+    for amplitude in (h, h / 4, h / 16, 4 * h):
+        try:
+            point, _ = cont.correct(u0 + amplitude * normal, normal)
+        except (ShootingError, np.linalg.LinAlgError):
+            continue
+        single = problem.map(point.z0, point.p)
+        if np.max(np.abs(single.end - point.z0)) > 1e3 * problem.tol:  # not a fixed point of P: truly doubled
+            point.tangent = cont.tangent(point, normal)  # away from the P-orbit, not back through the vertex
+            return point
+    raise ShootingError(f"no doubled orbit found next to the period doubling at {problem.param} = {pd.p:.10g}")
+
+
+def branch(scene: Scene, param: str, lo: float, hi: float, *, points: int = 200, rtol: float = RTOL,
+           tol: float = NEWTON_TOL, start_guess=None, double: bool = True,
+           progress: Callable[[int, Point], None] | None = None) -> Branch:
+    """The branch of T-periodic orbits from p = lo (started from the linear response, or start_guess) to
+    p = hi, with events located; at each period doubling the doubled branch is switched to and continued
+    (inside [lo, hi], at most `points` points). The step is sized so that the branch has about `points`
+    points when it is straight: max_step = 1.5 / points of the scaled arclength (range = 1)."""
+    t0 = time.perf_counter()
+    problem = Problem(scene, param, rtol=rtol, tol=tol)
+    scale = abs(hi - lo)
+    start = problem.shoot(lo, problem.linear_guess(lo) if start_guess is None else start_guess)
+    max_step = 1.5 / points
+    main, reason = continue_from(problem, start, hi, scale=scale, step=max_step / 2, max_step=max_step,
+                                 max_points=4 * points, progress=progress)
+    result = Branch(problem, main, stop_reason=reason)
+    if double:
+        for pd in [pt for pt in main if pt.event == "period-doubling"]:
+            try:
+                first = switch_to_doubled(problem, pd, scale)
+                doubled_points, why = continue_from(replace(problem, periods=2), first, hi, scale=scale,
+                                                    step=max_step / 2, max_step=max_step, max_points=points,
+                                                    direction=first.tangent, p_bounds=(min(lo, hi), max(lo, hi)))
+                result.doubled.append(Branch(replace(problem, periods=2), doubled_points, stop_reason=why))
+            except ShootingError as error:
+                result.doubled.append(Branch(replace(problem, periods=2), [], stop_reason=str(error)))
+    result.seconds = time.perf_counter() - t0
+    return result
+
+
+# ----- rows: what branch.parquet holds ---------------------------------------------------------------------
+
+COLUMNS = ("branch", "periods", "param", "value", "period", "x_min", "x_max", "rho_max", "stable", "event",
+           "rho1_re", "rho1_im", "rho2_re", "rho2_im", "x0", "v0", "contact_crossings", "residual",
+           "liouville_error")
+
+
+def rows(result: Branch) -> list[dict]:
+    """One dict per orbit (COLUMNS); branch 0 is the T-periodic branch, 1, 2, ... the doubled ones."""
+    out = []
+    for index, br in enumerate([result, *result.doubled]):
+        for pt in br.points:
+            rho = pt.multipliers
+            out.append({"branch": index, "periods": pt.periods, "param": br.problem.param, "value": pt.p,
+                        "period": pt.period, "x_min": pt.x_min, "x_max": pt.x_max, "rho_max": pt.rho_max,
+                        "stable": bool(pt.stable), "event": pt.event,
+                        "rho1_re": rho[0].real, "rho1_im": rho[0].imag, "rho2_re": rho[1].real,
+                        "rho2_im": rho[1].imag, "x0": pt.z0[0], "v0": pt.z0[1],
+                        "contact_crossings": pt.crossings, "residual": pt.residual,
+                        "liouville_error": pt.liouville_error})
+    return out
