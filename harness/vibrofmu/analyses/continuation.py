@@ -379,19 +379,20 @@ def switch_to_doubled(problem: Problem, pd: Point, scale: float, h: float = 0.02
 
 
 def branch(scene: Scene, param: str, lo: float, hi: float, *, points: int = 200, rtol: float = RTOL,
-           tol: float = NEWTON_TOL, start_guess=None, double: bool = True,
+           tol: float = NEWTON_TOL, start_guess=None, double: bool = True, max_points: int | None = None,
            progress: Callable[[int, Point], None] | None = None) -> Branch:
     """The branch of T-periodic orbits from p = lo (started from the linear response, or start_guess) to
     p = hi, with events located; at each period doubling the doubled branch is switched to and continued
     (inside [lo, hi], at most `points` points). The step is sized so that the branch has about `points`
-    points when it is straight: max_step = 1.5 / points of the scaled arclength (range = 1)."""
+    points when it is straight: max_step = 1.5 / points of the scaled arclength (range = 1); a branch that
+    winds (folds, large amplitudes) takes more, up to max_points (default 4 points)."""
     t0 = time.perf_counter()
     problem = Problem(scene, param, rtol=rtol, tol=tol)
     scale = abs(hi - lo)
     start = problem.shoot(lo, problem.linear_guess(lo) if start_guess is None else start_guess)
     max_step = 1.5 / points
     main, reason = continue_from(problem, start, hi, scale=scale, step=max_step / 2, max_step=max_step,
-                                 max_points=4 * points, progress=progress)
+                                 max_points=max_points or 4 * points, progress=progress)
     result = Branch(problem, main, stop_reason=reason)
     if double:
         for pd in [pt for pt in main if pt.event == "period-doubling"]:
@@ -428,3 +429,150 @@ def rows(result: Branch) -> list[dict]:
                         "contact_crossings": pt.crossings, "residual": pt.residual,
                         "liouville_error": pt.liouville_error})
     return out
+
+
+# ----- FMU confirmation of a located event -------------------------------------------------------------------
+
+CONFIRM_SAMPLES = 16  # communication steps per forcing period (the stroboscopic sample is every 16th)
+CONFIRM_PERIODS = 1500  # forcing periods per run: mu T / 2 ~ 0.03 at mu = 0.01, omega = 1 -> e^-47 of a start error
+CONFIRM_TAIL = 40  # periods at the end that are judged
+# Same orbit: stroboscopic states within this of each other (the FMU's rtol 1e-8 and the AC drive's
+# O(beta/Omega^2) ~ 1e-5 wobble, which shooting leaves out, are far below it; distinct orbits of a
+# fold/PD are O(0.01 .. 1) apart).
+SAME_STATE = 1e-3
+
+
+@dataclass
+class FmuRun:
+    """A long FMU run at one parameter value, judged on its last CONFIRM_TAIL periods."""
+
+    p: float
+    start: tuple[float, float]
+    settled_period: int | None  # 1, 2 (x(kT) alternates), or None (neither within SAME_STATE)
+    x_min: float
+    x_max: float
+    end: tuple[float, float]  # stroboscopic state at the end
+    stop_reason: str | None = None
+
+    @property
+    def contact_lost(self) -> bool:
+        return self.x_min < CONTACT_EDGE
+
+    def as_dict(self) -> dict:
+        return {"value": self.p, "start": list(self.start), "settled_period": self.settled_period,
+                "x_min": self.x_min, "x_max": self.x_max, "end": list(self.end), "contact_lost": self.contact_lost,
+                "stop_reason": self.stop_reason}
+
+
+def fmu_run(fmu, scene: Scene, param: str, p: float, start, periods: int = CONFIRM_PERIODS) -> FmuRun:
+    """The plant FMU at parameter value p from the state `start` (at tau = 0, the forcing phase of z0)."""
+    from vibromodel.settings import Settings
+
+    from vibrofmu.analyses.simulate import start_values
+    from vibrofmu.hosts.run import run_fmu
+
+    s = scene.with_values(**{param: float(p), "x_start": float(start[0]), "v_start": float(start[1])})
+    T = TWO_PI / s.omega
+    result = run_fmu(fmu, start_values(s, Settings()), periods * T, T / CONFIRM_SAMPLES)
+    x, v = result.outputs["x"], result.outputs["v"]
+    if not result.completed:
+        return FmuRun(p, tuple(start), None, math.nan, math.nan, (math.nan, math.nan), result.stop_reason)
+    strobe = np.column_stack([x[::CONFIRM_SAMPLES], v[::CONFIRM_SAMPLES]])[-CONFIRM_TAIL:]
+    step1 = np.max(np.abs(strobe[1:] - strobe[:-1]))
+    step2 = np.max(np.abs(strobe[2:] - strobe[:-2]))
+    settled = 1 if step1 <= SAME_STATE else 2 if step2 <= SAME_STATE else None
+    tail = x[-CONFIRM_TAIL * CONFIRM_SAMPLES:]
+    return FmuRun(p, tuple(start), settled, float(tail.min()), float(tail.max()), tuple(strobe[-1]))
+
+
+def _walk(points: list[Point], index: int, step: int, delta: float, stable_only: bool = False) -> Point | None:
+    """The orbit about `delta` away in p from the event points[index], reached along the branch in list
+    direction `step` (+-1) without passing another event (nor an unstable orbit when stable_only): the
+    nearest point of the same piece of branch, never an orbit of another piece at the same p."""
+    event, found = points[index], None
+    i = index + step
+    while 0 <= i < len(points):
+        pt = points[i]
+        if pt.event or (stable_only and not pt.stable):
+            break
+        found = pt
+        if abs(pt.p - event.p) >= delta:
+            break
+        i += step
+    return found
+
+
+def confirm_event(result: Branch, index: int, fmu, delta: float) -> dict:
+    """Long FMU runs on either side of the event points[index] (docs/continuation.md, FMU confirmation),
+    each from an orbit of the branch next to the event (_walk), at that orbit's own parameter value:
+    fold       from the stable orbit next to the fold at p_in, and the same start at the mirror value
+               p_out = 2 p_fold - p_in (no orbit of this piece there): it stays at p_in (same amplitude within
+               10 %) and jumps at p_out (amplitude changed by more than 10 %);
+    grazing    from the stable orbit on each side: contact lost on one side only, as the branch predicts;
+    period-doubling  from the P-orbit on each side (the unstable one 1e-3 off it): settled period 1 on the
+               stable side, 2 on the other.
+    Returns {event, value, runs, expected, confirmed, reason}."""
+    problem, points = result.problem, result.points
+    event = points[index]
+    record = {"event": event.event, "value": event.p, "delta": delta, "runs": [], "confirmed": False}
+
+    def run(p, start):
+        return fmu_run(fmu, problem.scene, problem.param, p, start)
+
+    if event.event == "fold":
+        candidates = [pt for pt in (_walk(points, index, -1, delta, True), _walk(points, index, 1, delta, True))
+                      if pt is not None]
+        if not candidates:
+            record["reason"] = "both sides of the fold are unstable: nothing for an FMU run to follow"
+            return record
+        start = max(candidates, key=lambda pt: abs(pt.p - event.p))
+        inside = run(start.p, start.z0)
+        outside = run(2.0 * event.p - start.p, start.z0)
+        record["runs"] = [inside.as_dict(), outside.as_dict()]
+        amp_start = start.x_max - start.x_min
+        amp_in, amp_out = inside.x_max - inside.x_min, outside.x_max - outside.x_min
+        record["expected"] = (f"at {start.p:.8g} stays on the orbit (amplitude {amp_start / 2:.4g}); at "
+                              f"{2.0 * event.p - start.p:.8g} jumps to another orbit")
+        stays = inside.settled_period is not None and abs(amp_in - amp_start) < 0.1 * amp_start
+        jumps = outside.settled_period is not None and abs(amp_out - amp_start) > 0.1 * amp_start
+        record["confirmed"] = bool(stays and jumps)
+        record["jump"] = {"amplitude_before": amp_start / 2, "amplitude_after": amp_out / 2}
+        return record
+    sides = [_walk(points, index, -1, delta), _walk(points, index, 1, delta)]
+    if None in sides:
+        record["reason"] = "the branch has no orbit on one side of the event"
+        return record
+    # an unstable orbit is left from a start 1e-3 off it (an exact start would sit on it for as long as the
+    # FMU's own errors take to grow)
+    runs = [run(pt.p, pt.z0 if pt.stable else pt.z0 + np.array([1e-3, 0.0])) for pt in sides]
+    record["runs"] = [r.as_dict() for r in runs]
+    if event.event == "grazing":
+        if not all(pt.stable for pt in sides):
+            record["reason"] = "an orbit next to the grazing is unstable: no FMU run can stay on it"
+            return record
+        predicted = [pt.x_min < CONTACT_EDGE for pt in sides]
+        record["expected"] = f"contact lost: {predicted[0]} at {sides[0].p:.8g}, {predicted[1]} at {sides[1].p:.8g}"
+        record["confirmed"] = bool(predicted[0] != predicted[1]
+                                   and [r.contact_lost for r in runs] == predicted
+                                   and all(r.settled_period == 1 for r in runs))
+    elif event.event == "period-doubling":
+        expected = [1 if pt.stable else 2 for pt in sides]
+        record["expected"] = f"settled period (in T): {expected[0]} at {sides[0].p:.8g}, {expected[1]} at {sides[1].p:.8g}"
+        record["confirmed"] = bool(expected[0] != expected[1] and [r.settled_period for r in runs] == expected)
+    else:
+        record["reason"] = f"no FMU check for {event.event}"
+    return record
+
+
+def confirm(result: Branch, fmu, delta: float, progress: Callable[[str], None] | None = None) -> list[dict]:
+    """confirm_event for every event of the T-periodic branch."""
+    records = []
+    for index, pt in enumerate(result.points):
+        if pt.event:
+            record = confirm_event(result, index, fmu, delta)
+            record["verdict"] = ("confirmed" if record["confirmed"] else
+                                 f"not checkable ({record['reason']})" if "reason" in record else "NOT confirmed")
+            records.append(record)
+            if progress is not None:
+                progress(f"FMU check of the {pt.event} at {result.problem.param} = {pt.p:.8g}: {record['verdict']}")
+    return records
