@@ -576,3 +576,96 @@ def confirm(result: Branch, fmu, delta: float, progress: Callable[[str], None] |
             if progress is not None:
                 progress(f"FMU check of the {pt.event} at {result.problem.param} = {pt.p:.8g}: {record['verdict']}")
     return records
+
+
+# ----- the undamped, unforced oscillator: free orbits continued in energy (a check, docs/continuation.md) -------
+
+@dataclass
+class FreeOrbit:
+    energy: float  # V(x0) - V(x_e), V = forces.potential (alpha = gamma = 0: x_e = 0)
+    x0: float  # the right turning point (v = 0)
+    period: float
+    closure: float  # |x(T) - x0|, not imposed by the Newton iteration: energy conservation closes the orbit
+    monodromy: np.ndarray
+    crossings: int
+    segments: list = field(repr=False)
+
+    def x(self, s: np.ndarray) -> np.ndarray:
+        """x at rescaled time s = 2 pi tau / T in [0, 2 pi]."""
+        s = np.asarray(s, dtype=float)
+        out = np.empty_like(s)
+        for sol in self.segments:
+            inside = (s >= sol.t_min) & (s <= sol.t_max)
+            out[inside] = sol(s[inside])[0]
+        return out
+
+
+def free_orbits(energies, rtol: float = RTOL, R: float = 3.0) -> list[FreeOrbit]:
+    """x'' + H(x) = 1 (mu = Delta = alpha = beta = gamma = 0): the orbit of each energy (in increasing order),
+    continued in the energy. Unknowns (x0, omega = 2 pi/T): V(x0) - V(0) = E and v(2 pi; (x0, 0), omega) = 0
+    (the return to the section v = 0 after one turn), Newton with dv/dx0 = Phi21 and dv/domega from the
+    variational equations; the predictor is the secant through the last two orbits (the first is started from
+    the linear oscillator, x0 = sqrt(2E), omega = 1). R only places the electrodes (no force: alpha = gamma = 0)."""
+    scene = Scene(mu=0.0, Delta=0.0, alpha=0.0, beta=0.0, gamma=0.0, R=R, omega=1.0)
+    v_ref = forces.potential(0.0)
+    found: list[FreeOrbit] = []
+    for energy in energies:
+        if len(found) >= 2:
+            (e1, a), (e2, b) = [(o.energy, np.array([o.x0, TWO_PI / o.period])) for o in found[-2:]]
+            u = b + (b - a) * (energy - e2) / (e2 - e1)
+        elif found:
+            u = np.array([found[-1].x0, TWO_PI / found[-1].period])
+        else:
+            u = np.array([math.sqrt(2.0 * energy), 1.0])
+        for _ in range(30):
+            s = scene.with_values(omega=float(u[1]))
+            result = n_period_map(s, "omega", [u[0], 0.0], 1, rtol)
+            F = np.array([forces.potential(u[0]) - v_ref - energy, result.end[1]])
+            if abs(F[1]) <= NEWTON_TOL and abs(F[0]) <= 1e-14 * max(1.0, energy):
+                break
+            g0 = forces.hertz(u[0]) - 1.0  # V'(x0)
+            J = np.array([[g0, 0.0], [result.monodromy[1, 0], result.d_param[1]]])
+            u = u - np.linalg.solve(J, F)
+        else:
+            raise ShootingError(f"free orbit of energy {energy:g} did not converge")
+        found.append(FreeOrbit(energy=float(energy), x0=float(u[0]), period=TWO_PI / float(u[1]),
+                               closure=float(abs(result.end[0] - u[0])), monodromy=result.monodromy,
+                               crossings=result.crossings, segments=result.segments))
+    return found
+
+
+def free_energy(x: float) -> float:
+    """W(x) = V(x) - V(0) of the free oscillator (alpha = gamma = 0), without V's cancellation near x = 0:
+    (3/5)[(1 + y)^(5/2) - 1 - 5y/2] with y = 2x/3 in contact (expm1/log1p), -x - 3/5 beyond the contact edge."""
+    if x <= CONTACT_EDGE:
+        return -x - 0.6
+    y = 2.0 * x / 3.0
+    return 0.6 * (math.expm1(2.5 * math.log1p(y)) - 2.5 * y)
+
+
+def quadrature_period(energy: float) -> float:
+    """T(E) = 2 int_{x-}^{x+} dx / sqrt(2 (E - W(x))), independent of any ODE solver: with W(x) = E sin^2 theta
+    on each side of x = 0, dx = 2E sin cos dtheta / W'(x), so T = 2 sqrt(2E) int_0^{pi/2} sin theta
+    (1/W'(x+(theta)) + 1/|W'(x-(theta))|) dtheta, a smooth integrand (split where x- crosses the contact edge,
+    where W'' jumps); x(theta) by Brent, the integral by scipy's quad."""
+    from scipy.integrate import quad
+
+    def slope(x):  # W'(x) = H(x) - 1
+        return forces.hertz(x) - 1.0
+
+    def x_at(theta, side):
+        level = energy * math.sin(theta) ** 2
+        if level == 0.0:
+            return 0.0
+        bound = side * (1.0 + 2.0 * energy + 2.0 * math.sqrt(2.0 * energy))
+        return brentq(lambda x: free_energy(x) - level, 0.0, bound, xtol=1e-16, rtol=1e-15)
+
+    def integrand(theta):
+        if theta == 0.0:
+            return 2.0 / math.sqrt(2.0 * energy)  # W' ~ x ~ sqrt(2E) theta on both sides
+        return math.sin(theta) * (1.0 / slope(x_at(theta, 1.0)) + 1.0 / abs(slope(x_at(theta, -1.0))))
+
+    edge = free_energy(CONTACT_EDGE)  # 0.9
+    points = [math.asin(math.sqrt(edge / energy))] if energy > edge else None
+    value, _ = quad(integrand, 0.0, math.pi / 2, points=points, epsabs=0.0, epsrel=1e-13, limit=200)
+    return 2.0 * math.sqrt(2.0 * energy) * value
