@@ -1,5 +1,5 @@
 """The `vibrofmu` command: build, simulate, closed-loop, oafm, stability, bench, demo, doctor, ssp, container,
-report, study.
+report, study, continuation.
 
 This module parses the command line and dispatches; each sub-command is one module of vibrofmu.commands that
 exports COMMAND (name, help, options, run). `vibrofmu --help` stays fast: the command modules import only the

@@ -190,7 +190,9 @@ def test_verdicts_unchanged_when_the_tolerances_are_halved():
 def _fold_errors(eps):
     """Scene of the primary resonance scaled by eps (mu ~ eps^2, Delta ~ eps^3, amplitude ~ eps, detuning
     ~ eps^2): the exact and slow-flow fold frequencies."""
-    scene = Scene(mu=0.01 * eps**2, Delta=0.008 * eps**3, R=3.0, beta=0.0)
+    # beta = gamma = 0: no AC drive, whose vibrational correction (~gamma^2/Omega^4 ~ 1e-9, not scaled by eps)
+    # the slow flow has and the shooting model leaves out (shooting.py)
+    scene = Scene(mu=0.01 * eps**2, Delta=0.008 * eps**3, R=3.0, beta=0.0, gamma=0.0)
     slow = av.folds(av.averaged(scene), samples=400)
     w = av.averaged(scene).omega_e
     result = cont.branch(scene, "omega", w - 0.025 * eps**2, w + 0.01 * eps**2, points=40, double=False)
@@ -202,14 +204,17 @@ def _fold_errors(eps):
 def test_slow_flow_folds_converge_at_the_averaging_order():
     """First-order averaging (with the Lindstedt backbone to r^4) drops O(eps^4) in the frequency on the scaling
     r ~ eps, mu ~ eps^2, Delta ~ eps^3, omega - omega_e ~ eps^2 (the fold structure is then the same at every eps):
-    the fold error must fall 16x per halving of eps (exponent 4 +- 0.5: the next order adds eps^6 / eps^4)."""
+    the fold error must fall 16x per halving of eps. The next order, eps^6, makes the observed order approach 4
+    from above (measured at eps = 1 -> 0.5: 5.3, where r ~ 0.6 is not small): decreasing, and within 4 +- 0.35
+    for the last halving (eps^6 / eps^4 = 1/64 there: an order error ~ log2(1 + D/(16 C)) with the measured
+    D/C ~ 1.5, about 0.13)."""
     errors = []
-    for eps in (1.0, 0.5, 0.25):
+    for eps in (0.5, 0.25, 0.125):
         exact, slow, scene = _fold_errors(eps)
         assert len(exact) == len(slow) == 2  # the same two folds: qualitatively right
         errors.append(np.max(np.abs(exact - slow)))
     orders = [math.log2(errors[0] / errors[1]), math.log2(errors[1] / errors[2])]
-    assert all(3.5 <= o <= 4.5 for o in orders), (errors, orders)
+    assert orders[0] >= orders[1] and abs(orders[1] - 4) <= 0.35, (errors, orders)
 
 
 # ----- the command ---------------------------------------------------------------------------------------------

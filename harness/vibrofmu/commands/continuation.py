@@ -22,9 +22,9 @@ def _finite(text):
 
 
 def options(p):
-    p.add_argument("--param", choices=PARAMETERS, help="the parameter to continue in (required unless --bench)")
-    p.add_argument("--from", dest="start", type=float, metavar="A", help="first value of the parameter")
-    p.add_argument("--to", dest="stop", type=float, metavar="B", help="last value of the parameter")
+    p.add_argument("--param", choices=PARAMETERS, help="the parameter to continue in (no default: required unless --bench)")
+    p.add_argument("--from", dest="start", type=float, metavar="A", help="first value of the parameter (no default: required unless --bench)")
+    p.add_argument("--to", dest="stop", type=float, metavar="B", help="last value of the parameter (no default: required unless --bench)")
     p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", help=SET_HELP)
     p.add_argument("--points", type=count, default=200,
                    help="points of a straight branch over [A, B] (sets the largest step; a winding branch takes "
@@ -38,7 +38,7 @@ def options(p):
     p.add_argument("--chart", nargs=3, type=positive, metavar=("DELTA_LO", "DELTA_HI", "N"),
                    help="also the two-parameter chart in (omega, Delta): omega-branches at N forcing amplitudes "
                         "(geometric grid) beside the slow flow's folds (chart.png, chart.parquet, chart.json, "
-                        "the fold table); needs --param omega")
+                        "the fold table); needs --param omega (default: no chart)")
     p.add_argument("--bench", action="store_true",
                    help=f"the cost benchmark: a branch of {BENCH_POINTS} points on the scene "
                         f"{', '.join(f'{k}={v:g}' for k, v in BENCH_SCENE.items())}, omega 0.6 -> 1.2 (bench.json)")
