@@ -276,3 +276,16 @@ def test_fmu_confirms_the_folds_and_grazing_of_the_paper_family(plant_fmu):
                         ("grazing", "confirmed")]
     runs = records[3]["runs"]
     assert [run["contact_lost"] for run in runs] == [True, False]
+
+
+def test_neimark_sacker_fires_only_where_liouville_puts_it():
+    """rho1 rho2 = det M = exp(-mu T): a complex pair has |rho|^2 = exp(-mu T), on the unit circle exactly at
+    mu = 0. Continued in mu through 0 (away from resonance: a complex pair), the test function det M - 1 must fire
+    once, at mu = 0 (Brent to 1e-12 of the step; det M is known to the integration's ~1e-11, and
+    d(det M)/dmu = -T ~ -9, so mu* to ~1e-11)."""
+    result = cont.branch(GRAZING_SCENE.with_values(omega=0.7, Delta=0.05), "mu", 0.02, -0.02, points=4, double=False)
+    events = result.events()
+    assert [pt.event for pt in events] == ["neimark-sacker"]
+    assert abs(events[0].p) < 1e-9
+    assert np.allclose(np.abs(events[0].multipliers), 1.0, atol=1e-9)
+    assert all(pt.stable == (pt.p > 0) for pt in result.points if not pt.event)
