@@ -289,3 +289,24 @@ def test_neimark_sacker_fires_only_where_liouville_puts_it():
     assert abs(events[0].p) < 1e-9
     assert np.allclose(np.abs(events[0].multipliers), 1.0, atol=1e-9)
     assert all(pt.stable == (pt.p > 0) for pt in result.points if not pt.event)
+
+
+def test_slow_flow_folds_are_traced_through_the_resonance_peak():
+    """continuation_output.slow_flow_folds traces the slow flow's response curve through its peak (one smooth
+    parameter): it finds the folds averaging.folds finds, to 1e-12, and also the upper fold next to the peak that
+    a trace by r on each side of the backbone misses at large Delta/mu; each is a zero of the slow flow with
+    det J = 0 (the independent check: the flow's own right-hand side and Jacobian there)."""
+    from vibrofmu.analyses.continuation_output import slow_flow_folds
+
+    scene = Scene(mu=0.01, Delta=0.01095, R=3.0, beta=0.0, gamma=0.0)
+    model = av.averaged(scene)
+    ours, theirs = slow_flow_folds(scene), av.folds(model)
+    assert len(ours) == 2 and len(theirs) == 1
+    assert min(abs(f.omega - theirs[0].omega) for f in ours) < 1e-12
+    for fold in ours:
+        state = av.steady_state(model.flow(fold.omega), fold.r)
+        flow = model.flow(fold.omega)
+        assert max(map(abs, flow.rhs(state.A, state.B))) < 1e-14  # a steady state (rhs ~ drive 5e-3 x eps)
+        # det J = mu^2/4 + nu (nu - r kappa') vanishes: Brent's 1e-15 in theta times |d det / d theta| <~ 1e-4,
+        # plus the round-off of its O(mu^2/4 = 2.5e-5) terms, ~1e-20: 1e-6 of mu^2/4 is far above both
+        assert abs(np.linalg.det(flow.jacobian(state.A, state.B))) < 1e-6 * scene.mu**2 / 4

@@ -92,8 +92,62 @@ def plot_branch(path: Path, result: cont.Branch, title: str) -> None:
 HOLDS = 0.1
 
 
-def slow_flow_folds(scene: Scene) -> list[av.Fold]:
-    return av.folds(av.averaged(scene), samples=400)
+def slow_flow_folds(scene: Scene, samples: int = 801) -> list[av.Fold]:
+    """The slow flow's folds (det J = 0) on its frequency-response curve, traced through the peak.
+
+    averaging.folds traces the curve by r on each side of the backbone separately, up to r_peak (1 - 1e-9): a
+    fold closer to the peak than its last sample (at large Delta/mu the upper fold sits within ~1e-4 of r_peak)
+    is missed. Here the curve is one smooth parameter: the steady states satisfy (mu/2)^2 + nu^2 = (drive/r)^2,
+    so mu/2 = (drive/r) cos theta, nu = (drive/r) sin theta, theta in (-pi/2, pi/2), through the peak at theta = 0:
+    for each theta, omega solves detuning(omega) - kappa(r) = (mu/2) tan theta with r = 2 drive(omega) cos theta / mu
+    (Brent), and the sign changes of det J along theta are located by Brent. Orbits beyond the contact edge
+    (r >= r_max) are left out: the averaged model does not reach them."""
+    from scipy.optimize import brentq
+
+    model = av.averaged(scene)
+    if scene.Delta == 0.0 or scene.mu <= 0.0:
+        return []
+    mu = scene.mu
+
+    def omega_of(theta):
+        def mismatch(omega):
+            flow = model.flow(omega)
+            r = 2.0 * flow.drive * math.cos(theta) / mu
+            return flow.detuning - model.backbone.kappa(r) - 0.5 * mu * math.tan(theta)
+
+        centre = model.omega_e
+        width = 0.05 * centre
+        for _ in range(40):
+            lo, hi = max(centre - width, 1e-6), centre + width
+            if mismatch(lo) * mismatch(hi) < 0.0:
+                return brentq(mismatch, lo, hi, xtol=1e-15, rtol=1e-15)
+            width *= 1.5
+        return None
+
+    def state(theta):
+        omega = omega_of(theta)
+        if omega is None:
+            return None, None
+        flow = model.flow(omega)
+        r = 2.0 * flow.drive * math.cos(theta) / mu
+        return omega, av.steady_state(flow, r)
+
+    def det(theta):
+        return state(theta)[1].det
+
+    # theta near +-pi/2 is far from resonance (r -> 0); tan theta's range is covered uniformly in arctan
+    thetas = np.arctan(np.sinh(np.linspace(-12.0, 12.0, samples)))
+    values = []
+    for theta in thetas:
+        omega, st = state(theta)
+        values.append(math.nan if st is None or st.r >= model.r_max else st.det)
+    found = []
+    for t0, t1, d0, d1 in zip(thetas, thetas[1:], values, values[1:]):
+        if d0 * d1 < 0.0:
+            theta = brentq(det, t0, t1, xtol=1e-15)
+            omega, st = state(theta)
+            found.append(av.Fold(omega, st.r, -1 if theta > 0 else 1))
+    return sorted(found, key=lambda fold: fold.omega)
 
 
 def slow_flow_cusp(scene: Scene, lo: float, hi: float) -> float | None:
@@ -194,10 +248,9 @@ def plot_chart(path: Path, data: dict) -> None:
     for verdict, color in VERDICT_COLORS.items():
         ax.fill_between([], [], color=color, label=f"averaging {verdict}")
     curve = data["slow_flow_curve"]
-    for k in range(2):
-        xs = [c["folds"][k] if len(c["folds"]) > k else np.nan for c in curve]
-        ax.plot(xs, [c["Delta"] for c in curve], "-", color="tab:blue", lw=1.3,
-                label="slow-flow folds" if k == 0 else None)
+    xs = [w for c in curve for w in c["folds"]]
+    ys = [c["Delta"] for c in curve for _ in c["folds"]]
+    ax.plot(xs, ys, ".", color="tab:blue", ms=4, label="slow-flow folds")  # dots: the count changes along Delta
     if data["slow_flow_cusp_Delta"]:
         cusp_row = next((c for c in curve if c["folds"]), None)
         if cusp_row:
