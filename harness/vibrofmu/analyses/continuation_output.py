@@ -81,7 +81,7 @@ def plot_branch(path: Path, result: cont.Branch, title: str) -> None:
     for ax in axes:
         ax.grid(True, alpha=0.3)
     fig.suptitle(wrapped(title, fig.get_figwidth(), 11), fontsize=11)
-    _legend_below(fig, [axes[0]], columns=3)
+    _legend_below(fig, [axes[0]], columns=2)
     _save(fig, path)
 
 
