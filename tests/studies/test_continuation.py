@@ -310,3 +310,11 @@ def test_slow_flow_folds_are_traced_through_the_resonance_peak():
         # det J = mu^2/4 + nu (nu - r kappa') vanishes: Brent's 1e-15 in theta times |d det / d theta| <~ 1e-4,
         # plus the round-off of its O(mu^2/4 = 2.5e-5) terms, ~1e-20: 1e-6 of mu^2/4 is far above both
         assert abs(np.linalg.det(flow.jacobian(state.A, state.B))) < 1e-6 * scene.mu**2 / 4
+
+
+def test_a_branch_that_cannot_start_says_where_and_exits_1(tmp_path, capsys):
+    # R = 1: the lower electrode is at the contact edge x = -1.5, and this resonant orbit would reach +-1.5
+    assert main(["continuation", "--param", "Delta", "--from", "0.5", "--to", "0.6", "--set", "omega=1",
+                 "--out", str(tmp_path)]) == 1
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("error: continuation in Delta from 0.5: pull-in") and "--set R=3" in err and "\n" not in err

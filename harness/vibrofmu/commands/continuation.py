@@ -99,7 +99,9 @@ def run(args) -> int:
                              double=not args.no_doubling, progress=progress,
                              max_points=BENCH_POINTS if args.bench else None)
     except ShootingError as error:
-        print(f"error: continuation in {args.param} from {args.start:g}: {error}", file=sys.stderr)
+        hint = (f" (the electrodes sit at x = +-3R/2 = +-{1.5 * scene.R:g}; a larger R, e.g. --set R=3, leaves room "
+                f"for large orbits)" if "pull-in" in str(error) else "")
+        print(f"error: continuation in {args.param} from {args.start:g}: {error}{hint}", file=sys.stderr)
         return 1
     output.write_branch(out / "branch.parquet", result)
     title = (f"periodic orbits continued in {args.param} ({', '.join(f'{k} = {v:g}' for k, v in scene.as_dict().items() if k not in ('x_start', 'v_start', args.param))})")
