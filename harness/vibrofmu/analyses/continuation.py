@@ -291,7 +291,8 @@ class Branch:
     points: list
     doubled: list = field(default_factory=list)  # Branch per switched period doubling
     stop_reason: str = ""
-    seconds: float = 0.0
+    seconds: float = 0.0  # wall clock
+    cpu_seconds: float = 0.0  # this process's CPU time: the cost on a machine shared with other work
 
     def events(self) -> list[Point]:
         return [pt for pt in self.points if pt.event]
@@ -386,7 +387,7 @@ def branch(scene: Scene, param: str, lo: float, hi: float, *, points: int = 200,
     (inside [lo, hi], at most `points` points). The step is sized so that the branch has about `points`
     points when it is straight: max_step = 1.5 / points of the scaled arclength (range = 1); a branch that
     winds (folds, large amplitudes) takes more, up to max_points (default 4 points)."""
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     problem = Problem(scene, param, rtol=rtol, tol=tol)
     scale = abs(hi - lo)
     start = problem.shoot(lo, problem.linear_guess(lo) if start_guess is None else start_guess)
@@ -404,7 +405,7 @@ def branch(scene: Scene, param: str, lo: float, hi: float, *, points: int = 200,
                 result.doubled.append(Branch(replace(problem, periods=2), doubled_points, stop_reason=why))
             except ShootingError as error:
                 result.doubled.append(Branch(replace(problem, periods=2), [], stop_reason=str(error)))
-    result.seconds = time.perf_counter() - t0
+    result.seconds, result.cpu_seconds = time.perf_counter() - t0, time.process_time() - c0
     return result
 
 

@@ -108,13 +108,14 @@ def run(args) -> int:
     output.plot_branch(out / "branch.png", result, title)
     summary = {"scene": scene.as_dict(), "param": args.param, "from": args.start, "to": args.stop,
                "points": len(result.points), "stop_reason": result.stop_reason, "seconds": result.seconds,
+               "cpu_seconds": result.cpu_seconds,
                "events": [{"event": pt.event, "value": pt.p, "x_min": pt.x_min, "x_max": pt.x_max,
                            "multipliers": [[r.real, r.imag] for r in pt.multipliers]} for pt in result.events()],
                "doubled_branches": [{"points": len(br.points), "stop_reason": br.stop_reason,
                                      "events": [{"event": pt.event, "value": pt.p} for pt in br.events()]}
                                     for br in result.doubled]}
     print(f"{len(result.points)} orbits from {args.param} = {args.start:g} ({result.stop_reason}) in "
-          f"{result.seconds:.1f} s")
+          f"{result.seconds:.1f} s ({result.cpu_seconds:.1f} s CPU)")
     for pt in result.events():
         print(f"{pt.event} at {args.param} = {pt.p:.10g}: x in [{pt.x_min:.5g}, {pt.x_max:.5g}], multipliers "
               + ", ".join(f"{r.real:.5g}{r.imag:+.2g}j" if r.imag else f"{r.real:.6g}" for r in pt.multipliers))
@@ -130,12 +131,14 @@ def run(args) -> int:
     if args.bench:
         import os
 
-        bench = {"points": len(result.points), "seconds": result.seconds,
+        bench = {"points": len(result.points), "seconds": result.seconds, "cpu_seconds": result.cpu_seconds,
                  "seconds_per_point": result.seconds / len(result.points), "cpu_count": os.cpu_count(),
+                 "load_average_1min": os.getloadavg()[0],
                  "target": f"{BENCH_POINTS} points in < 60 s", "scene": scene.as_dict()}
         (out / "bench.json").write_text(json.dumps(bench, indent=1))
-        print(f"bench: {bench['points']} points in {bench['seconds']:.1f} s ({1e3 * bench['seconds_per_point']:.0f} "
-              f"ms per point; target {bench['target']})")
+        print(f"bench: {bench['points']} points in {bench['seconds']:.1f} s wall clock, {bench['cpu_seconds']:.1f} s "
+              f"CPU ({1e3 * bench['seconds_per_point']:.0f} ms per point; load average "
+              f"{bench['load_average_1min']:.1f} on {bench['cpu_count']} cores; target {bench['target']})")
     if args.chart:
         import numpy as np
 
