@@ -558,7 +558,8 @@ def confirm_event(result: Branch, index: int, fmu, delta: float) -> dict:
                                    and all(r.settled_period == 1 for r in runs))
     elif event.event == "period-doubling":
         expected = [1 if pt.stable else 2 for pt in sides]
-        record["expected"] = f"settled period (in T): {expected[0]} at {sides[0].p:.8g}, {expected[1]} at {sides[1].p:.8g}"
+        record["expected"] = (f"settled period (in T): {expected[0]} at {sides[0].p:.8g}, {expected[1]} at "
+                              f"{sides[1].p:.8g}")
         record["confirmed"] = bool(expected[0] != expected[1] and [r.settled_period for r in runs] == expected)
     else:
         record["reason"] = f"no FMU check for {event.event}"

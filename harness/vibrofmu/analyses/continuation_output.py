@@ -277,12 +277,14 @@ def plot_chart(path: Path, data: dict) -> None:
 
 def agreement_table(data: dict) -> list[str]:
     """Markdown rows: Delta, slow-flow folds, exact folds, errors in units of mu, contact at the exact fold, verdict."""
-    lines = ["| Δ | slow-flow folds ω | exact folds ω | error / μ (nearest) | contact lost at exact fold | verdict |",
+    lines = ["| Δ | slow-flow folds ω | exact folds ω | error / μ (nearest) | contact lost at exact fold "
+             "| verdict |",
              "|---|---|---|---|---|---|"]
     for r in data["rows"]:
         def fmt(values, spec=".6f"):
             return ", ".join(format(v, spec) for v in values) or "—"
         lines.append(f"| {r['Delta']:.4g} | {fmt(r['slow_folds'])} | {fmt(r['exact_folds'])} | "
                      f"{fmt(r['fold_errors_in_mu'], '+.3f')} | "
-                     f"{', '.join('yes' if c else 'no' for c in r['exact_fold_contact_lost']) or '—'} | {r['verdict']}: {r['why']} |")
+                     f"{', '.join('yes' if c else 'no' for c in r['exact_fold_contact_lost']) or '—'} | "
+                     f"{r['verdict']}: {r['why']} |")
     return lines

@@ -13,18 +13,14 @@ BENCH_POINTS = 200
 BENCH_STEP_POINTS = 50  # step sized for 50 points on a straight branch: the 200 then reach past both folds and grazings
 
 
-def _finite(text):
-    try:
-        value = float(text)
-    except ValueError:
-        raise UserError(f"{text!r} is not a number") from None
-    return value
-
 
 def options(p):
-    p.add_argument("--param", choices=PARAMETERS, help="the parameter to continue in (no default: required unless --bench)")
-    p.add_argument("--from", dest="start", type=float, metavar="A", help="first value of the parameter (no default: required unless --bench)")
-    p.add_argument("--to", dest="stop", type=float, metavar="B", help="last value of the parameter (no default: required unless --bench)")
+    p.add_argument("--param", choices=PARAMETERS,
+                   help="the parameter to continue in (no default: required unless --bench)")
+    p.add_argument("--from", dest="start", type=float, metavar="A",
+                   help="first value of the parameter (no default: required unless --bench)")
+    p.add_argument("--to", dest="stop", type=float, metavar="B",
+                   help="last value of the parameter (no default: required unless --bench)")
     p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", help=SET_HELP)
     p.add_argument("--points", type=count, default=200,
                    help="points of a straight branch over [A, B] (sets the largest step; a winding branch takes "
@@ -95,7 +91,8 @@ def run(args) -> int:
     from vibrofmu.analyses.shooting import ShootingError
 
     try:
-        result = cont.branch(scene, args.param, args.start, args.stop, points=BENCH_STEP_POINTS if args.bench else args.points,
+        result = cont.branch(scene, args.param, args.start, args.stop,
+                             points=BENCH_STEP_POINTS if args.bench else args.points,
                              double=not args.no_doubling, progress=progress,
                              max_points=BENCH_POINTS if args.bench else None)
     except ShootingError as error:
@@ -104,7 +101,9 @@ def run(args) -> int:
         print(f"error: continuation in {args.param} from {args.start:g}: {error}{hint}", file=sys.stderr)
         return 1
     output.write_branch(out / "branch.parquet", result)
-    title = (f"periodic orbits continued in {args.param} ({', '.join(f'{k} = {v:g}' for k, v in scene.as_dict().items() if k not in ('x_start', 'v_start', args.param))})")
+    others = ", ".join(f"{k} = {v:g}" for k, v in scene.as_dict().items()
+                       if k not in ("x_start", "v_start", args.param))
+    title = f"periodic orbits continued in {args.param} ({others})"
     output.plot_branch(out / "branch.png", result, title)
     summary = {"scene": scene.as_dict(), "param": args.param, "from": args.start, "to": args.stop,
                "points": len(result.points), "stop_reason": result.stop_reason, "seconds": result.seconds,
