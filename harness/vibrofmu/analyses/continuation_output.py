@@ -1,0 +1,290 @@
+"""What `vibrofmu continuation` writes: branch.parquet, branch.png, and the two-parameter chart (chart.parquet,
+chart.png, the slow-flow vs exact fold table) of docs/continuation.md."""
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from vibromodel import averaging as av
+from vibromodel.parameters import Scene
+
+from vibrofmu.analyses import continuation as cont
+from vibrofmu.output.export import _legend_below, _save, plt, wrapped
+
+EVENT_MARKERS = {"fold": ("s", "tab:red"), "period-doubling": ("D", "tab:purple"),
+                 "neimark-sacker": ("*", "tab:olive"), "grazing": ("o", "tab:orange")}
+
+
+def write_branch(path: Path, result: cont.Branch) -> None:
+    """branch.parquet: one row per orbit (continuation.COLUMNS); the scene and the parameter in the schema's
+    metadata (key b'vibrofmu', JSON)."""
+    table = pa.Table.from_pylist(cont.rows(result))
+    meta = {"scene": result.problem.scene.as_dict(), "param": result.problem.param,
+            "columns": "see docs/continuation.md, branch.parquet"}
+    table = table.replace_schema_metadata({b"vibrofmu": json.dumps(meta).encode()})
+    pq.write_table(table, path)
+
+
+def _segments(values, flags):
+    """Runs of consecutive equal flags: (start, stop, flag), stop exclusive, each run sharing its end point
+    with the next so that the line is unbroken."""
+    runs, start = [], 0
+    for i in range(1, len(flags) + 1):
+        if i == len(flags) or flags[i] != flags[start]:
+            runs.append((start, min(i + 1, len(values)), flags[start]))
+            start = i
+    return runs
+
+
+def plot_branch(path: Path, result: cont.Branch, title: str) -> None:
+    """Amplitude (x_max - x_min)/2 and x_min against the parameter: stable solid, unstable dashed, events
+    marked, doubled branches in their own colour, the contact edge x = -3/2 drawn on the x_min panel."""
+    fig, axes = plt.subplots(2, 1, figsize=(8, 7.5), sharex=True, layout="constrained",
+                             gridspec_kw={"height_ratios": [3, 2]})
+    seen = set()
+    for index, (br, color) in enumerate(zip([result, *result.doubled], ["k", "tab:blue", "tab:green", "tab:cyan"] * 9)):
+        pts = [pt for pt in br.points]
+        if not pts:
+            continue
+        p = np.array([pt.p for pt in pts])
+        amp = np.array([(pt.x_max - pt.x_min) / 2 for pt in pts])
+        x_min = np.array([pt.x_min for pt in pts])
+        stable = [pt.stable for pt in pts]
+        name = "period-T branch" if index == 0 else f"doubled branch {index} (period 2T)"
+        for start, stop, flag in _segments(p, stable):
+            style = "-" if flag else "--"
+            label = f"{name}, {'stable' if flag else 'unstable'}"
+            show = label not in seen
+            seen.add(label)
+            axes[0].plot(p[start:stop], amp[start:stop], style, color=color, lw=1.4, label=label if show else None)
+            axes[1].plot(p[start:stop], x_min[start:stop], style, color=color, lw=1.4)
+        for pt in pts:
+            if pt.event:
+                marker, c = EVENT_MARKERS[pt.event]
+                show = pt.event not in seen
+                seen.add(pt.event)
+                axes[0].plot(pt.p, (pt.x_max - pt.x_min) / 2, marker, color=c, ms=7, mfc="none", mew=1.6,
+                             label=pt.event if show else None)
+                axes[1].plot(pt.p, pt.x_min, marker, color=c, ms=7, mfc="none", mew=1.6)
+    axes[1].axhline(cont.CONTACT_EDGE, color="tab:orange", lw=0.8, ls=":")
+    axes[1].annotate("contact edge 1 + 2x/3 = 0", (0.01, cont.CONTACT_EDGE), xycoords=("axes fraction", "data"),
+                     fontsize=8, color="tab:orange", xytext=(0, 3), textcoords="offset points")
+    axes[0].set_ylabel(r"amplitude $(x_{max} - x_{min})/2$")
+    axes[1].set_ylabel(r"$x_{min}$ over the orbit")
+    axes[1].set_xlabel(result.problem.param)
+    for ax in axes:
+        ax.grid(True, alpha=0.3)
+    fig.suptitle(wrapped(title, fig.get_figwidth(), 11), fontsize=11)
+    _legend_below(fig, [axes[0]], columns=2)
+    _save(fig, path)
+
+
+# ----- the two-parameter chart in (omega, Delta) -------------------------------------------------------------
+
+# A slow-flow fold "holds" when its frequency is within this fraction of the damping width mu of the exact
+# fold: the resonance peak's half-width is mu/2, so an error of 0.1 mu is a tenth of what a sweep resolves
+HOLDS = 0.1
+
+
+def slow_flow_folds(scene: Scene, samples: int = 801) -> list[av.Fold]:
+    """The slow flow's folds (det J = 0) on its frequency-response curve, traced through the peak.
+
+    averaging.folds traces the curve by r on each side of the backbone separately, up to r_peak (1 - 1e-9): a
+    fold closer to the peak than its last sample (at large Delta/mu the upper fold sits within ~1e-4 of r_peak)
+    is missed. Here the curve is one smooth parameter: the steady states satisfy (mu/2)^2 + nu^2 = (drive/r)^2,
+    so mu/2 = (drive/r) cos theta, nu = (drive/r) sin theta, theta in (-pi/2, pi/2), through the peak at theta = 0:
+    for each theta, omega solves detuning(omega) - kappa(r) = (mu/2) tan theta with r = 2 drive(omega) cos theta / mu
+    (Brent), and the sign changes of det J along theta are located by Brent. Orbits beyond the contact edge
+    (r >= r_max) are left out: the averaged model does not reach them."""
+    from scipy.optimize import brentq
+
+    model = av.averaged(scene)
+    if scene.Delta == 0.0 or scene.mu <= 0.0:
+        return []
+    mu = scene.mu
+
+    def omega_of(theta):
+        def mismatch(omega):
+            flow = model.flow(omega)
+            r = 2.0 * flow.drive * math.cos(theta) / mu
+            return flow.detuning - model.backbone.kappa(r) - 0.5 * mu * math.tan(theta)
+
+        centre = model.omega_e
+        width = 0.05 * centre
+        for _ in range(40):
+            lo, hi = max(centre - width, 1e-6), centre + width
+            if mismatch(lo) * mismatch(hi) < 0.0:
+                return brentq(mismatch, lo, hi, xtol=1e-15, rtol=1e-15)
+            width *= 1.5
+        return None
+
+    def state(theta):
+        omega = omega_of(theta)
+        if omega is None:
+            return None, None
+        flow = model.flow(omega)
+        r = 2.0 * flow.drive * math.cos(theta) / mu
+        return omega, av.steady_state(flow, r)
+
+    def det(theta):
+        return state(theta)[1].det
+
+    # theta near +-pi/2 is far from resonance (r -> 0); tan theta's range is covered uniformly in arctan
+    thetas = np.arctan(np.sinh(np.linspace(-12.0, 12.0, samples)))
+    values = []
+    for theta in thetas:
+        omega, st = state(theta)
+        values.append(math.nan if st is None or st.r >= model.r_max else st.det)
+    found = []
+    for t0, t1, d0, d1 in zip(thetas, thetas[1:], values, values[1:]):
+        if d0 * d1 < 0.0:
+            theta = brentq(det, t0, t1, xtol=1e-15)
+            omega, st = state(theta)
+            found.append(av.Fold(omega, st.r, -1 if theta > 0 else 1))
+    return sorted(found, key=lambda fold: fold.omega)
+
+
+def slow_flow_cusp(scene: Scene, lo: float, hi: float) -> float | None:
+    """The smallest Delta in [lo, hi] with slow-flow folds (bisection on 'has folds'), None if none has."""
+    def has(delta):
+        return bool(slow_flow_folds(scene.with_values(Delta=delta)))
+
+    if not has(hi):
+        return None
+    if has(lo):
+        return lo
+    for _ in range(30):
+        mid = math.sqrt(lo * hi)
+        lo, hi = (lo, mid) if has(mid) else (mid, hi)
+    return hi
+
+
+def omega_window(scene: Scene) -> tuple[float, float]:
+    """Where the primary resonance's branch is continued: from below the slow flow's softened peak (its
+    backbone at the contact edge) to 3 mu above omega_e, and never below 0.5 omega_e."""
+    model = av.averaged(scene)
+    w = model.omega_e
+    r_peak = min(scene.Delta / (scene.mu * w), model.r_max)
+    shift = abs(model.backbone.kappa(r_peak))
+    return max(0.5 * w, w - 1.5 * shift - 3 * scene.mu), w + 3 * scene.mu
+
+
+def chart_row(scene: Scene, points: int, rtol: float = cont.RTOL) -> dict:
+    """Exact events of the omega-branch at this Delta beside the slow flow's folds, and the verdict:
+    'holds' (same number of folds, each within HOLDS mu), 'quantitatively off' (same number, some further),
+    'qualitatively wrong' (a different number of folds, or contact lost at an exact fold)."""
+    lo, hi = omega_window(scene)
+    result = cont.branch(scene, "omega", lo, hi, points=points, rtol=rtol)
+    exact = sorted([pt for pt in result.points if pt.event == "fold"], key=lambda pt: pt.p)
+    slow = slow_flow_folds(scene)
+    events = {name: [pt.p for pt in result.points if pt.event == name] for name in cont.EVENTS}
+    for br in result.doubled:
+        events["period-doubling"] += [pt.p for pt in br.points if pt.event == "period-doubling"]
+    # each slow-flow fold against the nearest exact one (also when the counts differ: the fold that the slow
+    # flow does have may still be right while the other has moved beyond contact loss)
+    errors = [min((e.p - f.omega for e in exact), key=abs) for f in slow] if exact else []
+    contact = any(pt.x_min < cont.CONTACT_EDGE for pt in exact)
+    if len(exact) != len(slow) or contact:
+        verdict = "qualitatively wrong"
+    elif all(abs(e) <= HOLDS * scene.mu for e in errors):
+        verdict = "holds"
+    else:
+        verdict = "quantitatively off"
+    return {"Delta": scene.Delta, "omega_lo": lo, "omega_hi": hi, "points": len(result.points),
+            "seconds": result.seconds,
+            "exact_folds": [pt.p for pt in exact], "exact_fold_amplitudes": [(pt.x_max - pt.x_min) / 2 for pt in exact],
+            "exact_fold_contact_lost": [bool(pt.x_min < cont.CONTACT_EDGE) for pt in exact],
+            "slow_folds": [f.omega for f in slow], "slow_fold_amplitudes": [f.r for f in slow],
+            "fold_errors": errors, "fold_errors_in_mu": [e / scene.mu for e in errors],
+            "grazing": events["grazing"], "period_doubling": events["period-doubling"],
+            "neimark_sacker": events["neimark-sacker"], "verdict": verdict,
+            "why": ("no fold in either: one stable orbit per frequency in both" if not exact and not slow else
+                    f"{len(slow)} slow-flow folds, {len(exact)} exact" if len(exact) != len(slow) else
+                    "contact lost at an exact fold: beyond the slow flow's model" if contact else
+                    f"largest fold error {max(abs(e) for e in errors) / scene.mu:.3g} mu (threshold {HOLDS:g} mu)")}
+
+
+def chart(scene: Scene, deltas, points: int, progress: Callable[[str], None] | None = None) -> dict:
+    rows = []
+    for delta in deltas:
+        row = chart_row(scene.with_values(Delta=float(delta)), points)
+        rows.append(row)
+        if progress is not None:
+            progress(f"chart: Delta = {delta:.4g}: {len(row['exact_folds'])} exact folds, "
+                     f"{len(row['slow_folds'])} slow-flow folds, {len(row['grazing'])} grazing: {row['verdict']}")
+    fine = np.geomspace(min(deltas), max(deltas), 60)
+    slow_curve = [{"Delta": float(d), "folds": [f.omega for f in slow_flow_folds(scene.with_values(Delta=float(d)))]}
+                  for d in fine]
+    cusp = slow_flow_cusp(scene, float(min(deltas)), float(max(deltas)))
+    return {"scene": scene.as_dict(), "rows": rows, "slow_flow_curve": slow_curve, "slow_flow_cusp_Delta": cusp,
+            "holds_threshold_in_mu": HOLDS}
+
+
+def write_chart(out: Path, data: dict) -> None:
+    flat = [{k: (json.dumps(v) if isinstance(v, list) else v) for k, v in row.items()} for row in data["rows"]]
+    pq.write_table(pa.Table.from_pylist(flat), out / "chart.parquet")
+    (out / "chart.json").write_text(json.dumps(data, indent=1))
+    plot_chart(out / "chart.png", data)
+
+
+VERDICT_COLORS = {"holds": "#d9f2d9", "quantitatively off": "#fff2cc", "qualitatively wrong": "#f8d7da"}
+
+
+def plot_chart(path: Path, data: dict) -> None:
+    fig, ax = plt.subplots(figsize=(8, 6.5), layout="constrained")
+    rows = data["rows"]
+    deltas = [r["Delta"] for r in rows]
+    edges = np.sqrt(np.array(deltas[:-1]) * np.array(deltas[1:])) if len(deltas) > 1 else np.array([])
+    lows = np.concatenate([[deltas[0] / 1.2], edges])
+    highs = np.concatenate([edges, [deltas[-1] * 1.2]])
+    for row, a, b in zip(rows, lows, highs):
+        ax.axhspan(a, b, color=VERDICT_COLORS[row["verdict"]], zorder=0)
+    for verdict, color in VERDICT_COLORS.items():
+        ax.fill_between([], [], color=color, label=f"averaging {verdict}")
+    curve = data["slow_flow_curve"]
+    xs = [w for c in curve for w in c["folds"]]
+    ys = [c["Delta"] for c in curve for _ in c["folds"]]
+    ax.plot(xs, ys, ".", color="tab:blue", ms=4, label="slow-flow folds")  # dots: the count changes along Delta
+    if data["slow_flow_cusp_Delta"]:
+        cusp_row = next((c for c in curve if c["folds"]), None)
+        if cusp_row:
+            ax.plot(cusp_row["folds"][0], data["slow_flow_cusp_Delta"], "^", color="tab:blue", ms=8,
+                    label="slow-flow cusp")
+    for key, marker, color, label in (("exact_folds", "s", "tab:red", "exact folds"),
+                                      ("grazing", "o", "tab:orange", "exact grazing (contact first lost)"),
+                                      ("period_doubling", "D", "tab:purple", "exact period doubling")):
+        xs = [w for r in rows for w in r[key]]
+        ys = [r["Delta"] for r in rows for _ in r[key]]
+        if xs:
+            ax.plot(xs, ys, marker, color=color, mfc="none", mew=1.5, ms=6, label=label)
+    ax.set_yscale("log")
+    ax.set_xlabel(r"forcing frequency $\omega$")
+    ax.set_ylabel(r"forcing amplitude $\Delta$")
+    ax.grid(True, alpha=0.3, which="both")
+    s = data["scene"]
+    fig.suptitle(wrapped(f"where the averaged (slow-flow) predictions hold: exact folds, grazing and period "
+                         f"doubling beside the slow flow's folds (mu = {s['mu']:g}, R = {s['R']:g})",
+                         fig.get_figwidth(), 11), fontsize=11)
+    _legend_below(fig, [ax], columns=3)
+    _save(fig, path)
+
+
+def agreement_table(data: dict) -> list[str]:
+    """Markdown rows: Delta, slow-flow folds, exact folds, errors in units of mu, contact at the exact fold, verdict."""
+    lines = ["| Δ | slow-flow folds ω | exact folds ω | error / μ (nearest) | contact lost at exact fold "
+             "| verdict |",
+             "|---|---|---|---|---|---|"]
+    for r in data["rows"]:
+        def fmt(values, spec=".6f"):
+            return ", ".join(format(v, spec) for v in values) or "—"
+        lines.append(f"| {r['Delta']:.4g} | {fmt(r['slow_folds'])} | {fmt(r['exact_folds'])} | "
+                     f"{fmt(r['fold_errors_in_mu'], '+.3f')} | "
+                     f"{', '.join('yes' if c else 'no' for c in r['exact_fold_contact_lost']) or '—'} | "
+                     f"{r['verdict']}: {r['why']} |")
+    return lines
