@@ -15,7 +15,7 @@ import sys
 from vibrofmu.commands.common import Parser, run
 
 COMMANDS = ("build", "simulate", "closed_loop", "oafm", "stability", "bench", "demo", "doctor", "ssp", "container",
-            "report", "study")  # modules of vibrofmu.commands, in the order `vibrofmu --help` lists them
+            "report", "study", "diagram")  # modules of vibrofmu.commands, in the order `vibrofmu --help` lists them
 
 
 def commands():

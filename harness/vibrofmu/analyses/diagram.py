@@ -480,10 +480,10 @@ def plot(d: Diagram, path, title: str = "") -> None:
         ax.scatter(xs, ys, s=1.5, color=COLOURS[direction], alpha=0.6, linewidths=0, label=f"sweep {direction}")
         pulled = [p.value for p in points if p.pull_in]
         if pulled:  # pull-in: no samples; marked on the axis
-            ax.plot(pulled, [0.0] * len(pulled), "x", color=COLOURS[direction], ms=4, label=f"pull-in ({direction})")
+            ax.plot(pulled, [0.0] * len(pulled), "x", color=COLOURS[direction], ms=2.5, label=f"pull-in ({direction})")
     ax.axhline(-1.5, color="grey", lw=0.6, ls=":", label="contact loss x = -3/2")
     ax.set_ylabel("x(kT) (stroboscopic, forcing phase 0)")
-    ax.legend(loc="best", markerscale=6, fontsize=8)
+    ax.legend(loc="best", markerscale=4, fontsize=8)
     ax.set_title(title or f"bifurcation diagram in {d.name}")
     if with_exponents:
         ax2 = axes[1, 0]
