@@ -54,6 +54,9 @@ SETTINGS = Settings()  # the core's plant: fidelity 0, DOP853, rtol 1e-8 (the FM
 VOLTAGES = ("V_bias", "V_AC")  # factors on the scene's voltages: alpha ~ V_b^2, beta ~ V_b V_AC, gamma ~ V_AC^2
 PARAMETERS = tuple(n for n in scene_names() if n not in ("x_start", "v_start")) + VOLTAGES
 TWO_PI = 2.0 * math.pi
+CONTACT_LOSS_X = -1.5  # 1 + 2x/3 = 0
+CONTACT_PHASES = 32  # phases per recorded period at which contact loss is looked for (an indicator: a loss
+# shorter than T / 32 can be missed; the Lyapunov integration locates every crossing exactly)
 
 
 def scene_at(base: Scene, name: str, value: float) -> Scene:
@@ -85,7 +88,7 @@ class Point:
     x: np.ndarray
     v: np.ndarray
     transient: int
-    contact_loss: bool = False  # some sample or the continued run had 1 + 2x/3 <= 0 at a sample
+    contact_loss: bool = False  # x <= -3/2 at one of CONTACT_PHASES phases of a recorded period
     pull_in: bool = False
     message: str = ""
     cost_s: float = 0.0
@@ -112,15 +115,17 @@ def sweep(library, base: Scene, name: str, values, samples: int = DEFAULT_SAMPLE
         point = Point(float(value), x, v, n_tr)
         plant = CompiledPlant(scene.with_values(x_start=state[0], v_start=state[1]), SETTINGS, library)
         try:
-            for k in range(1, n_tr + samples + 1):
-                xk, vk, _ = plant.advance(k * period)
-                if k > n_tr:
-                    x[k - n_tr - 1], v[k - n_tr - 1] = xk, vk
-                point.contact_loss |= not plant.in_contact
+            for k in range(1, n_tr + 1):
+                plant.advance(k * period)
+            for k in range(samples):  # the recorded periods, also looked at CONTACT_PHASES times a period
+                t0 = (n_tr + k) * period
+                for j in range(1, CONTACT_PHASES):
+                    point.contact_loss |= plant.advance(t0 + j * period / CONTACT_PHASES)[0] <= CONTACT_LOSS_X
+                x[k], v[k], _ = plant.advance(t0 + period)
         except (TerminalEvent, IntegrationError) as error:
             point.pull_in, point.message = True, str(error)
             x[:], v[:] = np.nan, np.nan
-        point.contact_loss |= bool(np.any(1.0 + 2.0 * x / 3.0 <= 0.0))
+        point.contact_loss |= bool(np.any(x <= CONTACT_LOSS_X))
         state = point.end or (base.x_start, base.v_start)
         point.cost_s = time.perf_counter() - started
         points.append(point)
