@@ -25,7 +25,7 @@ def options(p):
     p.add_argument("--workers", type=count, default=1,
                    help="1: in this process; K >= 2: a local Dask cluster of K worker processes")
     p.add_argument("--scheduler", default=None,
-                   help="address of an existing Dask scheduler (tcp://HOST:PORT) instead of --workers")
+                   help="address of an existing Dask scheduler (tcp://HOST:PORT) instead of --workers (default: none)")
     p.add_argument("--out", required=True,
                    help="output folder (diagram.parquet, lyapunov.parquet, convergence.parquet, summary.json, "
                         "diagram.png, lyapunov_convergence.png)")
