@@ -2,6 +2,12 @@
 independent evidence: the damped linear oscillator's closed form, Floquet multipliers of shooting's monodromy
 matrix, the phase-space contraction trace J = -mu, shooting's periodic orbits, the slow flow's folds."""
 import math
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
 
 import numpy as np
 import pyarrow.parquet as pq
@@ -217,3 +223,44 @@ def test_dask_and_serial_give_the_same_bits():
             assert a.value == b.value and np.array_equal(a.x, b.x) and np.array_equal(a.v, b.v)
         for a, b in zip(serial.exponents[direction], parallel.exponents[direction]):
             assert (a.value, a.largest, a.second, a.running) == (b.value, b.largest, b.second, b.running)
+
+
+def _interrupt(tmp_path, workers: str):
+    """Run the command in its own session, send SIGINT to the group once the progress bar shows (as Ctrl-C in a
+    terminal: the command and its worker processes), return (exit code, stderr)."""
+    out = tmp_path / "out"
+    argv = [sys.executable, "-c", "import sys; from vibrofmu.cli import main; sys.exit(main())", "diagram", "--param",
+            "omega", "--from", "1.8", "--to", "2.2", "--points", "40", "--set", "mu=0.1", "--set", "Delta=2.5",
+            "--set", "R=3", "--set", "beta=0", "--set", "gamma=0", "--workers", workers, "--out", str(out)]
+    process = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+                               start_new_session=True)
+    chunks = []
+    reader = threading.Thread(target=lambda: chunks.extend(iter(lambda: process.stderr.read(1), "")))
+    reader.start()
+    try:
+        deadline = time.monotonic() + 120
+        while "diagram:" not in "".join(chunks):  # the progress bar: the cluster is up, the points run
+            assert process.poll() is None and time.monotonic() < deadline, "".join(chunks)
+            time.sleep(0.05)
+        time.sleep(2.0)  # into the points (the whole run takes minutes)
+        assert process.poll() is None
+        os.killpg(process.pid, signal.SIGINT)
+        process.wait(timeout=120)
+    finally:
+        if process.poll() is None:
+            process.kill()
+        reader.join()
+    err = "".join(chunks)
+    return process.returncode, err
+
+
+@pytest.mark.long  # a subprocess
+def test_ctrl_c_stops_a_serial_diagram(tmp_path):
+    code, err = _interrupt(tmp_path, "1")
+    assert code == 130 and "error: interrupted" in err and "Traceback" not in err, err
+
+
+@pytest.mark.slow  # a subprocess with a Dask cluster
+def test_ctrl_c_stops_a_diagram_on_dask(tmp_path):
+    code, err = _interrupt(tmp_path, "2")
+    assert code == 130 and "error: interrupted" in err and "Traceback" not in err, err

@@ -91,7 +91,8 @@ class Point:
     contact_loss: bool = False  # x <= -3/2 at one of CONTACT_PHASES phases of a recorded period
     pull_in: bool = False
     message: str = ""
-    cost_s: float = 0.0
+    cost_s: float = 0.0  # wall seconds
+    cpu_s: float = 0.0  # CPU seconds of the thread that computed it
 
     @property
     def end(self) -> tuple[float, float] | None:
@@ -107,7 +108,7 @@ def sweep(library, base: Scene, name: str, values, samples: int = DEFAULT_SAMPLE
     state = start or (base.x_start, base.v_start)
     points = []
     for i, value in enumerate(values):
-        started = time.perf_counter()
+        started, cpu = time.perf_counter(), time.thread_time()
         scene = scene_at(base, name, float(value))
         n_tr = transient_periods(scene) if transient is None else transient
         period = TWO_PI / scene.omega
@@ -127,7 +128,7 @@ def sweep(library, base: Scene, name: str, values, samples: int = DEFAULT_SAMPLE
             x[:], v[:] = np.nan, np.nan
         point.contact_loss |= bool(np.any(x <= CONTACT_LOSS_X))
         state = point.end or (base.x_start, base.v_start)
-        point.cost_s = time.perf_counter() - started
+        point.cost_s, point.cpu_s = time.perf_counter() - started, time.thread_time() - cpu
         points.append(point)
         if progress is not None:
             progress(i + 1)
@@ -263,11 +264,12 @@ class PointExponent:
     running: list = field(default_factory=list)
     message: str = ""
     cost_s: float = 0.0
+    cpu_s: float = 0.0
 
 
 def point_exponent(base: Scene, name: str, value: float, direction: str, end, periods: int) -> PointExponent:
     """The exponents of the attractor the diagram point (value, direction) ended on (end: its last sample)."""
-    started = time.perf_counter()
+    started, cpu = time.perf_counter(), time.thread_time()
     out = PointExponent(value, direction)
     if end is not None:
         try:
@@ -276,7 +278,7 @@ def point_exponent(base: Scene, name: str, value: float, direction: str, end, pe
             out.running = result.running.tolist()
         except (PullIn, IntegrationError) as error:
             out.message = str(error)
-    out.cost_s = time.perf_counter() - started
+    out.cost_s, out.cpu_s = time.perf_counter() - started, time.thread_time() - cpu
     return out
 
 
@@ -334,6 +336,12 @@ class Diagram:
     exponents: dict  # direction -> list[PointExponent] in the sweep's order (empty without exponents)
     wall_s: float = 0.0
     workers: int = 1
+
+    @property
+    def cpu_s(self) -> float:
+        """CPU seconds of all points' sweeps and exponents (the work, whoever did it)."""
+        return (sum(p.cpu_s for points in self.sweeps.values() for p in points)
+                + sum(e.cpu_s for exps in self.exponents.values() for e in exps))
 
 
 def batches(items: list, workers: int, per_worker: int = 4) -> list[list]:

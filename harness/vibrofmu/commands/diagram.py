@@ -100,7 +100,7 @@ def run(args) -> int:
     pulled = sum(p.pull_in for points in result.sweeps.values() for p in points)
     summary = {"parameter": args.param, "from": lo, "to": hi, "points": args.points, "samples": args.samples,
                "transient": args.transient or "auto", "lyapunov_periods": args.lyapunov_periods,
-               "scene": base.as_dict(), "workers": result.workers, "wall_s": result.wall_s,
+               "scene": base.as_dict(), "workers": result.workers, "wall_s": result.wall_s, "cpu_s": result.cpu_s,
                "pull_in_points": pulled}
     if args.lyapunov_periods and np.isfinite(largest).any():
         i = int(np.nanargmax(largest))
@@ -111,7 +111,8 @@ def run(args) -> int:
                                                             + np.array([dg.scene_at(base, args.param, v).mu
                                                                         for v in params])))))
     export.write_json(out / "summary.json", summary)
-    line = f"{args.points} points x 2 sweeps in {result.wall_s:.1f} s on {result.workers} worker(s)"
+    line = (f"{args.points} points x 2 sweeps in {result.wall_s:.1f} s on {result.workers} worker(s) "
+            f"({result.cpu_s:.1f} s of CPU in the points)")
     if "max_exponent" in summary:
         line += (f"; largest exponent from {summary['min_exponent']:.3g} to {summary['max_exponent']:.3g} "
                  f"({args.param} = {summary['at']:.6g}, {summary['direction']}), positive at "
