@@ -242,7 +242,7 @@ def _interrupt(tmp_path, workers: str):
         while "diagram:" not in "".join(chunks):  # the progress bar: the cluster is up, the points run
             assert process.poll() is None and time.monotonic() < deadline, "".join(chunks)
             time.sleep(0.05)
-        time.sleep(2.0)  # into the points (the whole run takes minutes)
+        time.sleep(0.5)  # into the points (the whole run takes minutes)
         assert process.poll() is None
         os.killpg(process.pid, signal.SIGINT)
         process.wait(timeout=120)
