@@ -537,3 +537,27 @@ def plot_convergence(d: Diagram, path, count: int = 6) -> None:
     fig.tight_layout()
     fig.savefig(path, dpi=140)
     plt.close(fig)
+
+
+# ----- the integrators' costs, side by side (docs/bifurcation-diagram.md, Speed) ------------------------
+
+def integrator_costs(scene: Scene, periods: int = 100) -> dict:
+    """ms per forcing period of the core (state only, rtol 1e-8, as the sweeps run it) and of scipy's DOP853 on
+    state + Phi (this module's Lyapunov integration, rtol LYAPUNOV_RTOL), from the same start, in this process."""
+    from vibromodel.compiled import CompiledPlant
+
+    period = TWO_PI / scene.omega
+    plant = CompiledPlant(scene, SETTINGS, _library())
+    started = time.perf_counter()
+    for k in range(1, periods + 1):
+        plant.advance(k * period)
+    core = (time.perf_counter() - started) / periods
+    started = time.perf_counter()
+    lyapunov(scene, (scene.x_start, scene.v_start), periods)
+    scipy = (time.perf_counter() - started) / periods
+    return {"core_ms": 1e3 * core, "scipy_variational_ms": 1e3 * scipy, "ratio": scipy / core}
+
+
+if __name__ == "__main__":  # python3 -m vibrofmu.analyses.diagram: the costs on a large orbit with contact loss
+    costs = integrator_costs(Scene(mu=0.1, Delta=2.5, omega=2.0, beta=0.0, gamma=0.0, R=3.0, x_start=0.0))
+    print(", ".join(f"{k} {v:.4g}" for k, v in costs.items()))
