@@ -389,6 +389,7 @@ def compute(base: Scene, name: str, values, samples: int = DEFAULT_SAMPLES, tran
                for direction, order in orders.items()}
     pending = as_completed(list(futures))
     parts: dict = {}  # future -> (direction, batch index)
+    done: dict = {"up": {}, "down": {}}  # direction -> batch index -> exponents
     for future in pending:
         if stop and stop():
             client.cancel(list(futures) + list(parts))
@@ -405,11 +406,10 @@ def compute(base: Scene, name: str, values, samples: int = DEFAULT_SAMPLES, tran
                     pending.add(more)
         else:
             direction, k = parts[future]
-            exponents.setdefault(("batch", direction), {})[k] = result
+            done[direction][k] = result
             report("lyapunov", len(result))
-    for direction in orders:
-        done = exponents.pop(("batch", direction), {})
-        exponents[direction] = [e for k in sorted(done) for e in done[k]]
+    for direction, by_batch in done.items():
+        exponents[direction] = [e for k in sorted(by_batch) for e in by_batch[k]]
     return Diagram(name, values, sweeps, exponents, time.perf_counter() - started, workers)
 
 
