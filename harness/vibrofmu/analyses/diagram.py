@@ -10,9 +10,9 @@ tau = 0 from the carried state, so the forcing phase of every sample is 0 (with 
 phase restarts too: its frequencies Omega, 2 Omega are not commensurate with omega and a stroboscopic section
 at T is then not a Poincare section; set beta = gamma = 0 for a strictly periodic forcing, as shooting does).
 
-Transient. Away from folds a perturbation of the steady state decays at least like the linear part of Eq. 3,
-exp(-mu tau / 2) (both Floquet multipliers of a stable orbit have product exp(-mu T), and on the
-small-amplitude branch both moduli are exp(-mu T / 2)). To shrink an O(1) offset to TRANSIENT_EPS takes
+Transient. A perturbation of the steady state decays like the linear part of Eq. 3, exp(-mu tau / 2), where
+the Floquet multipliers are a complex pair (their product is exp(-mu T), so both moduli are exp(-mu T / 2): the
+small-amplitude branch); where they are real one is larger. To shrink an O(1) offset to TRANSIENT_EPS takes
 tau = 2 ln(1 / TRANSIENT_EPS) / mu, i.e. ceil(2 ln(1 / eps) / (mu T)) periods (transient_periods); the carried
 state is usually much closer than O(1), and near a fold, where a multiplier tends to 1, the decay is slower and
 the samples show the slow drift (which is how a fold looks in a diagram). The count is bounded to
