@@ -215,6 +215,8 @@ def test_dask_and_serial_give_the_same_bits():
     client, cluster = connect(None, 2)
     try:
         parallel = dg.compute(CHAOTIC, "omega", values, samples=8, transient=100, periods=5, client=client)
+        with pytest.raises(dg.TaskFailed, match="ParameterError.*speed"):  # raised on a worker: one message
+            dg.compute(CHAOTIC, "speed", values, samples=8, transient=100, periods=5, client=client)
     finally:
         client.close()
         cluster.close()

@@ -328,6 +328,10 @@ def exponent_task(base: dict, name: str, items: list, periods: int) -> list[Poin
     return [point_exponent(scene, name, value, direction, end, periods) for value, direction, end in items]
 
 
+class TaskFailed(RuntimeError):
+    """A Dask task of the diagram raised (its message says which error)."""
+
+
 @dataclass
 class Diagram:
     name: str
@@ -394,7 +398,11 @@ def compute(base: Scene, name: str, values, samples: int = DEFAULT_SAMPLES, tran
         if stop and stop():
             client.cancel(list(futures) + list(parts))
             raise KeyboardInterrupt
-        result = future.result()
+        try:
+            result = future.result()
+        except Exception as error:  # a task that raised on its worker (or a worker lost too often)
+            client.cancel(list(futures) + list(parts))
+            raise TaskFailed(f"a diagram task failed on a Dask worker: {type(error).__name__}: {error}") from None
         if future in futures:
             direction = futures[future]
             sweeps[direction] = result

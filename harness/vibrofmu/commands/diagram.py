@@ -70,9 +70,15 @@ def run(args) -> int:
         else:
             from vibrofmu.study.scheduling import STOP, stop_on_sigint
 
-            with stop_on_sigint():
-                result = dg.compute(base, args.param, values, args.samples, args.transient, args.lyapunov_periods,
-                                    client=client, progress=lambda kind, n: bar.update(n), stop=STOP.is_set)
+            try:
+                with stop_on_sigint():
+                    result = dg.compute(base, args.param, values, args.samples, args.transient,
+                                        args.lyapunov_periods, client=client, progress=lambda kind, n: bar.update(n),
+                                        stop=STOP.is_set)
+            except dg.TaskFailed as error:
+                bar.close()
+                print(f"error: {error}", file=sys.stderr)
+                return 1
     finally:
         bar.close()
         if client is not None:
