@@ -1,5 +1,5 @@
 """The `vibrofmu` command: build, simulate, closed-loop, oafm, stability, bench, demo, doctor, ssp, container,
-report, study, continuation.
+report, study, continuation, diagram.
 
 This module parses the command line and dispatches; each sub-command is one module of vibrofmu.commands that
 exports COMMAND (name, help, options, run). `vibrofmu --help` stays fast: the command modules import only the
@@ -15,7 +15,7 @@ import sys
 from vibrofmu.commands.common import Parser, run
 
 COMMANDS = ("build", "simulate", "closed_loop", "oafm", "stability", "bench", "demo", "doctor", "ssp", "container",
-            "report", "study", "continuation")  # modules of vibrofmu.commands, in the order `vibrofmu --help` lists them
+            "report", "study", "continuation", "diagram")  # modules of vibrofmu.commands, in `vibrofmu --help`'s order
 
 
 def commands():
