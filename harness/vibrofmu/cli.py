@@ -12,6 +12,7 @@ import argparse
 import importlib
 import sys
 
+from vibrofmu import interrupts
 from vibrofmu.commands.common import Parser, run
 
 COMMANDS = ("build", "simulate", "closed_loop", "oafm", "stability", "bench", "demo", "doctor", "ssp", "container",
@@ -44,7 +45,8 @@ def main(argv=None) -> int:
     except SystemExit as stop:  # --help (0) or a bad command line (2, one line printed by Parser.error)
         return stop.code
     try:
-        return run(args.func, args)
+        with interrupts.install():  # counted: a host answers an FMU call failed by Ctrl-C with KeyboardInterrupt
+            return run(args.func, args)
     except KeyboardInterrupt:
         print("error: interrupted", file=sys.stderr)
         return 130

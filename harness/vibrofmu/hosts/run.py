@@ -20,6 +20,8 @@ from fmpy.fmi2 import (FMU2Slave, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFr
                        fmi2CallbackFunctions, fmi2CallbackLoggerTYPE)
 from fmpy.logging import addLoggerProxy
 
+from vibrofmu import interrupts
+
 STATUS_NAMES = ["ok", "warning", "discard", "error", "fatal", "pending"]
 FMI2_FATAL = STATUS_NAMES.index("fatal")
 
@@ -180,22 +182,12 @@ def run_fmu(fmu_path: Path | str, start_values: dict, stop_time: float, output_i
     instantiate_time = time.perf_counter() - t0
 
     t_loop = time.perf_counter()
-    if stop_reason is None:
-        times.append(0.0)
-        rows.append(read_outputs())
-        for i in range(n_steps):
-            t, h = i * output_interval, output_interval
-            if t + h > stop_time + 1e-9 * max(1.0, abs(stop_time)):  # FMI 2.0: no step beyond the stop time
-                h = stop_time - t  # (a stop time that is not a multiple of the interval: the last step is shorter)
-            try:
-                fmu.doStep(currentCommunicationPoint=t, communicationStepSize=h)
-            except FMICallException as error:
-                stop_reason, status = _reason(error, instance.log), error.status
-                break
-            times.append(t + h)  # the FMU's own clock: t + h
-            rows.append(read_outputs())
-            if progress is not None:
-                progress(i + 1, n_steps)
+    try:
+        stop_reason, status = _steps(instance, times, rows, n_steps, output_interval, stop_time, progress,
+                                     stop_reason, status)
+    except KeyboardInterrupt:
+        instance.close()  # (its extracted folder removed) and the interrupt goes on
+        raise
     wall_time = time.perf_counter() - t_loop
     after_failure = dict(zip(columns, read_outputs())) if status is not None and status != FMI2_FATAL else None
     instance.close()
@@ -208,7 +200,33 @@ def run_fmu(fmu_path: Path | str, start_values: dict, stop_time: float, output_i
                      after_failure=after_failure)
 
 
+def _steps(instance, times, rows, n_steps, output_interval, stop_time, progress, stop_reason, status):
+    """The doStep loop of run_fmu (appends to times and rows); returns (stop_reason, status)."""
+    fmu, read_outputs = instance.fmu, instance.read_outputs
+    if stop_reason is None:
+        times.append(0.0)
+        rows.append(read_outputs())
+        for i in range(n_steps):
+            t, h = i * output_interval, output_interval
+            if t + h > stop_time + 1e-9 * max(1.0, abs(stop_time)):  # FMI 2.0: no step beyond the stop time
+                h = stop_time - t  # (a stop time that is not a multiple of the interval: the last step is shorter)
+            try:
+                fmu.doStep(currentCommunicationPoint=t, communicationStepSize=h)
+                row = read_outputs()
+            except FMICallException as error:
+                stop_reason, status = _reason(error, instance.log), error.status
+                break
+            times.append(t + h)  # the FMU's own clock: t + h
+            rows.append(row)
+            if progress is not None:
+                progress(i + 1, n_steps)
+    return stop_reason, status
+
+
 def _reason(error: FMICallException, log: FmuLog, instance: str | None = None) -> str:
+    """Why an FMI call failed; a call failed by the user's Ctrl-C raises KeyboardInterrupt instead (every host
+    answers a failed call through here)."""
+    interrupts.check()
     messages = log.errors(instance)
     detail = messages[-1] if messages else "no log message"
     return f"{str(error).rstrip('.')}: {detail}"

@@ -9,6 +9,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from vibrofmu.output import export  # noqa: E402
 from vibrofmu.study.spec import Spec  # noqa: E402
 
 
@@ -47,8 +48,7 @@ def monte_carlo(d: dict, result: dict, path: Path) -> Path:
     axes[1].set_ylim(0, max(0.05, max(hi for _, hi in (summary[k]["ci95_wilson"] for k in ("contact_loss", "pull_in"))) * 1.2))
     axes[1].set_title(f"{len(d['case'])} samples")
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    export.save_figure(fig, path, dpi=110)  # atomic: never a half-written png
     return path
 
 
@@ -79,8 +79,7 @@ def basins(spec: Spec, d: dict, result: dict, path: Path) -> Path:
                  f"{agreement['fraction']:.3f} beyond {agreement['margin']:g} of the boundary", fontsize=9)
     ax.legend(fontsize=7, loc="upper right", framealpha=0.85)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    export.save_figure(fig, path, dpi=110)  # atomic: never a half-written png
     return path
 
 
@@ -135,6 +134,5 @@ def response_map(result: dict, path: Path) -> Path:
     agreement = result["summary"]["agreement"]
     fig.suptitle(f"response map: bistability agreement {agreement['fraction']:.3f} "
                  f"({agreement['agreeing']}/{agreement['compared']} points off the folds' margin)")
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    export.save_figure(fig, path, dpi=110)  # atomic: never a half-written png
     return path
