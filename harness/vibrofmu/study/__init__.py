@@ -49,7 +49,8 @@ def run(args) -> int:
     import hashlib
 
     from vibrofmu.output import export
-    from vibrofmu.fmus.build import PLANT_FMU, build_plant
+    from vibrofmu import paths
+    from vibrofmu.fmus.build import build_plant
     from vibrofmu.study import analysis, plots
     from vibrofmu.study.cases import make_cases
     from vibrofmu.study.scheduling import FmuFile, Progress, connect, execute, stop_on_sigint
@@ -69,7 +70,7 @@ def run(args) -> int:
 
     fmu_digest = plugin = None
     if spec.engine == "fmu":
-        fmu = Path(args.fmu) if args.fmu else PLANT_FMU
+        fmu = Path(args.fmu) if args.fmu else paths.build_dir() / paths.PLANT_NAME  # (the command checked --fmu)
         if not fmu.exists():
             if args.fmu:
                 raise SpecError(f"--fmu {fmu}: no such file")
