@@ -49,8 +49,9 @@ def _interruptible(name, method):
             return method(self, *args)
         except KeyboardInterrupt:
             self._interrupted(name)
-            if name.startswith("get_"):
-                return [placeholder] * len(args[0])
+            if name.startswith("get_"):  # the status flag itself read as it is (the shim reads it after a call)
+                return [self.fmi_status if getattr(self.vars.get(vr), "name", None) == "fmi_status" else placeholder
+                        for vr in args[0]]
             return placeholder
     call._interruptible = True
     return call

@@ -41,10 +41,10 @@ def main(argv=None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     command = next((arg for arg in argv if not arg.startswith("-")), None)
     try:
-        args = make_parser({command}).parse_args(argv)
-    except SystemExit as stop:  # --help (0) or a bad command line (2, one line printed by Parser.error)
-        return stop.code
-    try:
+        try:
+            args = make_parser({command}).parse_args(argv)  # (imports the command's modules: Ctrl-C may land here)
+        except SystemExit as stop:  # --help (0) or a bad command line (2, one line printed by Parser.error)
+            return stop.code
         with interrupts.install():  # counted: a host answers an FMU call failed by Ctrl-C with KeyboardInterrupt
             return run(args.func, args)
     except KeyboardInterrupt:

@@ -27,8 +27,8 @@ def _handler(signum, frame):
 @contextlib.contextmanager
 def install():
     """Count SIGINTs (each still raises KeyboardInterrupt, as Python's default handler does) until the end."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
+    if threading.current_thread() is not threading.main_thread() or signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+        yield  # (SIGINT ignored, as under nohup or in a background job: left so)
         return
     global _received
     _received = 0

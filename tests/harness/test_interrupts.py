@@ -92,7 +92,8 @@ def test_ctrl_c_during_pure_python_do_steps_stops_the_host_within_a_second(plant
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(HARNESS), os.environ.get("PYTHONPATH", "")]),
            "TMPDIR": str(tmp_path)}
     process = subprocess.Popen([sys.executable, "-c", RUN, str(plant_fmu)], env=env, stdout=subprocess.PIPE,
-                               stderr=subprocess.PIPE, text=True)
+                               stderr=subprocess.PIPE, text=True,  # SIGINT's default (not an inherited SIG_IGN)
+                               preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     assert process.stdout.readline().strip() == "started"
     time.sleep(1.5)  # past instantiation (about 0.5 s): inside the doStep loop
     sent = time.perf_counter()
