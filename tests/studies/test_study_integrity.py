@@ -139,3 +139,29 @@ def test_the_rows_digest_sees_every_value():
     for changed in ({"case": 2, "r": 0.1, "failed": None}, {"case": 1, "r": 0.1 + 2 ** -56, "failed": None},
                     {"case": 1, "r": 0.1, "failed": "x"}):
         assert rows_digest(pa.Table.from_pylist([changed])) != rows_digest(table)
+
+
+@pytest.mark.parametrize("case", ["out is a file", "fmu is not an FMU", "fmu is missing",
+                                  pytest.param("fmu is the controller's", marks=pytest.mark.fmu)])
+def test_bad_out_or_fmu_is_one_line_and_exit_2_before_the_cluster(case, tmp_path, capsys, request, monkeypatch):
+    """Issue 26: these started the cluster, failed every case and suggested --resume (or gave a traceback). The
+    cluster is never reached: connect would fail the test."""
+    from vibrofmu.cli import main
+    from vibrofmu.study import scheduling
+
+    monkeypatch.setattr(scheduling, "connect", lambda *a: pytest.fail("the cluster was started"))
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "a_file").write_text("not a folder, not an FMU")
+    out, fmu, message = str(tmp_path / "out"), [], None
+    if case == "out is a file":
+        out, message = str(tmp_path / "a_file"), "a file of that name exists"
+    elif case == "fmu is not an FMU":
+        fmu, message = ["--fmu", str(tmp_path / "a_file")], "is not an FMU"
+    elif case == "fmu is missing":
+        fmu, message = ["--fmu", str(tmp_path / "missing.fmu")], "no FMU at"
+    else:
+        fmu, message = ["--fmu", str(request.getfixturevalue("controller_fmu"))], "needs HertzEAOscillator"
+    assert main(["study", "monte-carlo", "--quick", "--out", out, *fmu]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error: ") and message in err[0], err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a_file"]  # nothing written, no FMU in the working folder
