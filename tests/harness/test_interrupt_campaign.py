@@ -8,6 +8,9 @@ README.md and docs/ (--root), so the real documents are never at risk.
 
     python3 tests/harness/test_interrupt_campaign.py [TRIALS_PER_COMMAND]   # prints one line per trial
     pytest -m slow tests/harness/test_interrupt_campaign.py                 # 4 trials per command (20)
+
+Plus 20 SIGINTs during pure-Python doSteps of the plant FMU (kernel = 1: the slave's Python code runs every
+doStep), which say which path took each: the slave's catch, pythonfmu's fatal, or the host's own code.
 """
 from __future__ import annotations
 
@@ -135,6 +138,51 @@ def test_sigint_at_random_moments(fmu_dir_built):
     assert [r for r in results if not ok(r)] == []
 
 
+INSIDE = """
+import json, sys
+from vibrofmu import interrupts
+from vibrofmu.hosts import run as host
+
+logs = []
+close = host.FmuInstance.close
+host.FmuInstance.close = lambda self: (logs.extend(self.log.messages[-3:]), close(self))
+with interrupts.install():
+    print("started", flush=True)
+    try:
+        result = host.run_fmu(sys.argv[1], {"kernel": 1}, 1e5, 0.1)  # pure-Python doSteps: minutes
+        print(json.dumps({"interrupted": False, "reason": result.stop_reason}))
+    except KeyboardInterrupt:
+        print(json.dumps({"interrupted": True, "fmu_log": logs}))
+"""
+
+
+def inside_fmu_trial(fmu: Path, delay: float) -> dict:
+    """SIGINT during pure-Python doSteps of the plant FMU (kernel = 1) under the harness's host: how it ended and
+    which path took it (the slave's catch logs "interrupted (SIGINT", pythonfmu's fatal "Fatal py exception",
+    neither: the interrupt landed in the host's own code)."""
+    process = subprocess.Popen([sys.executable, "-c", INSIDE, str(fmu)], env=ENV, stdout=subprocess.PIPE,
+                               stderr=subprocess.PIPE, text=True, preexec_fn=default_sigint)
+    assert process.stdout.readline().strip() == "started"
+    time.sleep(delay)
+    sent = time.perf_counter()
+    process.send_signal(signal.SIGINT)
+    out, err = process.communicate(timeout=120)
+    result = json.loads(out.strip().splitlines()[-1]) if out.strip() else {"interrupted": False, "stderr": err[-300:]}
+    log = " ".join(result.get("fmu_log", []))
+    result.update(exit_s=round(time.perf_counter() - sent, 3), code=process.returncode,
+                  path="slave" if "interrupted (SIGINT" in log else "fatal" if "Fatal py exception" in log else "host")
+    return result
+
+
+@pytest.mark.slow
+@pytest.mark.fmu
+def test_sigint_inside_pure_python_fmu_calls(plant_fmu):
+    rng = random.Random(26)
+    results = [inside_fmu_trial(plant_fmu, rng.uniform(0.8, 3.0)) for _ in range(20)]
+    assert all(r["interrupted"] and r["exit_s"] <= 1.0 for r in results), results
+    assert any(r["path"] == "slave" for r in results)  # the slave's catch was exercised, not only the host's
+
+
 @pytest.fixture(scope="module")
 def fmu_dir_built(plant_fmu, controller_fmu, closed_loop_fmu):
     return plant_fmu.parent
@@ -142,6 +190,13 @@ def fmu_dir_built(plant_fmu, controller_fmu, closed_loop_fmu):
 
 if __name__ == "__main__":
     fmus = ROOT / "build"
+    rng = random.Random()
+    inside = [inside_fmu_trial(fmus / "HertzEAOscillator.fmu", rng.uniform(0.8, 3.0)) for _ in range(20)]
+    for result in inside:
+        print(json.dumps({k: result[k] for k in ("interrupted", "path", "exit_s")}))
+    print(f"inside FMU calls: {sum(r['interrupted'] for r in inside)}/20 interrupted, paths "
+          f"{ {p: sum(r['path'] == p for r in inside) for p in ('slave', 'fatal', 'host')} }, "
+          f"max exit {max(r['exit_s'] for r in inside):.2f} s")
     results = campaign(int(sys.argv[1]) if len(sys.argv) > 1 else 4, seed=int(time.time()), fmus=fmus)
     failed = [r for r in results if not ok(r)]
     interrupted = [r for r in results if not r["finished_before"]]
