@@ -183,9 +183,10 @@ def batch_size(c_s: float, c_w: float, remaining: int, workers: int) -> int:
     return max(1, min(needed_batch(c_s, c_w, workers), balance))
 
 
-def checkpoint_batch(c_w: float) -> int:
-    """The largest batch that holds about CHECKPOINT_S of work at c_w seconds a case (at least 1)."""
-    return max(1, int(CHECKPOINT_S / c_w)) if c_w > 0 else 1
+def checkpoint_batch(c_w: float) -> int | None:
+    """The largest batch that holds about CHECKPOINT_S of work at c_w seconds a case (at least 1; None: no cost
+    measured, no cap)."""
+    return max(1, int(CHECKPOINT_S / c_w)) if c_w > 0 else None
 
 
 def guided_batches(n: int, smallest: int, workers: int, largest: int | None = None) -> list[int]:
