@@ -16,7 +16,16 @@
  * After every state-changing call (setup experiment, enter/exit
  * initialization, doStep, set*, reset, setFMUstate) that the inner library
  * answered with OK/Warning/Discard, the shim reads that flag; if it is 3 the
- * call returns fmi2Error instead.  (fmi2DeSerializeFMUstate is not mapped:
+ * call returns fmi2Error instead.
+ *
+ * Interrupts.  A SIGINT (Ctrl-C) that reaches a Python host while the slave's
+ * Python code runs becomes a KeyboardInterrupt there; pythonfmu would turn it
+ * into fmi2Fatal and the host would go on.  The slave catches it instead
+ * (slave_support._interruptible), halts, and sets the flag to 130; the call
+ * returns fmi2Error and the shim re-raises SIGINT once, after the inner call
+ * has returned (no Python code of the slave runs after it), so the host's own
+ * handler sees the user's interrupt: a Python host gets its KeyboardInterrupt
+ * as soon as the call returns.  (fmi2DeSerializeFMUstate is not mapped:
  * it does not involve the slave instance, see there.)
  *
  * Per-instance state:
@@ -113,6 +122,7 @@
 #include <dlfcn.h>
 #include <math.h>
 #include <pthread.h>
+#include <signal.h>
 #include <stddef.h>
 #include <stdint.h>
 #include <stdio.h>
@@ -125,6 +135,7 @@
 #endif
 
 #define FLAG_ERROR 3
+#define FLAG_INTERRUPTED 130 /* slave_support.STATUS_INTERRUPTED */
 
 #include "fmi2_layer.h"    /* the FMI 2.0 headers, logging, error mode, state table (fmu_src/fmi/) */
 #include "fmi2_host_api.h" /* the table of fmi2 functions of the inner library (fmu_src/fmi/) */
@@ -212,6 +223,7 @@ typedef struct {
     int stop_defined;               /* fmi2SetupExperiment's stop time (the fast path steps only before it) */
     double stop_time;
     unsigned long long fast_steps;  /* doSteps done by the fast path (vibro_fast_path_steps) */
+    int interrupted;                /* the flag read FLAG_INTERRUPTED and SIGINT was re-raised */
 } Shim;
 
 /* The shim whose forwarded call is running on this thread (for vibro_fast_path_attach). */
@@ -345,6 +357,15 @@ static fmi2Status note(Shim *s, fmi2Status st)
     return st;
 }
 
+/* The slave caught a KeyboardInterrupt (its flag reads FLAG_INTERRUPTED): raise SIGINT again, once per interrupt,
+   now that no Python code of the slave runs any more; the host's handler takes it (a Python host: its
+   KeyboardInterrupt on return; the default handler: the process ends as on Ctrl-C). */
+static void redeliver_interrupt(Shim *s, int interrupted)
+{
+    if (interrupted && !s->interrupted) raise(SIGINT);
+    s->interrupted = interrupted;
+}
+
 /* After a state-changing call: map the Python status flag onto the result. */
 static fmi2Status settle(Shim *s, fmi2Status st, int may_clear_error)
 {
@@ -353,7 +374,8 @@ static fmi2Status settle(Shim *s, fmi2Status st, int may_clear_error)
         fmi2Integer flag = 0;
         fmi2Status rs = inner.GetInteger(s->inner, &vr, 1, &flag);
         if (rs > fmi2Warning) st = rs;
-        else if (flag == FLAG_ERROR) st = fmi2Error;
+        else if (flag == FLAG_ERROR || flag == FLAG_INTERRUPTED) st = fmi2Error;
+        redeliver_interrupt(s, rs <= fmi2Warning && flag == FLAG_INTERRUPTED);
     }
     if (st == fmi2Fatal) s->fmi.mode = FMI2_MODE_FATAL;
     else if (st == fmi2Error) s->fmi.mode = FMI2_MODE_ERROR;
@@ -369,8 +391,12 @@ static fmi2Status settle(Shim *s, fmi2Status st, int may_clear_error)
 static fmi2Status checked_getter(Shim *s, fmi2Status st)
 {
     if (st <= fmi2Warning && s->error_logged) {
+        const fmi2ValueReference vr = STATUS_VR;
+        fmi2Integer flag = 0;
         st = fmi2Error;
         if (s->fmi.mode != FMI2_MODE_FATAL) s->fmi.mode = FMI2_MODE_ERROR;
+        if (inner.GetInteger(s->inner, &vr, 1, &flag) <= fmi2Warning) /* interrupted during the getter? */
+            redeliver_interrupt(s, flag == FLAG_INTERRUPTED);
     }
     s->error_logged = 0;
     return st;

@@ -22,6 +22,39 @@ from vibromodel.solvers import RULE_TEXT
 from vibromodel.parameters import NonFiniteOutput, ParameterError, check_finite, check_parameters, scene_names
 
 STATUS_OK, STATUS_ERROR = 0, 3
+# A KeyboardInterrupt (the host's SIGINT, Ctrl-C, delivered while the slave's Python code ran) is never swallowed:
+# the call ends in fmi2Error, the instance halts, and the flag reads STATUS_INTERRUPTED, on which the status shim
+# re-raises SIGINT once the call has returned to the host (fmi2_status_shim.c, settle), so a Python host such as
+# FMPy gets its KeyboardInterrupt. (Only a host with Python's SIGINT handler can interrupt Python code: the shim
+# leaves a C host's signal handling alone.)
+STATUS_INTERRUPTED = 130
+INTERRUPTED = "interrupted (SIGINT, Ctrl-C): the host's interrupt is passed back to it"
+# The pythonfmu callbacks guarded against KeyboardInterrupt, with what each returns when interrupted.
+_INTERRUPTIBLE = {
+    "setup_experiment": None, "enter_initialization_mode": None, "exit_initialization_mode": None,
+    "terminate": None, "do_step": False, "_set_fmu_state": None,
+    **{f"set_{kind}": None for kind in ("real", "integer", "boolean", "string")},
+    **{f"get_{kind}": placeholder for kind, placeholder in (("real", 0.0), ("integer", 0), ("boolean", False),
+                                                            ("string", ""))},
+}
+
+
+def _interruptible(name, method):
+    """`method` (a pythonfmu callback) with a KeyboardInterrupt turned into an interrupted, halted instance."""
+    placeholder = _INTERRUPTIBLE[name]
+
+    @functools.wraps(method)
+    def call(self, *args):
+        try:
+            return method(self, *args)
+        except KeyboardInterrupt:
+            self._interrupted(name)
+            if name.startswith("get_"):  # the status flag itself read as it is (the shim reads it after a call)
+                return [self.fmi_status if getattr(self.vars.get(vr), "name", None) == "fmi_status" else placeholder
+                        for vr in args[0]]
+            return placeholder
+    call._interruptible = True
+    return call
 # FMI 2.0 co-simulation states the slave tracks (the error state is the C layer's -- fmu_src/fmi/fmi2_layer.c, in
 # the status shim and the native FMUs -- and `halted`'s).
 INSTANTIATED, INITIALIZATION_MODE, STEP_MODE, TERMINATED = ("instantiated", "initialization mode", "step mode",
@@ -86,7 +119,7 @@ class StatusSlave(Fmi2Slave):
         self.fmi_status = STATUS_OK
         self.register_variable(Integer("fmi_status", causality=Fmi2Causality.local,
                                        variability=Fmi2Variability.discrete,
-                                       description="0 ok, 3 error (read by the status shim)"))
+                                       description="0 ok, 3 error, 130 interrupted (read by the status shim)"))
         self.phase = INSTANTIATED  # FMI 2.0 state (state machine of the co-simulation interface)
         self.halted = "the FMU has not been initialised"  # why doStep refuses, or None
         self.initialised = False  # exitInitializationMode was called: only inputs may be set
@@ -135,6 +168,11 @@ class StatusSlave(Fmi2Slave):
     def _halt(self, message):
         self.halted = message
         self._error(message)
+
+    def _interrupted(self, call):
+        """A KeyboardInterrupt during `call`: halt (fmi2Error) and flag it for the shim to re-raise SIGINT."""
+        self._halt(f"{call}: {INTERRUPTED}")
+        self.fmi_status = STATUS_INTERRUPTED
 
     # -- the FMI 2.0 state machine (co-simulation): each call only in the states the standard allows --------
     def _allowed(self, call) -> bool:
@@ -216,6 +254,10 @@ class StatusSlave(Fmi2Slave):
                 return self._step_allowed(current_time, step_size) and step(self, current_time, step_size)
             do_step._checked = True
             cls.do_step = do_step
+        for name in _INTERRUPTIBLE:  # outermost: a KeyboardInterrupt anywhere in the call
+            method = getattr(cls, name)
+            if not getattr(method, "_interruptible", False):
+                setattr(cls, name, _interruptible(name, method))
 
     def _parameter_values(self) -> dict:
         """name -> value of every parameter, rtol being the experiment's tolerance when setupExperiment gave one."""
@@ -339,7 +381,7 @@ class StatusSlave(Fmi2Slave):
                 raise ValueError(f"variable {var.name} = {value!r} is not a {type(var).__name__}")
             if type(var) is Real and var.causality == Fmi2Causality.output and not math.isfinite(value):
                 raise ValueError(f"variable {var.name} = {value!r} is not finite")
-        if variables["fmi_status"] not in (STATUS_OK, STATUS_ERROR):
+        if variables["fmi_status"] not in (STATUS_OK, STATUS_ERROR, STATUS_INTERRUPTED):
             raise ValueError(f"fmi_status = {variables['fmi_status']!r}")
 
     @staticmethod

@@ -12,6 +12,7 @@ import argparse
 import importlib
 import sys
 
+from vibrofmu import interrupts
 from vibrofmu.commands.common import Parser, run
 
 COMMANDS = ("build", "simulate", "closed_loop", "oafm", "stability", "bench", "demo", "doctor", "ssp", "container",
@@ -40,11 +41,12 @@ def main(argv=None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     command = next((arg for arg in argv if not arg.startswith("-")), None)
     try:
-        args = make_parser({command}).parse_args(argv)
-    except SystemExit as stop:  # --help (0) or a bad command line (2, one line printed by Parser.error)
-        return stop.code
-    try:
-        return run(args.func, args)
+        try:
+            args = make_parser({command}).parse_args(argv)  # (imports the command's modules: Ctrl-C may land here)
+        except SystemExit as stop:  # --help (0) or a bad command line (2, one line printed by Parser.error)
+            return stop.code
+        with interrupts.install():  # counted: a host answers an FMU call failed by Ctrl-C with KeyboardInterrupt
+            return run(args.func, args)
     except KeyboardInterrupt:
         print("error: interrupted", file=sys.stderr)
         return 130

@@ -102,3 +102,16 @@ def test_projection_is_bounded_by_workers_and_scheduler():
     q = projected["at_the_batch_size_for_these_workers"]
     assert q["batch_size"] == 2  # 64 workers x 0.002 s / 0.1 s = 1.28 -> 2
     assert q["cases_per_s"] == pytest.approx(64 * 2 / (2 * 0.1 + 0.002))  # now the workers bound it
+
+
+def test_batches_hold_at_most_a_checkpoint_of_work():
+    """Issue 26: a basins study interrupted at 25 s kept 2 of 3,600 cases (its first batches held 450 cases each).
+    Now no batch holds more than CHECKPOINT_S of work at the pilot's cost per case, unless the scheduling
+    overhead needs more (the smallest size b wins); every case is in exactly one batch."""
+    from vibrofmu.study.scheduling import CHECKPOINT_S, checkpoint_batch, guided_batches
+
+    for c_w, smallest in ((0.05, 1), (6.0, 1), (0.001, 1), (0.05, 100)):
+        sizes = guided_batches(3600, smallest, 2, checkpoint_batch(c_w))
+        assert sum(sizes) == 3600
+        assert max(sizes) <= max(smallest, CHECKPOINT_S / c_w)
+    assert checkpoint_batch(0.0) is None and sum(guided_batches(3600, 1, 2, None)) == 3600

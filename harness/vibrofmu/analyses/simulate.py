@@ -45,6 +45,32 @@ def start_values(scene: Scene, settings: Settings) -> dict:
 
 _NOTED: set[str] = set()  # notes already printed in this process
 
+# What a run keeps per output point: time and the plant's 6 outputs (x, v, a, F_contact, F_electrostatic,
+# in_contact), 8 bytes each in memory (hosts.run preallocates them) and at most 25 characters each in result.csv
+# (%.17g: sign, 17 digits, point, e-XXX; the separator).
+POINT_COLUMNS = 7
+MEMORY_BYTES_PER_POINT = 8 * POINT_COLUMNS
+CSV_BYTES_PER_POINT = 25 * POINT_COLUMNS
+MAX_OUTPUT_MB = 500.0  # the default of simulate --max-output-mb
+
+
+def output_size(stop_time: float, output_interval: float) -> tuple[int, float]:
+    """(output points, the larger of their memory and result.csv sizes in MB) of a run."""
+    points = int(round(stop_time / output_interval)) + 1
+    return points, points * max(MEMORY_BYTES_PER_POINT, CSV_BYTES_PER_POINT) / 1e6
+
+
+def check_output_size(stop_time: float, output_interval: float, max_mb: float) -> None:
+    """ParameterError naming the estimate and the option that raises the limit when a run's output (every output
+    point, kept in memory and written to result.csv) would exceed max_mb megabytes."""
+    points, mb = output_size(stop_time, output_interval)
+    if mb > max_mb:
+        raise ParameterError("stop-time", stop_time,
+                             f"with --output-interval {output_interval:g} the run has {points:,} output points, "
+                             f"about {mb:,.0f} MB of results (result.csv; {points * MEMORY_BYTES_PER_POINT / 1e6:,.0f} "
+                             f"MB in memory), over --max-output-mb {max_mb:g}: raise --max-output-mb, lengthen "
+                             "--output-interval or shorten --stop-time")
+
 
 def check_inputs(scene: Scene, settings: Settings, stop_time: float, output_interval: float) -> list[str]:
     """Raise ParameterError for bad input (before anything runs); return warnings (the FMU logs the settings'

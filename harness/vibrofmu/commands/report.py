@@ -1,4 +1,5 @@
 """`vibrofmu report`: the numbers in README.md and docs/*.md regenerated (report.py holds the blocks)."""
+import contextlib
 import sys
 from pathlib import Path
 
@@ -105,14 +106,17 @@ def run(args) -> int:
         checked = sorted({name for blocks in found.values() for name in blocks if name in bodies})
         print(f"report --check: blocks {', '.join(checked) or 'none'} match a fresh run")
         return 0
-    updated = 0
-    for doc, text in texts.items():
-        new = replace_blocks(text, bodies)
-        if new != text:
-            doc.write_text(new)
-            updated += 1
-            print(f"updated {doc.relative_to(root)}: " + ", ".join(n for n in found[doc] if n in bodies))
-    if not updated:
+    from vibrofmu.output.export import atomic
+
+    # every document written to a temporary name first, then all renamed: a Ctrl-C leaves each document either
+    # as it was or updated, never half-written (and none is touched before every block was generated)
+    changed = {doc: new for doc, text in texts.items() if (new := replace_blocks(text, bodies)) != text}
+    with contextlib.ExitStack() as stack:
+        for doc, new in changed.items():
+            stack.enter_context(atomic(doc)).write_text(new)
+    for doc in changed:
+        print(f"updated {doc.relative_to(root)}: " + ", ".join(n for n in found[doc] if n in bodies))
+    if not changed:
         print(f"report: blocks {', '.join(bodies) or 'none'} regenerated; the documents already hold them")
     return 0
 

@@ -1,12 +1,12 @@
 """`vibrofmu simulate`: the plant FMU under FMPy, exported, optionally against the reference."""
 from vibrofmu.commands.common import (FMU_HELP, SIMULATE_SET_HELP, Command, UserError, built_plant, non_negative,
-                                      out_folder, plant_fmu, progress_printer, split_set, writable_folder)
+                                      out_folder, plant_fmu, positive, progress_printer, split_set, writable_folder)
 
 
 def options(p):
     from vibromodel import solvers
 
-    from vibrofmu.analyses.simulate import FIDELITIES, SOLVERS
+    from vibrofmu.analyses.simulate import FIDELITIES, MAX_OUTPUT_MB, SOLVERS
 
     p.add_argument("--fidelity", choices=list(FIDELITIES), default="exact", help="plant model")
     p.add_argument("--solver", choices=list(SOLVERS), default="adaptive",
@@ -17,6 +17,8 @@ def options(p):
     p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", help=SIMULATE_SET_HELP)
     p.add_argument("--stop-time", type=float, default=200.0, help="end of the run, tau")
     p.add_argument("--output-interval", type=float, default=0.1, help="communication step (doStep size)")
+    p.add_argument("--max-output-mb", type=positive, default=MAX_OUTPUT_MB,
+                   help="refuse up front a run whose results (result.csv, and memory) would exceed this size")
     p.add_argument("--compare", action="store_true", help="compare with the DOP853 rtol 1e-12 reference")
     p.add_argument("--fmu", default=None, help=FMU_HELP)
     p.add_argument("--out", required=True, help="output folder (result.csv, summary.json, x.png)")
@@ -27,7 +29,7 @@ def run(args) -> int:
     from vibromodel.parameters import ParameterError, Scene
     from vibromodel.plant import Settings
 
-    from vibrofmu.analyses.simulate import FIDELITIES, SOLVERS, check_inputs, simulate
+    from vibrofmu.analyses.simulate import FIDELITIES, SOLVERS, check_inputs, check_output_size, simulate
 
     scene_values, oafm_values = split_set(args.set)
     scene = Scene().with_values(**scene_values)
@@ -46,6 +48,7 @@ def run(args) -> int:
         advice = (error.reason.replace("set oafm_tau_end <= ", "add --set oafm_tau_end=")  # the FMU's names -> options
                   .replace("fidelity 0-3", "another --fidelity").replace("fidelity 4", "--fidelity analytic"))
         raise UserError(f"--stop-time {args.stop_time:g}: {advice}") from None
+    check_output_size(args.stop_time, args.output_interval, args.max_output_mb)  # before anything runs
     out = out_folder(args.out)
     result, summary, _ = simulate(built_plant(fmu), scene, settings, args.stop_time, args.output_interval, out,
                                   compare=args.compare, progress=progress_printer("simulate"))

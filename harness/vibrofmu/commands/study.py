@@ -1,7 +1,7 @@
 """`vibrofmu study KIND`: response map, basins or Monte Carlo on Dask (vibrofmu.study)."""
 import sys
 
-from vibrofmu.commands.common import Command
+from vibrofmu.commands.common import FMU_HELP, Command, plant_fmu, writable_folder
 
 
 def options(p):
@@ -21,13 +21,18 @@ def options(p):
     p.add_argument("--quick", action="store_true", help="a small version of the kind (under a minute on 2 cores)")
     p.add_argument("--engine", choices=["fmu", "core"], default=None,
                    help="fmu: the plant FMU under FMPy (default); core: the compiled kernel directly")
-    p.add_argument("--fmu", default=None, help="plant FMU (default: build/HertzEAOscillator.fmu, built when missing)")
+    p.add_argument("--fmu", default=None, help=FMU_HELP)
 
 
 def run(args) -> int:
     from vibrofmu import study
     from vibrofmu.study.spec import SpecError
 
+    # the checks every command makes, before the cluster starts: the output folder, a given FMU (the plant's);
+    # the default one is build/'s, built there when missing (study.run: only for the fmu engine)
+    writable_folder(args.out)
+    if args.fmu is not None:
+        plant_fmu(args.fmu)
     try:
         return study.run(args)
     except SpecError as error:

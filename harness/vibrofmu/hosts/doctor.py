@@ -78,7 +78,9 @@ def write_env_file(out: Path, python: str | None = None, fmu: Path | None = None
     if missing(record):
         raise RuntimeError(f"{python or sys.executable} lacks {', '.join(missing(record))}: install it there "
                            f"(pip install {' '.join(missing(record))}) or name another Python with --python")
-    Path(out).write_text(env_text(record))
+    from vibrofmu.output import export  # (matplotlib: only when writing)
+
+    export.write_text(Path(out), env_text(record))  # atomic
     return record
 
 

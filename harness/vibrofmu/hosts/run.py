@@ -20,6 +20,8 @@ from fmpy.fmi2 import (FMU2Slave, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFr
                        fmi2CallbackFunctions, fmi2CallbackLoggerTYPE)
 from fmpy.logging import addLoggerProxy
 
+from vibrofmu import interrupts
+
 STATUS_NAMES = ["ok", "warning", "discard", "error", "fatal", "pending"]
 FMI2_FATAL = STATUS_NAMES.index("fatal")
 
@@ -168,47 +170,65 @@ def run_fmu(fmu_path: Path | str, start_values: dict, stop_time: float, output_i
     read_outputs = instance.read_outputs
     n_steps = int(round(stop_time / output_interval))
 
-    times, rows = [], []
+    # preallocated (8 bytes per value: a long run's memory is bounded and known up front, cf. simulate's
+    # --max-output-mb), filled up to `filled` rows
+    times, data = np.empty(n_steps + 1), np.empty((n_steps + 1, len(columns)))
     stop_reason = status = None
     try:
-        fmu.setupExperiment(tolerance=tolerance, startTime=0.0, stopTime=stop_time)
-        fmu.enterInitializationMode()
-        instance.set(start_values)
-        fmu.exitInitializationMode()
-    except FMICallException as error:
-        stop_reason, status = _reason(error, instance.log), error.status
-    instantiate_time = time.perf_counter() - t0
+        try:
+            fmu.setupExperiment(tolerance=tolerance, startTime=0.0, stopTime=stop_time)
+            fmu.enterInitializationMode()
+            instance.set(start_values)
+            fmu.exitInitializationMode()
+        except FMICallException as error:
+            stop_reason, status = _reason(error, instance.log), error.status
+        instantiate_time = time.perf_counter() - t0
 
-    t_loop = time.perf_counter()
-    if stop_reason is None:
-        times.append(0.0)
-        rows.append(read_outputs())
-        for i in range(n_steps):
-            t, h = i * output_interval, output_interval
-            if t + h > stop_time + 1e-9 * max(1.0, abs(stop_time)):  # FMI 2.0: no step beyond the stop time
-                h = stop_time - t  # (a stop time that is not a multiple of the interval: the last step is shorter)
-            try:
-                fmu.doStep(currentCommunicationPoint=t, communicationStepSize=h)
-            except FMICallException as error:
-                stop_reason, status = _reason(error, instance.log), error.status
-                break
-            times.append(t + h)  # the FMU's own clock: t + h
-            rows.append(read_outputs())
-            if progress is not None:
-                progress(i + 1, n_steps)
+        t_loop = time.perf_counter()
+        filled, stop_reason, status = _steps(instance, times, data, n_steps, output_interval, stop_time, progress,
+                                             stop_reason, status)
+    except KeyboardInterrupt:
+        instance.close()  # (its extracted folder removed) and the interrupt goes on
+        raise
     wall_time = time.perf_counter() - t_loop
     after_failure = dict(zip(columns, read_outputs())) if status is not None and status != FMI2_FATAL else None
     instance.close()
 
-    data = np.array(rows, dtype=float).reshape(len(rows), len(columns))
+    data = data[:filled]
     outputs = {name: data[:, j] for j, name in enumerate(columns)}
-    return RunResult(time=np.array(times), outputs=outputs, stop_time=stop_time,
+    return RunResult(time=times[:filled], outputs=outputs, stop_time=stop_time,
                      completed=stop_reason is None, stop_reason=stop_reason, log=instance.log.messages,
                      wall_time=wall_time, instantiate_time=instantiate_time, status=status,
                      after_failure=after_failure)
 
 
+def _steps(instance, times, data, n_steps, output_interval, stop_time, progress, stop_reason, status):
+    """The doStep loop of run_fmu (fills times and data); returns (rows filled, stop_reason, status)."""
+    fmu, read_outputs = instance.fmu, instance.read_outputs
+    if stop_reason is not None:
+        return 0, stop_reason, status
+    times[0], data[0] = 0.0, read_outputs()
+    filled = 1
+    for i in range(n_steps):
+        t, h = i * output_interval, output_interval
+        if t + h > stop_time + 1e-9 * max(1.0, abs(stop_time)):  # FMI 2.0: no step beyond the stop time
+            h = stop_time - t  # (a stop time that is not a multiple of the interval: the last step is shorter)
+        try:
+            fmu.doStep(currentCommunicationPoint=t, communicationStepSize=h)
+            row = read_outputs()
+        except FMICallException as error:
+            return filled, _reason(error, instance.log), error.status
+        times[filled], data[filled] = t + h, row  # the FMU's own clock: t + h
+        filled += 1
+        if progress is not None:
+            progress(i + 1, n_steps)
+    return filled, stop_reason, status
+
+
 def _reason(error: FMICallException, log: FmuLog, instance: str | None = None) -> str:
+    """Why an FMI call failed; a call failed by the user's Ctrl-C raises KeyboardInterrupt instead (every host
+    answers a failed call through here)."""
+    interrupts.check()
     messages = log.errors(instance)
     detail = messages[-1] if messages else "no log message"
     return f"{str(error).rstrip('.')}: {detail}"

@@ -6,8 +6,11 @@ the axes (below them), so they cover no data; one curve alone gets no legend (it
 """
 from __future__ import annotations
 
+import contextlib
 import json
+import os
 import textwrap
+import uuid
 from pathlib import Path
 
 import matplotlib
@@ -21,10 +24,40 @@ TAU = r"time $\tau$"
 DPI = 110
 
 
+CSV_CHUNK = 65536  # rows formatted at a time (a long run's CSV never exists whole as text in memory)
+
+
+@contextlib.contextmanager
+def atomic(path: Path):
+    """Yield a temporary name next to `path` (hidden, ending in .tmp) to write to; when the block ends normally it
+    replaces `path` (os.replace: atomic on POSIX); on an exception or Ctrl-C it is removed. So a file under its
+    final name is always complete: an old one or the new one, never half of one."""
+    path = Path(path)
+    tmp = path.with_name(f".{path.name}.{uuid.uuid4().hex[:12]}.tmp")
+    try:
+        yield tmp
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+        raise
+
+
+def write_text(path: Path, text: str) -> None:
+    """`text` into `path`, atomically (see atomic)."""
+    with atomic(path) as tmp:
+        tmp.write_text(text)
+
+
 def write_csv(path: Path, time: np.ndarray, columns: dict[str, np.ndarray]) -> None:
+    """time and the columns as CSV (17 significant digits), atomically, formatted CSV_CHUNK rows at a time."""
     names = ["time"] + list(columns)
-    data = np.column_stack([time] + [columns[n] for n in columns])
-    np.savetxt(path, data, delimiter=",", header=",".join(names), comments="", fmt="%.17g")
+    arrays = [np.asarray(time)] + [np.asarray(columns[n]) for n in columns]
+    with atomic(path) as tmp, open(tmp, "w") as file:
+        file.write(",".join(names) + "\n")
+        for start in range(0, len(arrays[0]), CSV_CHUNK):
+            data = np.column_stack([a[start:start + CSV_CHUNK] for a in arrays])
+            np.savetxt(file, data, delimiter=",", fmt="%.17g")
 
 
 def json_safe(value):
@@ -46,8 +79,18 @@ def json_safe(value):
 
 
 def write_json(path: Path, data: dict) -> None:
-    """`data` as JSON, non-finite numbers written as null (json_safe): always valid JSON (allow_nan=False)."""
-    path.write_text(json.dumps(json_safe(data), indent=2, default=float, allow_nan=False) + "\n")
+    """`data` as JSON, atomically, non-finite numbers written as null (json_safe): always valid JSON (allow_nan=False)."""
+    write_text(path, json.dumps(json_safe(data), indent=2, default=float, allow_nan=False) + "\n")
+
+
+def save_figure(fig, path: Path, **options) -> None:
+    """fig.savefig to `path` atomically (the format from path's suffix), then closed."""
+    path = Path(path)
+    try:
+        with atomic(path) as tmp:
+            fig.savefig(tmp, format=path.suffix.lstrip(".") or None, **options)
+    finally:
+        plt.close(fig)
 
 
 def wrapped(title: str, width_inches: float, fontsize: float) -> str:
@@ -83,8 +126,7 @@ def _legend_below(fig, axes, columns: int = 4) -> None:
 
 
 def _save(fig, path: Path) -> None:
-    fig.savefig(path, dpi=DPI)
-    plt.close(fig)
+    save_figure(fig, path, dpi=DPI)
 
 
 def contact_loss_intervals(time, in_contact) -> list[tuple[float, float]]:

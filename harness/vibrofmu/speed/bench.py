@@ -738,5 +738,4 @@ def plot_work_precision(path: Path, records: list[dict], plan: Plan) -> None:
     fig.suptitle(f"Work-precision, paper example (Omega = 2){' (--quick)' if plan.quick else ''}: "
                  "FMU under FMPy vs solve_ivp and the compiled floor")
     fig.tight_layout()
-    fig.savefig(path, dpi=110, bbox_inches="tight")
-    plt.close(fig)
+    export.save_figure(fig, path, dpi=110, bbox_inches="tight")

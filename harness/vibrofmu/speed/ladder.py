@@ -572,5 +572,4 @@ def plot_ladder(path: Path, ladder: dict) -> None:
     fig.suptitle(f"Speed-accuracy ladder, paper example, tau in [0, {ladder['stop_time']:g}], "
                  f"{ladder.get('rounds', ladder.get('repeats'))} interleaved rounds: pick a rung")
     fig.tight_layout()
-    fig.savefig(path, dpi=100, bbox_inches="tight")
-    plt.close(fig)
+    export.save_figure(fig, path, dpi=100, bbox_inches="tight")

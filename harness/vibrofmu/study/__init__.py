@@ -7,6 +7,9 @@ summary), plots. Heavy modules (dask, pyarrow) are imported inside the command.
 """
 from __future__ import annotations
 
+import contextlib
+import os
+import signal
 import sys
 import time
 from pathlib import Path
@@ -44,15 +47,38 @@ def cusp_test(client, spec, store, fmu_digest, out: Path) -> list[dict]:
     return tests
 
 
+def _end_workers(cluster) -> None:
+    """End the local cluster's worker processes (ours) at once, and keep their nannies from restarting them: they
+    ignore SIGINT, and a graceful close waits for the batch in hand (that took minutes)."""
+    for nanny in list(getattr(cluster, "workers", {}).values()):
+        nanny.auto_restart = False
+        pid = getattr(nanny, "pid", None)
+        if pid:
+            with contextlib.suppress(OSError):
+                os.kill(pid, signal.SIGKILL)
+
+
+def _end_resource_tracker() -> None:
+    """End multiprocessing's resource tracker (our child process) before os._exit: the workers' semaphores it
+    would report are gone with the process anyway (Linux unlinks them at creation)."""
+    from multiprocessing import resource_tracker
+
+    pid = getattr(resource_tracker._resource_tracker, "_pid", None)
+    if pid:
+        with contextlib.suppress(OSError):
+            os.kill(pid, signal.SIGKILL)
+
+
 def run(args) -> int:
     """`vibrofmu study` with its parsed options (commands/study.py)."""
     import hashlib
 
     from vibrofmu.output import export
-    from vibrofmu.fmus.build import PLANT_FMU, build_plant
+    from vibrofmu import paths
+    from vibrofmu.fmus.build import build_plant
     from vibrofmu.study import analysis, plots
     from vibrofmu.study.cases import make_cases
-    from vibrofmu.study.scheduling import FmuFile, Progress, connect, execute, stop_on_sigint
+    from vibrofmu.study.scheduling import CLOSE_TIMEOUT_S, FmuFile, Progress, connect, execute, stop_on_sigint
     from vibrofmu.study.spec import SpecError, build_spec
     from vibrofmu.study.storage import Store
 
@@ -69,7 +95,7 @@ def run(args) -> int:
 
     fmu_digest = plugin = None
     if spec.engine == "fmu":
-        fmu = Path(args.fmu) if args.fmu else PLANT_FMU
+        fmu = Path(args.fmu) if args.fmu else paths.build_dir() / paths.PLANT_NAME  # (the command checked --fmu)
         if not fmu.exists():
             if args.fmu:
                 raise SpecError(f"--fmu {fmu}: no such file")
@@ -84,14 +110,20 @@ def run(args) -> int:
         client, cluster = connect(args.scheduler, args.workers)
     except KeyboardInterrupt:
         print("interrupted while starting the cluster: nothing computed", file=sys.stderr)
+        if not args.scheduler:  # a local cluster half started: its workers end with this process (see the end)
+            sys.stdout.flush()
+            sys.stderr.flush()
+            _end_resource_tracker()
+            os._exit(130)
         return 130
     interrupted, run, tests = False, {}, None
+    workers = progress = None
     try:
-        workers = len(client.scheduler_info(n_workers=-1)["workers"])
-    except Exception:  # noqa: BLE001 - only for the summary
-        workers = None
-    progress = Progress(len(cases), resumed, args.kind)
-    try:
+        try:
+            workers = len(client.scheduler_info(n_workers=-1)["workers"])
+        except Exception:  # noqa: BLE001 - only for the summary
+            pass
+        progress = Progress(len(cases), resumed, args.kind)
         if plugin is not None:
             client.register_plugin(plugin)
         with stop_on_sigint():
@@ -101,12 +133,16 @@ def run(args) -> int:
                 tests = cusp_test(client, spec, store, fmu_digest, out)
     except KeyboardInterrupt:
         interrupted = True
+        if cluster is not None:
+            _end_workers(cluster)
     finally:
-        progress.close()
+        if progress is not None:
+            progress.close()
         try:
-            client.close()
-            if cluster is not None:
-                cluster.close()
+            if not (interrupted and cluster is not None):  # (its workers ended: see the end)
+                client.close(timeout=CLOSE_TIMEOUT_S)
+                if cluster is not None:
+                    cluster.close(timeout=CLOSE_TIMEOUT_S)
         except Exception:  # a cluster torn down by Ctrl-C: nothing left to close
             pass
         table = store.compact()
@@ -128,6 +164,14 @@ def run(args) -> int:
     if interrupted:
         print(f"interrupted: {done}/{len(cases)} cases in {out / 'results.parquet'}; continue with --resume",
               file=sys.stderr)
+        if cluster is not None:
+            # everything is on disk (each file written whole and renamed); the local cluster's scheduler and nannies
+            # live in this process and its workers are ended: closing them gracefully took 5-15 s more (timeouts,
+            # then Dask's exit handlers), so the process ends here, within the few seconds a Ctrl-C may take
+            sys.stdout.flush()
+            sys.stderr.flush()
+            _end_resource_tracker()  # (else it lists the workers' semaphores as "leaked", a dozen lines)
+            os._exit(130)
         return 130
     if run.get("failed_batches") or done < len(cases):
         print(f"error: {len(cases) - done} cases not computed ({(run.get('failed_batches') or ['?'])[0]}); "

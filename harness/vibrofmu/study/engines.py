@@ -26,6 +26,7 @@ from vibromodel.integrate import IntegrationError, TerminalEvent
 from vibromodel.parameters import ParameterError, Scene
 from vibromodel.plant import Settings
 
+from vibrofmu import interrupts
 from vibrofmu.analyses.sweep import settle_loop
 
 try:
@@ -250,6 +251,7 @@ class FmuEngine(Engine):
                 instance.fmu.reset()
                 return instance
             except FMICallException:
+                interrupts.check()
                 self._free(instance)
         self.made += 1
         instance = FmuInstance(self.fmu_path, instance_name=f"study{self.made}", log=self.log,

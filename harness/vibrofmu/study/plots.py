@@ -10,6 +10,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib.ticker import MaxNLocator  # noqa: E402
 
+from vibrofmu.output import export  # noqa: E402
 from vibrofmu.study.spec import Spec  # noqa: E402
 
 
@@ -53,8 +54,7 @@ def monte_carlo(d: dict, result: dict, path: Path) -> Path:
     axes[1].set_ylim(0, max(0.05, max(hi for _, hi in (summary[k]["ci95_wilson"] for k in ("contact_loss", "pull_in"))) * 1.2))
     axes[1].set_title(f"{len(d['case'])} samples")
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    export.save_figure(fig, path, dpi=110)  # atomic: never a half-written png
     return path
 
 
@@ -97,8 +97,7 @@ def basins(spec: Spec, d: dict, result: dict, path: Path) -> Path:
                  f"{overall}; farther than {margin:g} from the predicted boundary: "
                  f"{agreement['agreeing']}/{agreement['compared']} agree ({agreement['fraction']:.3f})", fontsize=9)
     fig.legend(*ax.get_legend_handles_labels(), fontsize=7, loc="outside lower center", ncols=2, frameon=False)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    export.save_figure(fig, path, dpi=110)  # atomic: never a half-written png
     return path
 
 
@@ -156,6 +155,5 @@ def response_map(result: dict, path: Path) -> Path:
     agreement = result["summary"]["agreement"]
     fig.suptitle(f"response map: bistability agreement {agreement['fraction']:.3f} "
                  f"({agreement['agreeing']}/{agreement['compared']} points off the folds' margin)")
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    export.save_figure(fig, path, dpi=110)  # atomic: never a half-written png
     return path

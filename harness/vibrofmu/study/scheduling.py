@@ -35,6 +35,14 @@ CONNECT_TIMEOUT_S = 3.0  # --scheduler: give up connecting after this (the whole
 OVERHEAD_PROBE_TASKS = 200
 MAX_OVERHEAD = 0.05  # scheduling cost per task / work per task
 BATCHES_PER_WORKER = 4
+# Checkpoints: no batch holds more than about CHECKPOINT_S of work (at the pilot's cost per case), so finished cases
+# reach the disk at least that often per worker and a Ctrl-C loses little; unless the scheduling overhead needs
+# larger batches (needed_batch wins).
+CHECKPOINT_S = 2.0
+# Ctrl-C: the batches that finish within STOP_GRACE_S are still written; then the command stops (its cluster is
+# closed within CLOSE_TIMEOUT_S): the whole exit takes a few seconds, whatever a batch still running costs.
+STOP_GRACE_S = 1.5
+CLOSE_TIMEOUT_S = 2.0
 
 _FMU_BYTES: dict[str, bytes] = {}  # per worker process: digest -> FMU bytes (filled by FmuFile)
 
@@ -56,18 +64,29 @@ STOP = threading.Event()
 
 @contextlib.contextmanager
 def stop_on_sigint():
-    """The first Ctrl-C sets STOP (execute stops at the next finished batch: no signal lands inside Dask's
-    own code, where it could be taken for a failed task); a second one interrupts at once."""
+    """The first Ctrl-C sets STOP: execute writes the batches that finish in the next STOP_GRACE_S and stops (no
+    signal lands inside Dask's own code meanwhile, where it could be taken for a failed task); then, or at a
+    second Ctrl-C, KeyboardInterrupt."""
+    timers = []
+
     def handler(signum, frame):
         if STOP.is_set():
             raise KeyboardInterrupt
         STOP.set()
+        # then a real SIGINT to the main thread (runs this handler again, STOP being set; a real signal also ends a
+        # wait of the main thread, which _thread.interrupt_main does not)
+        timer = threading.Timer(STOP_GRACE_S, signal.pthread_kill, (threading.main_thread().ident, signal.SIGINT))
+        timer.daemon = True
+        timers.append(timer)
+        timer.start()
 
     STOP.clear()
     previous = signal.signal(signal.SIGINT, handler)
     try:
         yield
     finally:
+        for timer in timers:  # stopped already: no late interrupt in what follows (writing the results)
+            timer.cancel()
         signal.signal(signal.SIGINT, previous)
 
 
@@ -132,14 +151,12 @@ def connect(scheduler: str | None, workers: int | None):
             raise SpecError(f"the Dask scheduler at {scheduler} has no workers") from None
         return client, None
     n = workers or os.cpu_count() or 1
-    # Ctrl-C in a terminal reaches the whole process group: the worker processes ignore SIGINT (a disposition
-    # they inherit, and their nannies' restarted workers too) and the client shuts them down itself
-    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
-    try:
-        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
-                               dashboard_address=None, silence_logs=logging.CRITICAL)
-    finally:
-        signal.signal(signal.SIGINT, previous)
+    # Ctrl-C in a terminal reaches the whole process group: the worker processes ignore SIGINT (worker_signals,
+    # preloaded; also in the workers a nanny restarts) and the client answers it: it keeps every finished case and
+    # ends the workers (study.run)
+    cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
+                           dashboard_address=None, silence_logs=logging.CRITICAL,
+                           preload=["vibrofmu.study.worker_signals"])
     return Client(cluster), cluster
 
 
@@ -166,14 +183,22 @@ def batch_size(c_s: float, c_w: float, remaining: int, workers: int) -> int:
     return max(1, min(needed_batch(c_s, c_w, workers), balance))
 
 
-def guided_batches(n: int, smallest: int, workers: int) -> list[int]:
+def checkpoint_batch(c_w: float) -> int | None:
+    """The largest batch that holds about CHECKPOINT_S of work at c_w seconds a case (at least 1; None: no cost
+    measured, no cap)."""
+    return max(1, int(CHECKPOINT_S / c_w)) if c_w > 0 else None
+
+
+def guided_batches(n: int, smallest: int, workers: int, largest: int | None = None) -> list[int]:
     """Batch sizes for n cases, largest first (guided self-scheduling): each batch takes a
     BATCHES_PER_WORKER * workers-th of the cases still left, but at least `smallest`. Few, large batches at the
     start keep the client's work per batch (a Parquet part, a progress update, a scheduler round trip) small; the
-    small ones at the end let the workers finish together (the idle tail is about one small batch)."""
+    small ones at the end let the workers finish together (the idle tail is about one small batch). `largest`
+    (checkpoint_batch) caps them, so that finished cases reach the disk every few seconds."""
     sizes, left = [], n
+    cap = math.inf if largest is None else max(smallest, largest)  # (the overhead's smallest wins)
     while left > 0:
-        size = min(left, max(smallest, math.ceil(left / (BATCHES_PER_WORKER * workers))))
+        size = min(left, cap, max(smallest, math.ceil(left / (BATCHES_PER_WORKER * workers))))
         sizes.append(size)
         left -= size
     return sizes
@@ -223,7 +248,7 @@ def execute(client, spec: Spec, cases: list[dict], store, fmu_digest: str | None
         c_w = tally["cost"] / tally["cases"] if tally["cases"] else 0.0
         plan["c_w"] = c_w
         plan["b"] = b = batch_size(c_s, c_w, len(rest), n_workers)
-        plan["sizes"] = sizes = guided_batches(len(rest), b, n_workers)
+        plan["sizes"] = sizes = guided_batches(len(rest), b, n_workers, checkpoint_batch(c_w))
         starts = [sum(sizes[:k]) for k in range(len(sizes))]
         batches = [rest[start:start + size] for start, size in zip(starts, sizes)]
         more = client.map(run_batch, [spec_dict] * len(batches), [fmu_digest] * len(batches), batches, pure=False)
@@ -232,9 +257,6 @@ def execute(client, spec: Spec, cases: list[dict], store, fmu_digest: str | None
 
     submitted = not rest  # (no pilot means no cases at all)
     for future in pending:
-        if STOP.is_set():  # Ctrl-C (stop_on_sigint): stop after the batch in hand, keep what is written
-            client.cancel(futures)
-            raise KeyboardInterrupt
         try:
             rows = future.result()
         except Exception as error:  # a batch that failed (e.g. its worker died too often): not written
@@ -243,6 +265,9 @@ def execute(client, spec: Spec, cases: list[dict], store, fmu_digest: str | None
         tally["cases"] += len({row["case"] for row in rows})
         tally["cost"] += sum(row["cost_s"] for row in rows)
         progress.update(store.write(rows))
+        if STOP.is_set():  # Ctrl-C (stop_on_sigint): the batch in hand is written; stop, keep what is written
+            client.cancel(futures)
+            raise KeyboardInterrupt
         if not submitted:
             submitted = True
             submit_rest()
