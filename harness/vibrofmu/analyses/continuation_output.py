@@ -9,13 +9,12 @@ from typing import Callable
 
 import numpy as np
 import pyarrow as pa
-import pyarrow.parquet as pq
 
 from vibromodel import averaging as av
 from vibromodel.parameters import Scene
 
 from vibrofmu.analyses import continuation as cont
-from vibrofmu.output.export import _legend_below, _save, plt, wrapped
+from vibrofmu.output.export import _legend_below, _save, plt, write_json, write_parquet, wrapped
 
 EVENT_MARKERS = {"fold": ("s", "tab:red"), "period-doubling": ("D", "tab:purple"),
                  "neimark-sacker": ("*", "tab:olive"), "grazing": ("o", "tab:orange")}
@@ -28,7 +27,7 @@ def write_branch(path: Path, result: cont.Branch) -> None:
     meta = {"scene": result.problem.scene.as_dict(), "param": result.problem.param,
             "columns": "see docs/continuation.md, branch.parquet"}
     table = table.replace_schema_metadata({b"vibrofmu": json.dumps(meta).encode()})
-    pq.write_table(table, path)
+    write_parquet(table, path)
 
 
 def _segments(values, flags):
@@ -228,8 +227,8 @@ def chart(scene: Scene, deltas, points: int, progress: Callable[[str], None] | N
 
 def write_chart(out: Path, data: dict) -> None:
     flat = [{k: (json.dumps(v) if isinstance(v, list) else v) for k, v in row.items()} for row in data["rows"]]
-    pq.write_table(pa.Table.from_pylist(flat), out / "chart.parquet")
-    (out / "chart.json").write_text(json.dumps(data, indent=1))
+    write_parquet(pa.Table.from_pylist(flat), out / "chart.parquet")
+    write_json(out / "chart.json", data)
     plot_chart(out / "chart.png", data)
 
 

@@ -44,6 +44,8 @@ from vibromodel.integrate import IntegrationError, TerminalEvent
 from vibromodel.parameters import PULL_IN_GAP, ParameterError, Scene, scene_names, validate
 from vibromodel.settings import Settings
 
+from vibrofmu.output import export
+
 TRANSIENT_EPS = 1e-8  # a discarded transient shrinks an O(1) offset below this (module doc)
 MIN_TRANSIENT, MAX_TRANSIENT = 20, 20000
 DEFAULT_SAMPLES = 64
@@ -516,8 +518,7 @@ def plot(d: Diagram, path, title: str = "") -> None:
         ax2.legend(loc="best", fontsize=8)
     axes[-1, 0].set_xlabel(d.name)
     fig.tight_layout()
-    fig.savefig(path, dpi=140)
-    plt.close(fig)
+    export.save_figure(fig, path, dpi=140)  # atomic, then closed
 
 
 def plot_convergence(d: Diagram, path, count: int = 6) -> None:
@@ -543,8 +544,7 @@ def plot_convergence(d: Diagram, path, count: int = 6) -> None:
     ax.set_title("Benettin: convergence of the largest exponent")
     ax.legend(fontsize=8)
     fig.tight_layout()
-    fig.savefig(path, dpi=140)
-    plt.close(fig)
+    export.save_figure(fig, path, dpi=140)  # atomic, then closed
 
 
 # ----- the integrators' costs, side by side (docs/bifurcation-diagram.md, Speed) ------------------------

@@ -1,6 +1,5 @@
 """`vibrofmu continuation`: periodic orbits of the exact model continued in one parameter, through contact loss,
 with folds, period doublings, Neimark-Sacker points and grazing located (docs/continuation.md)."""
-import json
 import math
 import sys
 
@@ -79,6 +78,7 @@ def run(args) -> int:
 
     from vibrofmu.analyses import continuation as cont
     from vibrofmu.analyses import continuation_output as output
+    from vibrofmu.output import export
 
     def say(line):
         print(line, file=sys.stderr, flush=True)
@@ -126,7 +126,7 @@ def run(args) -> int:
         delta = args.delta or 0.01 * abs(args.stop - args.start)
         records = cont.confirm(result, fmu, delta, progress=print)
         summary["confirmations"] = records
-        (out / "confirmations.json").write_text(json.dumps(records, indent=1))
+        export.write_json(out / "confirmations.json", records)
     if args.bench:
         import os
 
@@ -134,7 +134,7 @@ def run(args) -> int:
                  "seconds_per_point": result.seconds / len(result.points), "cpu_count": os.cpu_count(),
                  "load_average_1min": os.getloadavg()[0],
                  "target": f"{BENCH_POINTS} points in < 60 s", "scene": scene.as_dict()}
-        (out / "bench.json").write_text(json.dumps(bench, indent=1))
+        export.write_json(out / "bench.json", bench)
         print(f"bench: {bench['points']} points in {bench['seconds']:.1f} s wall clock, {bench['cpu_seconds']:.1f} s "
               f"CPU ({1e3 * bench['seconds_per_point']:.0f} ms per point; load average "
               f"{bench['load_average_1min']:.1f} on {bench['cpu_count']} cores; target {bench['target']})")
@@ -147,7 +147,7 @@ def run(args) -> int:
         summary["chart"] = {"rows": data["rows"], "slow_flow_cusp_Delta": data["slow_flow_cusp_Delta"]}
         for line in output.agreement_table(data):
             print(line)
-    (out / "summary.json").write_text(json.dumps(summary, indent=1, default=float))
+    export.write_json(out / "summary.json", summary)
     print(f"wrote {out}/branch.parquet, branch.png, summary.json" + (", confirmations.json" if args.confirm else "")
           + (", bench.json" if args.bench else "") + (", chart.png, chart.parquet, chart.json" if args.chart else ""))
     return status

@@ -39,7 +39,6 @@ def _bar(total: int):
 
 def run(args) -> int:
     import numpy as np
-    import pyarrow.parquet as pq
 
     from vibromodel.parameters import Scene
 
@@ -89,11 +88,11 @@ def run(args) -> int:
             except Exception:  # noqa: BLE001 - a cluster torn down by Ctrl-C: nothing left to close
                 pass
 
-    pq.write_table(dg.diagram_table(result), out / "diagram.parquet")
+    export.write_parquet(dg.diagram_table(result), out / "diagram.parquet")
     ly = dg.lyapunov_table(result)
-    pq.write_table(ly, out / "lyapunov.parquet")
+    export.write_parquet(ly, out / "lyapunov.parquet")
     if args.lyapunov_periods:
-        pq.write_table(dg.convergence_table(result), out / "convergence.parquet")
+        export.write_parquet(dg.convergence_table(result), out / "convergence.parquet")
     title = (f"{args.param} from {lo:g} to {hi:g}; " + ", ".join(f"{k} = {v:g}" for k, v in base.as_dict().items()
                                                                   if k not in ("x_start", "v_start", args.param)))
     dg.plot(result, out / "diagram.png", title=export.wrapped(title, 9.0, 11))

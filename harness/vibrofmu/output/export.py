@@ -83,6 +83,15 @@ def write_json(path: Path, data: dict) -> None:
     write_text(path, json.dumps(json_safe(data), indent=2, default=float, allow_nan=False) + "\n")
 
 
+def write_parquet(table, path: Path) -> None:
+    """A pyarrow Table to `path` as Parquet with page checksums (a reader with page_checksum_verification=True
+    detects a damaged page), atomically (see atomic)."""
+    import pyarrow.parquet as pq
+
+    with atomic(path) as tmp:
+        pq.write_table(table, tmp, write_page_checksum=True)
+
+
 def save_figure(fig, path: Path, **options) -> None:
     """fig.savefig to `path` atomically (the format from path's suffix), then closed."""
     path = Path(path)
