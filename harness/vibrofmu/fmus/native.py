@@ -36,9 +36,10 @@ FMI_SRC = FMU_SRC / "fmi"  # the FMI 2.0 layer shared with the status shim
 # The FMI standard's own headers (fmi2Functions.h ...) are not packed: an importing tool has them (FMI 2.0,
 # section 2.1.2), FMPy's build_platform_binary compiles against its package's copy, and so does this build
 # (toolchain.fmi_include_dir).
-COMMON_SOURCES = (NATIVE_SRC / "fmi2_native.c", FMI_SRC / "fmi2_layer.c", NATIVE_SRC / "pytext.c",
+COMMON_SOURCES = (NATIVE_SRC / "fmi2_native.c", NATIVE_SRC / "fmi2_me.c", FMI_SRC / "fmi2_layer.c", NATIVE_SRC / "pytext.c",
                   NATIVE_SRC / "scene_checks.c", NATIVE_SRC / "series.c", FMU_SRC / "core" / "pyfloat.c")
-COMMON_HEADERS = (NATIVE_SRC / "fmi2_native.h", FMI_SRC / "fmi2_layer.h", FMI_SRC / "fmi2_calls.h",
+COMMON_HEADERS = (NATIVE_SRC / "fmi2_native.h", NATIVE_SRC / "me_model.h", NATIVE_SRC / "me_data.h",
+                  FMI_SRC / "fmi2_layer.h", FMI_SRC / "fmi2_calls.h",
                   NATIVE_SRC / "pytext.h", NATIVE_SRC / "scene_checks.h", NATIVE_SRC / "series.h",
                   FMU_SRC / "core" / "pyfloat.h")
 CORE = FMU_SRC / "core"
@@ -66,6 +67,15 @@ MODEL_FILES = {
         "plant.h", "model.c", "model.h", "fidelity.h")) + solver_files() + tuple(NATIVE_SRC / name for name in (
             "plant_setup.c", "plant_setup.h", "controller_setup.c", "controller_setup.h")),
 }
+# Model Exchange (fmu_src/native/fmi2_me.c, me_model.h): each model whose config.h defines ME_N_STATES, with its
+# continuous states and each one's derivative variable, in the order of the C hooks' arrays, and the number of its
+# event indicators (ME_N_INDICATORS) with their names (FMI 3.0 declares them as variables).
+ME_STATES = {"HertzEAOscillator": (("x", "v"), ("v", "a"))}
+ME_INDICATORS = {"HertzEAOscillator": (
+    ("contact_indicator", "1 + 2x/3: > 0 in contact (contact loss and re-contact at its zeros)"),
+    ("upper_gap_indicator", "pull-in margin of the upper electrode, 1 - gap - 2x/(3R) (pull-in at 0)"),
+    ("lower_gap_indicator", "pull-in margin of the lower electrode, 1 - gap + 2x/(3R) (pull-in at 0)"))}
+
 # The compiler commands (vibrofmu.fmus.toolchain: NATIVE_LINUX64 with $CC, NATIVE_WIN64 with mingw-w64).
 LINUX_COMMAND = ("gcc", *toolchain.NATIVE_LINUX64)
 WIN64_COMMAND = (toolchain.WIN64_COMPILER, *toolchain.NATIVE_WIN64)
@@ -283,6 +293,9 @@ def native_model_description(model_description: bytes, c_files: list[str]) -> by
     root = ET.fromstring(model_description)
     root.set("generationTool", "vibrofmu native (interface of the pythonfmu FMU, C layer fmu_src/native)")
     cs = root.find("CoSimulation")
+    model_id = cs.get("modelIdentifier")
+    if model_id in ME_STATES:
+        _add_model_exchange(root, cs, model_id, c_files)
     cs.set("needsExecutionTool", "false")
     cs.set("canBeInstantiatedOnlyOncePerProcess", "false")
     cs.set("canGetAndSetFMUstate", "true")
@@ -298,6 +311,33 @@ def native_model_description(model_description: bytes, c_files: list[str]) -> by
             sv.set("description", "0 ok, 3 error (the FMU's error flag)")
     ET.indent(root, "\t")
     return b'<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="utf-8")
+
+
+def _add_model_exchange(root, cs, model_id: str, c_files: list[str]) -> None:
+    """FMI 2.0 Model Exchange beside the co-simulation: <ModelExchange>, numberOfEventIndicators, each state's
+    derivative variable (derivative= the state's index), <Derivatives> and <InitialUnknowns> in ModelStructure."""
+    states, derivatives = ME_STATES[model_id]
+    me = ET.Element("ModelExchange", modelIdentifier=model_id, needsExecutionTool="false",
+                    completedIntegratorStepNotNeeded="true", canBeInstantiatedOnlyOncePerProcess="false",
+                    canNotUseMemoryManagementFunctions="true", canGetAndSetFMUstate="true",
+                    canSerializeFMUstate="true", providesDirectionalDerivative="false")
+    files = ET.SubElement(me, "SourceFiles")
+    for name in c_files:
+        ET.SubElement(files, "File", name=name)
+    root.insert(list(root).index(cs), me)
+    root.set("numberOfEventIndicators", str(len(ME_INDICATORS[model_id])))
+    variables = list(root.find("ModelVariables"))
+    index = {sv.get("name"): i + 1 for i, sv in enumerate(variables)}
+    for state, derivative in zip(states, derivatives):
+        real = variables[index[derivative] - 1].find("Real")
+        real.set("derivative", str(index[state]))
+    structure = root.find("ModelStructure")
+    outputs = structure.find("Outputs")
+    position = list(structure).index(outputs) + 1 if outputs is not None else 0
+    block = ET.Element("Derivatives")
+    for derivative in derivatives:
+        ET.SubElement(block, "Unknown", index=str(index[derivative]))
+    structure.insert(position, block)
 
 
 def build_description(model_id: str, c_files: list[str]) -> str:
