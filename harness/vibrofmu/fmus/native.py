@@ -254,30 +254,38 @@ def _reason(check, *args) -> str:
     raise AssertionError(f"{check.__qualname__}{args} raised no ParameterError")
 
 
-def model_sources(model_id: str) -> list[Path]:
-    """Every hand-written file of the model's native FMU (C sources and headers)."""
+def model_sources(model_id: str, fmi_version: int = 2) -> list[Path]:
+    """Every hand-written file of the model's native FMU (C sources and headers); FMI 3.0: the FMI 2.0 FMU's and
+    the FMI 3.0 layer fmi3_native.c over it."""
     folder = NATIVE_SRC / model_id
-    return [*COMMON_SOURCES, *COMMON_HEADERS, folder / "native_model.c", folder / "config.h", *MODEL_FILES[model_id]]
+    extra = [NATIVE_SRC / "fmi3_native.c"] if fmi_version == 3 else []
+    return [*COMMON_SOURCES, *extra, *COMMON_HEADERS, folder / "native_model.c", folder / "config.h",
+            *MODEL_FILES[model_id]]
 
 
-def write_sources(model_id: str, model_description: bytes, out: Path) -> list[str]:
+def write_sources(model_id: str, model_description: bytes, out: Path, fmi_version: int = 2) -> list[str]:
     """All sources, flat, into out (with the generated headers); returns the C files to compile."""
     out.mkdir(parents=True, exist_ok=True)
-    for path in model_sources(model_id):
+    for path in model_sources(model_id, fmi_version):
         shutil.copyfile(path, out / path.name)
     (out / "variables.h").write_text(variables_header(model_description))
     (out / "rules.h").write_text(rules_header())
     if model_id == "HertzEAClosedLoop":
         (out / "reference.h").write_text(reference_header())
-    return sorted(p.name for p in model_sources(model_id) if p.suffix == ".c")
+    return sorted(p.name for p in model_sources(model_id, fmi_version) if p.suffix == ".c")
 
 
 def compile_binary(sources: Path, c_files: list[str], out: Path, target: str = "linux64") -> Path:
     """Compile the sources into out (linux64: gcc .so; win64: mingw .dll); RuntimeError with the compiler's
     output on failure."""
     command = (*toolchain.c_compiler(), *LINUX_COMMAND[1:]) if target == "linux64" else WIN64_COMMAND
+    exports = []
+    if "fmi3_native.c" in c_files and target == "linux64":  # the FMI 3.0 binary exports fmi3* only (fmi3_native.c)
+        script = out.with_suffix(".map")
+        script.write_text("{ global: fmi3*; local: *; };\n")
+        exports = [f"-Wl,--version-script={script}"]
     cmd = [*command, f"-I{sources}", toolchain.fmi_include(), "-o", str(out), *(str(sources / f) for f in c_files),
-           "-lm"]
+           *exports, "-lm"]
     proc = subprocess.run(cmd, capture_output=True, text=True)
     if proc.returncode != 0 or proc.stderr.strip():
         raise RuntimeError(f"compiling {out.name} failed or warned ({' '.join(cmd)}):\n{proc.stderr}")
@@ -288,8 +296,11 @@ def win64_available() -> bool:
     return shutil.which(toolchain.WIN64_COMPILER) is not None
 
 
-def native_model_description(model_description: bytes, c_files: list[str]) -> bytes:
-    """The pythonfmu FMU's modelDescription.xml with the native FMU's capabilities and its source files."""
+def native_model_description(model_description: bytes, c_files: list[str], fmi_version: int = 2) -> bytes:
+    """The pythonfmu FMU's modelDescription.xml with the native FMU's capabilities and its source files (FMI 3.0:
+    fmi3_model_description of that)."""
+    if fmi_version == 3:
+        return fmi3_model_description(native_model_description(model_description, c_files), c_files)
     root = ET.fromstring(model_description)
     root.set("generationTool", "vibrofmu native (interface of the pythonfmu FMU, C layer fmu_src/native)")
     cs = root.find("CoSimulation")
@@ -340,6 +351,74 @@ def _add_model_exchange(root, cs, model_id: str, c_files: list[str]) -> None:
     structure.insert(position, block)
 
 
+# FMI 3.0's platform tuples of the folders under binaries/ (FMI 2.0: linux64, win64)
+FMI3_PLATFORMS = ("x86_64-linux", "x86_64-windows")
+_FMI3_TYPES = {"Real": "Float64", "Integer": "Int32", "Boolean": "Boolean"}
+
+
+def fmi3_model_description(model_description: bytes, c_files: list[str]) -> bytes:
+    """The FMI 3.0 modelDescription.xml of a native FMU from its FMI 2.0 one: the same variables and value
+    references (Real -> Float64, Integer -> Int32), the independent variable `time` (value reference N), the event
+    indicators as local variables (N + 1 ...) for the Model Exchange models, Co-Simulation with event mode and early
+    return (the models with contact events), Model Exchange where the FMI 2.0 FMU has it."""
+    old = ET.fromstring(model_description)
+    cs2 = old.find("CoSimulation")
+    model_id = cs2.get("modelIdentifier")
+    has_me = old.find("ModelExchange") is not None
+    root = ET.Element("fmiModelDescription", fmiVersion="3.0", modelName=old.get("modelName"),
+                      instantiationToken=old.get("guid"), description=old.get("description", ""),
+                      author=old.get("author", ""), generationTool=old.get("generationTool", ""),
+                      generationDateAndTime=old.get("generationDateAndTime", ""),
+                      variableNamingConvention=old.get("variableNamingConvention", "flat"))
+    common = {"modelIdentifier": model_id, "needsExecutionTool": "false",
+              "canBeInstantiatedOnlyOncePerProcess": "false", "canGetAndSetFMUState": "true",
+              "canSerializeFMUState": "true", "providesDirectionalDerivatives": "false"}
+    if has_me:
+        ET.SubElement(root, "ModelExchange", **common, needsCompletedIntegratorStep="false")
+    early = "true" if model_id in ME_STATES else "false"  # the models with contact events (model_do_step_early)
+    ET.SubElement(root, "CoSimulation", **common, canHandleVariableCommunicationStepSize="true",
+                  hasEventMode="true", mightReturnEarlyFromDoStep=early, canReturnEarlyAfterIntermediateUpdate="false",
+                  providesIntermediateUpdate="false")
+    for tag in ("UnitDefinitions", "LogCategories", "DefaultExperiment"):
+        element = old.find(tag)
+        if element is not None:
+            root.append(element)
+    variables = ET.SubElement(root, "ModelVariables")
+    svs = list(old.find("ModelVariables"))
+    n = len(svs)
+    ET.SubElement(variables, "Float64", name="time", valueReference=str(n), causality="independent",
+                  variability="continuous", description="simulation time tau")
+    by_index = {i + 1: sv for i, sv in enumerate(svs)}
+    for sv in svs:
+        kind = next(child for child in sv if child.tag in _FMI3_TYPES)
+        attributes = {"name": sv.get("name"), "valueReference": sv.get("valueReference")}
+        for key in ("description", "causality", "variability", "initial"):
+            if sv.get(key) is not None:
+                attributes[key] = sv.get(key)
+        for key in ("start", "unit"):
+            if kind.get(key) is not None:
+                attributes[key] = kind.get(key)
+        if kind.get("derivative") is not None:
+            attributes["derivative"] = by_index[int(kind.get("derivative"))].get("valueReference")
+        ET.SubElement(variables, _FMI3_TYPES[kind.tag], **attributes)
+    indicators = ME_INDICATORS.get(model_id, ()) if has_me else ()
+    for k, (name, description) in enumerate(indicators):
+        ET.SubElement(variables, "Float64", name=name, valueReference=str(n + 1 + k), causality="local",
+                      variability="continuous", description=description)
+    structure = ET.SubElement(root, "ModelStructure")
+    for sv in svs:
+        if sv.get("causality") == "output":
+            ET.SubElement(structure, "Output", valueReference=sv.get("valueReference"))
+    if has_me:
+        names = {sv.get("name"): sv.get("valueReference") for sv in svs}
+        for derivative in ME_STATES[model_id][1]:
+            ET.SubElement(structure, "ContinuousStateDerivative", valueReference=names[derivative])
+        for k in range(len(indicators)):
+            ET.SubElement(structure, "EventIndicator", valueReference=str(n + 1 + k))
+    ET.indent(root, "\t")
+    return b'<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="utf-8")
+
+
 def build_description(model_id: str, c_files: list[str]) -> str:
     files = "".join(f'      <SourceFile name="{name}"/>\n' for name in c_files)
     return ('<?xml version="1.0" encoding="UTF-8"?>\n<fmiBuildDescription fmiVersion="3.0">\n'
@@ -347,9 +426,11 @@ def build_description(model_id: str, c_files: list[str]) -> str:
             '    </SourceFileSet>\n  </BuildConfiguration>\n</fmiBuildDescription>\n')
 
 
-def build_native(pythonfmu_fmu: Path, out_dir: Path, win64: bool | None = None, reference: bool = True) -> Path:
+def build_native(pythonfmu_fmu: Path, out_dir: Path, win64: bool | None = None, reference: bool = True,
+                 fmi_version: int = 2) -> Path:
     """out_dir/<id>.fmu from the pythonfmu FMU's interface (see the module's text); win64 None: when mingw is
-    installed. reference: pack the default experiment's result into documentation/."""
+    installed. reference: pack the default experiment's result into documentation/ (FMI 2.0 only).
+    fmi_version 3: the FMI 3.0 FMU (fmi3_native.c over the same sources; FMPy's fmi3 headers)."""
     with zipfile.ZipFile(pythonfmu_fmu) as z:
         md = z.read("modelDescription.xml")
     model_id = ET.fromstring(md).find("CoSimulation").get("modelIdentifier")
@@ -358,19 +439,20 @@ def build_native(pythonfmu_fmu: Path, out_dir: Path, win64: bool | None = None, 
     fmu = out_dir / f"{model_id}.fmu"
     with tempfile.TemporaryDirectory() as tmp:
         sources = Path(tmp) / "sources"
-        c_files = write_sources(model_id, md, sources)
-        binaries = {f"binaries/linux64/{model_id}.so": compile_binary(sources, c_files, Path(tmp) / "lib.so")}
+        c_files = write_sources(model_id, md, sources, fmi_version)
+        linux64, win64_dir = ("linux64", "win64") if fmi_version == 2 else FMI3_PLATFORMS
+        binaries = {f"binaries/{linux64}/{model_id}.so": compile_binary(sources, c_files, Path(tmp) / "lib.so")}
         if win64 or (win64 is None and win64_available()):
-            binaries[f"binaries/win64/{model_id}.dll"] = compile_binary(sources, c_files, Path(tmp) / "lib.dll",
+            binaries[f"binaries/{win64_dir}/{model_id}.dll"] = compile_binary(sources, c_files, Path(tmp) / "lib.dll",
                                                                          "win64")
         (sources / "buildDescription.xml").write_text(build_description(model_id, c_files))
         with zipfile.ZipFile(fmu, "w", zipfile.ZIP_DEFLATED) as z:
-            z.writestr("modelDescription.xml", native_model_description(md, c_files))
+            z.writestr("modelDescription.xml", native_model_description(md, c_files, fmi_version))
             for name, path in binaries.items():
                 z.write(path, name)
             for path in sorted(sources.iterdir()):
                 z.write(path, f"sources/{path.name}")
-    if reference:
+    if reference and fmi_version == 2:
         from vibrofmu.fmus.refresult import pack_reference
 
         pack_reference(fmu)

@@ -29,12 +29,13 @@ KERNEL = ("-std=c11", "-O2", *IEEE, "-fPIC", "-shared", "-flto", "-fno-semantic-
 # The status shim over pythonfmu's library (fmu_src/fmi2_status_shim.c with fmi/fmi2_layer.c and pyloader.c).
 SHIM = ("-shared", "-fPIC", "-O2", "-fvisibility=hidden", *WARNINGS)
 SHIM_LIBS = ("-ldl", "-pthread")
-# The native FMUs: the same arithmetic as the core; -flto across the model, solver and FMI files.
+# The native FMUs: the same arithmetic as the core; -flto across the model, solver and FMI files (=auto: the larger
+# FMI 3.0 binaries are split into LTO partitions, compiled in parallel rather than with a warning).
 NATIVE = ("-std=c11", "-O2", *IEEE, *WARNINGS)
-NATIVE_LINUX64 = (*NATIVE, "-fPIC", "-shared", "-fvisibility=hidden", "-flto")
+NATIVE_LINUX64 = (*NATIVE, "-fPIC", "-shared", "-fvisibility=hidden", "-flto=auto")
 # Debian's mingw-w64; __USE_MINGW_ANSI_STDIO: C99 printf (inf, %zu, %g as glibc) instead of msvcrt's.
 WIN64_COMPILER = "x86_64-w64-mingw32-gcc"
-NATIVE_WIN64 = (*NATIVE, "-shared", "-static-libgcc", "-D__USE_MINGW_ANSI_STDIO=1", "-flto")
+NATIVE_WIN64 = (*NATIVE, "-shared", "-static-libgcc", "-D__USE_MINGW_ANSI_STDIO=1", "-flto=auto")
 # The C hosts (tests/c_host/fmi2_host.c, instance_cycles.c, speed/timing_host.c, speed/floor_driver.c).
 HOST = ("-O2", *WARNINGS)
 HOST_LIBS = ("-ldl", "-lm")
