@@ -773,15 +773,23 @@ EXPORT3 fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunic
 
 /* ---- Model Exchange ---- */
 
-#ifdef ME_N_STATES
+/* Defined for every model (FMPy loads them all); a model without Model Exchange (no ME_N_STATES) answers
+   fmi3Error: its instances are Co-Simulation ones. */
 #define ME_ONLY(call)                                                                                         \
     if (!w->model_exchange) return refuse(w, "%s: this instance was created for Co-Simulation", call)
+#ifdef ME_N_STATES
+#define ME2_CALL(expr) (expr)
+#else /* never reached past ME_ONLY: fmi3InstantiateModelExchange fails for these models (sizeof: not evaluated) */
+#define ME2_CALL(expr) ((void)sizeof(expr), fmi2Error)
+#define ME_N_STATES 0
+#define ME_N_INDICATORS 0
+#endif
 
 EXPORT3 fmi3Status fmi3EnterContinuousTimeMode(fmi3Instance instance)
 {
     W3_CALL(fmi3EnterContinuousTimeMode, BIT(W_EVENT));
     ME_ONLY("fmi3EnterContinuousTimeMode");
-    fmi2Status st = fmi2EnterContinuousTimeMode(w->c);
+    fmi2Status st = ME2_CALL(fmi2EnterContinuousTimeMode(w->c));
     if (st <= fmi2Warning) w->mode = W_CONTINUOUS;
     return to3(st);
 }
@@ -794,7 +802,8 @@ EXPORT3 fmi3Status fmi3CompletedIntegratorStep(fmi3Instance instance, fmi3Boolea
     if (enterEventMode == NULL || terminateSimulation == NULL)
         return refuse(w, "fmi3CompletedIntegratorStep: enterEventMode or terminateSimulation is NULL");
     fmi2Boolean enter = fmi2False, terminate = fmi2False;
-    fmi2Status st = fmi2CompletedIntegratorStep(w->c, noSetFMUStatePriorToCurrentPoint, &enter, &terminate);
+    fmi2Status st =
+        ME2_CALL(fmi2CompletedIntegratorStep(w->c, noSetFMUStatePriorToCurrentPoint, &enter, &terminate));
     *enterEventMode = enter != 0;
     *terminateSimulation = terminate != 0;
     return to3(st);
@@ -804,7 +813,7 @@ EXPORT3 fmi3Status fmi3SetTime(fmi3Instance instance, fmi3Float64 time)
 {
     W3_CALL(fmi3SetTime, BIT(W_EVENT) | BIT(W_CONTINUOUS));
     ME_ONLY("fmi3SetTime");
-    fmi2Status st = fmi2SetTime(w->c, time);
+    fmi2Status st = ME2_CALL(fmi2SetTime(w->c, time));
     if (st <= fmi2Warning) w->time = time;
     return to3(st);
 }
@@ -814,7 +823,7 @@ EXPORT3 fmi3Status fmi3SetContinuousStates(fmi3Instance instance, const fmi3Floa
 {
     W3_CALL(fmi3SetContinuousStates, BIT(W_CONTINUOUS));
     ME_ONLY("fmi3SetContinuousStates");
-    return to3(fmi2SetContinuousStates(w->c, continuousStates, nContinuousStates));
+    return to3(ME2_CALL(fmi2SetContinuousStates(w->c, continuousStates, nContinuousStates)));
 }
 
 #define AFTER_INIT (BIT(W_EVENT) | BIT(W_CONTINUOUS) | BIT(W_TERMINATED))
@@ -824,7 +833,7 @@ EXPORT3 fmi3Status fmi3GetContinuousStateDerivatives(fmi3Instance instance, fmi3
 {
     W3_CALL(fmi3GetContinuousStateDerivatives, AFTER_INIT);
     ME_ONLY("fmi3GetContinuousStateDerivatives");
-    return to3(fmi2GetDerivatives(w->c, derivatives, nContinuousStates));
+    return to3(ME2_CALL(fmi2GetDerivatives(w->c, derivatives, nContinuousStates)));
 }
 
 EXPORT3 fmi3Status fmi3GetEventIndicators(fmi3Instance instance, fmi3Float64 eventIndicators[],
@@ -832,7 +841,7 @@ EXPORT3 fmi3Status fmi3GetEventIndicators(fmi3Instance instance, fmi3Float64 eve
 {
     W3_CALL(fmi3GetEventIndicators, AFTER_INIT);
     ME_ONLY("fmi3GetEventIndicators");
-    return to3(fmi2GetEventIndicators(w->c, eventIndicators, nEventIndicators));
+    return to3(ME2_CALL(fmi2GetEventIndicators(w->c, eventIndicators, nEventIndicators)));
 }
 
 EXPORT3 fmi3Status fmi3GetContinuousStates(fmi3Instance instance, fmi3Float64 continuousStates[],
@@ -840,7 +849,7 @@ EXPORT3 fmi3Status fmi3GetContinuousStates(fmi3Instance instance, fmi3Float64 co
 {
     W3_CALL(fmi3GetContinuousStates, AFTER_INIT);
     ME_ONLY("fmi3GetContinuousStates");
-    return to3(fmi2GetContinuousStates(w->c, continuousStates, nContinuousStates));
+    return to3(ME2_CALL(fmi2GetContinuousStates(w->c, continuousStates, nContinuousStates)));
 }
 
 EXPORT3 fmi3Status fmi3GetNominalsOfContinuousStates(fmi3Instance instance, fmi3Float64 nominals[],
@@ -848,7 +857,7 @@ EXPORT3 fmi3Status fmi3GetNominalsOfContinuousStates(fmi3Instance instance, fmi3
 {
     W3_CALL(fmi3GetNominalsOfContinuousStates, BIT(W_INSTANTIATED) | AFTER_INIT);
     ME_ONLY("fmi3GetNominalsOfContinuousStates");
-    return to3(fmi2GetNominalsOfContinuousStates(w->c, nominals, nContinuousStates));
+    return to3(ME2_CALL(fmi2GetNominalsOfContinuousStates(w->c, nominals, nContinuousStates)));
 }
 
 EXPORT3 fmi3Status fmi3GetNumberOfEventIndicators(fmi3Instance instance, size_t *nEventIndicators)
@@ -866,4 +875,3 @@ EXPORT3 fmi3Status fmi3GetNumberOfContinuousStates(fmi3Instance instance, size_t
     *nContinuousStates = ME_N_STATES;
     return fmi3OK;
 }
-#endif
