@@ -258,18 +258,57 @@ def test_fmi3_bad_calls_are_errors(plant_fmi3, tmp_path):
     me.freeInstance()
 
 
+CLOSED_LOOP_OUT = ["x", "v", "U", "mu_hat", "gamma_hat"]
+
+
+def _closed_loop_me_bound(cs, rtol):
+    """ME (CVode) against CS (DOP853) at the same rtol, per output: CVODE's budget 1000 rtol (max + 1) (the ME
+    reference test's) plus the co-simulation's own 10 rtol max (GRAZE_BOUND)."""
+    return {name: 1000 * rtol * (np.max(np.abs(cs[name])) + 1) + 10 * rtol * np.max(np.abs(cs[name]))
+            for name in CLOSED_LOOP_OUT}
+
+
+def test_closed_loop_model_exchange_runs_under_cvode(native_closed_loop_fmu):
+    """The closed loop as FMI 2 ME: 11 states (x, v, the nine estimates), derivatives v, der(v), der(theta^_i);
+    under CVode it follows the co-simulation within CVODE's budget over the first 20 time units."""
+    assert validate_fmu(str(native_closed_loop_fmu)) == []
+    md = read_model_description(str(native_closed_loop_fmu))
+    assert md.modelExchange is not None and md.numberOfEventIndicators == 3
+    assert [d.variable.derivative.name for d in md.derivatives] == ["x", "v", "mu_hat", "a1_hat", "a2_hat", "a3_hat",
+                                                                    "a4_hat", "a5_hat", "Delta_hat", "beta_hat",
+                                                                    "gamma_hat"]
+    rtol, stop = 1e-10, 20.0
+    cs = simulate_fmu(str(native_closed_loop_fmu), stop_time=stop, output_interval=0.1, output=CLOSED_LOOP_OUT,
+                      relative_tolerance=rtol)
+    me = simulate_fmu(str(native_closed_loop_fmu), fmi_type="ModelExchange", solver="CVode", relative_tolerance=rtol,
+                      stop_time=stop, output_interval=0.1, output=CLOSED_LOOP_OUT)
+    bound = _closed_loop_me_bound(cs, rtol)
+    for name in CLOSED_LOOP_OUT:
+        assert np.max(np.abs(me[name] - cs[name])) <= bound[name], name
+    assert np.ptp(me["mu_hat"]) > 0.0  # the estimates move
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("name", ["controller", "closed_loop"])
 def test_fmi3_cosimulation_of_the_other_models(name, request, tmp_path):
     """The controller and the closed loop as FMI 3.0 Co-Simulation (no early return: no contact events of their own
-    located by the layer; event mode accepted): validate silent, the default experiment FMI 2's bits."""
+    located by the layer; event mode accepted): validate silent, the default experiment FMI 2's bits; the closed
+    loop's FMI 3 ME under CVode follows its co-simulation on the default experiment (tau 0..200)."""
     from vibrofmu.fmus.native import build_native
 
     native2 = request.getfixturevalue(f"native_{name}_fmu")
     fmu3 = build_native(request.getfixturevalue(f"{name}_fmu"), tmp_path, fmi_version=3)
     assert validate_fmu(str(fmu3)) == []
     md = read_model_description(str(fmu3))
-    assert md.modelExchange is None and not md.coSimulation.mightReturnEarlyFromDoStep
+    assert (md.modelExchange is not None) == (name == "closed_loop") and not md.coSimulation.mightReturnEarlyFromDoStep
+    if name == "closed_loop":
+        rtol = 1e-10
+        cs = simulate_fmu(str(native2), output_interval=0.1, output=CLOSED_LOOP_OUT, relative_tolerance=rtol)
+        me = simulate_fmu(str(fmu3), fmi_type="ModelExchange", solver="CVode", relative_tolerance=rtol,
+                          output_interval=0.1, output=CLOSED_LOOP_OUT)
+        bound = _closed_loop_me_bound(cs, rtol)
+        for name_ in CLOSED_LOOP_OUT:
+            assert np.max(np.abs(me[name_] - cs[name_])) <= bound[name_], name_
     outputs = [v.name for v in md.modelVariables if v.causality == "output" and v.type == "Float64"][:3]
     r2 = simulate_fmu(str(native2), stop_time=20.0, output_interval=0.1, output=outputs)
     r3 = simulate_fmu(str(fmu3), stop_time=20.0, output_interval=0.1, output=outputs, use_event_mode=True)
