@@ -300,7 +300,7 @@ def write_sources(model_id: str, model_description: bytes, out: Path, fmi_versio
     out.mkdir(parents=True, exist_ok=True)
     for path in model_sources(model_id, fmi_version):
         shutil.copyfile(path, out / path.name)
-    (out / "variables.h").write_text(variables_header(model_description))
+    (out / "variables.h").write_text(variables_header(with_derivative_variables(model_description)))
     (out / "rules.h").write_text(rules_header())
     if model_id == "HertzEAClosedLoop":
         (out / "reference.h").write_text(reference_header())

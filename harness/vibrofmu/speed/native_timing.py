@@ -34,6 +34,7 @@ def host_timing(host: Path, fmu: Path, repeats: int = 3, stop: float = 200.0, st
     return best
 
 
+FMI_VERSIONS_HOST_SOURCE = Path(__file__).with_name("fmi_versions_host.c")
 FMI3_OVER_FMI2_LIMIT = 1.1  # issue 23: FMI 3 CS per output <= 1.1 x FMI 2 CS (paper scene, interval 0.1)
 
 
@@ -47,7 +48,7 @@ def fmi_versions_timing(fmu2: Path, fmu3: Path, repeats: int = 5, stop: float = 
     from vibrofmu.fmus.native import FMI3_PLATFORMS
 
     with tempfile.TemporaryDirectory() as tmp:
-        host = toolchain.compile_host(Path(__file__).with_name("fmi_versions_host.c"), Path(tmp) / "fmi_versions_host")
+        host = toolchain.compile_host(FMI_VERSIONS_HOST_SOURCE, Path(tmp) / "fmi_versions_host")
         u2, u3 = Path(extract(str(fmu2), unzipdir=f"{tmp}/2")), Path(extract(str(fmu3), unzipdir=f"{tmp}/3"))
         md = read_model_description(str(u2))
         model_id = md.coSimulation.modelIdentifier
