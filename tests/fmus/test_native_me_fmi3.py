@@ -314,3 +314,50 @@ def test_fmi3_cosimulation_of_the_other_models(name, request, tmp_path):
     r3 = simulate_fmu(str(fmu3), stop_time=20.0, output_interval=0.1, output=outputs, use_event_mode=True)
     for name_ in outputs:
         assert r3[name_].tobytes() == r2[name_].tobytes()
+
+
+def test_fmu_state_holds_the_model_exchange_and_fmi3_state(native_plant_fmu, plant_fmi3, tmp_path):
+    """FMI 2 ME: a state taken in continuous-time mode (and serialized) brings back the states and time it had; FMI
+    3 CS with early return: a step redone from a restored (serialized) state gives the same bits."""
+    md = read_model_description(str(native_plant_fmu))
+    fmu = FMU2Model(guid=md.guid, unzipDirectory=extract(str(native_plant_fmu), str(tmp_path / "2")),
+                    modelIdentifier=md.modelExchange.modelIdentifier, instanceName="me")
+    fmu.instantiate()
+    fmu.setupExperiment(startTime=0.0)
+    fmu.enterInitializationMode()
+    fmu.exitInitializationMode()
+    fmu.newDiscreteStates()
+    fmu.enterContinuousTimeMode()
+    fmu.setTime(1.5)
+    fmu.setContinuousStates((ctypes.c_double * 2)(0.25, -0.5), 2)
+    state = fmu.deSerializeFMUstate(fmu.serializeFMUstate(fmu.getFMUstate()))
+    fmu.setTime(2.0)
+    fmu.setContinuousStates((ctypes.c_double * 2)(0.0, 0.0), 2)
+    fmu.setFMUstate(state)
+    x, dx = (ctypes.c_double * 2)(), (ctypes.c_double * 2)()
+    fmu.getContinuousStates(x, 2)
+    fmu.getDerivatives(dx, 2)
+    assert list(x) == [0.25, -0.5] and dx[0] == -0.5
+    vrs = {v.name: v.valueReference for v in md.modelVariables}
+    assert fmu.getReal([vrs["a"]])[0] == dx[1]  # the output a is the derivative of v, at the restored time
+    fmu.freeFMUstate(state)
+    fmu.freeInstance()
+
+    md3 = read_model_description(str(plant_fmi3))
+    cs = FMU3Slave(guid=md3.guid, unzipDirectory=extract(str(plant_fmi3), str(tmp_path / "3")),
+                   modelIdentifier=md3.coSimulation.modelIdentifier, instanceName="cs")
+    cs.instantiate(earlyReturnAllowed=True)
+    vr3 = {v.name: v.valueReference for v in md3.modelVariables}
+    cs.setFloat64([vr3[name] for name in IMPACTS], list(IMPACTS.values()))
+    cs.enterInitializationMode(startTime=0.0)
+    cs.exitInitializationMode()
+    t = 0.0
+    while t < 17.0:  # the first contact loss is at tau = 17.23
+        t = cs.doStep(t, 0.5)[3]
+    saved = cs.deserializeFMUState(cs.serializeFMUState(cs.getFMUState()))
+    first = cs.doStep(t, 0.5), cs.getFloat64([vr3["x"], vr3["time"]])
+    cs.setFMUState(saved)
+    again = cs.doStep(t, 0.5), cs.getFloat64([vr3["x"], vr3["time"]])
+    assert first == again and first[0][2]  # the same early return, the same bits
+    cs.freeFMUState(saved)
+    cs.freeInstance()
