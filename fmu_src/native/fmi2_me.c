@@ -213,3 +213,41 @@ EXPORT fmi2Status fmi2GetNominalsOfContinuousStates(fmi2Component c, fmi2Real x_
 }
 
 #endif
+
+#ifdef HAS_DIRECTIONAL_DERIVATIVES
+fmi2Status native_directional_derivative(Instance *I, const fmi2ValueReference vUnknown[], size_t nUnknown,
+                                         const fmi2ValueReference vKnown[], size_t nKnown, const fmi2Real dvKnown[],
+                                         fmi2Real dvUnknown[])
+{
+    State *S = native_state(I);
+    const char *call = "fmi2GetDirectionalDerivative";
+    if ((nUnknown > 0 && (vUnknown == NULL || dvUnknown == NULL)) || (nKnown > 0 && (vKnown == NULL || dvKnown == NULL))) {
+        native_error(I, "%s: an array argument is NULL", call);
+        return settled(I);
+    }
+    if (S->phase != PHASE_STEP_MODE && S->phase != PHASE_TERMINATED) {
+        native_error(I, "%s is not allowed in %s (FMI 2.0: after fmi2ExitInitializationMode, at the model's current "
+                     "point)", call, mode_name(current_mode(S)));
+        return settled(I);
+    }
+    if (S->halted && S->phase != PHASE_TERMINATED) {
+        native_error(I, "%s refused: %s", call, S->halt_message);
+        return settled(I);
+    }
+    for (size_t i = 0; i < nUnknown; i++) {
+        double sum = 0.0;
+        for (size_t j = 0; j < nKnown; j++) {
+            double partial;
+            if (vUnknown[i] >= N_VARIABLES || vKnown[j] >= N_VARIABLES ||
+                !model_partial(S, vUnknown[i], vKnown[j], &partial)) {
+                native_error(I, "%s: the derivative of valueReference %u by valueReference %u is not provided (%s)",
+                             call, vUnknown[i], vKnown[j], MODEL_PARTIALS);
+                return settled(I);
+            }
+            sum += partial * dvKnown[j];
+        }
+        dvUnknown[i] = sum;
+    }
+    return settled(I);
+}
+#endif

@@ -646,6 +646,9 @@ EXPORT fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueR
                                                const fmi2Real dvK[], fmi2Real dvU[])
 {
     INST(c); ALLOWED(fmi2GetDirectionalDerivative);
+#ifdef HAS_DIRECTIONAL_DERIVATIVES
+    return native_directional_derivative(I, vU, nU, vK, nK, dvK, dvU); /* fmi2_me.c */
+#endif
     (void)vU; (void)nU; (void)vK; (void)nK; (void)dvK; (void)dvU;
     native_log(I, fmi2Error, "fmi2GetDirectionalDerivative is not provided (providesDirectionalDerivative=false)");
     return fmi2Error;

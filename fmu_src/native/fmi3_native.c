@@ -484,9 +484,16 @@ EXPORT3 fmi3Status fmi3GetDirectionalDerivative(fmi3Instance instance, const fmi
                                                 size_t nSensitivity)
 {
     W3_CALL(fmi3GetDirectionalDerivative, ANY_MODE);
+#ifdef HAS_DIRECTIONAL_DERIVATIVES
+    if (nSeed != nKnowns || nSensitivity != nUnknowns)
+        return refuse(w, "fmi3GetDirectionalDerivative: nSeed = %zu and nSensitivity = %zu must be nKnowns = %zu and "
+                      "nUnknowns = %zu (every variable is a scalar)", nSeed, nSensitivity, nKnowns, nUnknowns);
+    return to3(fmi2GetDirectionalDerivative(w->c, unknowns, nUnknowns, knowns, nKnowns, seed, sensitivity));
+#else
     (void)unknowns; (void)nUnknowns; (void)knowns; (void)nKnowns; (void)seed; (void)nSeed; (void)sensitivity;
     (void)nSensitivity;
     return not_provided(w, "fmi3GetDirectionalDerivative", "providesDirectionalDerivatives=false");
+#endif
 }
 
 EXPORT3 fmi3Status fmi3GetAdjointDerivative(fmi3Instance instance, const fmi3ValueReference unknowns[],

@@ -35,4 +35,17 @@ int model_me_event(Instance *inst, State *s, int *terminate);
 void model_do_step_early(Instance *inst, State *s, double t, double h);
 #endif
 
+#ifdef HAS_DIRECTIONAL_DERIVATIVES
+/* The partial derivative d(unknown)/d(known) at the current point (Model Exchange: the states and time set; co-
+   simulation: the last communication point): 1 with *value, or 0 when the FMU does not provide that pair. */
+int model_partial(const State *s, fmi2ValueReference unknown, fmi2ValueReference known, double *value);
+/* The text naming the pairs model_partial provides (for the refusal's log line) */
+extern const char *const MODEL_PARTIALS;
+/* fmi2GetDirectionalDerivative on model_partial (fmi2_me.c): dvUnknown[i] = sum_j d(vUnknown[i])/d(vKnown[j])
+   dvKnown[j]; fmi2Error naming the first pair not provided, a NULL array, or a call before initialisation. */
+fmi2Status native_directional_derivative(Instance *I, const fmi2ValueReference vUnknown[], size_t nUnknown,
+                                         const fmi2ValueReference vKnown[], size_t nKnown, const fmi2Real dvKnown[],
+                                         fmi2Real dvUnknown[]);
+#endif
+
 #endif

@@ -4,6 +4,8 @@ under FMPy; Model Exchange under CVode matches the independent reference and loc
 early return stops at each contact change at the reference's time and leaves the trajectory FMI 2.0's; bad calls
 are errors, never a crash (fmu_src/native/fmi2_me.c, fmi3_native.c, me_model.h)."""
 import ctypes
+import xml.etree.ElementTree as ET
+import zipfile
 
 import numpy as np
 import pytest
@@ -360,4 +362,64 @@ def test_fmu_state_holds_the_model_exchange_and_fmi3_state(native_plant_fmu, pla
     again = cs.doStep(t, 0.5), cs.getFloat64([vr3["x"], vr3["time"]])
     assert first == again and first[0][2]  # the same early return, the same bits
     cs.freeFMUState(saved)
+    cs.freeInstance()
+
+
+@pytest.mark.parametrize("fidelity", [0, 1])
+def test_directional_derivatives_are_the_finite_differences(native_plant_fmu, plant_fmi3, tmp_path, fidelity):
+    """fmi2/fmi3GetDirectionalDerivative of a, F_contact, F_electrostatic by x, v, U (Model Exchange, at a point in
+    contact and one in free flight) against central differences of the outputs with h = 1e-5. Bound 1e-8: the
+    truncation h^2/6 max|f'''| <= 2e-11 (f''' of the Hertz law is (1 + 2x/3)^(-3/2)/... <= 2 here, the electrostatic
+    terms are ~alpha), the rounding 2 eps max|f| / h <= 1e-10 for |f| <= 2; a wrong slope is off by O(0.1)."""
+    md = read_model_description(str(native_plant_fmu))
+    vr = {v.name: v.valueReference for v in md.modelVariables}
+    fmu = FMU2Model(guid=md.guid, unzipDirectory=extract(str(native_plant_fmu), str(tmp_path / "2")),
+                    modelIdentifier=md.modelExchange.modelIdentifier, instanceName="me")
+    fmu.instantiate()
+    fmu.setupExperiment(startTime=0.0)
+    fmu.setReal([vr["R"], vr["alpha"], vr["beta"], vr["gamma"]], [2.0, 0.05, 0.02, 0.03])  # electrostatics visible
+    fmu.setInteger([vr["fidelity"]], [fidelity])
+    fmu.enterInitializationMode()
+    fmu.exitInitializationMode()
+    fmu.newDiscreteStates()
+    fmu.enterContinuousTimeMode()
+    unknowns = [vr["a"], vr["F_contact"], vr["F_electrostatic"]]
+    h = 1e-5
+
+    def outputs(t, x, v, U):
+        fmu.setTime(t)
+        fmu.setContinuousStates((ctypes.c_double * 2)(x, v), 2)
+        fmu.setReal([vr["U"]], [U])
+        return np.array(fmu.getReal(unknowns))
+
+    for t, x, v, U in ((1.3, 0.3, 0.2, 0.01), (2.1, -2.0, 0.5, -0.02)):
+        for k, known in enumerate(("x", "v", "U")):
+            step = np.eye(3)[k] * h
+            slope = (outputs(t, *(np.array([x, v, U]) + step)) - outputs(t, *(np.array([x, v, U]) - step))) / (2 * h)
+            outputs(t, x, v, U)
+            analytic = fmu.getDirectionalDerivative(unknowns, [vr[known]], [1.0])
+            assert np.max(np.abs(np.array(analytic) - slope)) <= 1e-8, (x, known, analytic, slope)
+    assert fmu.getDirectionalDerivative([vr["v"]], [vr["x"], vr["v"]], [2.0, 3.0]) == [3.0]  # v is a state
+    from fmpy.fmi1 import FMICallException
+
+    with pytest.raises(FMICallException):  # not a provided pair
+        fmu.getDirectionalDerivative([vr["in_contact"]], [vr["x"]], [1.0])
+    fmu.freeInstance()
+    assert md.modelExchange.providesDirectionalDerivative and md.coSimulation.providesDirectionalDerivative
+    # FMI 3: the same partials through fmi3GetDirectionalDerivative, in co-simulation at the start point
+    md3 = read_model_description(str(plant_fmi3))
+    with zipfile.ZipFile(plant_fmi3) as z:  # FMI 3.0's attribute is plural (FMPy 0.3.32 reads the singular)
+        root = ET.fromstring(z.read("modelDescription.xml"))
+    assert {root.find(tag).get("providesDirectionalDerivatives") for tag in ("ModelExchange", "CoSimulation")} == {
+        "true"}
+    cs = FMU3Slave(guid=md3.guid, unzipDirectory=extract(str(plant_fmi3), str(tmp_path / "3")),
+                   modelIdentifier=md3.coSimulation.modelIdentifier, instanceName="cs")
+    cs.instantiate()
+    cs.enterInitializationMode(startTime=0.0)
+    cs.exitInitializationMode()
+    x0 = 0.04  # x_start: in contact, d a / d x = -(1 + 2 x0 / 3)^(1/2) + the electrostatic slope (alpha ~ 1e-3)
+    assert cs.getDirectionalDerivative([vr["F_contact"], vr["a"]], [vr["x"]], [1.0]) == pytest.approx(
+        [np.sqrt(1 + 2 * x0 / 3), -np.sqrt(1 + 2 * x0 / 3)], abs=1e-2)
+    with pytest.raises(FMICallException):  # nSensitivity must be nUnknowns
+        cs.getDirectionalDerivative([vr["a"]], [vr["x"]], [1.0], nSensitivity=2)
     cs.freeInstance()

@@ -12,6 +12,8 @@
 #define ME_N_INDICATORS 3
 /* FMI 3.0 co-simulation returns early at contact loss and re-contact (model_do_step_early) */
 #define HAS_EARLY_RETURN 1
+/* fmi2/3GetDirectionalDerivative: the analytic partials of x, v, a, F_contact, F_electrostatic by x, v, U */
+#define HAS_DIRECTIONAL_DERIVATIVES 1
 
 typedef struct {
     int64_t built;  /* the kernel below is set up (after a successful fmi2ExitInitializationMode) */

@@ -463,3 +463,58 @@ void model_do_step_early(Instance *inst, State *s, double t, double h)
     }
     publish(s);
 }
+
+/* ---- directional derivatives: the analytic partials (Eq. 3 and Eq. 7 differentiated by hand) ---- */
+
+const char *const MODEL_PARTIALS = "provided: the derivatives of x, v, a, F_contact, F_electrostatic by x, v, U";
+
+/* sum k c_k x^(k-1) of a series (5) */
+static double horner_slope(const double *c, double x)
+{
+    double value = 0.0;
+    for (int k = 5; k >= 1; k--) value = value * x + k * c[k];
+    return value;
+}
+
+/* d/dx of F_contact and F_electrostatic (as vm_forces gives them) and of x'' at (t, x) */
+static void force_slopes(const VkModel *m, double t, double x, double *contact, double *electrostatic, double *accel)
+{
+    int fault = 0;
+    const double s = m->ac ? py_sin(m->Omega * t, &fault) : 0.0, c2 = m->ac ? py_cos(2.0 * m->Omega * t, &fault) : 1.0;
+    if (m->polynomial) { /* Eq. 7: F_contact G1, F_electrostatic alpha G2 + (beta s + gamma (1 - c2)) G3 */
+        const double g3 = horner_slope(m->g3, x);
+        *contact = horner_slope(m->g1, x);
+        *electrostatic = m->alpha * horner_slope(m->g2, x) + (m->beta * s + m->gamma * (1.0 - c2)) * g3;
+        *accel = -horner_slope(m->poly, x) + (m->ac ? (m->beta * s - m->gamma * c2) * g3 : 0.0);
+        return;
+    }
+    /* Eq. 3: d/dx (1 + 2x/3)^(3/2) = (1 + 2x/3)^(1/2) in contact; the electrostatic force of u = 2x/(3R) */
+    const double ind = vm_contact_indentation(x);
+    *contact = ind > 0.0 ? sqrt(ind) : 0.0;
+    const double du = 2.0 / (3.0 * m->R), u = du * x, lower = 1.0 - u, upper = 1.0 + u;
+    const double f3_slope = 2.0 * du / (lower * lower * lower);
+    *electrostatic = m->alpha * (f3_slope + 2.0 * du / (upper * upper * upper)) +
+                     (m->ac ? (m->beta * s + m->gamma * (1.0 - c2)) * f3_slope : 0.0);
+    *accel = -*contact + (m->electrostatics ? *electrostatic : 0.0);
+}
+
+int model_partial(const State *s, fmi2ValueReference unknown, fmi2ValueReference known, double *value)
+{
+    const VkPlant *p = &s->model.plant;
+    const int me = s->model.me.mode != ME_OFF;
+    const double t = me ? s->model.me.t : p->plant_t, x = me ? s->model.me.x[0] : p->out[0];
+    if (known != VR_x && known != VR_v && known != VR_U) return 0;
+    if (unknown == VR_x || unknown == VR_v) {
+        *value = known == unknown ? 1.0 : 0.0;
+        return 1;
+    }
+    if (unknown != VR_a && unknown != VR_F_contact && unknown != VR_F_electrostatic) return 0;
+    if (known == VR_v || known == VR_U) { /* a = ... - mu v + U; the forces depend on x only */
+        *value = unknown != VR_a ? 0.0 : known == VR_v ? -p->model.mu : 1.0;
+        return 1;
+    }
+    double contact, electrostatic, accel;
+    force_slopes(&p->model, t, x, &contact, &electrostatic, &accel);
+    *value = unknown == VR_a ? accel : unknown == VR_F_contact ? contact : electrostatic;
+    return 1;
+}

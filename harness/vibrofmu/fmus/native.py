@@ -82,6 +82,8 @@ _INDICATORS = (
 ME_INDICATORS = {"HertzEAOscillator": _INDICATORS, "HertzEAClosedLoop": _INDICATORS}
 # FMI 3.0 co-simulation with early return at contact loss and re-contact (config.h: HAS_EARLY_RETURN)
 EARLY_RETURN = ("HertzEAOscillator",)
+# fmi2/3GetDirectionalDerivative (config.h: HAS_DIRECTIONAL_DERIVATIVES)
+DIRECTIONAL_DERIVATIVES = ("HertzEAOscillator",)
 
 
 def with_derivative_variables(model_description: bytes) -> bytes:
@@ -344,6 +346,8 @@ def native_model_description(model_description: bytes, c_files: list[str], fmi_v
     cs.set("canGetAndSetFMUstate", "true")
     cs.set("canSerializeFMUstate", "true")
     cs.set("canNotUseMemoryManagementFunctions", "true")
+    if model_id in DIRECTIONAL_DERIVATIVES:
+        cs.set("providesDirectionalDerivative", "true")
     for old in cs.findall("SourceFiles"):
         cs.remove(old)
     files = ET.SubElement(cs, "SourceFiles")
@@ -363,7 +367,8 @@ def _add_model_exchange(root, cs, model_id: str, c_files: list[str]) -> None:
     me = ET.Element("ModelExchange", modelIdentifier=model_id, needsExecutionTool="false",
                     completedIntegratorStepNotNeeded="true", canBeInstantiatedOnlyOncePerProcess="false",
                     canNotUseMemoryManagementFunctions="true", canGetAndSetFMUstate="true",
-                    canSerializeFMUstate="true", providesDirectionalDerivative="false")
+                    canSerializeFMUstate="true",
+                    providesDirectionalDerivative=str(model_id in DIRECTIONAL_DERIVATIVES).lower())
     files = ET.SubElement(me, "SourceFiles")
     for name in c_files:
         ET.SubElement(files, "File", name=name)
@@ -410,7 +415,8 @@ def fmi3_model_description(model_description: bytes, c_files: list[str]) -> byte
                       variableNamingConvention=old.get("variableNamingConvention", "flat"))
     common = {"modelIdentifier": model_id, "needsExecutionTool": "false",
               "canBeInstantiatedOnlyOncePerProcess": "false", "canGetAndSetFMUState": "true",
-              "canSerializeFMUState": "true", "providesDirectionalDerivatives": "false"}
+              "canSerializeFMUState": "true",
+              "providesDirectionalDerivatives": str(model_id in DIRECTIONAL_DERIVATIVES).lower()}
     if has_me:
         ET.SubElement(root, "ModelExchange", **common, needsCompletedIntegratorStep="false")
     early = "true" if model_id in EARLY_RETURN else "false"  # model_do_step_early
