@@ -349,6 +349,9 @@ static fmi2Status get_values(Instance *I, const fmi2ValueReference vr[], size_t 
             out[i] = 0.0;
             native_error(I, "%s of %s in the initialization mode state: %s", call, VARIABLES[vr[i]].name, why);
         } else {
+#ifdef MODEL_LAZY_LOCALS
+            if (VARIABLES[vr[i]].causality == C_LOCAL) model_lazy_locals(&I->s); /* me_model.h */
+#endif
             out[i] = I->s.value[vr[i]];
             continue;
         }

@@ -22,6 +22,7 @@ typedef struct {
     double event_t;
     double reached;                /* the time the last doStep reached */
     int64_t step_event;            /* it ended on an event (early when reached < t + h) */
+    int64_t locals_stale;          /* the locals computed on demand (model_lazy_locals) need computing */
 } MeData;
 
 #endif

@@ -35,6 +35,12 @@ int model_me_event(Instance *inst, State *s, int *terminate);
 void model_do_step_early(Instance *inst, State *s, double t, double h);
 #endif
 
+#ifdef MODEL_LAZY_LOCALS
+/* Before a local variable is read (fmi2_native.c's getter): the locals the model computes on demand brought up to
+   date (the closed loop's der(...): one right-hand side, only when read). */
+void model_lazy_locals(State *s);
+#endif
+
 #ifdef HAS_DIRECTIONAL_DERIVATIVES
 /* The partial derivative d(unknown)/d(known) at the current point (Model Exchange: the states and time set; co-
    simulation: the last communication point): 1 with *value, or 0 when the FMU does not provide that pair. */

@@ -16,6 +16,7 @@ from fmpy.validation import validate_fmu
 
 from vibromodel.parameters import Scene
 from vibrofmu.analyses.reference import reference_solution
+from vibrofmu.hosts.run import FmuLog
 
 pytestmark = pytest.mark.fmu
 
@@ -159,13 +160,16 @@ def _logger():
 
 
 def test_model_exchange_bad_calls_are_errors(native_plant_fmu, tmp_path):
+    # FMPy's FMI 2 logger is a process-wide proxy: without a live logger of its own, an instance that logs after
+    # another test's logger was collected calls freed memory (hosts.run.FmuLog keeps its callback alive)
+    log = FmuLog()
     from fmpy.fmi1 import FMICallException
 
     md = read_model_description(str(native_plant_fmu))
     folder = extract(str(native_plant_fmu), str(tmp_path / "u"))
     fmu = FMU2Model(guid=md.guid, unzipDirectory=folder, modelIdentifier=md.modelExchange.modelIdentifier,
                     instanceName="me")
-    fmu.instantiate()
+    fmu.instantiate(callbacks=log.callbacks)
     with pytest.raises(FMICallException):  # before initialisation
         fmu.getDerivatives((ctypes.c_double * 2)(), 2)
     fmu.reset()
@@ -205,12 +209,14 @@ def test_model_exchange_bad_calls_are_errors(native_plant_fmu, tmp_path):
     fmu.freeInstance()
     cs = FMU2Slave(guid=md.guid, unzipDirectory=folder, modelIdentifier=md.coSimulation.modelIdentifier,
                    instanceName="cs")
-    cs.instantiate()
+    cs.instantiate(callbacks=log.callbacks)
     cs.setupExperiment(startTime=0.0)
     cs.enterInitializationMode()
     cs.exitInitializationMode()
     assert cs.dll.fmi2GetDerivatives(ctypes.c_void_p(cs.component), (ctypes.c_double * 2)(), 2) > 0  # a CS instance
     cs.freeInstance()
+    assert any("fmi2SetContinuousStates is not allowed in event mode" in m for m in log.errors())
+    assert any("instantiated for Co-Simulation" in m for m in log.errors())
 
 
 def test_fmi3_bad_calls_are_errors(plant_fmi3, tmp_path):
@@ -288,6 +294,15 @@ def test_closed_loop_model_exchange_runs_under_cvode(native_closed_loop_fmu):
     for name in CLOSED_LOOP_OUT:
         assert np.max(np.abs(me[name] - cs[name])) <= bound[name], name
     assert np.ptp(me["mu_hat"]) > 0.0  # the estimates move
+    # in co-simulation der(v), der(mu_hat) are computed when read: the slopes of v, mu_hat (central differences at
+    # h = 0.01: h^2/6 times the third derivative <= 2e-5 where it is <= 1; the outputs' own error 10 rtol / h
+    # <= 1e-5)
+    fine = simulate_fmu(str(native_closed_loop_fmu), stop_time=2.0, output_interval=0.01,
+                        output=["v", "der(v)", "mu_hat", "der(mu_hat)"])
+    for name in ("v", "mu_hat"):
+        slope = np.gradient(fine[name], 0.01)[1:-1]
+        assert np.max(np.abs(fine[f"der({name})"][1:-1] - slope)) <= 1e-4, name
+        assert np.max(np.abs(slope)) > 1e-4  # not trivially zero
 
 
 @pytest.mark.slow
@@ -321,10 +336,13 @@ def test_fmi3_cosimulation_of_the_other_models(name, request, tmp_path):
 def test_fmu_state_holds_the_model_exchange_and_fmi3_state(native_plant_fmu, plant_fmi3, tmp_path):
     """FMI 2 ME: a state taken in continuous-time mode (and serialized) brings back the states and time it had; FMI
     3 CS with early return: a step redone from a restored (serialized) state gives the same bits."""
+    # FMPy's FMI 2 logger is a process-wide proxy: without a live logger of its own, an instance that logs after
+    # another test's logger was collected calls freed memory (hosts.run.FmuLog keeps its callback alive)
+    log = FmuLog()
     md = read_model_description(str(native_plant_fmu))
     fmu = FMU2Model(guid=md.guid, unzipDirectory=extract(str(native_plant_fmu), str(tmp_path / "2")),
                     modelIdentifier=md.modelExchange.modelIdentifier, instanceName="me")
-    fmu.instantiate()
+    fmu.instantiate(callbacks=log.callbacks)
     fmu.setupExperiment(startTime=0.0)
     fmu.enterInitializationMode()
     fmu.exitInitializationMode()
@@ -344,6 +362,7 @@ def test_fmu_state_holds_the_model_exchange_and_fmi3_state(native_plant_fmu, pla
     assert fmu.getReal([vrs["a"]])[0] == dx[1]  # the output a is the derivative of v, at the restored time
     fmu.freeFMUstate(state)
     fmu.freeInstance()
+    assert log.errors() == []
 
     md3 = read_model_description(str(plant_fmi3))
     cs = FMU3Slave(guid=md3.guid, unzipDirectory=extract(str(plant_fmi3), str(tmp_path / "3")),
@@ -371,11 +390,14 @@ def test_directional_derivatives_are_the_finite_differences(native_plant_fmu, pl
     contact and one in free flight) against central differences of the outputs with h = 1e-5. Bound 1e-8: the
     truncation h^2/6 max|f'''| <= 2e-11 (f''' of the Hertz law is (1 + 2x/3)^(-3/2)/... <= 2 here, the electrostatic
     terms are ~alpha), the rounding 2 eps max|f| / h <= 1e-10 for |f| <= 2; a wrong slope is off by O(0.1)."""
+    # FMPy's FMI 2 logger is a process-wide proxy: without a live logger of its own, an instance that logs after
+    # another test's logger was collected calls freed memory (hosts.run.FmuLog keeps its callback alive)
+    log = FmuLog()
     md = read_model_description(str(native_plant_fmu))
     vr = {v.name: v.valueReference for v in md.modelVariables}
     fmu = FMU2Model(guid=md.guid, unzipDirectory=extract(str(native_plant_fmu), str(tmp_path / "2")),
                     modelIdentifier=md.modelExchange.modelIdentifier, instanceName="me")
-    fmu.instantiate()
+    fmu.instantiate(callbacks=log.callbacks)
     fmu.setupExperiment(startTime=0.0)
     fmu.setReal([vr["R"], vr["alpha"], vr["beta"], vr["gamma"]], [2.0, 0.05, 0.02, 0.03])  # electrostatics visible
     fmu.setInteger([vr["fidelity"]], [fidelity])
@@ -405,6 +427,9 @@ def test_directional_derivatives_are_the_finite_differences(native_plant_fmu, pl
     with pytest.raises(FMICallException):  # not a provided pair
         fmu.getDirectionalDerivative([vr["in_contact"]], [vr["x"]], [1.0])
     fmu.freeInstance()
+    assert log.errors() == [f"[error] fmi2GetDirectionalDerivative: the derivative of valueReference {vr['in_contact']} "
+                            f"by valueReference {vr['x']} is not provided (provided: the derivatives of x, v, a, "
+                            "F_contact, F_electrostatic by x, v, U)"]
     assert md.modelExchange.providesDirectionalDerivative and md.coSimulation.providesDirectionalDerivative
     # FMI 3: the same partials through fmi3GetDirectionalDerivative, in co-simulation at the start point
     md3 = read_model_description(str(plant_fmi3))

@@ -11,6 +11,8 @@
    lower gap */
 #define ME_N_STATES VL_DIM
 #define ME_N_INDICATORS 3
+/* der(v), der(theta^_i) are computed when read (model_lazy_locals) */
+#define MODEL_LAZY_LOCALS 1
 
 typedef struct {
     int64_t built;      /* the loop below is set up (after a successful fmi2ExitInitializationMode) */

@@ -110,9 +110,21 @@ static void publish_derivatives(State *s, double t, const double *y)
 static void publish(State *s)
 {
     for (int i = 0; i < VL_OUTPUTS; i++) s->value[OUTPUT_VRS[i]] = s->model.loop.out[i];
+    s->model.me.locals_stale = 1; /* der(...) when read: model_lazy_locals */
+}
+
+/* der(v), der(theta^_i) at the current point (co-simulation: the last communication point; Model Exchange: the
+   states and time set), computed when a local is read after the point changed */
+void model_lazy_locals(State *s)
+{
+    if (!s->model.me.locals_stale || !s->model.built) return;
     double y[VL_DIM];
-    state_of_outputs(&s->model.loop, y);
-    publish_derivatives(s, s->model.loop.t, y);
+    const int me = s->model.me.mode != ME_OFF;
+    if (me) memcpy(y, s->model.me.x, sizeof y);
+    else state_of_outputs(&s->model.loop, y);
+    point_reference(s);
+    publish_derivatives(s, me ? s->model.me.t : s->model.loop.t, y);
+    s->model.me.locals_stale = 0;
 }
 
 /* The pending error as the Python slave reports it (CompiledClosedLoop._raise_pending, StatusSlave). */
@@ -298,7 +310,7 @@ int model_me_outputs(Instance *inst, State *s)
     if (vl_outputs_at(l, me->t, me->x, out) != 0)
         for (int i = 0; i < VL_OUTPUTS; i++) out[i] = NAN; /* a getter refuses them (fmi2Error naming one) */
     for (int i = 0; i < VL_OUTPUTS; i++) s->value[OUTPUT_VRS[i]] = out[i];
-    publish_derivatives(s, me->t, me->x);
+    s->model.me.locals_stale = 1; /* der(...) when read: model_lazy_locals */
     return 0;
 }
 
