@@ -63,6 +63,8 @@ static inline VkSolverSlots slots_of(VlLoop *l)
 static const VkRhs LOOP_RHS = {loop_rhs, NULL, 0, NULL};
 static inline const VkSolverOps *ops_of(const VlLoop *l) { return vk_solvers[l->solver]; }
 
+int vl_rhs(const VlLoop *l, double t, const double *y, double *f) { return loop_rhs((void *)l, t, y, f); }
+
 int vl_outputs_at(const VlLoop *l, double t, const double *y, double *out)
 {
     const VcController *c = &l->controller;

@@ -68,6 +68,9 @@ int vl_do_step(VlLoop *l, double t, double h);
 /* ClosedLoop.outputs: the state at t (dense output or RK4's state), its outputs into out[] when all are finite;
    0 or a pending code. */
 int vl_publish(VlLoop *l);
+/* The loop's right-hand side f = (v, x'', theta^') at (t, y) (what the solvers integrate; the native FMU's Model
+   Exchange derivatives): 0 or the fault Python raises. */
+int vl_rhs(const VlLoop *l, double t, const double *y, double *f);
 /* ClosedLoop.outputs_at(t, x, v, theta^) into out[0..VL_OUTPUTS-1]: 0 or the fault Python raises (nothing pending). */
 int vl_outputs_at(const VlLoop *l, double t, const double *y, double *out);
 

@@ -12,6 +12,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "me_model.h"
 #include "pytext.h"
 #include "rules.h"
 
@@ -24,6 +25,8 @@
 struct Instance {
     Fmi2Layer fmi; /* callbacks, name, logging, error mode (FMI2_MODE_ERROR: a state-changing call ended in fmi2Error) */
     State s;
+    int model_exchange; /* instantiated as fmi2ModelExchange (fmi2_me.c) */
+    int early_return;   /* FMI 3.0 co-simulation with early return (fmi3_native.c): doStep is model_do_step_early */
 };
 
 /* The serialized FMU state: this header, then the State's bytes. */
@@ -86,6 +89,9 @@ void native_halt_parameter(Instance *inst, const char *name, double value, int i
 
 int native_logging_on(const Instance *inst) { return inst->fmi.logging_on; }
 State *native_state(Instance *inst) { return &inst->s; }
+Fmi2Layer *native_layer(Instance *inst) { return &inst->fmi; }
+int native_model_exchange(const Instance *inst) { return inst->model_exchange; }
+void native_set_early_return(Instance *inst, int on) { inst->early_return = on != 0; }
 
 /* ---- the FMI 2.0 state machine: the state table (fmi2_calls.h) read by fmi2_layer.c ---- */
 
@@ -231,8 +237,14 @@ EXPORT fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, 
     Instance *inst = calloc(1, sizeof *inst);
     if (inst == NULL) return NULL;
     if (!fmi2_layer_init(&inst->fmi, instanceName, functions, loggingOn)) { free(inst); return NULL; }
+#ifdef ME_N_STATES
+    inst->model_exchange = fmuType == fmi2ModelExchange;
+    if (fmuType != fmi2CoSimulation && fmuType != fmi2ModelExchange) {
+        native_log(inst, fmi2Error, "fmuType = %d: must be fmi2ModelExchange or fmi2CoSimulation", (int)fmuType);
+#else
     if (fmuType != fmi2CoSimulation) {
         native_log(inst, fmi2Error, "%s is a co-simulation FMU: fmuType must be fmi2CoSimulation", MODEL_IDENTIFIER);
+#endif
         fmi2_layer_free(&inst->fmi);
         free(inst);
         return NULL;
@@ -286,6 +298,9 @@ EXPORT fmi2Status fmi2ExitInitializationMode(fmi2Component c)
         I->s.halted = 0;
         I->s.halt_message[0] = '\0';
         model_initialise(I, &I->s);
+#ifdef ME_N_STATES
+        if (I->model_exchange && !I->s.halted) model_me_start(I, &I->s);
+#endif
     }
     return settle(I, 0);
 }
@@ -334,6 +349,9 @@ static fmi2Status get_values(Instance *I, const fmi2ValueReference vr[], size_t 
             out[i] = 0.0;
             native_error(I, "%s of %s in the initialization mode state: %s", call, VARIABLES[vr[i]].name, why);
         } else {
+#ifdef MODEL_LAZY_LOCALS
+            if (VARIABLES[vr[i]].causality == C_LOCAL) model_lazy_locals(&I->s); /* me_model.h */
+#endif
             out[i] = I->s.value[vr[i]];
             continue;
         }
@@ -492,6 +510,10 @@ EXPORT fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolea
         return settle(I, 0);
     }
     if (!PHASE_ALLOWS(I, fmi2DoStep)) return settle(I, 0);
+    if (I->model_exchange) {
+        native_error(I, "fmi2DoStep: this instance was instantiated for Model Exchange (no doStep)");
+        return settle(I, 0);
+    }
     if (I->s.has_stop) {
         const double stop = I->s.stop_time, end = stop + STOP_TIME_TOLERANCE * fmax(1.0, fabs(stop));
         if (isfinite(t) && isfinite(h) && t <= end && end < t + h) {
@@ -509,6 +531,12 @@ EXPORT fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolea
         native_error(I, "doStep refused: %s", I->s.halt_message);
         return settle(I, 0);
     }
+#ifdef HAS_EARLY_RETURN
+    if (I->early_return) {
+        model_do_step_early(I, &I->s, t, h);
+        return settle(I, 0);
+    }
+#endif
     model_do_step(I, &I->s, t, h);
     return settle(I, 0);
 }
@@ -621,6 +649,9 @@ EXPORT fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueR
                                                const fmi2Real dvK[], fmi2Real dvU[])
 {
     INST(c); ALLOWED(fmi2GetDirectionalDerivative);
+#ifdef HAS_DIRECTIONAL_DERIVATIVES
+    return native_directional_derivative(I, vU, nU, vK, nK, dvK, dvU); /* fmi2_me.c */
+#endif
     (void)vU; (void)nU; (void)vK; (void)nK; (void)dvK; (void)dvU;
     native_log(I, fmi2Error, "fmi2GetDirectionalDerivative is not provided (providesDirectionalDerivative=false)");
     return fmi2Error;

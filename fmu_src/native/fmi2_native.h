@@ -66,6 +66,11 @@ void native_halt(Instance *inst, const char *format, ...);
 void native_halt_parameter(Instance *inst, const char *name, double value, int integer, const char *reason);
 int native_logging_on(const Instance *inst);
 State *native_state(Instance *inst);
+Fmi2Layer *native_layer(Instance *inst);
+/* instantiated as fmi2ModelExchange */
+int native_model_exchange(const Instance *inst);
+/* FMI 3.0 co-simulation with early return: fmi2DoStep steps with model_do_step_early (me_model.h) */
+void native_set_early_return(Instance *inst, int on);
 
 /* ---- provided by each model (native_model.c) ---- */
 /* After the generic start values are in value[]: the model's own defaults. */

@@ -14,7 +14,7 @@ import pytest
 
 from vibrofmu import paths
 from vibrofmu.fmus import fmi_calls, native, toolchain
-from vibrofmu.speed import instructions, ladder
+from vibrofmu.speed import instructions, ladder, native_timing
 
 FMU_SRC = paths.FMU_SRC
 STRICT = ("-fsyntax-only", "-Werror")
@@ -35,7 +35,8 @@ def units():
             for path in (FMU_SRC / "fmi2_status_shim.c", FMU_SRC / "pyloader.c", FMU_SRC / "fmi" / "fmi2_layer.c")]
     hosts = [(path.name, toolchain.HOST, toolchain.host_includes(), path, ())
              for path in (paths.C_HOST_DIR / "fmi2_host.c", paths.C_HOST_DIR / "instance_cycles.c",
-                          ladder.TIMING_HOST_SOURCE, instructions.FLOOR_DRIVER_SOURCE)]
+                          ladder.TIMING_HOST_SOURCE, instructions.FLOOR_DRIVER_SOURCE,
+                          native_timing.FMI_VERSIONS_HOST_SOURCE)]
     return core + shim + hosts
 
 
@@ -57,13 +58,14 @@ def test_compiles_without_warnings(unit):
 
 
 @pytest.mark.fmu
+@pytest.mark.parametrize("fmi_version", (2, 3))
 @pytest.mark.parametrize("which", ("plant", "controller", "closed_loop"))
-def test_native_fmu_sources_compile_without_warnings(request, which, tmp_path):
+def test_native_fmu_sources_compile_without_warnings(request, which, fmi_version, tmp_path):
     with zipfile.ZipFile(request.getfixturevalue(f"{which}_fmu")) as fmu:
         md = fmu.read("modelDescription.xml")
     model_id = {"plant": "HertzEAOscillator", "controller": "AdaptiveLyapunovController",
                 "closed_loop": "HertzEAClosedLoop"}[which]
-    c_files = native.write_sources(model_id, md, tmp_path)
+    c_files = native.write_sources(model_id, md, tmp_path, fmi_version)
     for name in c_files:
         code, output = compile_errors(toolchain.NATIVE_LINUX64, [f"-I{tmp_path}", toolchain.fmi_include()],
                                       tmp_path / name)

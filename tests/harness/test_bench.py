@@ -285,3 +285,17 @@ def test_ladder_has_every_rung_in_both_hosts_with_its_error_and_the_acceptance_r
     assert "instructions per output: not measured: not requested" in stdout
     image = matplotlib.image.imread(out / "ladder.png")
     assert image.ndim == 3 and image.shape[0] > 200 and image.shape[1] > 600
+
+
+def test_fmi_versions_are_measured_side_by_side_and_printed(quick):
+    """Issue 23: the native plant's FMI 3 CS cost per output beside FMI 2 CS's (C host, interleaved rounds), with and
+    without early return, and ME under FMPy's CVode beside CS; ratios recomputable from the record, and printed."""
+    summary, stdout, _, _ = quick
+    cs, me = summary["fmi_versions"]["cosimulation"], summary["fmi_versions"]["model_exchange"]
+    per = cs["per_output_s"]
+    assert set(per) == {"fmi2", "fmi3", "fmi3er"} and all(0.0 < v < 1e-3 for v in per.values())
+    assert cs["fmi3_over_fmi2"] == pytest.approx(per["fmi3"] / per["fmi2"])
+    assert cs["fmi3_early_return_over_fmi2"] == pytest.approx(per["fmi3er"] / per["fmi2"])
+    assert cs["met"] == (cs["fmi3_over_fmi2"] <= cs["limit"] == 1.1)
+    assert me["me_over_cs"] == pytest.approx(me["per_output_s"]["me_cvode"] / me["per_output_s"]["cs"])
+    assert "FMI 3 CS / FMI 2 CS per output" in stdout and "ME (FMPy CVode) / CS (FMPy) per output" in stdout

@@ -15,7 +15,10 @@
 #include "controller_setup.h"
 #include "fidelity.h"
 #include "fmi2_native.h"
+#include "me_model.h"
+#include "plant.h"
 #include "plant_setup.h"
+#include "pyfloat.h"
 #include "pytext.h"
 #include "reference.h"
 #include "rules.h"
@@ -83,9 +86,45 @@ static int find_reference(Instance *inst, const State *s)
     return -1;
 }
 
+/* The Model Exchange derivative variables der(v), der(theta^_i) (with_derivative_variables, native.py) */
+static const fmi2ValueReference DERIVATIVE_VRS[VL_DIM - 1] = {
+    VR_der_v_, VR_der_mu_hat_, VR_der_a1_hat_, VR_der_a2_hat_, VR_der_a3_hat_, VR_der_a4_hat_, VR_der_a5_hat_,
+    VR_der_Delta_hat_, VR_der_beta_hat_, VR_der_gamma_hat_};
+
+/* The state y = (x, v, theta^) behind the outputs */
+static void state_of_outputs(const VlLoop *l, double *y)
+{
+    y[0] = l->out[0];
+    y[1] = l->out[1];
+    memcpy(y + 2, l->out + 9, VC_N * sizeof(double));
+}
+
+/* der(v), der(theta^_i) at (t, y) into value[] (NaN where the right-hand side faults: a getter refuses it) */
+static void publish_derivatives(State *s, double t, const double *y)
+{
+    double f[VL_DIM];
+    int fault = vl_rhs(&s->model.loop, t, y, f);
+    for (int i = 1; i < VL_DIM; i++) s->value[DERIVATIVE_VRS[i - 1]] = fault ? NAN : f[i];
+}
+
 static void publish(State *s)
 {
     for (int i = 0; i < VL_OUTPUTS; i++) s->value[OUTPUT_VRS[i]] = s->model.loop.out[i];
+    s->model.me.locals_stale = 1; /* der(...) when read: model_lazy_locals */
+}
+
+/* der(v), der(theta^_i) at the current point (co-simulation: the last communication point; Model Exchange: the
+   states and time set), computed when a local is read after the point changed */
+void model_lazy_locals(State *s)
+{
+    if (!s->model.me.locals_stale || !s->model.built) return;
+    double y[VL_DIM];
+    const int me = s->model.me.mode != ME_OFF;
+    if (me) memcpy(y, s->model.me.x, sizeof y);
+    else state_of_outputs(&s->model.loop, y);
+    point_reference(s);
+    publish_derivatives(s, me ? s->model.me.t : s->model.loop.t, y);
+    s->model.me.locals_stale = 0;
 }
 
 /* The pending error as the Python slave reports it (CompiledClosedLoop._raise_pending, StatusSlave). */
@@ -219,4 +258,82 @@ int model_initial_output(const State *s, fmi2ValueReference vr, double *value, c
     (void)why; (void)size;
     *value = s->value[vr];
     return 1;
+}
+
+/* ---- Model Exchange (me_model.h): states (x, v, theta^), derivatives vl_rhs, the solvers' events as indicators ---- */
+
+void model_me_start(Instance *inst, State *s)
+{
+    (void)inst;
+    MeData *me = &s->model.me;
+    me->mode = ME_EVENT_MODE;
+    me->stopped = 0;
+    me->t = s->model.loop.t;
+    state_of_outputs(&s->model.loop, me->x);
+}
+
+int model_me_derivatives(Instance *inst, State *s, double *dx)
+{
+    const MeData *me = &s->model.me;
+    point_reference(s);
+    int fault = vl_rhs(&s->model.loop, me->t, me->x, dx);
+    for (int i = 0; !fault && i < VL_DIM; i++)
+        if (!isfinite(dx[i])) fault = FAULT_OVERFLOW;
+    if (!fault) return 0;
+    char text[128], tt[64], xt[64];
+    py_fault_text(fault, text, sizeof text);
+    native_repr(me->t, tt, sizeof tt);
+    native_repr(me->x[0], xt, sizeof xt);
+    native_error(inst, "fmi2GetDerivatives: at tau = %s, x = %s: %s; the state is beyond the model's numerical "
+                 "range", tt, xt, text);
+    return 1;
+}
+
+void model_me_indicators(const State *s, double *z)
+{
+    const VlLoop *l = &s->model.loop;
+    double y[VL_DIM];
+    if (s->model.me.mode != ME_OFF) memcpy(y, s->model.me.x, sizeof y);
+    else state_of_outputs(l, y);
+    z[0] = vm_contact_indentation(y[0]);
+    z[1] = z[2] = 1.0; /* the polynomial models have no pull-in events (none in co-simulation either) */
+    for (int i = 1; i < l->dop.n_events && i < ME_N_INDICATORS; i++) z[i] = dop_event_g(&l->dop, i, y);
+}
+
+int model_me_outputs(Instance *inst, State *s)
+{
+    (void)inst;
+    VlLoop *l = &s->model.loop;
+    const MeData *me = &s->model.me;
+    double out[VL_OUTPUTS];
+    point_reference(s);
+    if (vl_outputs_at(l, me->t, me->x, out) != 0)
+        for (int i = 0; i < VL_OUTPUTS; i++) out[i] = NAN; /* a getter refuses them (fmi2Error naming one) */
+    for (int i = 0; i < VL_OUTPUTS; i++) s->value[OUTPUT_VRS[i]] = out[i];
+    s->model.me.locals_stale = 1; /* der(...) when read: model_lazy_locals */
+    return 0;
+}
+
+/* The contact changes are events for the host's solver only (the force has a kink there; nothing discrete
+   changes); pull-in stops the simulation (terminateSimulation, logged as the co-simulation's message). */
+int model_me_event(Instance *inst, State *s, int *terminate)
+{
+    const MeData *me = &s->model.me;
+    double z[ME_N_INDICATORS];
+    model_me_indicators(s, z);
+    for (int i = 1; i < ME_N_INDICATORS; i++) {
+        if (z[i] > 0.0) continue;
+        DopReport r;
+        memset(&r, 0, sizeof r);
+        r.t = me->t;
+        r.y[0] = me->x[0];
+        r.y[1] = me->x[1];
+        r.event = i;
+        char text[VL_MESSAGE];
+        vk_solver_message(&s->model.loop.model, DOP_TERMINAL, &r, text, sizeof text);
+        native_log(inst, fmi2Warning, "simulation stopped: %s (terminateSimulation)", text);
+        *terminate = 1;
+        return 0;
+    }
+    return 0;
 }

@@ -2,14 +2,23 @@
 #ifndef HERTZEA_OSCILLATOR_CONFIG_H
 #define HERTZEA_OSCILLATOR_CONFIG_H
 
+#include "me_data.h" /* Model Exchange and early return (me_model.h) */
 #include "plant.h"  /* fmu_src/core: the compiled plant */
 
 #define MODEL_IDENTIFIER "HertzEAOscillator"
-#define STATE_FORMAT "HertzEAOscillator native state 3"
+#define STATE_FORMAT "HertzEAOscillator native state 4"
+/* Model Exchange (fmi2_me.c, me_model.h): states (x, v); event indicators contact 1 + 2x/3, upper gap, lower gap */
+#define ME_N_STATES 2
+#define ME_N_INDICATORS 3
+/* FMI 3.0 co-simulation returns early at contact loss and re-contact (model_do_step_early) */
+#define HAS_EARLY_RETURN 1
+/* fmi2/3GetDirectionalDerivative: the analytic partials of x, v, a, F_contact, F_electrostatic by x, v, U */
+#define HAS_DIRECTIONAL_DERIVATIVES 1
 
 typedef struct {
     int64_t built;  /* the kernel below is set up (after a successful fmi2ExitInitializationMode) */
     VkPlant plant;  /* the compiled plant: model, integrator, outputs (no pointers) */
+    MeData me;      /* Model Exchange, early return */
 } ModelData;
 
 #endif

@@ -14,6 +14,7 @@
 
 #include "fidelity.h"
 #include "fmi2_native.h"
+#include "me_model.h"
 #include "plant_setup.h"
 #include "pyfloat.h"
 #include "pytext.h"
@@ -28,8 +29,12 @@ static const fmi2ValueReference OUTPUT_VRS[5] = {VR_x, VR_v, VR_a, VR_F_contact,
 
 void model_instantiate(State *s) { memset(&s->model, 0, sizeof s->model); }
 
-/* U is read by the next doStep (the plant holds it over the step). */
-void model_input_set(Instance *inst, State *s, fmi2ValueReference vr) { (void)inst; (void)s; (void)vr; }
+/* U is read by the next doStep (the plant holds it over the step); in Model Exchange the outputs follow it. */
+void model_input_set(Instance *inst, State *s, fmi2ValueReference vr)
+{
+    (void)vr;
+    if (s->model.me.mode != ME_OFF) model_me_outputs(inst, s);
+}
 
 /* ---- parameter checks (vibromodel.parameters.validate, plant.Settings.validate, OafmSettings.validate) ---- */
 
@@ -161,6 +166,8 @@ void model_initialise(Instance *inst, State *s)
 
 /* ---- doStep ---- */
 
+static void step_failed(Instance *inst, State *s, int code, double t, double h);
+
 void model_do_step(Instance *inst, State *s, double t, double h)
 {
     VkPlant *p = &s->model.plant;
@@ -178,6 +185,14 @@ void model_do_step(Instance *inst, State *s, double t, double h)
         publish(s);
         return;
     }
+    step_failed(inst, s, code, t, h);
+}
+
+/* A doStep's failure (code) as the Python slave reports it */
+static void step_failed(Instance *inst, State *s, int code, double t, double h)
+{
+    VkPlant *p = &s->model.plant;
+    const double U = s->value[VR_U];
     char a[64], b[64], message[VK_MESSAGE + 64], what[VK_MESSAGE + 64];
     switch (code) { /* plant.check_step's ParameterErrors */
     case VK_BAD_STEP:
@@ -269,5 +284,237 @@ int model_initial_output(const State *s, fmi2ValueReference vr, double *value, c
         return 1;
     }
     *value = s->value[vr];
+    return 1;
+}
+
+/* ---- Model Exchange (me_model.h): states (x, v), derivatives (v, x''), the solvers' events as indicators ---- */
+
+enum { CONTACT_EVENT = 0 }; /* vk_set_events' order: contact, upper gap, lower gap */
+
+void model_me_start(Instance *inst, State *s)
+{
+    (void)inst;
+    MeData *me = &s->model.me;
+    me->mode = ME_EVENT_MODE;
+    me->stopped = 0;
+    me->t = s->model.plant.plant_t;
+    me->x[0] = s->value[VR_x];
+    me->x[1] = s->value[VR_v];
+}
+
+int model_me_derivatives(Instance *inst, State *s, double *dx)
+{
+    const MeData *me = &s->model.me;
+    int fault;
+    dx[0] = me->x[1];
+    dx[1] = vm_accel(&s->model.plant.model, me->t, me->x[0], me->x[1], s->value[VR_U], &fault);
+    if (!fault && isfinite(dx[1])) return 0;
+    char text[128], tt[64], xt[64];
+    if (fault) py_fault_text(fault, text, sizeof text);
+    else snprintf(text, sizeof text, "x'' = %g is not finite", dx[1]);
+    native_repr(me->t, tt, sizeof tt);
+    native_repr(me->x[0], xt, sizeof xt);
+    native_error(inst, "fmi2GetDerivatives: at tau = %s, x = %s: %s; the state is beyond the model's numerical "
+                 "range", tt, xt, text);
+    return 1;
+}
+
+/* contact 1 + 2x/3 (> 0 in contact), the upper and lower gaps' pull-in margins (<= 0: pull-in): the DOP853
+   events g = c0 + c x of vk_set_events; the polynomial models (Eq. 7) have no pull-in events (none in
+   co-simulation either): their margins are the constant 1 */
+void model_me_indicators(const State *s, double *z)
+{
+    const VkPlant *p = &s->model.plant;
+    const double *y = s->model.me.mode != ME_OFF ? s->model.me.x : p->out;
+    z[0] = vm_contact_indentation(y[0]);
+    z[1] = z[2] = 1.0;
+    for (int i = 1; i < p->dop.n_events && i < ME_N_INDICATORS; i++) z[i] = dop_event_g(&p->dop, i, y);
+}
+
+int model_me_outputs(Instance *inst, State *s)
+{
+    (void)inst;
+    VkPlant *p = &s->model.plant;
+    const MeData *me = &s->model.me;
+    double fc, fe, a = NAN;
+    int fault = vm_forces(&p->model, me->t, me->x[0], &fc, &fe);
+    if (fault) fc = fe = NAN;
+    else a = vm_accel(&p->model, me->t, me->x[0], me->x[1], s->value[VR_U], &fault);
+    s->value[VR_x] = me->x[0];
+    s->value[VR_v] = me->x[1];
+    s->value[VR_a] = fault ? NAN : a; /* a getter refuses a non-finite value (fmi2Error naming it) */
+    s->value[VR_F_contact] = fc;
+    s->value[VR_F_electrostatic] = fe;
+    return 0;
+}
+
+/* in_contact at an event.  Within CONTACT_BAND of the contact surface (where a located root lies, a rounding of
+   the host's solver on either side) the direction of motion decides: moving in (x' > 0) closes the contact, moving
+   out opens it, so a root located a rounding short still switches the flag; x' = 0 there is a graze (the indicator
+   touches 0 without changing sign: a contact of zero length), which leaves the flag as it was.  Elsewhere the sign
+   of 1 + 2x/3.  The flag changes only here (a discrete variable), so it cannot chatter in continuous-time mode. */
+#define CONTACT_BAND 1e-8
+
+int model_me_event(Instance *inst, State *s, int *terminate)
+{
+    const MeData *me = &s->model.me;
+    const VkPlant *p = &s->model.plant;
+    double z[ME_N_INDICATORS];
+    model_me_indicators(s, z);
+    int in_contact = s->value[VR_in_contact] != 0.0;
+    if (fabs(z[CONTACT_EVENT]) > CONTACT_BAND) in_contact = z[CONTACT_EVENT] > 0.0;
+    else if (me->x[1] != 0.0) in_contact = me->x[1] > 0.0;
+    s->value[VR_in_contact] = in_contact;
+    for (int i = 1; i < ME_N_INDICATORS; i++) {
+        if (z[i] > 0.0) continue;
+        DopReport r; /* the co-simulation's pull-in message (vk_solver_message) */
+        memset(&r, 0, sizeof r);
+        r.t = me->t;
+        r.y[0] = me->x[0];
+        r.y[1] = me->x[1];
+        r.event = i;
+        char text[VK_MESSAGE];
+        vk_solver_message(&p->model, DOP_TERMINAL, &r, text, sizeof text);
+        native_log(inst, fmi2Warning, "simulation stopped: %s (terminateSimulation)", text);
+        *terminate = 1;
+        return 0;
+    }
+    return 0;
+}
+
+/* ---- FMI 3.0 co-simulation with early return ---- */
+
+/* plant.check_step's pre-checks (as vk_do_step makes them; nothing changes when one refuses) */
+static int step_checks(VkPlant *p, double t, double h)
+{
+    if (!(isfinite(h) && h > 0.0)) return VK_BAD_STEP;
+    if (!isfinite(p->U_input)) return VK_BAD_INPUT;
+    if (h / vk_step_ceiling(p) > p->max_steps_per_dostep) return VK_TOO_MANY_STEPS;
+    if (!(isfinite(t) && fabs(t - p->plant_t) <= p->time_tolerance * fmax(1.0, fabs(t)))) return VK_BAD_TIME;
+    return VK_OK;
+}
+
+/* DOP853 cuts its step at each zero of the contact event (dop853.h): a step that flips the contact side ends on
+   the event, so stepping one solver step at a time (dop_advance to just beyond the solver's time takes exactly
+   one step: its steps do not depend on the target) finds each event at the end of a step.  The steps are those of
+   model_do_step, so without an event the result is model_do_step's, bit for bit; with one, the doStep ends at
+   the event, and the next continues the same solver steps.  An event found by a step that ends beyond t + h stays
+   pending (event_t) while the solver is still there and is returned by the doStep that reaches it. RK4 and the
+   polynomial models (no contact events) step to t + h. */
+void model_do_step_early(Instance *inst, State *s, double t, double h)
+{
+    VkPlant *p = &s->model.plant;
+    MeData *me = &s->model.me;
+    me->step_event = 0;
+    if (p->solver != VK_DOP853 || p->dop.n_events == 0 || p->error) {
+        model_do_step(inst, s, t, h);
+        me->reached = p->plant_t;
+        return;
+    }
+    p->U_input = s->value[VR_U];
+    int code = step_checks(p, t, h);
+    if (code) {
+        step_failed(inst, s, code, t, h);
+        me->reached = p->plant_t;
+        return;
+    }
+    const double t_end = t + h;
+    code = vk_set_input(p, p->plant_t, p->U_input);
+    if (me->event_pending && p->dop.t != me->event_t) me->event_pending = 0; /* a restart dropped that step */
+    double steps = 0.0;
+    while (!code && p->dop.t < t_end && !(me->event_pending && me->event_t <= t_end)) {
+        if (steps >= p->dop.step_budget) { /* the budget's error, as the doStep reports it */
+            code = vk_advance(p, t_end);
+            break;
+        }
+        const int64_t side = p->dop.side[CONTACT_EVENT];
+        code = vk_advance(p, nextafter(p->dop.t, INFINITY));
+        steps += 1.0;
+        if (!code && p->dop.side[CONTACT_EVENT] != side) {
+            me->event_pending = 1;
+            me->event_t = p->dop.t;
+        }
+    }
+    double reached = t_end, xva[3];
+    if (!code && me->event_pending && me->event_t <= t_end) {
+        reached = me->event_t;
+        me->event_pending = 0;
+        me->step_event = 1;
+    }
+    if (!code) code = vk_advance(p, reached); /* no step: a terminal event at or before `reached` */
+    if (!code) {
+        p->plant_t = reached;
+        code = vk_plant_state(p, xva);
+    }
+    if (!code) code = vk_outputs_at(p, p->plant_t, xva[0], xva[1], &xva[2]);
+    if (code) {
+        me->step_event = 0;
+        step_failed(inst, s, code, t, h);
+        me->reached = p->plant_t;
+        return;
+    }
+    me->reached = reached;
+    int bad = non_finite_output(p);
+    if (bad >= 0) {
+        native_error(inst, "simulation stopped: output with valueReference %u is %g (not finite) after the step "
+                     "from tau = %.17g; the parameters are beyond the model's numerical range",
+                     (unsigned)OUTPUT_VRS[bad], p->out[bad], t);
+        return;
+    }
+    publish(s);
+}
+
+/* ---- directional derivatives: the analytic partials (Eq. 3 and Eq. 7 differentiated by hand) ---- */
+
+const char *const MODEL_PARTIALS = "provided: the derivatives of x, v, a, F_contact, F_electrostatic by x, v, U";
+
+/* sum k c_k x^(k-1) of a series (5) */
+static double horner_slope(const double *c, double x)
+{
+    double value = 0.0;
+    for (int k = 5; k >= 1; k--) value = value * x + k * c[k];
+    return value;
+}
+
+/* d/dx of F_contact and F_electrostatic (as vm_forces gives them) and of x'' at (t, x) */
+static void force_slopes(const VkModel *m, double t, double x, double *contact, double *electrostatic, double *accel)
+{
+    int fault = 0;
+    const double s = m->ac ? py_sin(m->Omega * t, &fault) : 0.0, c2 = m->ac ? py_cos(2.0 * m->Omega * t, &fault) : 1.0;
+    if (m->polynomial) { /* Eq. 7: F_contact G1, F_electrostatic alpha G2 + (beta s + gamma (1 - c2)) G3 */
+        const double g3 = horner_slope(m->g3, x);
+        *contact = horner_slope(m->g1, x);
+        *electrostatic = m->alpha * horner_slope(m->g2, x) + (m->beta * s + m->gamma * (1.0 - c2)) * g3;
+        *accel = -horner_slope(m->poly, x) + (m->ac ? (m->beta * s - m->gamma * c2) * g3 : 0.0);
+        return;
+    }
+    /* Eq. 3: d/dx (1 + 2x/3)^(3/2) = (1 + 2x/3)^(1/2) in contact; the electrostatic force of u = 2x/(3R) */
+    const double ind = vm_contact_indentation(x);
+    *contact = ind > 0.0 ? sqrt(ind) : 0.0;
+    const double du = 2.0 / (3.0 * m->R), u = du * x, lower = 1.0 - u, upper = 1.0 + u;
+    const double f3_slope = 2.0 * du / (lower * lower * lower);
+    *electrostatic = m->alpha * (f3_slope + 2.0 * du / (upper * upper * upper)) +
+                     (m->ac ? (m->beta * s + m->gamma * (1.0 - c2)) * f3_slope : 0.0);
+    *accel = -*contact + (m->electrostatics ? *electrostatic : 0.0);
+}
+
+int model_partial(const State *s, fmi2ValueReference unknown, fmi2ValueReference known, double *value)
+{
+    const VkPlant *p = &s->model.plant;
+    const int me = s->model.me.mode != ME_OFF;
+    const double t = me ? s->model.me.t : p->plant_t, x = me ? s->model.me.x[0] : p->out[0];
+    if (known != VR_x && known != VR_v && known != VR_U) return 0;
+    if (unknown == VR_x || unknown == VR_v) {
+        *value = known == unknown ? 1.0 : 0.0;
+        return 1;
+    }
+    if (unknown != VR_a && unknown != VR_F_contact && unknown != VR_F_electrostatic) return 0;
+    if (known == VR_v || known == VR_U) { /* a = ... - mu v + U; the forces depend on x only */
+        *value = unknown != VR_a ? 0.0 : known == VR_v ? -p->model.mu : 1.0;
+        return 1;
+    }
+    double contact, electrostatic, accel;
+    force_slopes(&p->model, t, x, &contact, &electrostatic, &accel);
+    *value = unknown == VR_a ? accel : unknown == VR_F_contact ? contact : electrostatic;
     return 1;
 }

@@ -127,10 +127,12 @@ def build_all(out_dir: Path | None = None) -> list[Path]:
 
 
 def build_natives(fmus: list[Path], out_dir: Path) -> list[Path]:
-    """The native FMU of each pythonfmu FMU that has a native model (fmu_src/native/<id>/); none without a C
-    compiler."""
+    """The native FMU of each pythonfmu FMU that has a native model (fmu_src/native/<id>/), as FMI 2.0 in out_dir
+    and as FMI 3.0 in out_dir/fmi3; none without a C compiler."""
     from vibrofmu.fmus.native import NATIVE_SRC, build_native
 
     if compiled_parts() is not None:
         return []
-    return [build_native(fmu, out_dir) for fmu in fmus if (NATIVE_SRC / Path(fmu).stem / "native_model.c").is_file()]
+    natives = [fmu for fmu in fmus if (NATIVE_SRC / Path(fmu).stem / "native_model.c").is_file()]
+    return [build_native(fmu, out_dir) for fmu in natives] + [
+        build_native(fmu, Path(out_dir) / "fmi3", fmi_version=3) for fmu in natives]

@@ -29,9 +29,10 @@ KERNEL = ("-std=c11", "-O2", *IEEE, "-fPIC", "-shared", "-flto", "-fno-semantic-
 # The status shim over pythonfmu's library (fmu_src/fmi2_status_shim.c with fmi/fmi2_layer.c and pyloader.c).
 SHIM = ("-shared", "-fPIC", "-O2", "-fvisibility=hidden", *WARNINGS)
 SHIM_LIBS = ("-ldl", "-pthread")
-# The native FMUs: the same arithmetic as the core; -flto across the model, solver and FMI files.
+# The native FMUs: the same arithmetic as the core; -flto across the model, solver and FMI files (=auto: the larger
+# FMI 3.0 binaries are split into LTO partitions, compiled in parallel rather than with a warning).
 NATIVE = ("-std=c11", "-O2", *IEEE, *WARNINGS)
-NATIVE_LINUX64 = (*NATIVE, "-fPIC", "-shared", "-fvisibility=hidden", "-flto")
+NATIVE_LINUX64 = (*NATIVE, "-fPIC", "-shared", "-fvisibility=hidden", "-flto=auto")
 # Debian's mingw-w64; __USE_MINGW_ANSI_STDIO: C99 printf (inf, %zu, %g as glibc) instead of msvcrt's.
 # -flto=auto: its plain -flto splits the closed loop into 2 LTRANS jobs and, finding no jobserver, warns "using
 # serial compilation" on stderr (a build that warns fails); =auto runs them side by side, silently.

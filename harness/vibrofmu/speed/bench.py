@@ -37,7 +37,7 @@ from vibromodel.plant import Kernel, Settings, Solver
 
 from vibrofmu.output import export
 
-from vibrofmu.speed import ladder
+from vibrofmu.speed import ladder, native_timing
 from vibrofmu.fmus.kernel import kernel_library
 from vibrofmu.analyses.reference import reference_solution
 from vibrofmu.hosts.run import FmuInstance, FmuLog, _reason
@@ -584,6 +584,8 @@ def run_bench(fmu: Path, out_dir: Path, quick: bool = False, repeats: int | None
     extremes = extreme_rows(quick) if extreme_rows is not None else []
     say("speed-accuracy ladder (C host and FMPy) ...")
     ladder_record = run_ladder_with_fmus(fmu, closed_loop_fmu, quick, say, ladder_rounds, instructions)
+    say("native plant: FMI 3 CS beside FMI 2 CS (C host), ME under FMPy's CVode beside CS ...")
+    fmi_versions = native_timing.fmi_versions_record(fmu, 3 if quick else 5)
     summary = {
         "bench": {"quick": quick, "stop_time": plan.stop_time, "repeats": plan.repeats, "threshold": THRESHOLD,
                   "output_intervals": list(INTERVALS), "scene": scene.as_dict(), "fmu": str(fmu),
@@ -600,6 +602,7 @@ def run_bench(fmu: Path, out_dir: Path, quick: bool = False, repeats: int | None
         "cases": records,
         "extremes": extremes,
         "ladder": ladder_record,
+        "fmi_versions": fmi_versions,
     }
     summary["targets"] = targets(records, instantiation, plan)
     summary["machine"]["load_average_at_end"] = list(os.getloadavg()) if hasattr(os, "getloadavg") else None
@@ -681,6 +684,8 @@ def summary_lines(summary: dict) -> list[str]:
                                       else f"not measured: {check['reason']}"))
     if summary.get("ladder"):
         lines += ladder.ladder_lines(summary["ladder"])
+    if summary.get("fmi_versions"):
+        lines += native_timing.fmi_versions_lines(summary["fmi_versions"])
     inst = t["instantiation"]
     warm = t["inputs"]["instantiation"]["warm_seconds"]
     lines.append("  instantiation (cold): " + ("not measured" if inst["seconds"] is None else

@@ -1,0 +1,884 @@
+/*
+ * fmi3_native.c -- the FMI 3.0 API of a native vibrofmu FMU (Co-Simulation, and Model Exchange for the models
+ * with me_model.h's hooks), written once for every model on top of its FMI 2.0 layer: the FMI 3.0 binary is the
+ * FMI 2.0 one (fmi2_native.c, fmi2_me.c, the model's native_model.c: the same rules, messages, integrator and
+ * bits) plus this file, which maps each FMI 3.0 call on the FMI 2.0 call that does the work and adds what FMI 3.0
+ * has beyond it:
+ *   - the independent variable `time` (value reference N_VARIABLES) and, for Model Exchange models, the event
+ *     indicators as variables (N_VARIABLES + 1 ...);
+ *   - Co-Simulation event mode (hasEventMode) and early return (mightReturnEarlyFromDoStep): with earlyReturnAllowed
+ *     a doStep ends at the first contact loss or re-contact inside the step (model_do_step_early), earlyReturn and
+ *     lastSuccessfulTime say where, and eventHandlingNeeded asks an event-mode master to handle it;
+ *   - the FMI 3.0 modes (instantiated, initialization, event, step / continuous-time, terminated): a call out of
+ *     its mode is fmi3Error with one log line naming it.
+ * The FMI 2.0 functions are linked in but not exported (harness/vibrofmu/fmus/native.py links with a version
+ * script on linux64), so another FMU's fmi2 symbols cannot interpose.
+ */
+#include <math.h>
+#include <stdarg.h>
+#include <stdbool.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "fmi3Functions.h"
+#include "me_model.h"
+
+#define EXPORT3 FMI3_Export
+
+enum { W_INSTANTIATED, W_INITIALIZATION, W_EVENT, W_STEP, W_CONTINUOUS, W_TERMINATED };
+static const char *const MODE_NAMES[] = {"instantiated", "initialization mode", "event mode", "step mode",
+                                         "continuous-time mode", "terminated"};
+
+#define VR_TIME ((fmi3ValueReference)N_VARIABLES)
+#ifdef ME_N_STATES
+#define N_INDICATOR_VARIABLES ME_N_INDICATORS
+#else
+#define N_INDICATOR_VARIABLES 0
+#endif
+
+typedef struct {
+    fmi2Component c;              /* the FMI 2.0 instance (fmi2_native.c) */
+    fmi2CallbackFunctions cb;     /* its callbacks: the logger passes messages on to logMessage */
+    fmi3InstanceEnvironment env;
+    fmi3LogMessageCallback log;
+    int model_exchange, event_mode_used, early_return_allowed;
+    int mode;                     /* W_* */
+    double time;
+} W3;
+
+/* The FMU state: the FMI 2.0 instance's, with the FMI 3.0 mode and time */
+typedef struct {
+    fmi2FMUstate inner;
+    int mode;
+    double time;
+} W3State;
+
+static void forward_log(fmi2ComponentEnvironment env, fmi2String name, fmi2Status status, fmi2String category,
+                        fmi2String message, ...)
+{
+    (void)name;
+    const W3 *w = env;
+    if (w == NULL || w->log == NULL) return;
+    char text[2048];
+    va_list args;
+    va_start(args, message);
+    vsnprintf(text, sizeof text, message, args); /* fmi2_layer doubled each '%': undo it */
+    va_end(args);
+    w->log(w->env, status <= fmi2Fatal ? (fmi3Status)status : fmi3Error, category, text);
+}
+
+static fmi3Status to3(fmi2Status st) { return st <= fmi2Fatal ? (fmi3Status)st : fmi3Error; }
+
+/* A refusal of the FMI 3.0 layer: logged through the FMI 2.0 instance (error state, status flag), fmi3Error */
+static fmi3Status refuse(W3 *w, const char *format, ...)
+{
+    char text[512];
+    va_list args;
+    va_start(args, format);
+    vsnprintf(text, sizeof text, format, args);
+    va_end(args);
+    native_error((Instance *)w->c, "%s", text);
+    native_layer((Instance *)w->c)->mode = FMI2_MODE_ERROR;
+    return fmi3Error;
+}
+
+/* Call F allowed in the modes of `modes` (bits 1 << W_*)? else fmi3Error naming the mode */
+static int in_mode(W3 *w, const char *call, unsigned modes, fmi3Status *st)
+{
+    if ((modes >> w->mode) & 1u) return 1;
+    char allowed[160] = "";
+    for (int m = W_INSTANTIATED; m <= W_TERMINATED; m++)
+        if ((modes >> m) & 1u)
+            snprintf(allowed + strlen(allowed), sizeof allowed - strlen(allowed), "%s%s", allowed[0] ? ", " : "",
+                     MODE_NAMES[m]);
+    *st = refuse(w, "%s is not allowed in %s (FMI 3.0 allows it in: %s)", call, MODE_NAMES[w->mode], allowed);
+    return 0;
+}
+
+#define BIT(m) (1u << (m))
+#define W3_CALL(F, MODES)                                                                                  \
+    W3 *w = (W3 *)instance;                                                                                \
+    fmi3Status st_ = fmi3OK;                                                                               \
+    if (w == NULL) return fmi3Error;                                                                       \
+    if (!in_mode(w, #F, (MODES), &st_)) return st_
+#define ANY_MODE (BIT(W_INSTANTIATED) | BIT(W_INITIALIZATION) | BIT(W_EVENT) | BIT(W_STEP) | BIT(W_CONTINUOUS) | \
+                  BIT(W_TERMINATED))
+#define RUNNING (BIT(W_EVENT) | BIT(W_STEP) | BIT(W_CONTINUOUS))
+
+EXPORT3 const char *fmi3GetVersion(void) { return fmi3Version; }
+
+EXPORT3 fmi3Status fmi3SetDebugLogging(fmi3Instance instance, fmi3Boolean loggingOn, size_t nCategories,
+                                       const fmi3String categories[])
+{
+    W3_CALL(fmi3SetDebugLogging, ANY_MODE);
+    return to3(fmi2SetDebugLogging(w->c, loggingOn, nCategories, categories));
+}
+
+static W3 *instantiate(fmi3String name, fmi3String token, fmi3String resourcePath, fmi3Boolean visible,
+                       fmi3Boolean loggingOn, fmi3InstanceEnvironment env, fmi3LogMessageCallback log, int me)
+{
+    W3 *w = calloc(1, sizeof *w);
+    if (w == NULL) return NULL;
+    w->env = env;
+    w->log = log;
+    w->model_exchange = me;
+    w->cb.logger = forward_log;
+    w->cb.allocateMemory = calloc;
+    w->cb.freeMemory = free;
+    w->cb.componentEnvironment = w;
+    char *uri = NULL; /* FMI 2.0 takes the resources as a file URI, FMI 3.0 as a path */
+    if (resourcePath != NULL && (uri = malloc(strlen(resourcePath) + 8)) != NULL)
+        sprintf(uri, "file://%s", resourcePath);
+    w->c = fmi2Instantiate(name, me ? fmi2ModelExchange : fmi2CoSimulation, token, uri, &w->cb, visible, loggingOn);
+    free(uri);
+    if (w->c == NULL) {
+        free(w);
+        return NULL;
+    }
+    w->mode = W_INSTANTIATED;
+    return w;
+}
+
+EXPORT3 fmi3Instance fmi3InstantiateModelExchange(fmi3String instanceName, fmi3String instantiationToken,
+                                                  fmi3String resourcePath, fmi3Boolean visible, fmi3Boolean loggingOn,
+                                                  fmi3InstanceEnvironment instanceEnvironment,
+                                                  fmi3LogMessageCallback logMessage)
+{
+    return instantiate(instanceName, instantiationToken, resourcePath, visible, loggingOn, instanceEnvironment,
+                       logMessage, 1);
+}
+
+EXPORT3 fmi3Instance fmi3InstantiateCoSimulation(fmi3String instanceName, fmi3String instantiationToken,
+                                                 fmi3String resourcePath, fmi3Boolean visible, fmi3Boolean loggingOn,
+                                                 fmi3Boolean eventModeUsed, fmi3Boolean earlyReturnAllowed,
+                                                 const fmi3ValueReference requiredIntermediateVariables[],
+                                                 size_t nRequiredIntermediateVariables,
+                                                 fmi3InstanceEnvironment instanceEnvironment,
+                                                 fmi3LogMessageCallback logMessage,
+                                                 fmi3IntermediateUpdateCallback intermediateUpdate)
+{
+    (void)requiredIntermediateVariables; (void)intermediateUpdate; /* no intermediate update */
+    W3 *w = instantiate(instanceName, instantiationToken, resourcePath, visible, loggingOn, instanceEnvironment,
+                        logMessage, 0);
+    if (w == NULL) return NULL;
+    if (nRequiredIntermediateVariables > 0 && logMessage != NULL)
+        logMessage(instanceEnvironment, fmi3Warning, "logStatusWarning",
+                   "requiredIntermediateVariables ignored: this FMU provides no intermediate update");
+    w->event_mode_used = eventModeUsed;
+    w->early_return_allowed = earlyReturnAllowed;
+#ifdef HAS_EARLY_RETURN
+    native_set_early_return((Instance *)w->c, earlyReturnAllowed);
+#endif
+    return w;
+}
+
+EXPORT3 fmi3Instance fmi3InstantiateScheduledExecution(fmi3String instanceName, fmi3String instantiationToken,
+                                                       fmi3String resourcePath, fmi3Boolean visible,
+                                                       fmi3Boolean loggingOn,
+                                                       fmi3InstanceEnvironment instanceEnvironment,
+                                                       fmi3LogMessageCallback logMessage,
+                                                       fmi3ClockUpdateCallback clockUpdate,
+                                                       fmi3LockPreemptionCallback lockPreemption,
+                                                       fmi3UnlockPreemptionCallback unlockPreemption)
+{
+    (void)instanceName; (void)instantiationToken; (void)resourcePath; (void)visible; (void)loggingOn;
+    (void)clockUpdate; (void)lockPreemption; (void)unlockPreemption;
+    if (logMessage != NULL)
+        logMessage(instanceEnvironment, fmi3Error, "logStatusError",
+                   "fmi3InstantiateScheduledExecution: this FMU has no Scheduled Execution interface");
+    return NULL;
+}
+
+EXPORT3 void fmi3FreeInstance(fmi3Instance instance)
+{
+    W3 *w = (W3 *)instance;
+    if (w == NULL) return;
+    fmi2FreeInstance(w->c);
+    free(w);
+}
+
+EXPORT3 fmi3Status fmi3EnterInitializationMode(fmi3Instance instance, fmi3Boolean toleranceDefined,
+                                               fmi3Float64 tolerance, fmi3Float64 startTime,
+                                               fmi3Boolean stopTimeDefined, fmi3Float64 stopTime)
+{
+    W3_CALL(fmi3EnterInitializationMode, BIT(W_INSTANTIATED));
+    fmi2Status st = fmi2SetupExperiment(w->c, toleranceDefined, tolerance, startTime, stopTimeDefined, stopTime);
+    if (st <= fmi2Warning) st = fmi2EnterInitializationMode(w->c);
+    if (st <= fmi2Warning) {
+        w->mode = W_INITIALIZATION;
+        w->time = startTime;
+    }
+    return to3(st);
+}
+
+EXPORT3 fmi3Status fmi3ExitInitializationMode(fmi3Instance instance)
+{
+    W3_CALL(fmi3ExitInitializationMode, BIT(W_INITIALIZATION));
+    fmi2Status st = fmi2ExitInitializationMode(w->c);
+    w->mode = w->model_exchange || w->event_mode_used ? W_EVENT : W_STEP;
+    return to3(st);
+}
+
+EXPORT3 fmi3Status fmi3EnterEventMode(fmi3Instance instance)
+{
+    W3_CALL(fmi3EnterEventMode, w->model_exchange ? BIT(W_EVENT) | BIT(W_CONTINUOUS) : BIT(W_STEP));
+    if (!w->model_exchange && !w->event_mode_used)
+        return refuse(w, "fmi3EnterEventMode: the instance was created with eventModeUsed = false");
+    fmi2Status st = fmi2OK;
+#ifdef ME_N_STATES
+    if (w->model_exchange) st = fmi2EnterEventMode(w->c);
+#endif
+    if (st <= fmi2Warning) w->mode = W_EVENT;
+    return to3(st);
+}
+
+EXPORT3 fmi3Status fmi3Terminate(fmi3Instance instance)
+{
+    W3_CALL(fmi3Terminate, RUNNING);
+    fmi2Status st = fmi2Terminate(w->c);
+    if (st <= fmi2Warning) w->mode = W_TERMINATED;
+    return to3(st);
+}
+
+EXPORT3 fmi3Status fmi3Reset(fmi3Instance instance)
+{
+    W3 *w = (W3 *)instance;
+    if (w == NULL) return fmi3Error;
+    fmi2Status st = fmi2Reset(w->c);
+    w->mode = W_INSTANTIATED;
+    w->time = 0.0;
+    return to3(st);
+}
+
+/* ---- variables: Float64 (FMI 2.0 Real), Int32 (Integer), Boolean; `time` and the indicators beside them ---- */
+
+static int sizes_match(W3 *w, const char *call, size_t nvr, size_t nValues, fmi3Status *st)
+{
+    if (nvr == nValues) return 1;
+    *st = refuse(w, "%s: nValues = %zu, expected nValueReferences = %zu (every variable is a scalar)", call, nValues,
+                 nvr);
+    return 0;
+}
+
+static int arrays_given(W3 *w, const char *call, const void *vr, const void *values, size_t n, fmi3Status *st)
+{
+    if (n == 0 || (vr != NULL && values != NULL)) return 1;
+    *st = refuse(w, "%s: valueReferences or values is NULL", call);
+    return 0;
+}
+
+/* an FMI 3.0-only variable (time, indicators) as a Float64: 1 with its value */
+static int extra_float64(W3 *w, fmi3ValueReference vr, double *value)
+{
+    if (vr == VR_TIME) {
+        *value = w->time;
+        return 1;
+    }
+#ifdef ME_N_STATES
+    if (vr > VR_TIME && vr <= VR_TIME + ME_N_INDICATORS) {
+        double z[ME_MAX_INDICATORS];
+        model_me_indicators(native_state((Instance *)w->c), z);
+        *value = z[vr - VR_TIME - 1];
+        return 1;
+    }
+#endif
+    return 0;
+}
+
+EXPORT3 fmi3Status fmi3GetFloat64(fmi3Instance instance, const fmi3ValueReference valueReferences[],
+                                  size_t nValueReferences, fmi3Float64 values[], size_t nValues)
+{
+    W3_CALL(fmi3GetFloat64, ANY_MODE);
+    if (!sizes_match(w, "fmi3GetFloat64", nValueReferences, nValues, &st_)) return st_;
+    if (!arrays_given(w, "fmi3GetFloat64", valueReferences, values, nValueReferences, &st_)) return st_;
+    int plain = 1;
+    for (size_t i = 0; i < nValueReferences; i++) plain &= valueReferences[i] < VR_TIME;
+    if (plain) return to3(fmi2GetReal(w->c, valueReferences, nValueReferences, values));
+    fmi3Status worst = fmi3OK;
+    for (size_t i = 0; i < nValueReferences; i++) {
+        if (extra_float64(w, valueReferences[i], &values[i])) continue;
+        fmi3Status st = to3(fmi2GetReal(w->c, &valueReferences[i], 1, &values[i]));
+        if (st > worst) worst = st;
+    }
+    return worst;
+}
+
+EXPORT3 fmi3Status fmi3SetFloat64(fmi3Instance instance, const fmi3ValueReference valueReferences[],
+                                  size_t nValueReferences, const fmi3Float64 values[], size_t nValues)
+{
+    W3_CALL(fmi3SetFloat64, ANY_MODE);
+    if (!sizes_match(w, "fmi3SetFloat64", nValueReferences, nValues, &st_)) return st_;
+    if (!arrays_given(w, "fmi3SetFloat64", valueReferences, values, nValueReferences, &st_)) return st_;
+    for (size_t i = 0; i < nValueReferences; i++)
+        if (valueReferences[i] >= VR_TIME && valueReferences[i] <= VR_TIME + N_INDICATOR_VARIABLES)
+            return refuse(w, "fmi3SetFloat64: variable with valueReference %u (%s) is computed by the FMU and cannot "
+                          "be set", valueReferences[i], valueReferences[i] == VR_TIME ? "time" : "an event indicator");
+    return to3(fmi2SetReal(w->c, valueReferences, nValueReferences, values));
+}
+
+EXPORT3 fmi3Status fmi3GetInt32(fmi3Instance instance, const fmi3ValueReference valueReferences[],
+                                size_t nValueReferences, fmi3Int32 values[], size_t nValues)
+{
+    W3_CALL(fmi3GetInt32, ANY_MODE);
+    if (!sizes_match(w, "fmi3GetInt32", nValueReferences, nValues, &st_)) return st_;
+    if (!arrays_given(w, "fmi3GetInt32", valueReferences, values, nValueReferences, &st_)) return st_;
+    return to3(fmi2GetInteger(w->c, valueReferences, nValueReferences, values));
+}
+
+EXPORT3 fmi3Status fmi3SetInt32(fmi3Instance instance, const fmi3ValueReference valueReferences[],
+                                size_t nValueReferences, const fmi3Int32 values[], size_t nValues)
+{
+    W3_CALL(fmi3SetInt32, ANY_MODE);
+    if (!sizes_match(w, "fmi3SetInt32", nValueReferences, nValues, &st_)) return st_;
+    if (!arrays_given(w, "fmi3SetInt32", valueReferences, values, nValueReferences, &st_)) return st_;
+    return to3(fmi2SetInteger(w->c, valueReferences, nValueReferences, values));
+}
+
+#define CHUNK 64
+EXPORT3 fmi3Status fmi3GetBoolean(fmi3Instance instance, const fmi3ValueReference valueReferences[],
+                                  size_t nValueReferences, fmi3Boolean values[], size_t nValues)
+{
+    W3_CALL(fmi3GetBoolean, ANY_MODE);
+    if (!sizes_match(w, "fmi3GetBoolean", nValueReferences, nValues, &st_)) return st_;
+    if (!arrays_given(w, "fmi3GetBoolean", valueReferences, values, nValueReferences, &st_)) return st_;
+    fmi3Status worst = fmi3OK;
+    for (size_t done = 0; done < nValueReferences; done += CHUNK) {
+        size_t n = nValueReferences - done < CHUNK ? nValueReferences - done : CHUNK;
+        fmi2Boolean b[CHUNK];
+        fmi3Status st = to3(fmi2GetBoolean(w->c, valueReferences + done, n, b));
+        for (size_t i = 0; i < n; i++) values[done + i] = b[i] != 0;
+        if (st > worst) worst = st;
+    }
+    return worst;
+}
+
+EXPORT3 fmi3Status fmi3SetBoolean(fmi3Instance instance, const fmi3ValueReference valueReferences[],
+                                  size_t nValueReferences, const fmi3Boolean values[], size_t nValues)
+{
+    W3_CALL(fmi3SetBoolean, ANY_MODE);
+    if (!sizes_match(w, "fmi3SetBoolean", nValueReferences, nValues, &st_)) return st_;
+    if (!arrays_given(w, "fmi3SetBoolean", valueReferences, values, nValueReferences, &st_)) return st_;
+    fmi3Status worst = fmi3OK;
+    for (size_t done = 0; done < nValueReferences; done += CHUNK) {
+        size_t n = nValueReferences - done < CHUNK ? nValueReferences - done : CHUNK;
+        fmi2Boolean b[CHUNK];
+        for (size_t i = 0; i < n; i++) b[i] = values[done + i] ? fmi2True : fmi2False;
+        fmi3Status st = to3(fmi2SetBoolean(w->c, valueReferences + done, n, b));
+        if (st > worst) worst = st;
+    }
+    return worst;
+}
+
+EXPORT3 fmi3Status fmi3GetString(fmi3Instance instance, const fmi3ValueReference valueReferences[],
+                                 size_t nValueReferences, fmi3String values[], size_t nValues)
+{
+    W3_CALL(fmi3GetString, ANY_MODE);
+    if (!sizes_match(w, "fmi3GetString", nValueReferences, nValues, &st_)) return st_;
+    if (!arrays_given(w, "fmi3GetString", valueReferences, values, nValueReferences, &st_)) return st_;
+    return to3(fmi2GetString(w->c, valueReferences, nValueReferences, values));
+}
+
+EXPORT3 fmi3Status fmi3SetString(fmi3Instance instance, const fmi3ValueReference valueReferences[],
+                                 size_t nValueReferences, const fmi3String values[], size_t nValues)
+{
+    W3_CALL(fmi3SetString, ANY_MODE);
+    if (!sizes_match(w, "fmi3SetString", nValueReferences, nValues, &st_)) return st_;
+    if (!arrays_given(w, "fmi3SetString", valueReferences, values, nValueReferences, &st_)) return st_;
+    return to3(fmi2SetString(w->c, valueReferences, nValueReferences, values));
+}
+
+/* The types this FMU has no variable of: any value reference is an error naming the type */
+static fmi3Status no_such_type(W3 *w, const char *call, const char *type, size_t n)
+{
+    if (n == 0) return fmi3OK;
+    return refuse(w, "%s: this FMU has no %s variable", call, type);
+}
+
+#define NO_TYPE(Name, T)                                                                                        \
+    EXPORT3 fmi3Status fmi3Get##Name(fmi3Instance instance, const fmi3ValueReference valueReferences[],          \
+                                     size_t nValueReferences, T values[], size_t nValues)                        \
+    {                                                                                                           \
+        W3_CALL(fmi3Get##Name, ANY_MODE);                                                                       \
+        (void)valueReferences; (void)values; (void)nValues;                                                     \
+        return no_such_type(w, "fmi3Get" #Name, #Name, nValueReferences);                                       \
+    }                                                                                                           \
+    EXPORT3 fmi3Status fmi3Set##Name(fmi3Instance instance, const fmi3ValueReference valueReferences[],          \
+                                     size_t nValueReferences, const T values[], size_t nValues)                  \
+    {                                                                                                           \
+        W3_CALL(fmi3Set##Name, ANY_MODE);                                                                       \
+        (void)valueReferences; (void)values; (void)nValues;                                                     \
+        return no_such_type(w, "fmi3Set" #Name, #Name, nValueReferences);                                       \
+    }
+NO_TYPE(Float32, fmi3Float32)
+NO_TYPE(Int8, fmi3Int8)
+NO_TYPE(UInt8, fmi3UInt8)
+NO_TYPE(Int16, fmi3Int16)
+NO_TYPE(UInt16, fmi3UInt16)
+NO_TYPE(UInt32, fmi3UInt32)
+NO_TYPE(Int64, fmi3Int64)
+NO_TYPE(UInt64, fmi3UInt64)
+
+EXPORT3 fmi3Status fmi3GetBinary(fmi3Instance instance, const fmi3ValueReference valueReferences[],
+                                 size_t nValueReferences, size_t valueSizes[], fmi3Binary values[], size_t nValues)
+{
+    W3_CALL(fmi3GetBinary, ANY_MODE);
+    (void)valueReferences; (void)valueSizes; (void)values; (void)nValues;
+    return no_such_type(w, "fmi3GetBinary", "Binary", nValueReferences);
+}
+
+EXPORT3 fmi3Status fmi3SetBinary(fmi3Instance instance, const fmi3ValueReference valueReferences[],
+                                 size_t nValueReferences, const size_t valueSizes[], const fmi3Binary values[],
+                                 size_t nValues)
+{
+    W3_CALL(fmi3SetBinary, ANY_MODE);
+    (void)valueReferences; (void)valueSizes; (void)values; (void)nValues;
+    return no_such_type(w, "fmi3SetBinary", "Binary", nValueReferences);
+}
+
+EXPORT3 fmi3Status fmi3GetClock(fmi3Instance instance, const fmi3ValueReference valueReferences[],
+                                size_t nValueReferences, fmi3Clock values[])
+{
+    W3_CALL(fmi3GetClock, ANY_MODE);
+    (void)valueReferences; (void)values;
+    return no_such_type(w, "fmi3GetClock", "Clock", nValueReferences);
+}
+
+EXPORT3 fmi3Status fmi3SetClock(fmi3Instance instance, const fmi3ValueReference valueReferences[],
+                                size_t nValueReferences, const fmi3Clock values[])
+{
+    W3_CALL(fmi3SetClock, ANY_MODE);
+    (void)valueReferences; (void)values;
+    return no_such_type(w, "fmi3SetClock", "Clock", nValueReferences);
+}
+
+/* ---- not provided (the modelDescription says so) ---- */
+
+static fmi3Status not_provided(W3 *w, const char *call, const char *why)
+{
+    return refuse(w, "%s is not provided (%s)", call, why);
+}
+
+EXPORT3 fmi3Status fmi3GetNumberOfVariableDependencies(fmi3Instance instance, fmi3ValueReference valueReference,
+                                                       size_t *nDependencies)
+{
+    W3_CALL(fmi3GetNumberOfVariableDependencies, ANY_MODE);
+    (void)valueReference; (void)nDependencies;
+    return not_provided(w, "fmi3GetNumberOfVariableDependencies", "providesPerElementDependencies=false");
+}
+
+EXPORT3 fmi3Status fmi3GetVariableDependencies(fmi3Instance instance, fmi3ValueReference dependent,
+                                               size_t elementIndicesOfDependent[], fmi3ValueReference independents[],
+                                               size_t elementIndicesOfIndependents[],
+                                               fmi3DependencyKind dependencyKinds[], size_t nDependencies)
+{
+    W3_CALL(fmi3GetVariableDependencies, ANY_MODE);
+    (void)dependent; (void)elementIndicesOfDependent; (void)independents; (void)elementIndicesOfIndependents;
+    (void)dependencyKinds; (void)nDependencies;
+    return not_provided(w, "fmi3GetVariableDependencies", "providesPerElementDependencies=false");
+}
+
+EXPORT3 fmi3Status fmi3GetDirectionalDerivative(fmi3Instance instance, const fmi3ValueReference unknowns[],
+                                                size_t nUnknowns, const fmi3ValueReference knowns[], size_t nKnowns,
+                                                const fmi3Float64 seed[], size_t nSeed, fmi3Float64 sensitivity[],
+                                                size_t nSensitivity)
+{
+    W3_CALL(fmi3GetDirectionalDerivative, ANY_MODE);
+#ifdef HAS_DIRECTIONAL_DERIVATIVES
+    if (nSeed != nKnowns || nSensitivity != nUnknowns)
+        return refuse(w, "fmi3GetDirectionalDerivative: nSeed = %zu and nSensitivity = %zu must be nKnowns = %zu and "
+                      "nUnknowns = %zu (every variable is a scalar)", nSeed, nSensitivity, nKnowns, nUnknowns);
+    return to3(fmi2GetDirectionalDerivative(w->c, unknowns, nUnknowns, knowns, nKnowns, seed, sensitivity));
+#else
+    (void)unknowns; (void)nUnknowns; (void)knowns; (void)nKnowns; (void)seed; (void)nSeed; (void)sensitivity;
+    (void)nSensitivity;
+    return not_provided(w, "fmi3GetDirectionalDerivative", "providesDirectionalDerivatives=false");
+#endif
+}
+
+EXPORT3 fmi3Status fmi3GetAdjointDerivative(fmi3Instance instance, const fmi3ValueReference unknowns[],
+                                            size_t nUnknowns, const fmi3ValueReference knowns[], size_t nKnowns,
+                                            const fmi3Float64 seed[], size_t nSeed, fmi3Float64 sensitivity[],
+                                            size_t nSensitivity)
+{
+    W3_CALL(fmi3GetAdjointDerivative, ANY_MODE);
+    (void)unknowns; (void)nUnknowns; (void)knowns; (void)nKnowns; (void)seed; (void)nSeed; (void)sensitivity;
+    (void)nSensitivity;
+    return not_provided(w, "fmi3GetAdjointDerivative", "providesAdjointDerivatives=false");
+}
+
+EXPORT3 fmi3Status fmi3EnterConfigurationMode(fmi3Instance instance)
+{
+    W3_CALL(fmi3EnterConfigurationMode, ANY_MODE);
+    return not_provided(w, "fmi3EnterConfigurationMode", "this FMU has no structural parameters");
+}
+
+EXPORT3 fmi3Status fmi3ExitConfigurationMode(fmi3Instance instance)
+{
+    W3_CALL(fmi3ExitConfigurationMode, ANY_MODE);
+    return not_provided(w, "fmi3ExitConfigurationMode", "this FMU has no structural parameters");
+}
+
+#define U(x) (void)(x)
+EXPORT3 fmi3Status fmi3GetIntervalDecimal(fmi3Instance instance, const fmi3ValueReference valueReferences[],
+                                          size_t nValueReferences, fmi3Float64 intervals[],
+                                          fmi3IntervalQualifier qualifiers[])
+{
+    W3_CALL(fmi3GetIntervalDecimal, ANY_MODE);
+    U(valueReferences); U(intervals); U(qualifiers);
+    return no_such_type(w, "fmi3GetIntervalDecimal", "Clock", nValueReferences);
+}
+
+EXPORT3 fmi3Status fmi3GetIntervalFraction(fmi3Instance instance, const fmi3ValueReference valueReferences[],
+                                           size_t nValueReferences, fmi3UInt64 counters[], fmi3UInt64 resolutions[],
+                                           fmi3IntervalQualifier qualifiers[])
+{
+    W3_CALL(fmi3GetIntervalFraction, ANY_MODE);
+    U(valueReferences); U(counters); U(resolutions); U(qualifiers);
+    return no_such_type(w, "fmi3GetIntervalFraction", "Clock", nValueReferences);
+}
+
+EXPORT3 fmi3Status fmi3GetShiftDecimal(fmi3Instance instance, const fmi3ValueReference valueReferences[],
+                                       size_t nValueReferences, fmi3Float64 shifts[])
+{
+    W3_CALL(fmi3GetShiftDecimal, ANY_MODE);
+    U(valueReferences); U(shifts);
+    return no_such_type(w, "fmi3GetShiftDecimal", "Clock", nValueReferences);
+}
+
+EXPORT3 fmi3Status fmi3GetShiftFraction(fmi3Instance instance, const fmi3ValueReference valueReferences[],
+                                        size_t nValueReferences, fmi3UInt64 counters[], fmi3UInt64 resolutions[])
+{
+    W3_CALL(fmi3GetShiftFraction, ANY_MODE);
+    U(valueReferences); U(counters); U(resolutions);
+    return no_such_type(w, "fmi3GetShiftFraction", "Clock", nValueReferences);
+}
+
+EXPORT3 fmi3Status fmi3SetIntervalDecimal(fmi3Instance instance, const fmi3ValueReference valueReferences[],
+                                          size_t nValueReferences, const fmi3Float64 intervals[])
+{
+    W3_CALL(fmi3SetIntervalDecimal, ANY_MODE);
+    U(valueReferences); U(intervals);
+    return no_such_type(w, "fmi3SetIntervalDecimal", "Clock", nValueReferences);
+}
+
+EXPORT3 fmi3Status fmi3SetIntervalFraction(fmi3Instance instance, const fmi3ValueReference valueReferences[],
+                                           size_t nValueReferences, const fmi3UInt64 counters[],
+                                           const fmi3UInt64 resolutions[])
+{
+    W3_CALL(fmi3SetIntervalFraction, ANY_MODE);
+    U(valueReferences); U(counters); U(resolutions);
+    return no_such_type(w, "fmi3SetIntervalFraction", "Clock", nValueReferences);
+}
+
+EXPORT3 fmi3Status fmi3SetShiftDecimal(fmi3Instance instance, const fmi3ValueReference valueReferences[],
+                                       size_t nValueReferences, const fmi3Float64 shifts[])
+{
+    W3_CALL(fmi3SetShiftDecimal, ANY_MODE);
+    U(valueReferences); U(shifts);
+    return no_such_type(w, "fmi3SetShiftDecimal", "Clock", nValueReferences);
+}
+
+EXPORT3 fmi3Status fmi3SetShiftFraction(fmi3Instance instance, const fmi3ValueReference valueReferences[],
+                                        size_t nValueReferences, const fmi3UInt64 counters[],
+                                        const fmi3UInt64 resolutions[])
+{
+    W3_CALL(fmi3SetShiftFraction, ANY_MODE);
+    U(valueReferences); U(counters); U(resolutions);
+    return no_such_type(w, "fmi3SetShiftFraction", "Clock", nValueReferences);
+}
+
+EXPORT3 fmi3Status fmi3EvaluateDiscreteStates(fmi3Instance instance)
+{
+    W3_CALL(fmi3EvaluateDiscreteStates, ANY_MODE);
+    return not_provided(w, "fmi3EvaluateDiscreteStates", "providesEvaluateDiscreteStates=false");
+}
+
+EXPORT3 fmi3Status fmi3ActivateModelPartition(fmi3Instance instance, fmi3ValueReference clockReference,
+                                              fmi3Float64 activationTime)
+{
+    W3_CALL(fmi3ActivateModelPartition, ANY_MODE);
+    U(clockReference); U(activationTime);
+    return not_provided(w, "fmi3ActivateModelPartition", "no Scheduled Execution interface");
+}
+
+EXPORT3 fmi3Status fmi3GetOutputDerivatives(fmi3Instance instance, const fmi3ValueReference valueReferences[],
+                                            size_t nValueReferences, const fmi3Int32 orders[], fmi3Float64 values[],
+                                            size_t nValues)
+{
+    W3_CALL(fmi3GetOutputDerivatives, ANY_MODE);
+    U(valueReferences); U(nValueReferences); U(orders); U(values); U(nValues);
+    return not_provided(w, "fmi3GetOutputDerivatives", "maxOutputDerivativeOrder=0");
+}
+
+/* ---- FMU state: the FMI 2.0 instance's, with the FMI 3.0 mode and time ---- */
+
+EXPORT3 fmi3Status fmi3GetFMUState(fmi3Instance instance, fmi3FMUState *FMUState)
+{
+    W3_CALL(fmi3GetFMUState, ANY_MODE);
+    if (FMUState == NULL) return refuse(w, "fmi3GetFMUState: FMUState is NULL");
+    W3State *s = *FMUState != NULL ? (W3State *)*FMUState : calloc(1, sizeof *s);
+    if (s == NULL) return refuse(w, "fmi3GetFMUState: out of memory");
+    fmi2Status st = fmi2GetFMUstate(w->c, &s->inner);
+    if (st > fmi2Warning) {
+        if (*FMUState == NULL) free(s);
+        return to3(st);
+    }
+    s->mode = w->mode;
+    s->time = w->time;
+    *FMUState = s;
+    return to3(st);
+}
+
+EXPORT3 fmi3Status fmi3SetFMUState(fmi3Instance instance, fmi3FMUState FMUState)
+{
+    W3 *w = (W3 *)instance;
+    if (w == NULL) return fmi3Error;
+    if (FMUState == NULL) return refuse(w, "fmi3SetFMUState: FMUState is NULL");
+    const W3State *s = FMUState;
+    fmi2Status st = fmi2SetFMUstate(w->c, s->inner);
+    if (st <= fmi2Warning) {
+        w->mode = s->mode;
+        w->time = s->time;
+    }
+    return to3(st);
+}
+
+EXPORT3 fmi3Status fmi3FreeFMUState(fmi3Instance instance, fmi3FMUState *FMUState)
+{
+    W3 *w = (W3 *)instance;
+    if (w == NULL) return fmi3Error;
+    if (FMUState == NULL || *FMUState == NULL) return fmi3OK;
+    W3State *s = *FMUState;
+    fmi2Status st = fmi2FreeFMUstate(w->c, &s->inner);
+    free(s);
+    *FMUState = NULL;
+    return to3(st);
+}
+
+/* serialized: mode (int64) and time (double), then the FMI 2.0 state's bytes */
+#define W3_HEADER (sizeof(int64_t) + sizeof(double))
+
+EXPORT3 fmi3Status fmi3SerializedFMUStateSize(fmi3Instance instance, fmi3FMUState FMUState, size_t *size)
+{
+    W3 *w = (W3 *)instance;
+    if (w == NULL) return fmi3Error;
+    if (FMUState == NULL || size == NULL) return refuse(w, "fmi3SerializedFMUStateSize: FMUState or size is NULL");
+    size_t inner = 0;
+    fmi2Status st = fmi2SerializedFMUstateSize(w->c, ((W3State *)FMUState)->inner, &inner);
+    *size = inner + W3_HEADER;
+    return to3(st);
+}
+
+EXPORT3 fmi3Status fmi3SerializeFMUState(fmi3Instance instance, fmi3FMUState FMUState, fmi3Byte serializedState[],
+                                         size_t size)
+{
+    W3 *w = (W3 *)instance;
+    if (w == NULL) return fmi3Error;
+    if (FMUState == NULL || serializedState == NULL || size < W3_HEADER)
+        return refuse(w, "fmi3SerializeFMUState: no state, no buffer, or %zu bytes are too few", size);
+    const W3State *s = FMUState;
+    int64_t mode = s->mode;
+    memcpy(serializedState, &mode, sizeof mode);
+    memcpy(serializedState + sizeof mode, &s->time, sizeof s->time);
+    return to3(fmi2SerializeFMUstate(w->c, s->inner, (fmi2Byte *)serializedState + W3_HEADER, size - W3_HEADER));
+}
+
+EXPORT3 fmi3Status fmi3DeserializeFMUState(fmi3Instance instance, const fmi3Byte serializedState[], size_t size,
+                                           fmi3FMUState *FMUState)
+{
+    W3 *w = (W3 *)instance;
+    if (w == NULL) return fmi3Error;
+    if (serializedState == NULL || FMUState == NULL || size < W3_HEADER)
+        return refuse(w, "fmi3DeserializeFMUState: no bytes, no FMUState, or %zu bytes are too few", size);
+    int64_t mode;
+    double time;
+    memcpy(&mode, serializedState, sizeof mode);
+    memcpy(&time, serializedState + sizeof mode, sizeof time);
+    if (mode < W_INSTANTIATED || mode > W_TERMINATED || !isfinite(time))
+        return refuse(w, "fmi3DeserializeFMUState refused: not a state of this FMU (mode %lld, time %g)",
+                      (long long)mode, time);
+    W3State *s = *FMUState != NULL ? (W3State *)*FMUState : calloc(1, sizeof *s);
+    if (s == NULL) return refuse(w, "fmi3DeserializeFMUState: out of memory");
+    fmi2Status st = fmi2DeSerializeFMUstate(w->c, (const fmi2Byte *)serializedState + W3_HEADER, size - W3_HEADER,
+                                            &s->inner);
+    if (st > fmi2Warning) {
+        if (*FMUState == NULL) free(s);
+        return to3(st);
+    }
+    s->mode = (int)mode;
+    s->time = time;
+    *FMUState = s;
+    return to3(st);
+}
+
+/* ---- event mode (both interfaces) ---- */
+
+EXPORT3 fmi3Status fmi3UpdateDiscreteStates(fmi3Instance instance, fmi3Boolean *discreteStatesNeedUpdate,
+                                            fmi3Boolean *terminateSimulation,
+                                            fmi3Boolean *nominalsOfContinuousStatesChanged,
+                                            fmi3Boolean *valuesOfContinuousStatesChanged,
+                                            fmi3Boolean *nextEventTimeDefined, fmi3Float64 *nextEventTime)
+{
+    W3_CALL(fmi3UpdateDiscreteStates, BIT(W_EVENT));
+    if (discreteStatesNeedUpdate == NULL || terminateSimulation == NULL || nominalsOfContinuousStatesChanged == NULL ||
+        valuesOfContinuousStatesChanged == NULL || nextEventTimeDefined == NULL || nextEventTime == NULL)
+        return refuse(w, "fmi3UpdateDiscreteStates: an output argument is NULL");
+    fmi2EventInfo info = {fmi2False, fmi2False, fmi2False, fmi2False, fmi2False, 0.0};
+    fmi2Status st = fmi2OK;
+#ifdef ME_N_STATES
+    if (w->model_exchange) st = fmi2NewDiscreteStates(w->c, &info);
+#endif
+    /* Co-Simulation: the doStep that ended on the event left the discrete outputs (in_contact) on its new side */
+    *discreteStatesNeedUpdate = info.newDiscreteStatesNeeded;
+    *terminateSimulation = info.terminateSimulation;
+    *nominalsOfContinuousStatesChanged = info.nominalsOfContinuousStatesChanged;
+    *valuesOfContinuousStatesChanged = info.valuesOfContinuousStatesChanged;
+    *nextEventTimeDefined = info.nextEventTimeDefined;
+    *nextEventTime = info.nextEventTime;
+    return to3(st);
+}
+
+/* ---- Co-Simulation ---- */
+
+EXPORT3 fmi3Status fmi3EnterStepMode(fmi3Instance instance)
+{
+    W3_CALL(fmi3EnterStepMode, BIT(W_EVENT));
+    if (w->model_exchange) return refuse(w, "fmi3EnterStepMode: a Model Exchange instance has no step mode");
+    w->mode = W_STEP;
+    return fmi3OK;
+}
+
+EXPORT3 fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoint,
+                              fmi3Float64 communicationStepSize, fmi3Boolean noSetFMUStatePriorToCurrentPoint,
+                              fmi3Boolean *eventHandlingNeeded, fmi3Boolean *terminateSimulation,
+                              fmi3Boolean *earlyReturn, fmi3Float64 *lastSuccessfulTime)
+{
+    W3_CALL(fmi3DoStep, BIT(W_STEP));
+    if (eventHandlingNeeded == NULL || terminateSimulation == NULL || earlyReturn == NULL ||
+        lastSuccessfulTime == NULL)
+        return refuse(w, "fmi3DoStep: an output argument is NULL");
+    const double t_end = currentCommunicationPoint + communicationStepSize;
+    fmi2Status st = fmi2DoStep(w->c, currentCommunicationPoint, communicationStepSize,
+                               noSetFMUStatePriorToCurrentPoint);
+    double reached = st <= fmi2Warning ? t_end : currentCommunicationPoint;
+    int event = 0;
+#ifdef HAS_EARLY_RETURN
+    if (w->early_return_allowed && st <= fmi2Warning) {
+        const MeData *me = &native_state((Instance *)w->c)->model.me;
+        reached = me->reached;
+        event = st <= fmi2Warning && me->step_event;
+    }
+#endif
+    *earlyReturn = st <= fmi2Warning && reached < t_end;
+    *lastSuccessfulTime = reached;
+    *eventHandlingNeeded = event && w->event_mode_used;
+    *terminateSimulation = fmi3False;
+    if (st <= fmi2Warning) w->time = *earlyReturn ? reached : t_end;
+    return to3(st);
+}
+
+/* ---- Model Exchange ---- */
+
+/* Defined for every model (FMPy loads them all); a model without Model Exchange (no ME_N_STATES) answers
+   fmi3Error: its instances are Co-Simulation ones. */
+#define ME_ONLY(call)                                                                                         \
+    if (!w->model_exchange) return refuse(w, "%s: this instance was created for Co-Simulation", call)
+#ifdef ME_N_STATES
+#define ME2_CALL(expr) (expr)
+#else /* never reached past ME_ONLY: fmi3InstantiateModelExchange fails for these models (sizeof: not evaluated) */
+#define ME2_CALL(expr) ((void)sizeof(expr), fmi2Error)
+#define ME_N_STATES 0
+#define ME_N_INDICATORS 0
+#endif
+
+EXPORT3 fmi3Status fmi3EnterContinuousTimeMode(fmi3Instance instance)
+{
+    W3_CALL(fmi3EnterContinuousTimeMode, BIT(W_EVENT));
+    ME_ONLY("fmi3EnterContinuousTimeMode");
+    fmi2Status st = ME2_CALL(fmi2EnterContinuousTimeMode(w->c));
+    if (st <= fmi2Warning) w->mode = W_CONTINUOUS;
+    return to3(st);
+}
+
+EXPORT3 fmi3Status fmi3CompletedIntegratorStep(fmi3Instance instance, fmi3Boolean noSetFMUStatePriorToCurrentPoint,
+                                               fmi3Boolean *enterEventMode, fmi3Boolean *terminateSimulation)
+{
+    W3_CALL(fmi3CompletedIntegratorStep, BIT(W_CONTINUOUS));
+    ME_ONLY("fmi3CompletedIntegratorStep");
+    if (enterEventMode == NULL || terminateSimulation == NULL)
+        return refuse(w, "fmi3CompletedIntegratorStep: enterEventMode or terminateSimulation is NULL");
+    fmi2Boolean enter = fmi2False, terminate = fmi2False;
+    fmi2Status st =
+        ME2_CALL(fmi2CompletedIntegratorStep(w->c, noSetFMUStatePriorToCurrentPoint, &enter, &terminate));
+    *enterEventMode = enter != 0;
+    *terminateSimulation = terminate != 0;
+    return to3(st);
+}
+
+EXPORT3 fmi3Status fmi3SetTime(fmi3Instance instance, fmi3Float64 time)
+{
+    W3_CALL(fmi3SetTime, BIT(W_EVENT) | BIT(W_CONTINUOUS));
+    ME_ONLY("fmi3SetTime");
+    fmi2Status st = ME2_CALL(fmi2SetTime(w->c, time));
+    if (st <= fmi2Warning) w->time = time;
+    return to3(st);
+}
+
+EXPORT3 fmi3Status fmi3SetContinuousStates(fmi3Instance instance, const fmi3Float64 continuousStates[],
+                                           size_t nContinuousStates)
+{
+    W3_CALL(fmi3SetContinuousStates, BIT(W_CONTINUOUS));
+    ME_ONLY("fmi3SetContinuousStates");
+    return to3(ME2_CALL(fmi2SetContinuousStates(w->c, continuousStates, nContinuousStates)));
+}
+
+#define AFTER_INIT (BIT(W_EVENT) | BIT(W_CONTINUOUS) | BIT(W_TERMINATED))
+
+EXPORT3 fmi3Status fmi3GetContinuousStateDerivatives(fmi3Instance instance, fmi3Float64 derivatives[],
+                                                     size_t nContinuousStates)
+{
+    W3_CALL(fmi3GetContinuousStateDerivatives, AFTER_INIT);
+    ME_ONLY("fmi3GetContinuousStateDerivatives");
+    return to3(ME2_CALL(fmi2GetDerivatives(w->c, derivatives, nContinuousStates)));
+}
+
+EXPORT3 fmi3Status fmi3GetEventIndicators(fmi3Instance instance, fmi3Float64 eventIndicators[],
+                                          size_t nEventIndicators)
+{
+    W3_CALL(fmi3GetEventIndicators, AFTER_INIT);
+    ME_ONLY("fmi3GetEventIndicators");
+    return to3(ME2_CALL(fmi2GetEventIndicators(w->c, eventIndicators, nEventIndicators)));
+}
+
+EXPORT3 fmi3Status fmi3GetContinuousStates(fmi3Instance instance, fmi3Float64 continuousStates[],
+                                           size_t nContinuousStates)
+{
+    W3_CALL(fmi3GetContinuousStates, AFTER_INIT);
+    ME_ONLY("fmi3GetContinuousStates");
+    return to3(ME2_CALL(fmi2GetContinuousStates(w->c, continuousStates, nContinuousStates)));
+}
+
+EXPORT3 fmi3Status fmi3GetNominalsOfContinuousStates(fmi3Instance instance, fmi3Float64 nominals[],
+                                                     size_t nContinuousStates)
+{
+    W3_CALL(fmi3GetNominalsOfContinuousStates, BIT(W_INSTANTIATED) | AFTER_INIT);
+    ME_ONLY("fmi3GetNominalsOfContinuousStates");
+    return to3(ME2_CALL(fmi2GetNominalsOfContinuousStates(w->c, nominals, nContinuousStates)));
+}
+
+EXPORT3 fmi3Status fmi3GetNumberOfEventIndicators(fmi3Instance instance, size_t *nEventIndicators)
+{
+    W3_CALL(fmi3GetNumberOfEventIndicators, ANY_MODE);
+    if (nEventIndicators == NULL) return refuse(w, "fmi3GetNumberOfEventIndicators: nEventIndicators is NULL");
+    *nEventIndicators = ME_N_INDICATORS;
+    return fmi3OK;
+}
+
+EXPORT3 fmi3Status fmi3GetNumberOfContinuousStates(fmi3Instance instance, size_t *nContinuousStates)
+{
+    W3_CALL(fmi3GetNumberOfContinuousStates, ANY_MODE);
+    if (nContinuousStates == NULL) return refuse(w, "fmi3GetNumberOfContinuousStates: nContinuousStates is NULL");
+    *nContinuousStates = ME_N_STATES;
+    return fmi3OK;
+}
