@@ -166,8 +166,9 @@ def stiffness(accel, tau, x) -> np.ndarray:
     return np.array([(accel(t, xi + h, 0.0, 0.0) - accel(t, xi - h, 0.0, 0.0)) / (2 * h) for t, xi in zip(tau, x)])
 
 
-def fit_domain(accel, basis: Basis, start: float, end: float, grid: Grid) -> Piece:
-    """Optimal C_i of one domain: least squares of sqrt(w/T) R on the collocation grid."""
+def fit_domain(accel, basis: Basis, start: float, end: float, grid: Grid, max_evaluations: int | None = None) -> Piece:
+    """Optimal C_i of one domain: least squares of sqrt(w/T) R on the collocation grid; at most max_evaluations
+    evaluations of the residual (None: scipy's default), fit["converged"] False when they ran out."""
     clock = time.perf_counter()
     length = end - start
     s, w = grid.points(length, len(basis.functions))
@@ -197,7 +198,8 @@ def fit_domain(accel, basis: Basis, start: float, end: float, grid: Grid) -> Pie
     C = np.zeros(n)
     result = None
     if n:
-        result = least_squares(fun, C, jac=jac, method="lm", x_scale="jac", xtol=1e-15, ftol=1e-15, gtol=1e-15)
+        result = least_squares(fun, C, jac=jac, method="lm", x_scale="jac", xtol=1e-15, ftol=1e-15, gtol=1e-15,
+                               max_nfev=max_evaluations)
         C = result.x
     R = fun(C)[: s.size] / weight
     return Piece(start=start, end=end, basis_name=basis.name, C=tuple(float(c) for c in C),
@@ -207,6 +209,7 @@ def fit_domain(accel, basis: Basis, start: float, end: float, grid: Grid) -> Pie
                       "panel": grid.panel, "nodes": grid.nodes,
                       "evaluations": int(result.nfev) if result is not None else 0,
                       "status": result.message if result is not None else "no unknowns",
+                      "converged": result is None or result.status != 0,  # 0: max_nfev ran out
                       "seconds": time.perf_counter() - clock})
 
 

@@ -49,6 +49,7 @@ class Plant:
         if level.open_loop is not None:
             self.solution, notes = level.open_loop(scene, settings, t0, stop_time, cache_dirs)
             self.notes += notes
+            self.warnings += getattr(self.solution, "warnings", [])  # the rung's doubts about its own domain
         else:  # the solver of the settings (solvers.SOLVERS)
             self.integrator = solver_entry(settings.solver).make(
                 self.model.accel, self.model.events, t0, scene.x_start, scene.v_start, 0.0, settings,

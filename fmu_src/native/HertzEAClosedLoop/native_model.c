@@ -154,7 +154,7 @@ void model_initialise(Instance *inst, State *s)
     l->dop.rtol = rtol;
     l->dop.atol = rtol * RULE_ATOL_PER_RTOL;
     l->dop.max_step = max_step != 0.0 ? max_step : INFINITY;
-    l->dop.step_budget = INFINITY;
+    l->dop.step_budget = RULE_MAX_STEPS_PER_DOSTEP;  /* as the plant (issue 25: the loop had no guard) */
     l->rk4.max_step = max_step != 0.0 ? max_step : RULE_RK4_DEFAULT_STEP;
     l->enabled = 1;
     s->model.reference = reference;
@@ -198,6 +198,13 @@ void model_do_step(Instance *inst, State *s, double t, double h)
     if (code == VL_BAD_STEP) {
         native_repr(h, a, sizeof a);
         native_error(inst, "doStep refused: parameter communicationStepSize = %s: %s", a, RULE_STEP_SIZE);
+        return;
+    }
+    if (code == VL_TOO_MANY_STEPS) {  /* the plant's words (HertzEAOscillator/native_model.c) */
+        native_repr(h, a, sizeof a);
+        native_error(inst, "doStep refused: parameter communicationStepSize = %s: needs more than %.0f steps of %g "
+                     "(max_step); make smaller communication steps or raise max_step", a,
+                     RULE_MAX_STEPS_PER_DOSTEP, l->solver == VL_RK4 ? l->rk4.max_step : l->dop.max_step);
         return;
     }
     if (code == VL_BAD_TIME) {
