@@ -32,9 +32,10 @@ FORCED_FLOOR = 1e-3  # without forcing, tau* is where the free vibration has dec
 # the last piece extrapolates the steady vibration (see the module docstring), so a long run sets oafm_tau_end.
 MAX_FIT_SPAN = 2000.0
 # Set-up time bounded (issue 25): an automatic span (oafm_tau_end = 0) longer than this is refused up front in the
-# FMU, before any fit: the fit costs ~5 ms per unit of tau here (the paper example: 267 in 1.25 s), so 400 is ~2 s.
-# Light damping (mu = 0.01: tau* + 1000) took 6-8 s. An explicit oafm_tau_end up to MAX_FIT_SPAN is the user's choice.
-MAX_AUTOMATIC_FIT_SPAN = 400.0
+# FMU, before any fit: a fresh fit cost 2-4 ms per unit of tau here (the paper example: 235 in 0.48 s, to stop time
+# 500 in 1.16 s; mu = 0.04: 545 in 0.91 s; mu = 0.05, x_start = 0.1: 448 in 1.9 s), so 600 is ~1.2-2.4 s. Light
+# damping (mu = 0.01: tau* + 1000) took 6-8 s. An explicit oafm_tau_end up to MAX_FIT_SPAN is the user's choice.
+MAX_AUTOMATIC_FIT_SPAN = 600.0
 # A forcing frequency whose term turns by less than this many cycles over the fit cannot be told from a constant
 # by the fit's basis (harmonics nu and nu + omega become collinear): refused (omega or Omega = 5e-324 made the
 # fit's residual NaN and the least-squares loop run for minutes).
@@ -109,18 +110,11 @@ def covering(scene: Scene, settings: OafmSettings, span: float | None, strict: b
     """Settings whose fit reaches at least `span` past the start (an FMU's stop time): no extrapolation
     inside the experiment. Explicit tau_star / tau_end are kept; automatic ones are resolved to numbers.
     A span beyond MAX_FIT_SPAN: strict (the plant at fidelity 4) raises ParameterError (stopTime); otherwise (a
-    reference) the fit stops at MAX_FIT_SPAN and the steady piece extrapolates beyond it."""
+    reference) the fit stops at MAX_FIT_SPAN and the steady piece extrapolates beyond it. Strict also refuses an
+    automatic span beyond MAX_AUTOMATIC_FIT_SPAN (set-up time), naming stopTime, tau_star or mu."""
     if settings.tau_end:
         return settings
     tau_star, tau_end = domains(scene, settings)
-    if strict and max(tau_end, span or 0.0) > MAX_AUTOMATIC_FIT_SPAN:
-        cause = ("stopTime", span) if span is not None and span > tau_end else ("mu", scene.mu)
-        raise ParameterError(*cause, f"fidelity 4's automatic fit would span tau = {max(tau_end, span or 0.0):.6g} "
-                             f"(tau* = {tau_star:.6g}, then the free vibration's decay, 20/mu at most "
-                             f"{MAX_STEADY_SPAN:g}, or the stop time), more than {MAX_AUTOMATIC_FIT_SPAN:g}: its set-up "
-                             f"would take more than ~2 s (~5 ms per unit of tau); set oafm_tau_end (<= "
-                             f"{MAX_FIT_SPAN:g}) to choose the span, beyond which the steady piece extrapolates, or use "
-                             "fidelity 0")
     if span is not None and span > max(tau_end, MAX_FIT_SPAN):
         if not strict:
             return dataclasses.replace(settings, tau_star=tau_star, tau_end=max(tau_end, MAX_FIT_SPAN))
@@ -128,6 +122,15 @@ def covering(scene: Scene, settings: OafmSettings, span: float | None, strict: b
                              f"tau = {MAX_FIT_SPAN:g} past the start (memory and set-up time grow with it); set "
                              f"oafm_tau_end <= {MAX_FIT_SPAN:g} to fit that far and extrapolate the steady vibration "
                              "beyond it, or use fidelity 0-3")
+    if strict and max(tau_end, span or 0.0) > MAX_AUTOMATIC_FIT_SPAN:
+        cause = (("stopTime", span) if span is not None and span > tau_end else
+                 ("tau_star", settings.tau_star) if settings.tau_star else ("mu", scene.mu))
+        raise ParameterError(*cause, f"fidelity 4's automatic fit would span tau = {max(tau_end, span or 0.0):.6g} "
+                             f"(tau* = {tau_star:.6g}, then the free vibration's decay, 20/mu at most "
+                             f"{MAX_STEADY_SPAN:g}, or the stop time), more than {MAX_AUTOMATIC_FIT_SPAN:g}: its set-up "
+                             f"would take more than ~2 s (2-4 ms per unit of tau); set oafm_tau_end (<= "
+                             f"{MAX_FIT_SPAN:g}) to choose the span, beyond which the steady piece extrapolates, or use "
+                             "fidelity 0")
     return dataclasses.replace(settings, tau_star=tau_star, tau_end=max(tau_end, span or 0.0))
 
 

@@ -17,6 +17,7 @@ import numpy as np
 
 from .control import ERRATA_INITIAL_ESTIMATES, Controller, Gains, Law, validate_estimates, validate_law
 from .fidelities import closed_loop_refusal, entry, integrated
+from .models import drive_step_ceiling
 from .parameters import ParameterError, Scene, validate
 from .plant import INTEGRATOR_REBUILT, MAX_STEPS_PER_DOSTEP, TIME_TOLERANCE, Settings, checked_settings
 from .snapshot import plain_attributes, restore_attributes
@@ -62,9 +63,12 @@ class ClosedLoop:
         self.t = t0
         self._stage = (None, None, None, None, None)  # (t, x, v, theta^, U) of the last rates() call
         theta0 = np.array(loop.estimates, dtype=float)
+        # max_step = 0: the adaptive solver's ceiling from the scene's drive and the reference's fastest term
+        self.drive_ceiling = drive_step_ceiling(scene, self.reference.fastest_frequency())
         self.integrator = solver_entry(settings.solver).make(self._accel, self.model.events, t0, scene.x_start,
                                                              scene.v_start, theta0, settings, rates=self._rates,
-                                                             step_budget=MAX_STEPS_PER_DOSTEP)
+                                                             step_budget=MAX_STEPS_PER_DOSTEP,
+                                                             drive_ceiling=self.drive_ceiling)
 
     # The integrators call rates(t, x, v, theta^) and then accel(t, x, v, theta^) at each stage: the control
     # U computed for the first is reused by the second.

@@ -11,7 +11,6 @@ Packed inside the FMU: imports nothing beyond vibromodel, numpy and the standard
 from __future__ import annotations
 
 import ctypes
-import math
 
 import numpy as np
 
@@ -276,7 +275,8 @@ class CompiledClosedLoop(_FastPath):
         fill_controller(l.controller, python.controller, python.scene, library)
         l.solver, l.time_tolerance = int(settings.solver), TIME_TOLERANCE
         l.dop.rtol, l.dop.atol = settings.rtol, settings.rtol * ATOL_PER_RTOL  # as ClosedLoop gives Dop853
-        l.dop.max_step, l.dop.step_budget = settings.max_step or math.inf, MAX_STEPS_PER_DOSTEP  # as the plant
+        l.dop.max_step = settings.max_step or python.drive_ceiling  # as ClosedLoop gives Dop853
+        l.dop.step_budget = MAX_STEPS_PER_DOSTEP  # as the plant
         l.rk4.max_step = settings.max_step or RK4_DEFAULT_STEP
         l.reference = self._program.struct
         l.enabled = 1

@@ -128,6 +128,10 @@ class AnalyticSolution:
     def C(self) -> list[tuple[float, ...]]:
         return [p.C for p in self.pieces]
 
+    def fastest_frequency(self) -> float:
+        """The largest angular frequency nu of any term (a step ceiling's drive, models.drive_step_ceiling)."""
+        return max((float(np.max(np.abs(p._rates.imag))) for p in self.pieces if p._rates.size), default=0.0)
+
     @property
     def tau_end(self) -> float:
         """End of the last fitted domain: beyond it the solution extrapolates."""

@@ -202,7 +202,10 @@ def test_the_grazing_contact_that_halted_brentq_completes_identically(library):
 def test_step_budget_failure_is_the_pythons(library, monkeypatch):
     monkeypatch.setattr(plant_module, "MAX_STEPS_PER_DOSTEP", 40)  # what Plant gives Dop853
     monkeypatch.setattr(settings_module, "MAX_STEPS_PER_DOSTEP", 40)  # what CompiledPlant gives the core
-    python = assert_same_traces(Scene(), Settings(), [(0.1, 0.0), (50.0, 0.0), (50.0, 0.0)], library)
+    # without a drive (no step ceiling: models.drive_step_ceiling) a step of 50 passes the up-front check and spends
+    # the budget of 40 steps
+    undriven = Scene(Delta=0.0, beta=0.0, gamma=0.0)
+    python = assert_same_traces(undriven, Settings(), [(0.1, 0.0), (50.0, 0.0), (50.0, 0.0)], library)
     error = python[1][0]
     assert error[0] is IntegrationError and "40 steps reached only tau" in error[1]
 

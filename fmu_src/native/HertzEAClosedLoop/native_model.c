@@ -43,6 +43,18 @@ static void point_reference(State *s)
     s->model.loop.reference.pieces = r->pieces;
 }
 
+/* The packed reference's fastest frequency (OafmProgram's largest frequency base: for the packed kinds, ERRATA and
+   MULTITONE, the largest frequency of its terms, as ClosedLoop's reference.fastest_frequency()) */
+static double reference_frequency(int reference)
+{
+    const PackedReference *r = &PACKED_REFERENCES[reference];
+    double fastest = 0.0;
+    for (int64_t i = 0; i < r->n_pieces; i++)
+        for (int64_t j = 0; j < r->pieces[i].n_freq_bases; j++)
+            if (fabs(r->pieces[i].freq_base[j]) > fastest) fastest = fabs(r->pieces[i].freq_base[j]);
+    return fastest;
+}
+
 /* The packed reference of the current parameters (its index), or -1 after refusing with the parameter that
    differs from the packed reference of the same kind (or `reference` when its kind is not packed). */
 static int find_reference(Instance *inst, const State *s)
@@ -153,7 +165,7 @@ void model_initialise(Instance *inst, State *s)
     l->time_tolerance = RULE_TIME_TOLERANCE;
     l->dop.rtol = rtol;
     l->dop.atol = rtol * RULE_ATOL_PER_RTOL;
-    l->dop.max_step = max_step != 0.0 ? max_step : INFINITY;
+    l->dop.max_step = max_step != 0.0 ? max_step : native_drive_ceiling(s, reference_frequency(reference));
     l->dop.step_budget = RULE_MAX_STEPS_PER_DOSTEP;  /* as the plant (issue 25: the loop had no guard) */
     l->rk4.max_step = max_step != 0.0 ? max_step : RULE_RK4_DEFAULT_STEP;
     l->enabled = 1;
