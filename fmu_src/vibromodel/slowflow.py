@@ -17,7 +17,6 @@ import time
 import numpy as np
 
 from .averaging import Averaged
-from .integrate import IntegrationError
 from .parameters import PULL_IN_GAP, ParameterError
 
 CHUNK = 200.0  # tau covered per integration when the end of the experiment is not known
@@ -55,6 +54,7 @@ class SlowFlowSolution:
 
     def __init__(self, model: Averaged, t0: float, x0: float, v0: float, rtol: float,
                  max_step: float = math.inf, t_end: float | None = None, bounded: bool = False):
+        self.stop = math.inf if t_end is None else t_end  # the experiment's end: check_domain looks no further
         if bounded and t_end is not None:
             t_end = min(t_end, t0 + WINDOW)  # the rest as the run advances
         self.bounded, self.first = bounded, 0  # first: cells dropped from the front (bounded only)
@@ -108,12 +108,15 @@ class SlowFlowSolution:
         return spacing
 
     def check_domain(self, cells, first_time: float) -> None:
-        """ParameterError at the first cell whose reconstructed x can leave the averaged model's domain.
+        """ParameterError at the first cell (before the stop time) whose reconstructed x can leave the averaged
+        model's domain.
 
         The slow flow expands the contact force in powers of x - x_e: it has no contact loss (1 + 2x/3 > 0, x > -3/2)
         and no pull-in (|x| < (1 - PULL_IN_GAP) 3R/2). x = x_e + p + h (p^2 - q^2) - m r^2 + psi with |p|, |q| <= r,
         so x lies within x_e -/+ (r + (|h| + |m|) r^2 + |psi|) (psi_bound). Δ = 0.3 used to return x(50) = -1.663
         with fmi2OK, where fidelity 0 stops at pull-in at tau = 17.08."""
+        if self.stop < math.inf:  # none after the stop time
+            cells = cells[:max(0, math.ceil((self.stop - first_time) / self.spacing))]
         if not cells:
             return
         AB = np.asarray(cells)[:, [0, 4]]
@@ -158,9 +161,11 @@ class SlowFlowSolution:
             if A_new == A and B_new == B:
                 break
             A, B = A_new, B_new
-        if not (math.isfinite(A) and math.isfinite(B)):
-            raise IntegrationError(f"the averaged model has no finite slow state at tau = {t0!r}: the parameters "
-                                   "are beyond its numerical range", t0, x0, v0)
+        if not (math.isfinite(A) and math.isfinite(B)):  # the iteration diverged (its contraction needs small rates)
+            name, value = ("Delta", self.Delta) if self.Delta != 0.0 else ("x_start", x0)
+            raise ParameterError(name, value, f"fidelity 3's averaged model has no finite slow state at tau = {t0!r}: "
+                                 "the slow state's start iteration diverges (the drive or the start is far beyond "
+                                 "the averaging's small, slow range); use fidelity 0")
         return A, B
 
     def _start(self, t, Z):

@@ -1,0 +1,61 @@
+"""The campaigns of issue 25 (vibrofmu.analyses.domains): a small subset in the default suite, the whole grids slow."""
+import math
+
+import pytest
+
+from vibrofmu.analyses import domains
+
+
+def assert_clean(summary):
+    """0 crashes, 0 hangs, 0 outputs outside the domain with fmi2OK, every refusal at initialisation naming a
+    parameter (issue 25's acceptance). The set-up times (slow_setups_not_refused, slowest_init_seconds) are measured
+    and reported by the campaign, not asserted: the project times nothing in tests."""
+    assert summary["crashes"] == 0 and summary["hangs"] == 0, summary
+    assert summary["outside_the_domain_with_fmi2OK"] == 0, summary
+    assert summary["refusals_naming_no_parameter"] == 0, summary
+
+
+@pytest.mark.fmu
+def test_extreme_inputs_subset(plant_fmu):
+    """Delta at NaN and at 1e4 (huge forcing) x fidelities 0-4, each in its own process: refused or right."""
+    result = domains.extreme_grid(plant_fmu, stop=5.0, parameters=("Delta",), values=(math.nan, 1e4))
+    assert result["summary"]["cases"] == 10
+    assert_clean(result["summary"])
+
+
+@pytest.mark.fmu
+@pytest.mark.slow
+def test_extreme_input_grid(plant_fmu):
+    """Every scene parameter, rtol and max_step at NaN, +-inf, 0, -1, 1e308, 1e-308, 1e4 x fidelities 0-4."""
+    result = domains.extreme_grid(plant_fmu)
+    assert result["summary"]["cases"] == 5 * len(domains.EXTREME_PARAMETERS) * len(domains.EXTREME_VALUES)
+    assert_clean(result["summary"])
+
+
+@pytest.mark.slow
+def test_long_lightly_damped_grazing_runs_with_the_drive_ceiling(capsys):
+    """217 runs (tau up to 5,000, mu down to 1e-3), as many as the campaign that found issue 25's 13 failures: the
+    drive's step ceiling never loses a run that is within 100 rtol max|x| without it, and wins some. The count is
+    printed (measured with seed 0: 212 of 217 within, 208 without; the 5 left, at mu < 1.5e-3 over tau = 980 ... 4,500,
+    err 1.0 ... 2.1 times the bound also with max_step = 1/omega_max: the per-step error control's accumulation
+    over thousands of lightly damped periods, not the drive; docs/numerics.md)."""
+    result = domains.graze_campaign(217, 0)
+    summary = result["summary"]
+    with capsys.disabled():
+        print(f"\ngrazing runs within 100 rtol max|x|: {summary['within_100_rtol_max_x_with_ceiling']} of 217 with the "
+              f"ceiling, {summary['within_100_rtol_max_x_without']} without")
+    for row in result["rows"]:
+        if row["none"]["error_over_bound"] <= 1.0 and row["none"]["agrees_on_stop"]:
+            assert row["ceiling"]["error_over_bound"] <= 1.0 and row["ceiling"]["agrees_on_stop"], row
+    assert summary["within_100_rtol_max_x_with_ceiling"] > summary["within_100_rtol_max_x_without"]
+
+
+@pytest.mark.slow
+def test_fidelities_3_and_4_accept_only_what_they_can_answer():
+    """The rung grid: every fidelity 3 or 4 answer given without a warning is within 5 % of fidelity 0's amplitude
+    (the averaged model's first-order error on the paper scene is ~1 %: docs/rungs.md), and fidelity 0 ran to the end
+    wherever they answered (set-up times are reported by the campaign, not asserted)."""
+    result = domains.rung_grid()
+    for row in result["rows"]:
+        if row["outcome"] == "accepted":
+            assert row["relative_error"] <= 0.05 and row["fidelity_0_stop"] is None, row
