@@ -29,12 +29,16 @@
 enum {
     VL_OK = 0,
     VL_BAD_STEP = 1,     /* communicationStepSize not finite or <= 0 (nothing changed) */
+    VL_TOO_MANY_STEPS = 3,  /* h / max_step > VL_MAX_STEPS_PER_DOSTEP (nothing changed), as the plant's */
     VL_BAD_TIME = 4,     /* currentCommunicationPoint is not the loop's time (nothing changed) */
     VL_TERMINAL = DOP_TERMINAL,  /* terminal event (pull-in): TerminalEvent */
     VL_FAILED = DOP_FAILED,      /* the solver cannot continue: IntegrationError */
     VL_RAISED = DOP_RAISED       /* where the Python loop raises a plain exception: message "<type>: <text>" */
 };
 enum { VL_DOP853 = 0, VL_RK4 = 1 };  /* plant.Solver */
+/* settings.MAX_STEPS_PER_DOSTEP: a doStep needing more steps of the solver's ceiling is refused up front (the
+   closed loop with max_step = 1e-308 ran > 150 s in one doStep, issue 25); the adaptive solver's step budget too */
+#define VL_MAX_STEPS_PER_DOSTEP 1000000.0
 
 typedef struct {
     /* ---- constants, set once from the parameters by vibromodel.compiled_loop ---- */

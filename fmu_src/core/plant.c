@@ -13,6 +13,7 @@
 #include "solver.h"
 
 enum { CONTACT = 0, UPPER_GAP = 1, LOWER_GAP = 2 };  /* ExactModel.events, in order */
+enum { POLY_UPPER_GAP = 0, POLY_LOWER_GAP = 1 };      /* PolynomialModel.events: the pull-in events only */
 
 /* Leave error `code` pending with (t, x, v) and the formatted message; the fast path stops. */
 static int set_error(VkPlant *p, int code, double t, double x, double v, const char *format, ...)
@@ -33,7 +34,7 @@ void vk_solver_message(const VkModel *m, int code, const DopReport *r, char *buf
 {
     if (code == DOP_TERMINAL) {
         number_text t_text, x_text, gap_text;
-        int upper = r->event == UPPER_GAP;  /* models.pull_in_events' names */
+        int upper = r->event == (m->polynomial ? POLY_UPPER_GAP : UPPER_GAP);  /* models.pull_in_events' names */
         snprintf(buf, size, "pull-in: %s gap 1 %s 2x/(3R) below %s at tau = %s, x = %s", upper ? "upper" : "lower",
                  upper ? "-" : "+", py_g(gap_text, m->pull_in_gap, 6), py_g(t_text, r->t, 10),
                  py_g(x_text, r->y[0], 10));
@@ -119,12 +120,19 @@ double vk_accel(const VkPlant *p, double t, double x, double v, double U)
     return fault ? NAN : a;
 }
 
-/* The model's events as the solvers take them (ExactModel.events: contact, upper gap, lower gap) */
+/* The model's events as the solvers take them (ExactModel.events: contact, upper gap, lower gap;
+   PolynomialModel.events: upper gap, lower gap -- the same pull-in rule, no contact kink in Eq. 7) */
 void vk_set_events(int64_t *n_events, DopEvent *events, const VkModel *m)
 {
     memset(events, 0, sizeof(DopEvent) * DOP_MAX_EVENTS);
-    if (m->polynomial) {  /* PolynomialModel.events is empty */
-        *n_events = 0;
+    if (m->polynomial) {
+        *n_events = 2;
+        events[POLY_UPPER_GAP].c0 = 1.0 - m->pull_in_gap;
+        events[POLY_UPPER_GAP].c[0] = -m->pull_in_c;
+        events[POLY_UPPER_GAP].terminal = 1;
+        events[POLY_LOWER_GAP].c0 = 1.0 - m->pull_in_gap;
+        events[POLY_LOWER_GAP].c[0] = m->pull_in_c;
+        events[POLY_LOWER_GAP].terminal = 1;
         return;
     }
     *n_events = 3;

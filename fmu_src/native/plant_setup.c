@@ -7,6 +7,17 @@
 #include "rules.h"
 #include "series.h"
 
+double native_drive_ceiling(const State *s, double extra)
+{
+    const double omega = s->value[VR_omega], Omega = s->value[VR_Omega];
+    double fastest = s->value[VR_Delta] != 0.0 ? omega : 0.0;  /* Python's max, left to right: the same double */
+    const double candidates[3] = {s->value[VR_beta] != 0.0 ? Omega : 0.0, s->value[VR_gamma] != 0.0 ? 2.0 * Omega : 0.0,
+                                  extra};
+    for (int i = 0; i < 3; i++)
+        if (candidates[i] > fastest) fastest = candidates[i];
+    return fastest > 0.0 ? NATIVE_DRIVE_STEP_TURN / fastest : INFINITY;
+}
+
 void native_plant_model(VkModel *m, const State *s, int fidelity)
 {
     const double Delta = s->value[VR_Delta], alpha = s->value[VR_alpha], beta = s->value[VR_beta],

@@ -9,6 +9,12 @@
 /* The compiled model of `fidelity` (fidelity.h: VK_FIDELITIES[fidelity].model, which must not be VK_MODEL_NONE) of
    the scene in s->value into *m (other fields untouched). */
 void native_plant_model(VkModel *m, const State *s, int fidelity);
+/* models.DRIVE_STEP_TURN (tests/model/test_rung_domains.py checks that they are equal) */
+#define NATIVE_DRIVE_STEP_TURN 2.25
+/* models.drive_step_ceiling: the adaptive solver's step ceiling when max_step = 0, NATIVE_DRIVE_STEP_TURN over the
+   fastest forcing term switched on (omega if Delta != 0, Omega if beta != 0, 2 Omega if gamma != 0) and `extra` (a
+   closed loop's reference); INFINITY when none. */
+double native_drive_ceiling(const State *s, double extra);
 /* settings.checked_settings's drive warnings for a solver that has them (solver->drive_gain_x: RK4): the forcing
    terms its steps of max_step do not resolve (plant.rk4_drive_warnings), logged as fmi2Warning; none for another. */
 void native_drive_warnings(Instance *inst, const State *s, const VkSolverOps *solver, double max_step);

@@ -15,10 +15,12 @@ import os
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
+import numpy as np
+
 from .models import ExactModel
 from .oafm import AnalyticSolution, Grid, Piece, continue_from, fit_domain
 from .oafm_bases import FAMILIES, eq11_operator, forced_x0
-from .parameters import ParameterError, Scene, validate
+from .parameters import PULL_IN_GAP, ParameterError, Scene, validate
 
 # The cache key holds the source of every module the fit depends on: an edit there retires old entries.
 FIT_SOURCES = ("analytic.py", "closedform.py", "oafm.py", "oafm_bases.py", "models.py", "forces.py", "parameters.py")
@@ -29,10 +31,35 @@ FORCED_FLOOR = 1e-3  # without forcing, tau* is where the free vibration has dec
 # paper example; 1e4 took 19 s and 635 MB, 1e6 more than 20 GB): a longer span is refused up front. Beyond the fit
 # the last piece extrapolates the steady vibration (see the module docstring), so a long run sets oafm_tau_end.
 MAX_FIT_SPAN = 2000.0
+# Set-up time bounded (issue 25): an automatic span (oafm_tau_end = 0) longer than this is refused up front in the
+# FMU, before any fit: a fresh fit cost 2-4 ms per unit of tau here (the paper example: 235 in 0.48 s, to stop time
+# 500 in 1.16 s; mu = 0.04: 545 in 0.91 s; mu = 0.05, x_start = 0.1: 448 in 1.9 s), so 600 is ~1.2-2.4 s. Light
+# damping (mu = 0.01: tau* + 1000) took 6-8 s. An explicit oafm_tau_end up to MAX_FIT_SPAN is the user's choice.
+MAX_AUTOMATIC_FIT_SPAN = 600.0
 # A forcing frequency whose term turns by less than this many cycles over the fit cannot be told from a constant
 # by the fit's basis (harmonics nu and nu + omega become collinear): refused (omega or Omega = 5e-324 made the
 # fit's residual NaN and the least-squares loop run for minutes).
 MIN_TURNS = 1e-3
+# The domain of fidelity 4 (issue 25: at Delta = 0.3, 1, 3 or beta = 3 the fit ran 258-301 s, then returned
+# x = 1.379 where fidelity 0 gives 0.347, or |x| up to 4.38 beyond the electrode, with fmi2OK).
+# (1) Before the fit: the linear prediction x0 (Eq. 11 driven by the linear forcing of Eq. 7, the OAFM's own initial
+#     approximation over the whole experiment) must stay inside the contact (1 + 2x/3 > 0: x > -3/2) and short of
+#     pull-in (|x| < (1 - PULL_IN_GAP) 3R/2): the OAFM expands about the linearized contact, and a vibration that the
+#     linear model already carries out of the contact or onto an electrode is not a correction of it.
+# (2) The fit: at most MAX_FIT_EVALUATIONS evaluations of the residual per domain (the paper example needs 11-15;
+#     the 258 s fits above ran thousands); a fit that does not converge within them is refused.
+# (3) After the fit: x~ on the fit's span must stay in the same domain, and its error is estimated from the residual
+#     R = x~'' - accel of Eq. 3: off resonance an error e of x answers R ~ a1 e (a1: Eq. 11's stiffness), so
+#     e ~ max|R| / a1. Measured against fidelity 0 on [0, 50] (Delta = 0, 0.003, 0.01, 0.03, 0.1): the observed
+#     error was 0.04-1.7 of this estimate (3.2e-9 for 7.3e-8, 2.7e-7 for 7.8e-6, 6.4e-4 for 3.7e-4). The estimate
+#     above FIT_WARN of max|x~| (0.01 %; the paper example: 2e-6) is logged as fmi2Warning, above FIT_REFUSE refused:
+#     both say to use fidelity 0.
+MAX_FIT_EVALUATIONS = 60
+FIT_WARN = 1e-4
+FIT_REFUSE = 0.1
+DOMAIN_SAMPLES_PER_PERIOD = 40  # samples of x0 and x~ per period of the fastest term (the checks above) ...
+MAX_DOMAIN_SAMPLES = 20_000  # ... at most (omega = 1000 over tau = 267: 1.7e6 samples took a minute; a forcing that
+# fast moves x by Delta/omega^2, which the samples of the slower terms bound)
 
 
 @dataclass(frozen=True)
@@ -83,7 +110,8 @@ def covering(scene: Scene, settings: OafmSettings, span: float | None, strict: b
     """Settings whose fit reaches at least `span` past the start (an FMU's stop time): no extrapolation
     inside the experiment. Explicit tau_star / tau_end are kept; automatic ones are resolved to numbers.
     A span beyond MAX_FIT_SPAN: strict (the plant at fidelity 4) raises ParameterError (stopTime); otherwise (a
-    reference) the fit stops at MAX_FIT_SPAN and the steady piece extrapolates beyond it."""
+    reference) the fit stops at MAX_FIT_SPAN and the steady piece extrapolates beyond it. Strict also refuses an
+    automatic span beyond MAX_AUTOMATIC_FIT_SPAN (set-up time), naming stopTime, tau_star or mu."""
     if settings.tau_end:
         return settings
     tau_star, tau_end = domains(scene, settings)
@@ -94,6 +122,15 @@ def covering(scene: Scene, settings: OafmSettings, span: float | None, strict: b
                              f"tau = {MAX_FIT_SPAN:g} past the start (memory and set-up time grow with it); set "
                              f"oafm_tau_end <= {MAX_FIT_SPAN:g} to fit that far and extrapolate the steady vibration "
                              "beyond it, or use fidelity 0-3")
+    if strict and max(tau_end, span or 0.0) > MAX_AUTOMATIC_FIT_SPAN:
+        cause = (("stopTime", span) if span is not None and span > tau_end else
+                 ("tau_star", settings.tau_star) if settings.tau_star else ("mu", scene.mu))
+        raise ParameterError(*cause, f"fidelity 4's automatic fit would span tau = {max(tau_end, span or 0.0):.6g} "
+                             f"(tau* = {tau_star:.6g}, then the free vibration's decay, 20/mu at most "
+                             f"{MAX_STEADY_SPAN:g}, or the stop time), more than {MAX_AUTOMATIC_FIT_SPAN:g}: its set-up "
+                             f"would take more than ~2 s (2-4 ms per unit of tau); set oafm_tau_end (<= "
+                             f"{MAX_FIT_SPAN:g}) to choose the span, beyond which the steady piece extrapolates, or use "
+                             "fidelity 0")
     return dataclasses.replace(settings, tau_star=tau_star, tau_end=max(tau_end, span or 0.0))
 
 
@@ -128,19 +165,25 @@ def solve(scene: Scene, settings: OafmSettings = OafmSettings(), t0: float = 0.0
     validate(scene)
     settings.validate()
     accel = ExactModel(scene).accel
-    return _chain(scene, settings, t0, lambda i, basis, start, end: fit_domain(accel, basis, start, end, settings.grid))
+    return _chain(scene, settings, t0, lambda i, basis, start, end: fit_domain(accel, basis, start, end, settings.grid,
+                                                                               MAX_FIT_EVALUATIONS))
 
 
-def assemble(scene: Scene, settings: OafmSettings, t0: float, C: list) -> AnalyticSolution:
-    """The solution from known C_i (a cache entry) without fitting: same bases, same closed forms."""
+def assemble(scene: Scene, settings: OafmSettings, t0: float, C: list, residual_max: list | None = None,
+             converged: list | None = None) -> AnalyticSolution:
+    """The solution from known C_i (a cache entry) without fitting: same bases, same closed forms; the fit's
+    largest residual and convergence per piece where the entry has them (check_fit reads them)."""
     return _chain(scene, settings, t0, lambda i, basis, start, end: Piece(
-        start=start, end=end, basis_name=basis.name, C=tuple(C[i]), x=basis.solution(C[i])))
+        start=start, end=end, basis_name=basis.name, C=tuple(C[i]), x=basis.solution(C[i]),
+        residual_max=math.nan if residual_max is None else float(residual_max[i]),
+        fit={} if converged is None else {"converged": bool(converged[i])}))
 
 
 def _chain(scene: Scene, settings: OafmSettings, t0: float, make_piece) -> AnalyticSolution:
     """Domain after domain, each starting from the previous one's x~, x~' at its end."""
     tau_star, tau_end = domains(scene, settings)
     check_affordable(scene, tau_end)
+    check_linear_domain(scene, t0, tau_end)
     pieces, x, v, start = [], scene.x_start, scene.v_start, t0
     for i, (make_basis, end) in enumerate(zip(FAMILIES[settings.basis], (t0 + tau_star, t0 + tau_end))):
         basis = make_basis(scene, start, x, v, settings.order)
@@ -148,6 +191,87 @@ def _chain(scene: Scene, settings: OafmSettings, t0: float, make_piece) -> Analy
         x, v = continue_from(pieces[-1], end)
         start = end
     return AnalyticSolution(pieces)
+
+
+def _samples(scene: Scene, t0: float, tau_end: float) -> np.ndarray:
+    """Times on [t0, t0 + tau_end], DOMAIN_SAMPLES_PER_PERIOD per period of the fastest of q, omega, 2 Omega."""
+    fastest = max(1.0, abs(scene.omega) if scene.Delta else 0.0, 2.0 * abs(scene.Omega) if scene.gamma or scene.beta
+                  else 0.0)
+    n = int(min(MAX_DOMAIN_SAMPLES, math.ceil(tau_end * fastest * DOMAIN_SAMPLES_PER_PERIOD / (2.0 * math.pi)))) + 1
+    return t0 + np.linspace(0.0, tau_end, n)
+
+
+def _outside(scene: Scene, x: np.ndarray) -> int | None:
+    """The first index where x leaves fidelity 4's domain (contact x > -3/2, pull-in |x| < (1 - gap) 3R/2)."""
+    electrode = (1.0 - PULL_IN_GAP) * 1.5 * scene.R
+    bad = np.flatnonzero(~((x > -1.5) & (np.abs(x) < electrode)))
+    return int(bad[0]) if bad.size else None
+
+
+def _domain_words(scene: Scene, x: float) -> str:
+    return "leaves the contact (1 + 2x/3 > 0: x > -3/2)" if not x > -1.5 else \
+        f"reaches pull-in (|x| < (1 - {PULL_IN_GAP:g}) 3R/2 = {(1.0 - PULL_IN_GAP) * 1.5 * scene.R:.6g})"
+
+
+def _dominant_drive(scene: Scene) -> str:
+    """The parameter behind the largest linear amplitude (Eq. 11's gain at each forcing, the free vibration)."""
+    L = eq11_operator(scene)
+
+    def gain(w):
+        return 1.0 / abs(complex(L.k - w * w, scene.mu * w))
+
+    amplitudes = {"Delta": abs(scene.Delta) * gain(scene.omega), "beta": abs(scene.beta) * gain(scene.Omega),
+                  "gamma": abs(scene.gamma) * gain(2.0 * scene.Omega),
+                  "x_start": abs(scene.x_start), "v_start": abs(scene.v_start) / L.q}
+    return max(amplitudes, key=amplitudes.get)
+
+
+def check_linear_domain(scene: Scene, t0: float, tau_end: float) -> None:
+    """ParameterError before any fit when the linear prediction leaves fidelity 4's domain (comment at
+    MAX_FIT_EVALUATIONS, (1))."""
+    L = eq11_operator(scene)
+    x0 = Piece(start=t0, end=t0 + tau_end, basis_name="x0", C=(),
+               x=forced_x0(L, scene, t0, scene.x_start, scene.v_start)[0].merged())
+    tau = _samples(scene, t0, tau_end)
+    x = x0.evaluate(tau - t0)[:, 0]
+    i = _outside(scene, x)
+    if i is not None:
+        name = _dominant_drive(scene)
+        raise ParameterError(name, getattr(scene, name), f"fidelity 4's linear prediction (Eq. 11, the OAFM's initial "
+                             f"approximation) {_domain_words(scene, float(x[i]))} at tau = {tau[i]:.6g} (x = "
+                             f"{x[i]:.4g}): outside the domain of the OAFM, which expands about the linearized contact; "
+                             "refused before the fit; use fidelity 0")
+
+
+def check_fit(scene: Scene, solution: AnalyticSolution, t0: float) -> list[str]:
+    """The fitted solution's domain and error estimate (comment at MAX_FIT_EVALUATIONS, (2) and (3)): raises
+    ParameterError outside the domain, for an unconverged fit or an estimate above FIT_REFUSE; returns the warning
+    for an estimate above FIT_WARN (else [])."""
+    name = _dominant_drive(scene)
+    for piece in solution.pieces:
+        if piece.fit.get("converged") is False:
+            raise ParameterError(name, getattr(scene, name), f"fidelity 4's OAFM fit on [{piece.start:.6g}, "
+                                 f"{piece.end:.6g}] did not converge in {MAX_FIT_EVALUATIONS} evaluations (residual "
+                                 f"rms {piece.residual_rms:.3g}): outside its domain; use fidelity 0")
+    tau = _samples(scene, t0, solution.tau_end - t0)
+    x = solution(tau)[0]
+    i = _outside(scene, x)
+    if i is not None:
+        raise ParameterError(name, getattr(scene, name), f"fidelity 4's fitted solution {_domain_words(scene, float(x[i]))} "
+                             f"at tau = {tau[i]:.6g} (x = {x[i]:.4g}): outside the domain of the OAFM; use fidelity 0")
+    a1 = eq11_operator(scene).k
+    residual = max(piece.residual_max for piece in solution.pieces)
+    estimate = residual / a1
+    size = float(np.max(np.abs(x))) if x.size else 0.0
+    if not math.isfinite(estimate) or estimate > FIT_REFUSE * size:
+        raise ParameterError(name, getattr(scene, name), f"fidelity 4's error estimate max|R|/a1 = {estimate:.3g} "
+                             f"(R: the residual of Eq. 3) exceeds {FIT_REFUSE:g} of max|x~| = {size:.4g}: outside the "
+                             "domain of the OAFM; use fidelity 0")
+    if estimate > FIT_WARN * size:
+        return [f"fidelity 4's error estimate max|R|/a1 = {estimate:.3g} exceeds {FIT_WARN:g} of max|x~| = "
+                f"{size:.4g} (R: the residual of Eq. 3): the OAFM solution is approximate here; use fidelity 0 for "
+                "accuracy"]
+    return []
 
 
 # ---------------------------------------------------------------- cache keyed by the parameters
@@ -183,7 +307,7 @@ def cached_solve(scene: Scene, settings: OafmSettings, t0: float = 0.0, read_dir
         if path.is_file():
             try:
                 entry = json.loads(path.read_text())
-                return assemble(scene, settings, t0, entry["C"]), str(path)
+                return assemble(scene, settings, t0, entry["C"], entry["residual_max"], entry["converged"]), str(path)
             except (OSError, ValueError, KeyError, TypeError):
                 continue  # unreadable entry: fall through to the next cache or a fresh fit
     solution = solve(scene, settings, t0)
@@ -194,7 +318,9 @@ def cached_solve(scene: Scene, settings: OafmSettings, t0: float = 0.0, read_dir
 def write_cache_entry(path: Path, solution: AnalyticSolution) -> None:
     """Write atomically (temporary file, then rename); a cache that cannot be written is skipped."""
     entry = {"C": [list(p.C) for p in solution.pieces],
-             "residual_rms": [p.residual_rms for p in solution.pieces]}
+             "residual_rms": [p.residual_rms for p in solution.pieces],
+             "residual_max": [p.residual_max for p in solution.pieces],
+             "converged": [p.fit.get("converged", True) for p in solution.pieces]}
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         tmp = path.with_suffix(f".{os.getpid()}.tmp")

@@ -15,14 +15,14 @@ from __future__ import annotations
 
 import cmath
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from math import comb
 
 import numpy as np
 from numpy.polynomial import polynomial as P
 
 from . import forces
-from .parameters import Scene
+from .parameters import ParameterError, Scene
 
 ORDER = 5  # the polynomial model Eq. 7 has degree 5
 FOLD_DET_TOLERANCE = 1e-12  # |det J| below this times its scale counts as a fold (det J = 0)
@@ -199,6 +199,44 @@ def averaged(scene: Scene, kind: str = "lindstedt") -> Averaged:
     return Averaged(scene, eq, backbone(eq, kind))
 
 
+def equilibrium_problem(scene: Scene) -> str | None:
+    """Why the averaged model of the scene has no stable static equilibrium to average about, or None.
+
+    The averaging expands about x_e, a root of sum A_k x^k with stiffness k1 = d/dx sum A_k x^k > 0 there (the
+    backbone divides by k1^(3/2) and omega_e = sqrt(k1)). A strong electrostatic pull (alpha, gamma or the AC
+    moments of beta) can leave no such root inside the contact: static pull-in, which the slow flow cannot describe
+    (alpha = 3 used to end in TypeError('must be real number, not complex'), naming nothing)."""
+    try:
+        eq = equilibrium(scene)
+        kappa = backbone(eq)
+        value = float(P.polyval(eq.x_e, eq.A))
+        scale = float(np.sum(np.abs(eq.A) * abs(eq.x_e) ** np.arange(len(eq.A))))
+    except (ArithmeticError, ValueError, TypeError) as error:
+        return f"no equilibrium found ({error})"
+    if not (math.isfinite(eq.x_e) and math.isfinite(eq.k[1]) and eq.k[1] > 0.0):
+        return f"stiffness k1 = {eq.k[1]:.4g} at x_e = {eq.x_e:.4g} (needs k1 > 0)"
+    if not abs(value) <= 1e-9 * scale:  # Newton did not converge: no root near -A0/A1
+        return f"Newton's method found no root of the averaged force (residual {value:.3g} at x = {eq.x_e:.4g})"
+    if not all(isinstance(k, float) and math.isfinite(k) for k in (kappa.kappa2, kappa.kappa4)):
+        return "the backbone's coefficients are not finite"
+    if not (eq.x_e > -1.5 and abs(eq.x_e) < 1.5 * scene.R):
+        return f"x_e = {eq.x_e:.4g} lies outside the contact (x > -3/2) or beyond an electrode (|x| < 3R/2)"
+    return None
+
+
+def checked_averaged(scene: Scene) -> Averaged:
+    """averaged(scene), or ParameterError when it has no stable equilibrium (equilibrium_problem), naming the
+    actuation parameter (alpha, gamma or beta) whose removal alone gives the scene one (alpha if none does)."""
+    problem = equilibrium_problem(scene)
+    if problem is None:
+        return averaged(scene)
+    name = next((name for name in ("alpha", "gamma", "beta") if getattr(scene, name) != 0.0
+                 and equilibrium_problem(replace(scene, **{name: 0.0})) is None), "alpha")
+    raise ParameterError(name, getattr(scene, name), f"fidelity 3 averages about a stable static equilibrium of the "
+                         f"averaged model and this scene has none: {problem} (the electrostatic pull overcomes the "
+                         "contact: static pull-in); use fidelity 0")
+
+
 # --- (d), (e) steady states and their stability --------------------------------------------------
 
 @dataclass(frozen=True)
@@ -358,6 +396,78 @@ def validity_notes(model: Averaged) -> list[str]:
         notes.append(f"omega = {s.omega:.4g} is far from resonance omega_e = {w:.4g}: averaging assumes "
                      "|omega - omega_e| small")
     return notes
+
+
+# The averaging's own domain (fidelity 3; issue 25). Thresholds from a grid against fidelity 0 on [0, 50] (the paper
+# scene with one parameter changed; relative error = max|x3 - x0| / max|x0|):
+# - detuning: the slow flow rotates the free vibration at omega - nu = (omega^2 + k1)/(2 omega) instead of omega_e,
+#   wrong by ~(omega - omega_e)^2/(2 omega), so its phase error grows with |omega - omega_e|/omega_e =: d. Measured:
+#   d = 0.1 -> 4.6 %, 0.2 -> 14 %, 1.0 -> 117 %, 2.0 -> 157 %. Warned above DETUNING_WARN, refused above
+#   DETUNING_REFUSE (about 20 % expected there; at d = 0.5 the start's slow state no longer converges).
+# - parametric pumping: the AC terms modulate the stiffness, beta sin(Omega t) g31 x and gamma cos(2 Omega t) g31 x
+#   (g31 = dG3/dx at 0). The averaged model keeps their means only; near Omega = 2 omega_e (beta) or Omega = omega_e
+#   (gamma) the modulation q pumps the resonance: Mathieu's first tongue grows at
+#   lambda = sqrt((q/(4 omega_e))^2 - (nu/2 - omega_e)^2) - mu/2 (Nayfeh & Mook, Nonlinear Oscillations, §5.4).
+#   lambda > 0: fidelity 0 grows to pull-in (beta = 0.3: lambda = +0.048, pull-in at tau = 28.6; beta = 1: +0.20,
+#   tau = 3.1) where fidelity 3 stays bounded: refused. Pumping that eats a share of the damping,
+#   (lambda + mu/2)/(mu/2) > PUMPING_WARN, is warned (beta = 0.01: share 0.07, 6.7 % error; beta = 0.03: 0.2, 17 %;
+#   beta = 0.1: 0.67, 42 %; the paper scene, beta = 1e-4: 0).
+# - damping: first-order averaging needs mu/(2 omega_e) small (mu = 1: 0.5, 14 %): warned above DAMPING_WARN.
+DETUNING_WARN = 0.05
+DETUNING_REFUSE = 0.3
+PUMPING_WARN = 0.05
+DAMPING_WARN = 0.25
+
+
+def parametric_growth(scene: Scene, omega_e: float) -> list[tuple[str, float, float]]:
+    """(parameter, Mathieu growth rate lambda, pumping share (lambda + mu/2)/(mu/2)) of each AC term that is on
+    (comment at DETUNING_WARN). The share is inf without damping."""
+    g31 = forces.series_g3(scene.R)[1]
+    rows = []
+    for name, amplitude, nu in (("beta", scene.beta, scene.Omega), ("gamma", scene.gamma, 2.0 * scene.Omega)):
+        if amplitude == 0.0:
+            continue
+        q = abs(amplitude * g31)
+        radicand = (q / (4.0 * omega_e)) ** 2 - (0.5 * nu - omega_e) ** 2
+        pump = math.sqrt(radicand) if radicand > 0.0 else 0.0
+        growth = pump - 0.5 * scene.mu
+        rows.append((name, growth, pump / (0.5 * scene.mu) if scene.mu > 0.0 else math.inf if pump else 0.0))
+    return rows
+
+
+def validity_estimates(model: Averaged) -> tuple[ParameterError | None, list[str]]:
+    """(the refusal, else None; the warnings) of the averaging's domain (comment at DETUNING_WARN), each naming the
+    parameter, its value, the estimate and the rule, and the rung to use instead."""
+    s, w = model.scene, model.omega_e
+    warnings = []
+    detuning = abs(s.omega - w) / w
+    # the free vibration turns at omega - nu whether or not the load drives it
+    if detuning > DETUNING_REFUSE:
+        return ParameterError("omega", s.omega, f"fidelity 3's detuning |omega - omega_e|/omega_e = {detuning:.3g} "
+                              f"exceeds {DETUNING_REFUSE:g} (omega_e = {w:.6g}): the averaged slow flow is built "
+                              "near resonance and its free vibration turns at the wrong frequency here (error "
+                              "~ the amplitude); use fidelity 0"), []
+    if detuning > DETUNING_WARN:
+        warnings.append(f"omega = {s.omega:g}: fidelity 3's detuning |omega - omega_e|/omega_e = {detuning:.3g} "
+                        f"exceeds {DETUNING_WARN:g} (omega_e = {w:.6g}): expect an error of x of the order of "
+                        f"{0.7 * detuning:.2g} of its amplitude; use fidelity 0 for accuracy")
+    for name, growth, share in parametric_growth(s, w):
+        value = getattr(s, name)
+        if growth > 0.0:
+            return ParameterError(name, value, f"fidelity 3's averaged model leaves out the parametric pumping of "
+                                  f"the AC term {name} at Omega = {s.Omega:g} near omega_e = {w:.6g}: the Mathieu "
+                                  f"growth rate {growth:.3g} > 0 says the vibration grows (towards pull-in) where the "
+                                  "averaged one stays bounded; use fidelity 0"), []
+        if share > PUMPING_WARN:
+            warnings.append(f"{name} = {value:g}: fidelity 3's averaged model leaves out the parametric pumping of "
+                            f"its AC term, which offsets {share:.2g} of the damping here (above {PUMPING_WARN:g}; "
+                            "Mathieu's first tongue): expect errors of x of that share of its amplitude; use fidelity "
+                            "0 for accuracy")
+    if s.mu / (2.0 * w) > DAMPING_WARN:
+        warnings.append(f"mu = {s.mu:g}: fidelity 3's small parameter mu/(2 omega_e) = {s.mu / (2.0 * w):.3g} exceeds "
+                        f"{DAMPING_WARN:g}: first-order averaging errs by about that share; use fidelity 0 for "
+                        "accuracy")
+    return None, warnings
 
 
 def ghost_margin(model, fold: Fold, wait: float) -> float:

@@ -17,8 +17,9 @@ import numpy as np
 
 from .control import ERRATA_INITIAL_ESTIMATES, Controller, Gains, Law, validate_estimates, validate_law
 from .fidelities import closed_loop_refusal, entry, integrated
+from .models import drive_step_ceiling
 from .parameters import ParameterError, Scene, validate
-from .plant import INTEGRATOR_REBUILT, TIME_TOLERANCE, Settings, checked_settings
+from .plant import INTEGRATOR_REBUILT, MAX_STEPS_PER_DOSTEP, TIME_TOLERANCE, Settings, checked_settings
 from .snapshot import plain_attributes, restore_attributes
 from .solvers import solver_entry
 from .tracking import ReferenceSettings, make_reference
@@ -62,8 +63,12 @@ class ClosedLoop:
         self.t = t0
         self._stage = (None, None, None, None, None)  # (t, x, v, theta^, U) of the last rates() call
         theta0 = np.array(loop.estimates, dtype=float)
+        # max_step = 0: the adaptive solver's ceiling from the scene's drive and the reference's fastest term
+        self.drive_ceiling = drive_step_ceiling(scene, self.reference.fastest_frequency())
         self.integrator = solver_entry(settings.solver).make(self._accel, self.model.events, t0, scene.x_start,
-                                                             scene.v_start, theta0, settings, rates=self._rates)
+                                                             scene.v_start, theta0, settings, rates=self._rates,
+                                                             step_budget=MAX_STEPS_PER_DOSTEP,
+                                                             drive_ceiling=self.drive_ceiling)
 
     # The integrators call rates(t, x, v, theta^) and then accel(t, x, v, theta^) at each stage: the control
     # U computed for the first is reused by the second.
@@ -91,6 +96,10 @@ class ClosedLoop:
         """ParameterError for a step the loop refuses (what the compiled loop's do_step checks too)."""
         if not (math.isfinite(h) and h > 0.0):
             raise ParameterError("communicationStepSize", h, "must be a finite number > 0")
+        ceiling = self.integrator.max_step
+        if h / ceiling > MAX_STEPS_PER_DOSTEP:  # the plant's guard (settings.check_step), same words
+            raise ParameterError("communicationStepSize", h, f"needs more than {MAX_STEPS_PER_DOSTEP} steps of "
+                                 f"{ceiling:g} (max_step); make smaller communication steps or raise max_step")
         if not (math.isfinite(t) and abs(t - self.t) <= TIME_TOLERANCE * max(1.0, abs(t))):
             raise ParameterError("currentCommunicationPoint", t, f"the closed loop is at tau = {self.t!r}")
 

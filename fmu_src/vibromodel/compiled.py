@@ -24,7 +24,7 @@ from .core_layouts import (DOP_MAX_EVENTS, DOP_STAGES, VK_BAD_INPUT, VK_BAD_STEP
                            Rk4 as Rk4State, VkModel, VkPlant)
 from .fidelities import REGISTRY, CModel, entry
 from .integrate import ATOL_PER_RTOL, IntegrationError, TerminalEvent
-from .models import pull_in_slope
+from .models import drive_step_ceiling, pull_in_slope
 from .parameters import PULL_IN_GAP, validate
 from .settings import Outputs, Settings, check_step, checked_settings
 from .solvers import BY_VALUE as SOLVERS_BY_VALUE, solver_entry
@@ -205,7 +205,7 @@ class CompiledPlant:
         self._library = library
         self._plant = VkPlant()
         self._address = ctypes.addressof(self._plant)
-        max_step = settings.max_step or math.inf  # as Plant gives Dop853
+        max_step = settings.max_step or drive_step_ceiling(scene)  # as Plant gives Dop853
         model_struct = self._plant.model
         for name, value in _model_fields(scene, model, level.c_model).items():
             setattr(model_struct, name, value if isinstance(value, (int, float)) else (_double * 6)(*value))

@@ -11,7 +11,6 @@ Packed inside the FMU: imports nothing beyond vibromodel, numpy and the standard
 from __future__ import annotations
 
 import ctypes
-import math
 
 import numpy as np
 
@@ -19,11 +18,12 @@ from . import forces
 from .compiled import SOLVER_SLOTS, check_structure
 # controller.h's and closedloop.h's constants and structures, generated from the headers (core_layouts.py)
 from .core_layouts import (VC_GAINS, VC_N, VC_NON_FINITE, VC_OK, VC_RAISED, VL_BAD_STEP, VL_BAD_TIME, VL_FAILED,
-                           VL_OK, VL_RAISED, VL_TERMINAL, VcController, VlLoop)
+                           VL_OK, VL_RAISED, VL_TERMINAL, VL_TOO_MANY_STEPS, VcController,
+                           VlLoop)
 from .control import ESTIMATE_NAMES, Controller, Gains, validate_estimates, validate_law
 from .fidelities import entry
 from .parameters import NonFiniteOutput, ParameterError, Scene, check_finite, validate
-from .plant import TIME_TOLERANCE
+from .plant import MAX_STEPS_PER_DOSTEP, TIME_TOLERANCE
 
 N = VC_N
 CONTROLLER_INPUTS = ("x", "v", "x_ref", "v_ref", "a_ref")
@@ -275,7 +275,8 @@ class CompiledClosedLoop(_FastPath):
         fill_controller(l.controller, python.controller, python.scene, library)
         l.solver, l.time_tolerance = int(settings.solver), TIME_TOLERANCE
         l.dop.rtol, l.dop.atol = settings.rtol, settings.rtol * ATOL_PER_RTOL  # as ClosedLoop gives Dop853
-        l.dop.max_step, l.dop.step_budget = settings.max_step or math.inf, math.inf
+        l.dop.max_step = settings.max_step or python.drive_ceiling  # as ClosedLoop gives Dop853
+        l.dop.step_budget = MAX_STEPS_PER_DOSTEP  # as the plant
         l.rk4.max_step = settings.max_step or RK4_DEFAULT_STEP
         l.reference = self._program.struct
         l.enabled = 1
@@ -296,7 +297,7 @@ class CompiledClosedLoop(_FastPath):
         """ClosedLoop.do_step: raises ParameterError, IntegrationError (TerminalEvent) as it does."""
         self._raise_pending()
         code = self._library.vl_do_step(self.address, t, h)
-        if code in (VL_BAD_STEP, VL_BAD_TIME):
+        if code in (VL_BAD_STEP, VL_TOO_MANY_STEPS, VL_BAD_TIME):
             self.python.t = self._l.t
             self.python.check_step(t, h)
             raise RuntimeError(f"the compiled closed loop refused the step with code {code}, but ClosedLoop "

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 from enum import IntEnum
 from typing import Callable
 
-from .analytic import cached_solve, covering
+from .analytic import cached_solve, check_fit, covering
 from .models import ExactModel, PolynomialModel
 from .parameters import ParameterError, Rule, Scene
 
@@ -101,14 +101,18 @@ class FidelityEntry:
 
 def _averaged_solution(scene, settings, t0, stop_time, cache_dirs):
     """Fidelity 3: the averaged slow flow integrated with large steps (docs/model.md, Averaging and slow flow)."""
-    from .averaging import averaged, validity_notes  # only fidelity 3 loads the slow flow
+    from .averaging import checked_averaged, validity_estimates, validity_notes  # only fidelity 3 loads them
     from .slowflow import SlowFlowSolution
 
-    model = averaged(scene)
+    model = checked_averaged(scene)  # ParameterError without a stable equilibrium (static pull-in)
+    refusal, warnings = validity_estimates(model)  # the averaging's own domain, before any integration
+    if refusal is not None:
+        raise refusal
     solution = SlowFlowSolution(model, t0, scene.x_start, scene.v_start, settings.rtol, settings.max_step or math.inf,
                                 stop_time, bounded=True)  # a window of the table at a time (slowflow.WINDOW)
     notes = [f"averaged slow flow (docs/model.md, Averaging and slow flow, {model.backbone.kind} backbone): x_e = {model.eq.x_e:.6g}, omega_e = "
              f"{model.omega_e:.8g}, table spacing {solution.spacing:.3g}"]
+    solution.warnings = warnings + solution.amplitude_warnings
     return solution, notes + [f"outside the averaging's validity: {note}" for note in validity_notes(model)]
 
 
@@ -116,7 +120,8 @@ def _analytic_solution(scene, settings, t0, stop_time, cache_dirs):
     """Fidelity 4: the OAFM solution fitted to cover [t0, stop_time] (or read from a cache)."""
     span = None if stop_time is None else stop_time - t0
     oafm = covering(scene, settings.oafm, span, strict=True)  # refuses a fit beyond analytic.MAX_FIT_SPAN
-    solution, source = cached_solve(scene, oafm, t0, read_dirs=cache_dirs)
+    solution, source = cached_solve(scene, oafm, t0, read_dirs=cache_dirs)  # refuses outside the linear domain
+    solution.warnings = check_fit(scene, solution, t0)  # refuses outside the domain; the error estimate's warning
     notes = [f"OAFM {oafm.basis} basis, tau* = {solution.pieces[1].start:.6g}, fit to tau = {solution.tau_end:.6g} "
              f"({source})"]
     if stop_time is None:

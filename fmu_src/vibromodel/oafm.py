@@ -128,6 +128,10 @@ class AnalyticSolution:
     def C(self) -> list[tuple[float, ...]]:
         return [p.C for p in self.pieces]
 
+    def fastest_frequency(self) -> float:
+        """The largest angular frequency nu of any term (a step ceiling's drive, models.drive_step_ceiling)."""
+        return max((float(np.max(np.abs(p._rates.imag))) for p in self.pieces if p._rates.size), default=0.0)
+
     @property
     def tau_end(self) -> float:
         """End of the last fitted domain: beyond it the solution extrapolates."""
@@ -166,8 +170,9 @@ def stiffness(accel, tau, x) -> np.ndarray:
     return np.array([(accel(t, xi + h, 0.0, 0.0) - accel(t, xi - h, 0.0, 0.0)) / (2 * h) for t, xi in zip(tau, x)])
 
 
-def fit_domain(accel, basis: Basis, start: float, end: float, grid: Grid) -> Piece:
-    """Optimal C_i of one domain: least squares of sqrt(w/T) R on the collocation grid."""
+def fit_domain(accel, basis: Basis, start: float, end: float, grid: Grid, max_evaluations: int | None = None) -> Piece:
+    """Optimal C_i of one domain: least squares of sqrt(w/T) R on the collocation grid; at most max_evaluations
+    evaluations of the residual (None: scipy's default), fit["converged"] False when they ran out."""
     clock = time.perf_counter()
     length = end - start
     s, w = grid.points(length, len(basis.functions))
@@ -197,7 +202,8 @@ def fit_domain(accel, basis: Basis, start: float, end: float, grid: Grid) -> Pie
     C = np.zeros(n)
     result = None
     if n:
-        result = least_squares(fun, C, jac=jac, method="lm", x_scale="jac", xtol=1e-15, ftol=1e-15, gtol=1e-15)
+        result = least_squares(fun, C, jac=jac, method="lm", x_scale="jac", xtol=1e-15, ftol=1e-15, gtol=1e-15,
+                               max_nfev=max_evaluations)
         C = result.x
     R = fun(C)[: s.size] / weight
     return Piece(start=start, end=end, basis_name=basis.name, C=tuple(float(c) for c in C),
@@ -207,6 +213,7 @@ def fit_domain(accel, basis: Basis, start: float, end: float, grid: Grid) -> Pie
                       "panel": grid.panel, "nodes": grid.nodes,
                       "evaluations": int(result.nfev) if result is not None else 0,
                       "status": result.message if result is not None else "no unknowns",
+                      "converged": result is None or result.status != 0,  # 0: max_nfev ran out
                       "seconds": time.perf_counter() - clock})
 
 

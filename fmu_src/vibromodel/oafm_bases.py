@@ -44,7 +44,8 @@ def eq11_operator(scene: Scene) -> LinearOperator:
     the analytic solutions built on it (OAFM, the corrected reference) need."""
     a1 = coefficients(scene.alpha, scene.gamma, scene.R)[1]
     if not a1 > 0.25 * scene.mu**2:
-        raise ParameterError("alpha", scene.alpha, f"a1 = 1 - 8 alpha/(3R) - 4 gamma/(3R) = {a1:.6g} must exceed "
+        name = "gamma" if 4.0 * scene.gamma > 8.0 * scene.alpha else "alpha"  # the larger pull of a1's formula
+        raise ParameterError(name, getattr(scene, name), f"a1 = 1 - 8 alpha/(3R) - 4 gamma/(3R) = {a1:.6g} must exceed "
                              f"mu^2/4 = {0.25 * scene.mu**2:.6g}: the analytic solution needs an oscillating Eq. 11")
     return LinearOperator(scene.mu, a1)
 

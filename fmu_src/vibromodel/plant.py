@@ -12,6 +12,7 @@ from .compiled import CompiledPlant, supports
 from .compiled_open_loop import CompiledOpenLoopPlant
 from .fidelities import entry
 from .integrate import IntegrationError
+from .models import drive_step_ceiling
 from .parameters import ParameterError, Scene, validate
 from .settings import (DEFAULT_EXPERIMENT, MAX_STEPS_PER_DOSTEP, RK4_DEFAULT_STEP, TIME_TOLERANCE, Kernel, Outputs,
                        Settings, Solver, check_step, checked_settings, rk4_drive_warnings)
@@ -49,10 +50,12 @@ class Plant:
         if level.open_loop is not None:
             self.solution, notes = level.open_loop(scene, settings, t0, stop_time, cache_dirs)
             self.notes += notes
+            self.warnings += getattr(self.solution, "warnings", [])  # the rung's doubts about its own domain
         else:  # the solver of the settings (solvers.SOLVERS)
             self.integrator = solver_entry(settings.solver).make(
                 self.model.accel, self.model.events, t0, scene.x_start, scene.v_start, 0.0, settings,
-                phased=(self.model.drive_frequencies, self.model.accel_phased), step_budget=MAX_STEPS_PER_DOSTEP)
+                phased=(self.model.drive_frequencies, self.model.accel_phased), step_budget=MAX_STEPS_PER_DOSTEP,
+                drive_ceiling=drive_step_ceiling(scene))
 
     def do_step(self, t: float, h: float, U: float) -> Outputs:
         """Advance from the communication point t to t + h with input U held constant.

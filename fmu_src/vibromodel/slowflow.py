@@ -17,8 +17,7 @@ import time
 import numpy as np
 
 from .averaging import Averaged
-from .integrate import IntegrationError
-from .parameters import ParameterError
+from .parameters import PULL_IN_GAP, ParameterError
 
 CHUNK = 200.0  # tau covered per integration when the end of the experiment is not known
 # A bounded solution (the plant's) tabulates at most WINDOW ahead at set-up and later CHUNK at a time as the run
@@ -28,6 +27,26 @@ CHUNK = 200.0  # tau covered per integration when the end of the experiment is n
 WINDOW = 1000.0
 MAX_STEPS = 10**6  # most steps of max_step one integration may take (as plant.MAX_STEPS_PER_DOSTEP)
 MAX_REFINEMENTS = 24
+# Set-up time is bounded by the table's size. Tabulating costs ~20 us per cell on this machine (measured: omega = 10
+# at rtol 1e-8, 128,000 cells in 2.4 s; omega = 100, 2,048,000 cells in 46 s), so at most MAX_TABLE_CELLS cells are
+# tabulated ahead at set-up (~0.8 s, 2 s left for a loaded machine) and per CHUNK later; a slow flow that would need
+# more per CHUNK is refused before any work (predicted_spacing).
+MAX_TABLE_CELLS = 40_000
+# A vibration that reaches beyond this share of the way from x_e to its domain's edge is warned about (check_domain):
+# measured against fidelity 0 on [0, 50], Delta = 0.1 (share 0.64) erred by 1.2 %, Delta = 0.15 (0.92) by 17 %.
+AMPLITUDE_WARN = 0.8
+
+
+def predicted_spacing(rate: float, rtol: float) -> float:
+    """A lower bound of the table spacing _refined_cells will choose, before integrating.
+
+    (A, B) turn at most at `rate` (|nu| + mu/2), so |d^4 Z/dt^4| <= rate^4 |Z| and the cubic Hermite cell's
+    midpoint error is <= h^4 rate^4 |Z| / 384; it meets rtol |Z| for h* = (384 rtol)^(1/4) / rate. Doubling the
+    cell count from span/ceil(span) stops within a factor 2 of h*: spacing >= h*/2 (checked: omega = 3, 10, 30,
+    100 at rtol 1e-8 gave rate x spacing = 0.042, 0.039, 0.029, 0.024 >= 0.022). Never above 1 (the first grid)."""
+    if not rate > 0.0:
+        return 1.0
+    return min(1.0, 0.5 * (384.0 * rtol) ** 0.25 / rate)
 
 
 class SlowFlowSolution:
@@ -35,6 +54,7 @@ class SlowFlowSolution:
 
     def __init__(self, model: Averaged, t0: float, x0: float, v0: float, rtol: float,
                  max_step: float = math.inf, t_end: float | None = None, bounded: bool = False):
+        self.stop = math.inf if t_end is None else t_end  # the experiment's end: check_domain looks no further
         if bounded and t_end is not None:
             t_end = min(t_end, t0 + WINDOW)  # the rest as the run advances
         self.bounded, self.first = bounded, 0  # first: cells dropped from the front (bounded only)
@@ -43,6 +63,7 @@ class SlowFlowSolution:
             raise ParameterError("max_step", max_step, f"the averaged slow flow over tau = {span:g} would need "
                                  f"more than {MAX_STEPS} steps of it; raise it or use 0 (automatic)")
         s = model.scene
+        self.x_start, self.Delta = x0, s.Delta  # named by check_domain
         self.flow = model.flow()
         self.omega, self.x_e = s.omega, model.eq.x_e
         self.ac = s.beta != 0.0 or s.gamma != 0.0  # a scene without AC actuation skips psi
@@ -53,8 +74,78 @@ class SlowFlowSolution:
         self.integration_seconds = 0.0  # time spent integrating the slow flow itself (not tabulating)
         _, k1, k2 = model.eq.k[:3]
         self.harmonic, self.mean_shift = k2 / (6 * k1), k2 / (2 * k1)
-        self._start(t0, self._initial_slow_state(t0, x0, v0))
-        self.extend(t_end if t_end is not None else t0 + CHUNK)
+        self.R, self.r_edge = s.R, model.r_max  # the domain (check_domain)
+        self.psi_bound = abs(s.beta) / s.Omega**2 + abs(s.gamma) / (4 * s.Omega**2) if self.ac else 0.0
+        self.r_start, self.amplitude_warnings = None, []
+        Z0 = self._initial_slow_state(t0, x0, v0)
+        self.r_start = math.hypot(*Z0)
+        t_end = t_end if t_end is not None else t0 + CHUNK
+        if bounded:  # tabulate ahead only what MAX_TABLE_CELLS allows (the rest as the run advances)
+            t_end = t0 + min(t_end - t0, max(CHUNK, MAX_TABLE_CELLS * self._affordable_spacing(model, rtol)))
+        self._start(t0, Z0)
+        self.extend(t_end)
+
+    def _affordable_spacing(self, model: Averaged, rtol: float) -> float:
+        """predicted_spacing of this slow flow; ParameterError (before any integration) when one CHUNK of table
+        would exceed MAX_TABLE_CELLS: the set-up or a later doStep would take seconds to minutes (omega = 1000 took
+        47 s). The rate bounds |nu(r)| + mu/2 for r up to the larger of the start's and the resonant peak's
+        amplitude 2 drive/mu, capped at the domain's edge r_max (check_domain refuses beyond it)."""
+        s, flow = model.scene, self.flow
+        peak = 2.0 * abs(flow.drive) / s.mu if s.mu > 0.0 else math.inf
+        r = min(max(self.r_start, peak), model.r_max)
+        parts = {"omega": abs(flow.detuning), "mu": 0.5 * s.mu,
+                 "Delta": abs(flow.backbone.kappa2) * r * r + abs(flow.backbone.kappa4) * r**4}
+        rate = sum(parts.values())
+        spacing = predicted_spacing(rate, rtol)
+        cells = CHUNK / spacing
+        if not cells <= MAX_TABLE_CELLS:
+            name = max(parts, key=parts.get)
+            raise ParameterError(name, getattr(s, name), f"fidelity 3's slow flow turns at up to {rate:.4g} (|nu| + "
+                                 f"mu/2; detuning {flow.detuning:.4g} from omega_e = {model.omega_e:.4g}), so its "
+                                 f"table at rtol {rtol:.3g} would need about {cells:.3g} cells per tau = {CHUNK:g}, "
+                                 f"more than {MAX_TABLE_CELLS} (set-up time); the averaging is meant for omega near "
+                                 "omega_e: use fidelity 0")
+        return spacing
+
+    def check_domain(self, cells, first_time: float) -> None:
+        """ParameterError at the first cell (before the stop time) whose reconstructed x can leave the averaged
+        model's domain.
+
+        The slow flow expands the contact force in powers of x - x_e: it has no contact loss (1 + 2x/3 > 0, x > -3/2)
+        and no pull-in (|x| < (1 - PULL_IN_GAP) 3R/2). x = x_e + p + h (p^2 - q^2) - m r^2 + psi with |p|, |q| <= r,
+        so x lies within x_e -/+ (r + (|h| + |m|) r^2 + |psi|) (psi_bound). Δ = 0.3 used to return x(50) = -1.663
+        with fmi2OK, where fidelity 0 stops at pull-in at tau = 17.08."""
+        if self.stop < math.inf:  # none after the stop time
+            cells = cells[:max(0, math.ceil((self.stop - first_time) / self.spacing))]
+        if not cells:
+            return
+        AB = np.asarray(cells)[:, [0, 4]]
+        r = np.hypot(AB[:, 0], AB[:, 1])
+        spread = r + (abs(self.harmonic) + abs(self.mean_shift)) * r * r + self.psi_bound
+        low, high = self.x_e - spread, self.x_e + spread
+        electrode = (1.0 - PULL_IN_GAP) * 1.5 * self.R
+        bad = np.flatnonzero(~((low > -1.5) & (low > -electrode) & (high < electrode)))
+        if bad.size == 0:
+            # how far towards the nearest edge x reaches, as a share of the way from x_e (AMPLITUDE_WARN)
+            room = np.minimum(np.minimum(self.x_e + 1.5, self.x_e + electrode), electrode - self.x_e)
+            share = float(np.max(spread / room))
+            if share > AMPLITUDE_WARN and not self.amplitude_warnings:
+                i = int(np.argmax(spread / room))
+                self.amplitude_warnings.append(
+                    f"Delta = {self.Delta:g}: fidelity 3's averaged vibration reaches {share:.2g} of the way from x_e "
+                    f"to the edge of its domain (contact loss or pull-in) at tau = {first_time + i * self.spacing:.6g} "
+                    f"(above {AMPLITUDE_WARN:g}): its series of the contact force about x_e converges slowly there "
+                    "(Delta = 0.15: 17 % error); use fidelity 0 for accuracy")
+            return
+        i = int(bad[0])
+        t = first_time + i * self.spacing
+        edge = "leaves the contact (x > -3/2)" if not low[i] > -1.5 else "reaches pull-in (|x| < (1 - 0.001) 3R/2)"
+        started_out = self.r_start is not None and i == 0 and t == self.t0
+        name, value = ("x_start", self.x_start) if started_out else ("Delta", self.Delta)
+        raise ParameterError(name, value, f"fidelity 3's averaged vibration {edge} at tau = {t:.6g}: amplitude "
+                             f"r = {r[i]:.4g} about x_e = {self.x_e:.4g} gives x in [{low[i]:.4g}, {high[i]:.4g}], "
+                             "outside the averaged model's domain (its contact force is a series about x_e, without "
+                             "contact loss or pull-in); use fidelity 0")
 
     def _initial_slow_state(self, t0, x0, v0, iterations=50):
         """(A, B) at t0 such that the reconstructed x and its exact derivative equal (x0, v0), with (A', B')
@@ -70,9 +161,11 @@ class SlowFlowSolution:
             if A_new == A and B_new == B:
                 break
             A, B = A_new, B_new
-        if not (math.isfinite(A) and math.isfinite(B)):
-            raise IntegrationError(f"the averaged model has no finite slow state at tau = {t0!r}: the parameters "
-                                   "are beyond its numerical range", t0, x0, v0)
+        if not (math.isfinite(A) and math.isfinite(B)):  # the iteration diverged (its contraction needs small rates)
+            name, value = ("Delta", self.Delta) if self.Delta != 0.0 else ("x_start", x0)
+            raise ParameterError(name, value, f"fidelity 3's averaged model has no finite slow state at tau = {t0!r}: "
+                                 "the slow state's start iteration diverges (the drive or the start is far beyond "
+                                 "the averaging's small, slow range); use fidelity 0")
         return A, B
 
     def _start(self, t, Z):
@@ -102,6 +195,7 @@ class SlowFlowSolution:
                 self.first += drop
         else:
             self.spacing, cells = self._refined_cells(solution.sol, self.t_end, span)
+        self.check_domain(cells, self.t_end)
         self.cells.extend(cells)
         self._start(self.t_end + span, tuple(solution.y[:, -1]))
 

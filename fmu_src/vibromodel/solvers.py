@@ -60,16 +60,20 @@ class SolverEntry:
     def fixed_step(self) -> bool:
         return self.family == "fixed"
 
-    def step(self, max_step: float) -> float:
-        """The step ceiling (adaptive, inf: none) or the step (fixed) of the setting max_step (0: automatic)."""
-        return max_step or (FIXED_DEFAULT_STEP if self.fixed_step else math.inf)
+    def step(self, max_step: float, drive_ceiling: float = math.inf) -> float:
+        """The step ceiling (adaptive) or the step (fixed) of the setting max_step; 0: automatic, i.e. the adaptive
+        solver's drive_ceiling (models.drive_step_ceiling; inf: none) or the fixed step FIXED_DEFAULT_STEP."""
+        return max_step or (FIXED_DEFAULT_STEP if self.fixed_step else drive_ceiling)
 
-    def make(self, accel, events, t0, x0, v0, U, settings, *, rates=None, phased=None, step_budget=math.inf):
+    def make(self, accel, events, t0, x0, v0, U, settings, *, rates=None, phased=None, step_budget=math.inf,
+             drive_ceiling=math.inf):
         """The integrator of `settings` (rtol, max_step) from (t0, x0, v0) with input U; rates: extra states (the
         closed loop), phased: (frequencies, accel_phased) for a solver that steps with the drive's phasors,
-        step_budget: most steps one advance may take (an adaptive solver's)."""
-        return self.integrator_class.from_settings(accel, events, t0, x0, v0, U, settings, self.step(settings.max_step),
-                                                   rates=rates, phased=phased, step_budget=step_budget)
+        step_budget: most steps one advance may take (an adaptive solver's), drive_ceiling: the adaptive solver's step
+        ceiling when max_step = 0 (models.drive_step_ceiling)."""
+        return self.integrator_class.from_settings(accel, events, t0, x0, v0, U, settings,
+                                                   self.step(settings.max_step, drive_ceiling), rates=rates,
+                                                   phased=phased, step_budget=step_budget)
 
 
 def _resolve(path: str):
@@ -80,7 +84,7 @@ def _resolve(path: str):
 SOLVERS: dict[str, SolverEntry] = {entry.key: entry for entry in (
     SolverEntry("dop853", "adaptive", 0, "ADAPTIVE", "DOP853", "adaptive", "adaptive DOP853",
                 (("rtol", "relative tolerance of the error control"),
-                 ("max_step", "step ceiling; 0 = none")),
+                 ("max_step", "step ceiling; 0 = 2.25/(the fastest forcing frequency switched on)")),
                 "adaptive", ".integrate:Dop853"),
     SolverEntry("rk4", "rk4", 1, "RK4", "RK4", "RK4", "fixed-step RK4",
                 (("max_step", f"the step; 0 = {FIXED_DEFAULT_STEP:g}"),),

@@ -12,6 +12,7 @@ from vibrofmu.hosts.run import FmuInstance, run_fmu
 from vibromodel.closedloop import ERRATA_SCENE, ClosedLoop, LoopSettings
 from vibromodel.compiled_loop import CompiledClosedLoop, make_closed_loop
 from vibromodel.control import Law
+from vibromodel.parameters import ParameterError
 from vibromodel.plant import Settings, Solver
 from vibromodel.tracking import ReferenceKind, ReferenceSettings
 
@@ -124,3 +125,25 @@ def test_refused_step_and_pull_in_on_the_fast_path(closed_loop_fmu):
     assert not result.completed and "pull-in" in result.stop_reason
     assert result.stop_reason == python.stop_reason and result.end_time == python.end_time
     assert math.isfinite(result.end_time)
+
+
+@pytest.mark.parametrize("solver", list(Solver))
+def test_the_loop_refuses_a_step_needing_more_than_a_million_solver_steps_like_the_plant(solver):
+    """max_step = 1e-308 hung the closed loop's doStep (> 150 s); the plant refuses such a step up front
+    (settings.check_step). The Python loop and the compiled one refuse it with the plant's words, nothing changed."""
+    settings = Settings(solver=solver, max_step=1e-300)
+    python, compiled = pair(ERRATA_SCENE, settings, LoopSettings())
+    for loop in (python, compiled):
+        with pytest.raises(ParameterError) as refusal:
+            loop.do_step(0.0, H)
+        assert refusal.value.name == "communicationStepSize" and "needs more than 1000000 steps" in str(refusal.value)
+        assert loop.t == 0.0
+
+
+@pytest.mark.fmu
+@pytest.mark.parametrize("fmu_name", ["closed_loop_fmu", "native_closed_loop_fmu"])
+def test_the_loop_fmus_refuse_the_endless_step(request, fmu_name):
+    """Both FMU kinds: fmi2Error naming communicationStepSize and max_step, at once (no solver step taken)."""
+    result = run_fmu(request.getfixturevalue(fmu_name), {"max_step": 1e-308}, 1.0, H)
+    assert not result.completed and result.end_time == 0.0
+    assert "communicationStepSize" in result.stop_reason and "max_step" in result.stop_reason

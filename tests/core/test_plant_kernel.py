@@ -167,10 +167,12 @@ ERROR_CASES = {  # scene, settings, steps, the first error Python raises (type, 
     "pull-in lower, then the same and a changed input (ValueError: outside the last step)":
         (PULL_IN_LOWER, Settings(), held(7) + [(0.1, 0.5)], (TerminalEvent, "lower gap")),
     "pull-in under a large input": (Scene(), Settings(), held(50) + held(20, U=3.0), (TerminalEvent, "pull-in")),
-    "step collapse, fidelity 1": (Scene(), Settings(fidelity=1), held(50) + held(40, U=30.0),
-                                  (IntegrationError, "collapsed")),
-    "step collapse, fidelity 2": (Scene(), Settings(fidelity=2), held(50) + held(40, U=-30.0),
-                                  (IntegrationError, "collapsed")),
+    # fidelities 1 and 2 under a large input: pull-in, like fidelity 0 (they ran past the electrode to a step
+    # collapse at x = -1.8e7 before issue 25)
+    "pull-in upper, fidelity 1": (Scene(), Settings(fidelity=1), held(50) + held(40, U=30.0),
+                                  (TerminalEvent, "pull-in: upper gap")),
+    "pull-in lower, fidelity 2": (Scene(), Settings(fidelity=2), held(50) + held(40, U=-30.0),
+                                  (TerminalEvent, "pull-in: lower gap")),
     # R at its rule's upper end (parameters.R_MAX) and a huge input: R = 1e60 is now refused up front
     "OverflowError of an error norm's square": (Scene(R=1e6, x_start=1e6), Settings(fidelity=1), held(2, U=1e200),
                                                 (OverflowError, "out of range")),
@@ -200,7 +202,10 @@ def test_the_grazing_contact_that_halted_brentq_completes_identically(library):
 def test_step_budget_failure_is_the_pythons(library, monkeypatch):
     monkeypatch.setattr(plant_module, "MAX_STEPS_PER_DOSTEP", 40)  # what Plant gives Dop853
     monkeypatch.setattr(settings_module, "MAX_STEPS_PER_DOSTEP", 40)  # what CompiledPlant gives the core
-    python = assert_same_traces(Scene(), Settings(), [(0.1, 0.0), (50.0, 0.0), (50.0, 0.0)], library)
+    # without a drive (no step ceiling: models.drive_step_ceiling) a step of 50 passes the up-front check and spends
+    # the budget of 40 steps
+    undriven = Scene(Delta=0.0, beta=0.0, gamma=0.0)
+    python = assert_same_traces(undriven, Settings(), [(0.1, 0.0), (50.0, 0.0), (50.0, 0.0)], library)
     error = python[1][0]
     assert error[0] is IntegrationError and "40 steps reached only tau" in error[1]
 

@@ -46,6 +46,18 @@ static void point_reference(State *s)
     s->model.loop.reference.pieces = r->pieces;
 }
 
+/* The packed reference's fastest frequency (OafmProgram's largest frequency base: for the packed kinds, ERRATA and
+   MULTITONE, the largest frequency of its terms, as ClosedLoop's reference.fastest_frequency()) */
+static double reference_frequency(int reference)
+{
+    const PackedReference *r = &PACKED_REFERENCES[reference];
+    double fastest = 0.0;
+    for (int64_t i = 0; i < r->n_pieces; i++)
+        for (int64_t j = 0; j < r->pieces[i].n_freq_bases; j++)
+            if (fabs(r->pieces[i].freq_base[j]) > fastest) fastest = fabs(r->pieces[i].freq_base[j]);
+    return fastest;
+}
+
 /* The packed reference of the current parameters (its index), or -1 after refusing with the parameter that
    differs from the packed reference of the same kind (or `reference` when its kind is not packed). */
 static int find_reference(Instance *inst, const State *s)
@@ -192,8 +204,8 @@ void model_initialise(Instance *inst, State *s)
     l->time_tolerance = RULE_TIME_TOLERANCE;
     l->dop.rtol = rtol;
     l->dop.atol = rtol * RULE_ATOL_PER_RTOL;
-    l->dop.max_step = max_step != 0.0 ? max_step : INFINITY;
-    l->dop.step_budget = INFINITY;
+    l->dop.max_step = max_step != 0.0 ? max_step : native_drive_ceiling(s, reference_frequency(reference));
+    l->dop.step_budget = RULE_MAX_STEPS_PER_DOSTEP;  /* as the plant (issue 25: the loop had no guard) */
     l->rk4.max_step = max_step != 0.0 ? max_step : RULE_RK4_DEFAULT_STEP;
     l->enabled = 1;
     s->model.reference = reference;
@@ -237,6 +249,13 @@ void model_do_step(Instance *inst, State *s, double t, double h)
     if (code == VL_BAD_STEP) {
         native_repr(h, a, sizeof a);
         native_error(inst, "doStep refused: parameter communicationStepSize = %s: %s", a, RULE_STEP_SIZE);
+        return;
+    }
+    if (code == VL_TOO_MANY_STEPS) {  /* the plant's words (HertzEAOscillator/native_model.c) */
+        native_repr(h, a, sizeof a);
+        native_error(inst, "doStep refused: parameter communicationStepSize = %s: needs more than %.0f steps of %g "
+                     "(max_step); make smaller communication steps or raise max_step", a,
+                     RULE_MAX_STEPS_PER_DOSTEP, l->solver == VL_RK4 ? l->rk4.max_step : l->dop.max_step);
         return;
     }
     if (code == VL_BAD_TIME) {

@@ -116,7 +116,7 @@ void model_initialise(Instance *inst, State *s)
     const double max_step = s->value[VR_max_step];
     p->dop.rtol = rtol;
     p->dop.atol = rtol * RULE_ATOL_PER_RTOL;
-    p->dop.max_step = max_step != 0.0 ? max_step : INFINITY;
+    p->dop.max_step = max_step != 0.0 ? max_step : native_drive_ceiling(s, 0.0);  /* models.drive_step_ceiling */
     p->dop.step_budget = RULE_MAX_STEPS_PER_DOSTEP;
     p->rk4.max_step = max_step != 0.0 ? max_step : RULE_RK4_DEFAULT_STEP;
     p->solver = solver;
