@@ -119,7 +119,7 @@ def test_fmu_error_equals_the_plants_computed_directly(quick):
     summary, *_ = quick
     scene, stop, h = Scene(), summary["bench"]["stop_time"], 0.1
     n = round(stop / h)
-    plant = Plant(scene, Settings(rtol=1e-8), 0.0, stop)
+    plant = Plant(scene, Settings(rtol=1e-8, max_step=bench.NO_CEILING), 0.0, stop)  # the bench's adaptive cases' setting
     x = np.array([scene.x_start] + [plant.do_step(i * h, h, 0.0).x for i in range(n)])
     reference = reference_solution(scene, 0, stop, rtol=bench.BENCH_RTOL, atol=1e-2 * bench.BENCH_RTOL)
     error = float(np.max(np.abs(x - reference(h * np.arange(n + 1))[0])))
@@ -210,7 +210,7 @@ def test_full_plan_covers_the_issues_grid():
     for interval in (0.1, 1.0):
         for fidelity in (0, 1, 2):
             for kernel in (0, 1):
-                assert all(("fmu", interval, fidelity, 0, r, 0.0, kernel, None) in keys for r in decades)
+                assert all(("fmu", interval, fidelity, 0, r, bench.NO_CEILING, kernel, None) in keys for r in decades)
             assert all(("fmu", interval, fidelity, 1, None, h, None, None) in keys
                        for h in (0.1, 0.05, 0.02, 0.01, 0.005))
         assert {(c.fidelity, c.rtol) for c in plan.cases if c.interval == interval and c.fidelity in (3, 4)} == \
@@ -219,7 +219,7 @@ def test_full_plan_covers_the_issues_grid():
             assert all(("solve_ivp", interval, 0, 0, r, 0.0, None, method) in keys for r in decades)
         assert all(("floor", interval, 0, 0, r, 0.0, None, None) in keys for r in decades)
     for r in (10 ** -6.5, 10 ** -8.5, 10 ** -10.5):  # the target's search between decades
-        assert ("fmu", 0.1, 0, 0, r, 0.0, 0, None) in keys and ("floor", 0.1, 0, 0, r, 0.0, None, None) in keys
+        assert ("fmu", 0.1, 0, 0, r, bench.NO_CEILING, 0, None) in keys and ("floor", 0.1, 0, 0, r, 0.0, None, None) in keys
         assert ("solve_ivp", 0.1, 0, 0, r, 0.0, None, "LSODA") in keys
 
 
