@@ -34,7 +34,7 @@ NATIVE = ("-std=c11", "-O2", *IEEE, *WARNINGS)
 NATIVE_LINUX64 = (*NATIVE, "-fPIC", "-shared", "-fvisibility=hidden", "-flto")
 # Debian's mingw-w64; __USE_MINGW_ANSI_STDIO: C99 printf (inf, %zu, %g as glibc) instead of msvcrt's.
 WIN64_COMPILER = "x86_64-w64-mingw32-gcc"
-NATIVE_WIN64 = (*NATIVE, "-shared", "-static-libgcc", "-D__USE_MINGW_ANSI_STDIO=1", "-flto")
+NATIVE_WIN64 = (*NATIVE, "-shared", "-static-libgcc", "-D__USE_MINGW_ANSI_STDIO=1", "-flto=auto")  # auto: no "serial compilation" warning
 # The C hosts (tests/c_host/fmi2_host.c, instance_cycles.c, speed/timing_host.c, speed/floor_driver.c).
 HOST = ("-O2", *WARNINGS)
 HOST_LIBS = ("-ldl", "-lm")
