@@ -412,8 +412,9 @@ static int before_stop(const Shim *s, fmi2Real t, fmi2Real h)
    pythonfmu 0.7.0 (CppfmuInstantiateSlave) turns fmuResourceLocation into a path by replacing "%20" with a space
    and deleting the first "file://"; any other form FMI 2.0 allows (file:/path, file://localhost/path, other
    escapes) left a path that is no folder, and the slave's import then failed inside its constructor: the host
-   died (SIGSEGV), and NULL threw a C++ exception (std::string(NULL)) that aborted it.  The shim checks the
-   arguments (fmi2_instantiate_check: the type, the GUID, the location as a folder), then hands pythonfmu the
+   died (SIGSEGV), and NULL threw a C++ exception (std::string(NULL)) that aborted it (so did a NULL instanceName).
+   The shim checks the arguments (fmi2_instantiate_check: the name, the type, the GUID, the location as a folder),
+   then hands pythonfmu the
    one form it reads, "file://" + the decoded path, after checking that the folder holds the slave
    (slavemodule.txt, pythonfmu's pointer to the slave's module) and that the path has no "%20" pythonfmu would
    turn into a space. */
@@ -421,12 +422,12 @@ static int before_stop(const Shim *s, fmi2Real t, fmi2Real h)
 #error "compile with -DFMU_GUID=<the guid of modelDescription.xml, as a C string>"
 #endif
 
-static int resource_location(Shim *s, fmi2Type fmuType, fmi2String fmuGUID, fmi2String fmuResourceLocation,
-                             char *location, size_t size)
+static int resource_location(Shim *s, fmi2String instanceName, fmi2Type fmuType, fmi2String fmuGUID,
+                             fmi2String fmuResourceLocation, char *location, size_t size)
 {
     static const char scheme[] = "file://";
     char path[4096];
-    if (!fmi2_instantiate_check(&s->fmi, "this FMU", fmuType, FMI2_TYPE_BIT(fmi2CoSimulation), fmuGUID,
+    if (!fmi2_instantiate_check(&s->fmi, instanceName, "this FMU", fmuType, FMI2_TYPE_BIT(fmi2CoSimulation), fmuGUID,
                                 FMU_GUID, fmuResourceLocation, path, sizeof path))
         return 0;
     if (strstr(path, "%20") != NULL) {
@@ -470,7 +471,7 @@ EXPORT fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, 
         return NULL;
     }
     char location[4096 + 8];
-    if (!resource_location(s, fmuType, fmuGUID, fmuResourceLocation, location, sizeof location)) {
+    if (!resource_location(s, instanceName, fmuType, fmuGUID, fmuResourceLocation, location, sizeof location)) {
         fmi2_layer_free(&s->fmi);
         free(s);
         return NULL;

@@ -242,10 +242,18 @@ int fmi2_resource_path(fmi2String uri, char *path, size_t size, char *why, size_
     return 1;
 }
 
-int fmi2_instantiate_check(const Fmi2Layer *L, const char *model, fmi2Type fmuType, unsigned types,
-                           fmi2String fmuGUID, const char *guid, fmi2String fmuResourceLocation, char *path,
-                           size_t size)
+int fmi2_instantiate_check(const Fmi2Layer *L, fmi2String instanceName, const char *model, fmi2Type fmuType,
+                           unsigned types, fmi2String fmuGUID, const char *guid, fmi2String fmuResourceLocation,
+                           char *path, size_t size)
 {
+    int blank = 1;
+    for (const char *p = instanceName; p != NULL && *p && blank; p++) blank = strchr(" \t\r\n\v\f", *p) != NULL;
+    if (blank) {
+        fmi2_layer_log(L, fmi2Error, "fmi2Instantiate refused: instanceName = %s%.200s%s: FMI 2.0 needs a name with "
+                       "a character other than white space", instanceName ? "'" : "",
+                       instanceName ? instanceName : "NULL", instanceName ? "'" : "");
+        return 0;
+    }
     if (!(types & FMI2_TYPE_BIT(fmuType))) {
         const char *type = fmuType == fmi2ModelExchange ? "fmi2ModelExchange"
                            : fmuType == fmi2CoSimulation ? "fmi2CoSimulation" : "unknown";

@@ -98,9 +98,10 @@ int fmi2_resource_path(fmi2String uri, char *path, size_t size, char *why, size_
 /* The checks every FMU of the project makes in fmi2Instantiate, logged (fmi2Error, naming the argument, its value
    and the rule) through the host's callbacks in L: fmuType among `types` (a mask of FMI2_TYPE_BIT(fmi2ModelExchange)
    / FMI2_TYPE_BIT(fmi2CoSimulation)), fmuGUID equal to `guid`, fmuResourceLocation a local folder (its path in
-   `path`).  1 when all hold. */
+   `path`), instanceName not NULL and not blank (FMI 2.0, 2.1.5).  1 when all hold. */
 #define FMI2_TYPE_BIT(type) (1u << (unsigned)(type))
-int fmi2_instantiate_check(const Fmi2Layer *L, const char *model, fmi2Type fmuType, unsigned types,
+int fmi2_instantiate_check(const Fmi2Layer *L, fmi2String instanceName, const char *model, fmi2Type fmuType,
+                           unsigned types,
                            fmi2String fmuGUID, const char *guid, fmi2String fmuResourceLocation, char *path,
                            size_t size);
 

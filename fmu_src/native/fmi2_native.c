@@ -263,7 +263,7 @@ EXPORT fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, 
     if (inst == NULL) return NULL;
     if (!fmi2_layer_init(&inst->fmi, instanceName, functions, loggingOn)) { free(inst); return NULL; }
     char resources[4096]; /* unused: the native FMUs need no resources, but the location must be a folder */
-    if (!fmi2_instantiate_check(&inst->fmi, MODEL_IDENTIFIER, fmuType, NATIVE_FMU_TYPES, fmuGUID, FMU_GUID,
+    if (!fmi2_instantiate_check(&inst->fmi, instanceName, MODEL_IDENTIFIER, fmuType, NATIVE_FMU_TYPES, fmuGUID, FMU_GUID,
                                 fmuResourceLocation, resources, sizeof resources)) {
         fmi2_layer_free(&inst->fmi);
         free(inst);

@@ -34,11 +34,12 @@ def test_resource_locations_guid_and_type(request, fixture):
     _check_exit(code, lines, stderr)
     labels = [line["case"] for line in lines]
     assert {"file:/abs", "file://localhost/abs", "NULL", "empty", "http URI", "wrong GUID", "NULL GUID",
-            "Model Exchange", "FMU root"} <= set(labels)
+            "NULL instanceName", "Model Exchange", "FMU root"} <= set(labels)
     for line in lines:
         assert line["accepted"] == line["expected"], line
         if not line["accepted"]:  # one log line that names the argument
-            assert any(word in " ".join(line["log"]) for word in ("fmuResourceLocation", "fmuGUID", "fmuType")), line
+            assert any(word in " ".join(line["log"]) for word in ("fmuResourceLocation", "fmuGUID", "fmuType",
+                                                                  "instanceName")), line
 
 
 @pytest.mark.parametrize("fixture", FMUS)
@@ -64,11 +65,14 @@ def test_null_states_are_errors_and_the_instance_lives_on(request, fixture):
     assert case["doStep at the end"]["status"] == OK
 
 
-# A sample of the forged-state campaign per FMU (seconds in all): 200 native states, 100 pythonfmu states.
-@pytest.mark.parametrize("fixture", FMUS)
+# A sample of the forged-state campaign per FMU (seconds in all): 200 native states, 60 pythonfmu states; and
+# for the native plant the sweep that sets every word of its State to 2**62 in turn (874 states; before
+# state_checks.c the old plant died at one of the first 1,000 of them, a solver's stage count or index).
+@pytest.mark.parametrize("fixture", [*FMUS, "native_plant_fmu sweep"])
 def test_forged_state_sample_never_crashes(request, fixture):
-    n = 200 if fixture.startswith("native") else 100
-    code, lines, stderr = run_probe("forged", request.getfixturevalue(fixture), str(n), "25")
+    fixture, *sweep = fixture.split()
+    n = 874 if sweep else 200 if fixture.startswith("native") else 60
+    code, lines, stderr = run_probe("forged", request.getfixturevalue(fixture), str(n), "25", *sweep)
     _check_exit(code, lines, stderr)
     counts = summary(lines)
     assert counts is not None and counts["fatal"] == 0 and sum(counts.values()) == n, (counts, lines[-2:])
@@ -86,9 +90,15 @@ def test_forged_state_campaign(request, kind, capsys):
         code, lines, stderr = run_probe("forged", request.getfixturevalue(fixture), "5000", "2500", timeout=1800)
         _check_exit(code, lines, stderr)
         totals[fixture] = summary(lines)
+    sweeps = {}
+    for fixture in [f for f in FMUS if f.startswith("native")] if kind == "native" else []:
+        code, lines, stderr = run_probe("forged", request.getfixturevalue(fixture), "0", "0", "sweep",
+                                        timeout=1800)  # 0: every word with each of the 3 values
+        _check_exit(code, lines, stderr)
+        sweeps[fixture] = summary(lines)
     with capsys.disabled():
-        print(f"\nforged states ({kind}): {totals}")
-    assert all(c is not None and c["fatal"] == 0 for c in totals.values())
+        print(f"\nforged states ({kind}): {totals}\nword sweeps: {sweeps}")
+    assert all(c is not None and c["fatal"] == 0 for c in [*totals.values(), *sweeps.values()])
     assert sum(sum(c.values()) for c in totals.values()) == 15_000
 
 
@@ -96,8 +106,8 @@ SECOND_RUN = textwrap.dedent("""
     import gc, sys
     from fmpy import simulate_fmu
     from fmpy.fmi2 import fmi2CallbackLoggerTYPE
-    from vibrofmu.hosts.run import FmuInstance, restore_fmpy_logger
-    fmu, restore = sys.argv[1], sys.argv[2] == "restore"
+    from vibrofmu.hosts import run
+    fmu, mode = sys.argv[1], sys.argv[2]  # restore, keep (FMPy's run without restoring) or harness (no FMPy run)
     stale = []  # calls of sentinels made after a logger was freed: they take over its freed ctypes closure
 
     def sentinels():
@@ -105,7 +115,7 @@ SECOND_RUN = textwrap.dedent("""
         return [fmi2CallbackLoggerTYPE(lambda *args: stale.append(1)) for _ in range(8)]
 
     # a harness run (its FmuLog points FMPy's logger proxy at a callback), then dropped
-    instance = FmuInstance(fmu)
+    instance = run.FmuInstance(fmu)
     instance.close()
     del instance
     keep = sentinels()
@@ -115,10 +125,11 @@ SECOND_RUN = textwrap.dedent("""
             pass
         simulate_fmu(fmu, start_values={"Delta": 0.3}, stop_time=1.0, output_interval=0.1, output=["x"],
                      logger=logger)
-        if restore:
-            restore_fmpy_logger()
-    first()
-    keep += sentinels()
+        if mode == "restore":
+            run.restore_fmpy_logger()
+    if mode != "harness":
+        first()
+        keep += sentinels()
     # a run without a logger that logs (pull-in at Delta = 0.3): the proxy must not call a freed logger
     try:
         simulate_fmu(fmu, start_values={"fidelity": 0, "Delta": 0.3}, stop_time=50.0, output_interval=0.1,
@@ -129,9 +140,9 @@ SECOND_RUN = textwrap.dedent("""
 """)
 
 
-def second_run(fmu, restore: bool) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-c", SECOND_RUN, str(fmu), "restore" if restore else "keep"],
-                          capture_output=True, text=True, timeout=600)
+def second_run(fmu, mode: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-c", SECOND_RUN, str(fmu), mode], capture_output=True, text=True,
+                          timeout=600)
 
 
 @pytest.mark.parametrize("fixture", ["plant_fmu", "native_plant_fmu"])
@@ -140,11 +151,13 @@ def test_a_second_run_after_a_freed_logger_does_not_crash(request, fixture):
     logger's ctypes objects were freed the next message of any FMU in a run without a logger crashed the process
     (SIGSEGV/SIGILL). The harness's FmuLog and restore_fmpy_logger leave it pointing at a callback that lives."""
     fmu = request.getfixturevalue(fixture)
-    proc = second_run(fmu, restore=True)
-    assert proc.returncode == 0, (proc.returncode, proc.stdout[-1000:], proc.stderr[-2000:])
-    assert "stale logger calls: 0" in proc.stdout, proc.stdout[-1000:]
-    assert "refused:" in proc.stdout  # the pull-in was logged and reported, through the living logger
-    # the same script without restore_fmpy_logger after FMPy's run with a logger: FMPy calls the freed logger (now a
-    # sentinel, or garbage: a crash) -- so this test would catch the bug
-    unprotected = second_run(fmu, restore=False)
-    assert unprotected.returncode != 0 or "stale logger calls: 0" not in unprotected.stdout, unprotected.stdout
+    for mode in ("restore", "harness"):  # FMPy's run with a logger then restore_fmpy_logger; a harness run alone
+        proc = second_run(fmu, mode)
+        assert proc.returncode == 0, (mode, proc.returncode, proc.stdout[-1000:], proc.stderr[-2000:])
+        assert "stale logger calls: 0" in proc.stdout, (mode, proc.stdout[-1000:])
+        assert "refused:" in proc.stdout  # the pull-in was logged and reported, through the living logger
+    if fixture.startswith("native"):  # (once: the proxy is FMPy's, the same for every FMU)
+        # the same script without restore_fmpy_logger after FMPy's run with a logger: FMPy calls the freed logger
+        # (now a sentinel, or garbage: a crash) -- so this test would catch the bug
+        unprotected = second_run(fmu, "keep")
+        assert unprotected.returncode != 0 or "stale logger calls: 0" not in unprotected.stdout, unprotected.stdout

@@ -52,6 +52,20 @@ def forge_native(serialized: bytes, rng: random.Random) -> tuple[bytes, str]:
     return bytes(header + payload), where
 
 
+SWEEP = [2**62, -1, float("nan")]  # a huge index or size, a negative one, a divisor that is not a number
+
+
+def sweep_native(serialized: bytes, k: int) -> tuple[bytes, str]:
+    """The k-th forgery of a sweep over the State's words: word k % n set to SWEEP[k // n % 3] (every field that
+    indexes, sizes or divides gets each breaking value once in 3 n forgeries)."""
+    header, payload = bytearray(serialized[:NATIVE_HEADER]), bytearray(serialized[NATIVE_HEADER:])
+    words = len(payload) // 8
+    offset, value = 8 * (k % words), SWEEP[k // words % len(SWEEP)]
+    payload[offset:offset + 8] = struct.pack("<d" if isinstance(value, float) else "<q", value)
+    header[72:80] = struct.pack("<Q", fnv1a(bytes(payload)))
+    return bytes(header + payload), f"word {offset} = {value!r}"
+
+
 def forge_python(serialized: bytes, rng: random.Random) -> tuple[bytes, str]:
     from vibromodel import snapshot
 
@@ -85,9 +99,14 @@ def _numbers(node, path):
         yield path
 
 
-def scenario_forged(probe, n: int, seed: int) -> None:
-    from vibrofmu.hosts.probe import emit
+def emit(**fields) -> None:
+    """One JSON line of the probe's output, flushed (a crash after it leaves it readable)."""
+    print(json.dumps(fields), flush=True)
 
+
+def scenario_forged(probe, n: int, seed: int, sweep: bool = False) -> None:
+    """n forged states (seeded), or with sweep (native only) the first n of sweep_native's (n = 0: all of them,
+    every word with each value)."""
     f, v = probe.lib, ctypes.c_void_p
     native = not probe.md.coSimulation.needsExecutionTool
     c = probe.start(stop=1e6)
@@ -104,9 +123,14 @@ def scenario_forged(probe, n: int, seed: int) -> None:
     f.fmi2SerializeFMUstate(c, good, buffer, size.value)
     serialized = buffer.raw
     rng = random.Random(seed)
+    if sweep and native and n <= 0:
+        n = len(SWEEP) * ((len(serialized) - NATIVE_HEADER) // 8)
     counts = {"refused": 0, "accepted": 0, "fatal": 0}
     for k in range(n):
-        data, where = (forge_native if native else forge_python)(serialized, rng)
+        if sweep and native:
+            data, where = sweep_native(serialized, k)
+        else:
+            data, where = (forge_native if native else forge_python)(serialized, rng)
         state = v()
         result = {"case": k, "where": where, "deserialize": f.fmi2DeSerializeFMUstate(c, data, len(data),
                                                                                          ctypes.byref(state)),
@@ -129,14 +153,10 @@ def scenario_forged(probe, n: int, seed: int) -> None:
         if k % 500 == 0:
             emit(**result, log=probe.take_log()[-1:])
         probe.take_log()
-    emit(summary=counts, n=n, seed=seed, native=native)
+    emit(summary=counts, n=n, seed=seed, native=native, sweep=sweep, size=len(serialized))
     f.fmi2FreeFMUstate(c, ctypes.byref(good))
     f.fmi2FreeInstance(c)
 
 
 def summary(lines: list[dict]) -> dict | None:
     return next((line["summary"] for line in lines if "summary" in line), None)
-
-
-if __name__ == "__main__":  # pragma: no cover - use the probe's entry point
-    print(json.dumps({"error": "run python -m vibrofmu.hosts.probe forged FMU N SEED"}))

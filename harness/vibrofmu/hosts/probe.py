@@ -9,8 +9,9 @@ last case that finished (`run_probe` reads it).  Scenarios:
                 {"case", "uri", "accepted", "log"}
   states        fmi2SetFMUstate(NULL), then fmi2Reset and a run; fmi2FreeFMUstate sets the pointer to NULL; NULL
                 arguments to the other state calls: {"case", "status", "log", ...}
-  forged N SEED N forged serialized states (see `forge`): each restored and stepped; {"case", "deserialize",
-                "set", "steps", "log"} per state, then a summary line.
+  forged N SEED [sweep]  N forged serialized states (see `forge`; sweep: native states, every word in turn):
+                each restored and stepped; {"case", "deserialize", "set", "step", "log"} every 500th state, then a
+                summary line.
 """
 from __future__ import annotations
 
@@ -27,6 +28,8 @@ from pathlib import Path
 from fmpy import extract, read_model_description
 from fmpy.fmi2 import (fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE, fmi2CallbackFunctions,
                        fmi2CallbackLoggerTYPE, fmi2StepFinishedTYPE)
+
+from vibrofmu.hosts.forge import emit, scenario_forged
 
 OK, WARNING, DISCARD, ERROR, FATAL = 0, 1, 2, 3, 4
 MODEL_EXCHANGE, CO_SIMULATION = 0, 1
@@ -74,9 +77,10 @@ class Probe:
         log, self.log = self.log, []
         return log
 
-    def instantiate(self, uri: str | None, guid: str | None = None, kind: int = CO_SIMULATION):
+    def instantiate(self, uri: str | None, guid: str | None = None, kind: int = CO_SIMULATION,
+                    name: bytes | None = b"probe"):
         guid = self.md.guid if guid is None else guid
-        return self.lib.fmi2Instantiate(b"probe", kind, None if guid == "NULL" else guid.encode(),
+        return self.lib.fmi2Instantiate(name, kind, None if guid == "NULL" else guid.encode(),
                                         None if uri is None else uri.encode(), ctypes.byref(self.callbacks), 0, 0)
 
     def resources_uri(self) -> str:
@@ -151,13 +155,16 @@ def needs_resources(md) -> bool:
 
 def scenario_instantiate(probe: Probe) -> None:
     forms = resource_forms(probe.unzipped, needs_resources(probe.md))
-    cases = [(label, uri, None, CO_SIMULATION, accept) for label, uri, accept in forms]
-    cases += [("wrong GUID", probe.resources_uri(), "{00000000-0000-0000-0000-000000000000}", CO_SIMULATION, False),
-              ("NULL GUID", probe.resources_uri(), "NULL", CO_SIMULATION, False)]
+    cases = [(label, uri, None, CO_SIMULATION, b"probe", accept) for label, uri, accept in forms]
+    here = probe.resources_uri()
+    cases += [("wrong GUID", here, "{00000000-0000-0000-0000-000000000000}", CO_SIMULATION, b"probe", False),
+              ("NULL GUID", here, "NULL", CO_SIMULATION, b"probe", False),
+              ("NULL instanceName", here, None, CO_SIMULATION, None, False),
+              ("blank instanceName", here, None, CO_SIMULATION, b" \t", False)]
     if probe.md.modelExchange is None:
-        cases.append(("Model Exchange", probe.resources_uri(), None, MODEL_EXCHANGE, False))
-    for label, uri, guid, kind, accept in cases:
-        c = probe.instantiate(uri, guid, kind)
+        cases.append(("Model Exchange", here, None, MODEL_EXCHANGE, b"probe", False))
+    for label, uri, guid, kind, name, accept in cases:
+        c = probe.instantiate(uri, guid, kind, name)
         accepted = bool(c)
         if accepted:
             probe.lib.fmi2FreeInstance(c)
@@ -208,10 +215,6 @@ def scenario_states(probe: Probe) -> None:
     f.fmi2FreeInstance(c)
 
 
-def emit(**fields) -> None:
-    print(json.dumps(fields), flush=True)
-
-
 def run_probe(scenario: str, fmu: Path, *args: str, timeout: float = 600.0) -> tuple[int, list[dict], str]:
     """Run a scenario in a subprocess: (exit code, the JSON lines, stderr's tail). A negative exit code is the
     signal that killed it (a crash)."""
@@ -233,9 +236,7 @@ def main(argv: list[str]) -> int:
         elif scenario == "states":
             scenario_states(probe)
         elif scenario == "forged":
-            from vibrofmu.hosts.forge import scenario_forged
-
-            scenario_forged(probe, int(rest[0]), int(rest[1]))
+            scenario_forged(probe, int(rest[0]), int(rest[1]), sweep=rest[2:] == ["sweep"])
         else:
             raise SystemExit(f"error: unknown scenario {scenario!r}")
     return 0
