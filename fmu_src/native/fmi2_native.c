@@ -241,7 +241,7 @@ int native_rebuild(const State *s, State *fresh)
             r->halt_message[0] = '\0';
             model_initialise(scratch, r);
         }
-        built = r->model.built != 0 && !r->halted;
+        built = r->model.built != 0; /* halted or not: an initialisation that fails after building (halted) too */
         memcpy(fresh, r, sizeof *fresh);
         fmi2_layer_free(&scratch->fmi);
     }

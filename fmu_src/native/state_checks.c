@@ -62,7 +62,7 @@ static int constants_refusal(const State *s, char *why, size_t size)
         return 1;
     }
     int refused = 0;
-    if (!native_rebuild(s, fresh)) {
+    if (!native_rebuild(s, fresh) || (fresh->halted && !s->halted)) {
         snprintf(why, size, "its parameters do not build a model (%.400s)", fresh->halt_message);
         refused = 1;
     } else {
@@ -95,11 +95,7 @@ int native_state_refusal(const State *s, char *why, size_t size)
         snprintf(why, size, "state field halt_message is not NUL-terminated");
         return 1;
     }
-    if (!isfinite(s->start_time) || !isfinite(s->stop_time) || !isfinite(s->tolerance)) {
-        snprintf(why, size, "state field start_time, stop_time or tolerance is not finite (%g, %g, %g)",
-                 s->start_time, s->stop_time, s->tolerance);
-        return 1;
-    }
+    /* start_time, stop_time and tolerance are the host's (fmi2SetupExperiment: any double, refused when used) */
     const double status = s->value[VR_fmi_status];
     if (status != 0.0 && status != 3.0) {
         snprintf(why, size, "state field fmi_status = %g is neither 0 (ok) nor 3 (error)", status);
@@ -111,7 +107,7 @@ int native_state_refusal(const State *s, char *why, size_t size)
             snprintf(why, size, "state field %s = %g is not a Boolean (0 or 1)", VARIABLES[i].name, v);
             return 1;
         }
-        if (VARIABLES[i].type == T_INTEGER && !(v == trunc(v) && fabs(v) <= 2147483647.0)) {
+        if (VARIABLES[i].type == T_INTEGER && !(v == trunc(v) && v >= -2147483648.0 && v <= 2147483647.0)) {
             snprintf(why, size, "state field %s = %g is not an fmi2Integer", VARIABLES[i].name, v);
             return 1;
         }

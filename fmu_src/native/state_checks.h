@@ -14,7 +14,8 @@
 int native_state_refusal(const State *s, char *why, size_t size);
 
 /* fmi2_native.c: the State that the parameters, experiment and start values in s build at
-   fmi2ExitInitializationMode, into *fresh, in a silent scratch instance; 1 when the model was built. */
+   fmi2ExitInitializationMode, into *fresh, in a silent scratch instance; 1 when the model was built (fresh->halted
+   says whether its initialisation then failed). */
 int native_rebuild(const State *s, State *fresh);
 
 #endif
