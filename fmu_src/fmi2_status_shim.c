@@ -414,10 +414,9 @@ static int before_stop(const Shim *s, fmi2Real t, fmi2Real h)
    escapes) left a path that is no folder, and the slave's import then failed inside its constructor: the host
    died (SIGSEGV), and NULL threw a C++ exception (std::string(NULL)) that aborted it (so did a NULL instanceName).
    The shim checks the arguments (fmi2_instantiate_check: the name, the type, the GUID, the location as a folder),
-   then hands pythonfmu the
-   one form it reads, "file://" + the decoded path, after checking that the folder holds the slave
-   (slavemodule.txt, pythonfmu's pointer to the slave's module) and that the path has no "%20" pythonfmu would
-   turn into a space. */
+   then hands pythonfmu the one form it reads, "file://" + the decoded path, after checking that the folder holds
+   the slave (slavemodule.txt, pythonfmu's pointer to the slave's module) and that the path has no "%20" pythonfmu
+   would turn into a space. */
 #ifndef FMU_GUID
 #error "compile with -DFMU_GUID=<the guid of modelDescription.xml, as a C string>"
 #endif

@@ -579,7 +579,7 @@ EXPORT fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate state)
     INST(c); ALLOWED(fmi2SetFMUstate);
     if (state == NULL) return refuse_null(I, "fmi2SetFMUstate", "FMUstate (no state given)");
     char why[512];
-    if (native_state_refusal((const State *)state, why, sizeof why)) { /* state_checks.c (issue 25) */
+    if (native_state_refusal((const State *)state, &I->s, why, sizeof why)) { /* state_checks.c (issue 25) */
         native_log(I, fmi2Error, "fmi2SetFMUstate refused: %s", why);
         return fmi2Error;
     }
@@ -655,7 +655,7 @@ EXPORT fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte bytes[
     State *copy = malloc(sizeof *copy);
     if (copy == NULL) return fmi2Error;
     memcpy(copy, bytes + sizeof header, sizeof *copy);
-    if (native_state_refusal(copy, why, sizeof why)) { /* a forged state: the checksum recomputed (issue 25) */
+    if (native_state_refusal(copy, &I->s, why, sizeof why)) { /* a forged state: the checksum recomputed (issue 25) */
         free(copy);
         native_log(I, fmi2Error, "fmi2DeSerializeFMUstate refused: %s", why);
         return fmi2Error;

@@ -52,6 +52,26 @@ static int model_fields_refusal(const unsigned char *model, char *why, size_t si
     return 0;
 }
 
+/* The bytes of s and of other that decide a model's build: the parameters (every value but the outputs, inputs and
+   the status), the experiment, ModelData's fields before the model and the model's constants. */
+static int same_build(const State *s, const State *other)
+{
+    for (size_t i = 0; i < N_VARIABLES; i++)
+        if (VARIABLES[i].causality == C_PARAMETER && memcmp(&s->value[i], &other->value[i], sizeof s->value[i]) != 0)
+            return 0;
+    if (s->start_time != other->start_time || s->has_tolerance != other->has_tolerance ||
+        memcmp(&s->tolerance, &other->tolerance, sizeof s->tolerance) != 0)
+        return 0;
+    const size_t member = offsetof(ModelData, STATE_MODEL_MEMBER);
+    const unsigned char *a = (const unsigned char *)&s->model, *b = (const unsigned char *)&other->model;
+    if (memcmp(a, b, member) != 0) return 0;
+    for (size_t r = 0; r < STATE_N_CONSTANTS; r++) {
+        const StateRange *c = &STATE_CONSTANTS[r];
+        if (memcmp(a + member + c->begin, b + member + c->begin, c->end - c->begin) != 0) return 0;
+    }
+    return 1;
+}
+
 /* The model's constants (and ModelData's fields before the model: built, the closed loop's reference index)
    against those the state's own parameters build. */
 static int constants_refusal(const State *s, char *why, size_t size)
@@ -84,7 +104,7 @@ static int constants_refusal(const State *s, char *why, size_t size)
     return refused;
 }
 
-int native_state_refusal(const State *s, char *why, size_t size)
+int native_state_refusal(const State *s, const State *current, char *why, size_t size)
 {
     if (flag("phase", s->phase, PHASE_INSTANTIATED, PHASE_TERMINATED, why, size) ||
         flag("initialised", s->initialised, 0, 1, why, size) || flag("halted", s->halted, 0, 1, why, size) ||
@@ -124,5 +144,7 @@ int native_state_refusal(const State *s, char *why, size_t size)
         return 1;
     }
     if (model_fields_refusal((const unsigned char *)&s->model.STATE_MODEL_MEMBER, why, size)) return 1;
+    if (current != NULL && current->model.built && !(current->halted && !s->halted) && same_build(s, current))
+        return 0; /* current's own build (valid): the rebuild would give the same */
     return constants_refusal(s, why, size);
 }

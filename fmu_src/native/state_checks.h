@@ -10,8 +10,10 @@
    that indexes, sizes or divides out of its range (the phase, the flags, the status, Integer and Boolean values, the
    compiled model's counts and switches: state_fields.h), a double of the model that is not finite, a text without
    its NUL, or a model whose constants differ from those the state's own parameters build (native_rebuild); else 0.
-   Called by fmi2SetFMUstate and fmi2DeSerializeFMUstate (a forger can recompute the serialized state's checksum). */
-int native_state_refusal(const State *s, char *why, size_t size);
+   Called by fmi2SetFMUstate and fmi2DeSerializeFMUstate (a forger can recompute the serialized state's checksum).
+   current: the instance's own state (built by it, so valid), or NULL: when s has current's parameters, experiment and
+   model constants, the rebuild is skipped (it would build current's; the common case, a host rolling back). */
+int native_state_refusal(const State *s, const State *current, char *why, size_t size);
 
 /* fmi2_native.c: the State that the parameters, experiment and start values in s build at
    fmi2ExitInitializationMode, into *fresh, in a silent scratch instance; 1 when the model was built (fresh->halted
