@@ -161,3 +161,48 @@ def test_a_second_run_after_a_freed_logger_does_not_crash(request, fixture):
         # (now a sentinel, or garbage: a crash) -- so this test would catch the bug
         unprotected = second_run(fmu, "keep")
         assert unprotected.returncode != 0 or "stale logger calls: 0" not in unprotected.stdout, unprotected.stdout
+
+
+@pytest.mark.parametrize("field,value,message", [
+    ("phase", 9, "state field phase = 9 outside [0, 3]"),
+    ("model.built", 2, "state field model.built = 2 outside [0, 1]"),
+    ("dop.n_stages", 10**8, "state field dop.n_stages = 100000000 outside"),
+    ("solver", 7, "differ from those its parameters build"),  # an index into the solver table, a constant
+])
+def test_a_forged_native_state_is_refused_naming_the_field(native_plant_fmu, field, value, message):
+    """The native plant's State (fmi2_native.h): value[N] doubles, phase, initialised, halted, start/stop time,
+    tolerance, has_stop, has_tolerance, then ModelData (built, then the compiled VkPlant). Each forgery (checksum
+    recomputed) is refused at fmi2DeSerializeFMUstate with fmi2Error and a log line naming the field."""
+    import struct
+
+    from fmpy.fmi1 import FMICallException
+
+    from vibrofmu.hosts.forge import NATIVE_HEADER, fnv1a
+    from vibrofmu.hosts.run import FmuInstance
+    from vibromodel.compiled import VkPlant
+
+    instance = FmuInstance(native_plant_fmu)
+    try:
+        fmu = instance.fmu
+        fmu.setupExperiment(startTime=0.0)
+        fmu.enterInitializationMode()
+        fmu.exitInitializationMode()
+        fmu.doStep(currentCommunicationPoint=0.0, communicationStepSize=0.1)
+        state = fmu.getFMUstate()
+        data = bytearray(fmu.serializeFMUstate(state))
+        fmu.freeFMUstate(state)
+        n = len(instance.model_description.modelVariables)
+        model = 8 * n + 64 + 8  # offsetof(State, model) + ModelData.built
+        offset = {"phase": 8 * n, "model.built": model - 8, "dop.n_stages": model + VkPlant.dop.offset +
+                  type(VkPlant().dop).n_stages.offset, "solver": model + VkPlant.solver.offset}[field]
+        payload = data[NATIVE_HEADER:]
+        payload[offset:offset + 8] = struct.pack("<q", value)
+        forged = bytes(data[:72]) + struct.pack("<Q", fnv1a(bytes(payload))) + bytes(payload)
+        with pytest.raises(FMICallException) as refused:
+            fmu.deSerializeFMUstate(forged)
+        assert refused.value.status == ERROR
+        assert message in instance.log.errors()[-1], instance.log.errors()[-1]
+        # untouched, it is taken (the offsets above are the State's)
+        fmu.freeFMUstate(fmu.deSerializeFMUstate(bytes(data)))
+    finally:
+        instance.close()
