@@ -227,8 +227,8 @@ int native_rebuild(const State *s, State *fresh)
     if (scratch != NULL && fmi2_layer_init(&scratch->fmi, "state check", NULL, 0)) {
         State *r = &scratch->s;
         reset_state(r);
-        memcpy(r->value, s->value, sizeof r->value);
-        r->value[VR_fmi_status] = FLAG_OK;
+        for (size_t i = 0; i < N_VARIABLES; i++) /* the parameters; inputs and outputs keep their start values */
+            if (VARIABLES[i].causality == C_PARAMETER) r->value[i] = s->value[i];
         r->start_time = s->start_time;
         r->has_stop = s->has_stop;
         r->stop_time = s->stop_time;

@@ -15,7 +15,8 @@
    model constants, the rebuild is skipped (it would build current's; the common case, a host rolling back). */
 int native_state_refusal(const State *s, const State *current, char *why, size_t size);
 
-/* fmi2_native.c: the State that the parameters, experiment and start values in s build at
+/* fmi2_native.c: the State that the parameters and experiment in s (inputs at their start values: they are not
+   among the model's constants) build at
    fmi2ExitInitializationMode, into *fresh, in a silent scratch instance; 1 when the model was built (fresh->halted
    says whether its initialisation then failed). */
 int native_rebuild(const State *s, State *fresh);
