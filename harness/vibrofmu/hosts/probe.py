@@ -118,9 +118,9 @@ def resource_forms(unzipped: Path, needs_resources: bool) -> list[tuple[str, str
     folder, and what is not one. The FMU root is accepted only by an FMU that needs nothing from its resources."""
     resources = (Path(unzipped) / "resources").resolve()
     plain = str(resources)
-    spaced = Path(unzipped).parent / f"{Path(unzipped).name} spaced é"  # a copy in a folder whose name is escaped
-    if not spaced.exists():
-        shutil.copytree(unzipped, spaced, symlinks=True)
+    spaced = Path(unzipped).parent / f"{Path(unzipped).name} spaced é"  # a copy of resources/ in a folder whose
+    if not spaced.exists():                                               # name is escaped
+        shutil.copytree(resources, spaced / "resources", symlinks=True)
     escaped = urllib.parse.quote(str(spaced / "resources"))  # ' ' -> %20, 'é' -> %C3%A9
     letters = plain.replace("/resources", "/%72esources")  # an escaped letter
     return [
