@@ -434,6 +434,46 @@ static int before_stop(const Shim *s, fmi2Real t, fmi2Real h)
         if (guard_ != fmi2OK) return guard_;                                                 \
     } while (0)
 
+/* ---- fmi2Instantiate's arguments (issue 25) ----
+   pythonfmu 0.7.0 (CppfmuInstantiateSlave) turns fmuResourceLocation into a path by replacing "%20" with a space
+   and deleting the first "file://"; any other form FMI 2.0 allows (file:/path, file://localhost/path, other
+   escapes) left a path that is no folder, and the slave's import then failed inside its constructor: the host
+   died (SIGSEGV), and NULL threw a C++ exception (std::string(NULL)) that aborted it (so did a NULL instanceName).
+   The shim checks the arguments (fmi2_instantiate_check: the name, the type, the GUID, the location as a folder),
+   then hands pythonfmu the one form it reads, "file://" + the decoded path, after checking that the folder holds
+   the slave (slavemodule.txt, pythonfmu's pointer to the slave's module) and that the path has no "%20" pythonfmu
+   would turn into a space. */
+#ifndef FMU_GUID
+#error "compile with -DFMU_GUID=<the guid of modelDescription.xml, as a C string>"
+#endif
+
+static int resource_location(Shim *s, fmi2String instanceName, fmi2Type fmuType, fmi2String fmuGUID,
+                             fmi2String fmuResourceLocation, char *location, size_t size)
+{
+    static const char scheme[] = "file://";
+    char path[4096];
+    if (!fmi2_instantiate_check(&s->fmi, instanceName, "this FMU", fmuType, FMI2_TYPE_BIT(fmi2CoSimulation), fmuGUID,
+                                FMU_GUID, fmuResourceLocation, path, sizeof path))
+        return 0;
+    if (strstr(path, "%20") != NULL) {
+        fmi2_layer_log(&s->fmi, fmi2Error, "fmi2Instantiate refused: fmuResourceLocation = '%.900s': its path %.900s "
+                       "holds '%%20', which pythonfmu would read as a space", fmuResourceLocation, path);
+        return 0;
+    }
+    char slave[4096 + 32];
+    snprintf(slave, sizeof slave, "%s/slavemodule.txt", path);
+    FILE *f = fopen(slave, "r");
+    if (f == NULL) {
+        fmi2_layer_log(&s->fmi, fmi2Error, "fmi2Instantiate refused: fmuResourceLocation = '%.900s': %.900s has no "
+                       "slavemodule.txt (it is not this FMU's resources folder, which holds the Python slave)",
+                       fmuResourceLocation, path);
+        return 0;
+    }
+    fclose(f);
+    snprintf(location, size, "%s%s", scheme, path);
+    return 1;
+}
+
 /* ---- exported FMI 2.0 API ---- */
 
 EXPORT const char *fmi2GetTypesPlatform(void) { return "default"; }
@@ -455,11 +495,17 @@ EXPORT fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, 
         free(s);
         return NULL;
     }
+    char location[4096 + 8];
+    if (!resource_location(s, instanceName, fmuType, fmuGUID, fmuResourceLocation, location, sizeof location)) {
+        fmi2_layer_free(&s->fmi);
+        free(s);
+        return NULL;
+    }
     s->inner_cb = s->fmi.cb;
     s->inner_cb.logger = forward_log;
     s->inner_cb.stepFinished = NULL;
     s->inner_cb.componentEnvironment = s;
-    s->inner = inner.Instantiate(instanceName, fmuType, fmuGUID, fmuResourceLocation, &s->inner_cb,
+    s->inner = inner.Instantiate(instanceName, fmuType, fmuGUID, location, &s->inner_cb,
                                  visible, 1 /* filtering is done by forward_log */);
     if (s->inner == NULL) {
         fmi2_layer_free(&s->fmi);
@@ -574,15 +620,27 @@ SETTER(Boolean, fmi2Boolean)
 SETTER(String, fmi2String)
 #undef FAST
 
+/* FMU states (issue 25).  pythonfmu dereferences what it is given: a NULL state (a Python exception: fmi2Fatal,
+   the instance lost) or a NULL pointer argument (a crash).  The shim refuses those with fmi2Error and a log line,
+   before forwarding, and leaves the instance as it was (not in the error state: nothing was changed).
+   fmi2FreeFMUstate sets the caller's pointer to NULL, as FMI 2.0 asks (pythonfmu leaves it). */
+static fmi2Status refuse_null(Shim *s, const char *call, const char *argument)
+{
+    fmi2_layer_log(&s->fmi, fmi2Error, "%s refused: %s = NULL", call, argument);
+    return fmi2Error;
+}
+
 EXPORT fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *state)
 {
     SHIM(c); ALLOWED(fmi2GetFMUstate);
+    if (state == NULL) return refuse_null(S, "fmi2GetFMUstate", "FMUstate (the pointer to store it in)");
     return note(S, inner.GetFMUstate(S->inner, state));
 }
 
 EXPORT fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate state)
 {
     SHIM(c); ALLOWED(fmi2SetFMUstate);
+    if (state == NULL) return refuse_null(S, "fmi2SetFMUstate", "FMUstate (no state given)");
     detach(S);
     calling_shim = S;
     fmi2Status st = inner.SetFMUstate(S->inner, state);
@@ -593,19 +651,34 @@ EXPORT fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate state)
 EXPORT fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *state)
 {
     SHIM(c); ALLOWED(fmi2FreeFMUstate);
-    return note(S, inner.FreeFMUstate(S->inner, state));
+    if (state == NULL || *state == NULL) return fmi2OK; /* nothing to free (FMI 2.0: a no-op) */
+    fmi2Status st = note(S, inner.FreeFMUstate(S->inner, state));
+    if (st <= fmi2Warning) *state = NULL;
+    return st;
 }
 
 EXPORT fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate state, size_t *size)
 {
     SHIM(c); ALLOWED(fmi2SerializedFMUstateSize);
+    if (state == NULL) return refuse_null(S, "fmi2SerializedFMUstateSize", "FMUstate");
+    if (size == NULL) return refuse_null(S, "fmi2SerializedFMUstateSize", "size (the pointer to store it in)");
     return note(S, inner.SerializedFMUstateSize(S->inner, state, size));
 }
 
 EXPORT fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate state, fmi2Byte bytes[], size_t size)
 {
     SHIM(c); ALLOWED(fmi2SerializeFMUstate);
-    return note(S, inner.SerializeFMUstate(S->inner, state, bytes, size));
+    if (state == NULL) return refuse_null(S, "fmi2SerializeFMUstate", "FMUstate");
+    if (bytes == NULL) return refuse_null(S, "fmi2SerializeFMUstate", "serializedState (the buffer)");
+    size_t needed = 0;
+    fmi2Status st = note(S, inner.SerializedFMUstateSize(S->inner, state, &needed));
+    if (st > fmi2Warning) return st;
+    if (size < needed) { /* pythonfmu copies `size` bytes from a buffer of `needed` */
+        fmi2_layer_log(&S->fmi, fmi2Error, "fmi2SerializeFMUstate refused: size = %zu, the state needs %zu bytes "
+                       "(fmi2SerializedFMUstateSize)", size, needed);
+        return fmi2Error;
+    }
+    return note(S, inner.SerializeFMUstate(S->inner, state, bytes, needed));
 }
 
 /* Allowed after an error.  It only builds a state object (pythonfmu calls a
@@ -615,6 +688,8 @@ EXPORT fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate state, fmi
 EXPORT fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte bytes[], size_t size, fmi2FMUstate *state)
 {
     SHIM(c); ALLOWED(fmi2DeSerializeFMUstate);
+    if (bytes == NULL) return refuse_null(S, "fmi2DeSerializeFMUstate", "serializedState (the bytes)");
+    if (state == NULL) return refuse_null(S, "fmi2DeSerializeFMUstate", "FMUstate (the pointer to store it in)");
     return note(S, inner.DeSerializeFMUstate(S->inner, bytes, size, state));
 }
 

@@ -7,6 +7,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 
 static void noop_logger(fmi2ComponentEnvironment e, fmi2String i, fmi2Status s, fmi2String c, fmi2String m, ...)
 {
@@ -151,4 +152,125 @@ fmi2Status fmi2_layer_refuse_nonfinite(Fmi2Layer *L, fmi2Status st, const fmi2Va
         return fmi2Error;
     }
     return st;
+}
+
+/* ---- fmi2Instantiate's arguments ---- */
+
+static int hex_digit(char c)
+{
+    if (c >= '0' && c <= '9') return c - '0';
+    if (c >= 'a' && c <= 'f') return c - 'a' + 10;
+    if (c >= 'A' && c <= 'F') return c - 'A' + 10;
+    return -1;
+}
+
+static int prefix_nocase(const char *text, const char *prefix)
+{
+    for (; *prefix; text++, prefix++) {
+        char c = *text >= 'A' && *text <= 'Z' ? (char)(*text - 'A' + 'a') : *text;
+        if (c != *prefix) return 0;
+    }
+    return 1;
+}
+
+int fmi2_resource_path(fmi2String uri, char *path, size_t size, char *why, size_t why_size)
+{
+    const char *rule = "FMI 2.0 needs a file URI of an existing folder: file:/path, file:///path or "
+                       "file://localhost/path";
+    if (uri == NULL) {
+        snprintf(why, why_size, "fmuResourceLocation = NULL: %s", rule);
+        return 0;
+    }
+    if (uri[0] == '\0') {
+        snprintf(why, why_size, "fmuResourceLocation = '' (empty): %s", rule);
+        return 0;
+    }
+    const char *p = uri;
+    if (!prefix_nocase(p, "file:")) {
+        snprintf(why, why_size, "fmuResourceLocation = '%.900s': not a file URI; %s", uri, rule);
+        return 0;
+    }
+    p += 5;
+    if (p[0] == '/' && p[1] == '/') { /* an authority: empty or localhost */
+        p += 2;
+        if (prefix_nocase(p, "localhost") && (p[9] == '/' || p[9] == '\0')) p += 9;
+        if (*p != '/') {
+            snprintf(why, why_size, "fmuResourceLocation = '%.900s': the host is not the local one; %s", uri, rule);
+            return 0;
+        }
+    }
+    if (*p != '/') {
+        snprintf(why, why_size, "fmuResourceLocation = '%.900s': the path is not absolute; %s", uri, rule);
+        return 0;
+    }
+    size_t n = 0;
+    for (; *p; p++) {
+        char c = *p;
+        if (c == '?' || c == '#') {
+            snprintf(why, why_size, "fmuResourceLocation = '%.900s': a query or fragment ('%c') in a file URI; %s",
+                     uri, c, rule);
+            return 0;
+        }
+        if (c == '%') {
+            int hi = hex_digit(p[1]), lo = hi < 0 ? -1 : hex_digit(p[2]);
+            if (hi < 0 || lo < 0 || (hi == 0 && lo == 0)) {
+                snprintf(why, why_size, "fmuResourceLocation = '%.900s': '%%' is not followed by two hexadecimal "
+                         "digits of a byte other than 0; %s", uri, rule);
+                return 0;
+            }
+            c = (char)(hi * 16 + lo);
+            p += 2;
+        }
+        if (n + 1 >= size) {
+            snprintf(why, why_size, "fmuResourceLocation = '%.900s': the path is longer than %zu bytes", uri,
+                     size - 1);
+            return 0;
+        }
+        path[n++] = c;
+    }
+    while (n > 1 && path[n - 1] == '/') n--; /* with or without a trailing '/' */
+    path[n] = '\0';
+#ifdef _WIN32
+    if (n >= 3 && path[0] == '/' && path[2] == ':') memmove(path, path + 1, n); /* file:///C:/dir -> C:/dir */
+#endif
+    struct stat info;
+    if (stat(path, &info) != 0 || !S_ISDIR(info.st_mode)) {
+        snprintf(why, why_size, "fmuResourceLocation = '%.900s': %.900s is not an existing folder; %s", uri, path,
+                 rule);
+        return 0;
+    }
+    return 1;
+}
+
+int fmi2_instantiate_check(const Fmi2Layer *L, fmi2String instanceName, const char *model, fmi2Type fmuType,
+                           unsigned types, fmi2String fmuGUID, const char *guid, fmi2String fmuResourceLocation,
+                           char *path, size_t size)
+{
+    int blank = 1;
+    for (const char *p = instanceName; p != NULL && *p && blank; p++) blank = strchr(" \t\r\n\v\f", *p) != NULL;
+    if (blank) {
+        fmi2_layer_log(L, fmi2Error, "fmi2Instantiate refused: instanceName = %s%.200s%s: FMI 2.0 needs a name with "
+                       "a character other than white space", instanceName ? "'" : "",
+                       instanceName ? instanceName : "NULL", instanceName ? "'" : "");
+        return 0;
+    }
+    if (!(types & FMI2_TYPE_BIT(fmuType))) {
+        const char *type = fmuType == fmi2ModelExchange ? "fmi2ModelExchange"
+                           : fmuType == fmi2CoSimulation ? "fmi2CoSimulation" : "unknown";
+        fmi2_layer_log(L, fmi2Error, "fmi2Instantiate refused: fmuType = %d (%s): %s offers only %s", (int)fmuType,
+                       type, model, types & FMI2_TYPE_BIT(fmi2ModelExchange) ? "Model Exchange" : "Co-Simulation");
+        return 0;
+    }
+    if (fmuGUID == NULL || strcmp(fmuGUID, guid) != 0) {
+        fmi2_layer_log(L, fmi2Error, "fmi2Instantiate refused: fmuGUID = %s%.200s%s is not %s's guid %s from its "
+                       "modelDescription.xml (FMI 2.0: a wrong GUID means another FMU or version)",
+                       fmuGUID ? "'" : "", fmuGUID ? fmuGUID : "NULL", fmuGUID ? "'" : "", model, guid);
+        return 0;
+    }
+    char why[2048];
+    if (!fmi2_resource_path(fmuResourceLocation, path, size, why, sizeof why)) {
+        fmi2_layer_log(L, fmi2Error, "fmi2Instantiate refused: %s", why);
+        return 0;
+    }
+    return 1;
 }

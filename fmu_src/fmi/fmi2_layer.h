@@ -87,4 +87,22 @@ static inline fmi2Status fmi2_layer_finite_reals(Fmi2Layer *L, fmi2Status st, co
     return st; /* inline: the loop the shim and the native layer each had (no call on the getters' path) */
 }
 
+/* ---- fmi2Instantiate's arguments (issue 25) ----
+   fmuResourceLocation as a local folder: 1 and its path (no trailing '/') in `path`, or 0 and why in `why`.
+   Accepted, as FMI 2.0 (section 2.1.5: an RFC 3986 URI of scheme "file") and RFC 8089 allow: file:/abs,
+   file:///abs, file://localhost/abs, percent-encoded octets (%XX), with or without a trailing '/'; the folder must
+   exist.  Refused: NULL, the empty string, another scheme (http:, ...) or host, a relative path, a query or
+   fragment, a malformed or NUL escape, a folder that does not exist. */
+int fmi2_resource_path(fmi2String uri, char *path, size_t size, char *why, size_t why_size);
+
+/* The checks every FMU of the project makes in fmi2Instantiate, logged (fmi2Error, naming the argument, its value
+   and the rule) through the host's callbacks in L: fmuType among `types` (a mask of FMI2_TYPE_BIT(fmi2ModelExchange)
+   / FMI2_TYPE_BIT(fmi2CoSimulation)), fmuGUID equal to `guid`, fmuResourceLocation a local folder (its path in
+   `path`), instanceName not NULL and not blank (FMI 2.0, 2.1.5).  1 when all hold. */
+#define FMI2_TYPE_BIT(type) (1u << (unsigned)(type))
+int fmi2_instantiate_check(const Fmi2Layer *L, fmi2String instanceName, const char *model, fmi2Type fmuType,
+                           unsigned types,
+                           fmi2String fmuGUID, const char *guid, fmi2String fmuResourceLocation, char *path,
+                           size_t size);
+
 #endif

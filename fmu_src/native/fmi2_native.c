@@ -15,6 +15,7 @@
 #include "me_model.h"
 #include "pytext.h"
 #include "rules.h"
+#include "state_checks.h"
 
 #define EXPORT FMI2_Export /* fmi2Functions.h: dllexport on Windows, default visibility elsewhere */
 
@@ -224,6 +225,36 @@ static void reset_state(State *s)
     model_instantiate(s);
 }
 
+/* state_checks.c: what a state's own parameters build (ExitInitializationMode in a silent scratch instance). */
+int native_rebuild(const State *s, State *fresh)
+{
+    Instance *scratch = calloc(1, sizeof *scratch);
+    int built = 0;
+    if (scratch != NULL && fmi2_layer_init(&scratch->fmi, "state check", NULL, 0)) {
+        State *r = &scratch->s;
+        reset_state(r);
+        for (size_t i = 0; i < N_VARIABLES; i++) /* the parameters; inputs and outputs keep their start values */
+            if (VARIABLES[i].causality == C_PARAMETER) r->value[i] = s->value[i];
+        r->start_time = s->start_time;
+        r->has_stop = s->has_stop;
+        r->stop_time = s->stop_time;
+        r->has_tolerance = s->has_tolerance;
+        r->tolerance = s->tolerance;
+        r->phase = PHASE_STEP_MODE;
+        r->initialised = 1;
+        if (check_parameters(scratch)) {
+            r->halted = 0;
+            r->halt_message[0] = '\0';
+            model_initialise(scratch, r);
+        }
+        built = r->model.built != 0; /* halted or not: an initialisation that fails after building (halted) too */
+        memcpy(fresh, r, sizeof *fresh);
+        fmi2_layer_free(&scratch->fmi);
+    }
+    free(scratch);
+    return built;
+}
+
 /* ---- API ---- */
 
 EXPORT const char *fmi2GetTypesPlatform(void) { return "default"; }
@@ -233,18 +264,16 @@ EXPORT fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, 
                                      fmi2String fmuResourceLocation, const fmi2CallbackFunctions *functions,
                                      fmi2Boolean visible, fmi2Boolean loggingOn)
 {
-    (void)fmuGUID; (void)fmuResourceLocation; (void)visible;
+    (void)visible;
     Instance *inst = calloc(1, sizeof *inst);
     if (inst == NULL) return NULL;
     if (!fmi2_layer_init(&inst->fmi, instanceName, functions, loggingOn)) { free(inst); return NULL; }
 #ifdef ME_N_STATES
     inst->model_exchange = fmuType == fmi2ModelExchange;
-    if (fmuType != fmi2CoSimulation && fmuType != fmi2ModelExchange) {
-        native_log(inst, fmi2Error, "fmuType = %d: must be fmi2ModelExchange or fmi2CoSimulation", (int)fmuType);
-#else
-    if (fmuType != fmi2CoSimulation) {
-        native_log(inst, fmi2Error, "%s is a co-simulation FMU: fmuType must be fmi2CoSimulation", MODEL_IDENTIFIER);
 #endif
+    char resources[4096]; /* unused: the native FMUs need no resources, but the location must be a folder */
+    if (!fmi2_instantiate_check(&inst->fmi, instanceName, MODEL_IDENTIFIER, fmuType, NATIVE_FMU_TYPES, fmuGUID, FMU_GUID,
+                                fmuResourceLocation, resources, sizeof resources)) {
         fmi2_layer_free(&inst->fmi);
         free(inst);
         return NULL;
@@ -550,10 +579,16 @@ EXPORT fmi2Status fmi2CancelStep(fmi2Component c)
 
 /* ---- FMU state: a copy of the State ---- */
 
+static fmi2Status refuse_null(Instance *I, const char *call, const char *argument)
+{
+    native_log(I, fmi2Error, "%s refused: %s = NULL", call, argument);
+    return fmi2Error;
+}
+
 EXPORT fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *state)
 {
     INST(c); ALLOWED(fmi2GetFMUstate);
-    if (state == NULL) return fmi2Error;
+    if (state == NULL) return refuse_null(I, "fmi2GetFMUstate", "FMUstate (the pointer to store it in)");
     State *copy = *state != NULL ? (State *)*state : malloc(sizeof *copy);
     if (copy == NULL) {
         native_log(I, fmi2Error, "fmi2GetFMUstate: out of memory");
@@ -567,8 +602,10 @@ EXPORT fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *state)
 EXPORT fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate state)
 {
     INST(c); ALLOWED(fmi2SetFMUstate);
-    if (state == NULL) {
-        native_log(I, fmi2Error, "fmi2SetFMUstate refused: no state given");
+    if (state == NULL) return refuse_null(I, "fmi2SetFMUstate", "FMUstate (no state given)");
+    char why[512];
+    if (native_state_refusal((const State *)state, &I->s, why, sizeof why)) { /* state_checks.c (issue 25) */
+        native_log(I, fmi2Error, "fmi2SetFMUstate refused: %s", why);
         return fmi2Error;
     }
     memcpy(&I->s, state, sizeof I->s);
@@ -591,7 +628,8 @@ EXPORT fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *state)
 EXPORT fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate state, size_t *size)
 {
     INST(c); ALLOWED(fmi2SerializedFMUstateSize);
-    (void)state;
+    if (state == NULL) return refuse_null(I, "fmi2SerializedFMUstateSize", "FMUstate");
+    if (size == NULL) return refuse_null(I, "fmi2SerializedFMUstateSize", "size (the pointer to store it in)");
     *size = sizeof(StateHeader) + sizeof(State);
     return fmi2OK;
 }
@@ -599,6 +637,7 @@ EXPORT fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate state
 EXPORT fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate state, fmi2Byte bytes[], size_t size)
 {
     INST(c); ALLOWED(fmi2SerializeFMUstate);
+    if (bytes == NULL) return refuse_null(I, "fmi2SerializeFMUstate", "serializedState (the buffer)");
     if (state == NULL || size < sizeof(StateHeader) + sizeof(State)) {
         native_log(I, fmi2Error, "fmi2SerializeFMUstate: no state, or %zu bytes are too few", size);
         return fmi2Error;
@@ -616,6 +655,8 @@ EXPORT fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate state, fmi
 EXPORT fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte bytes[], size_t size, fmi2FMUstate *state)
 {
     INST(c); ALLOWED(fmi2DeSerializeFMUstate);
+    if (bytes == NULL) return refuse_null(I, "fmi2DeSerializeFMUstate", "serializedState (the bytes)");
+    if (state == NULL) return refuse_null(I, "fmi2DeSerializeFMUstate", "FMUstate (the pointer to store it in)");
     StateHeader header;
     if (size != sizeof header + sizeof(State)) {
         native_log(I, fmi2Error, "fmi2DeSerializeFMUstate refused: not a state of this FMU (%zu bytes, expected "
@@ -635,9 +676,20 @@ EXPORT fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte bytes[
                    "(a damaged state)");
         return fmi2Error;
     }
-    State *copy = *state != NULL ? (State *)*state : malloc(sizeof *copy);
+    char why[512];
+    State *copy = malloc(sizeof *copy);
     if (copy == NULL) return fmi2Error;
     memcpy(copy, bytes + sizeof header, sizeof *copy);
+    if (native_state_refusal(copy, &I->s, why, sizeof why)) { /* a forged state: the checksum recomputed (issue 25) */
+        free(copy);
+        native_log(I, fmi2Error, "fmi2DeSerializeFMUstate refused: %s", why);
+        return fmi2Error;
+    }
+    if (*state != NULL) { /* FMI 2.0: an existing state is overwritten */
+        memcpy(*state, copy, sizeof *copy);
+        free(copy);
+        return fmi2OK;
+    }
     *state = copy;
     return fmi2OK;
 }

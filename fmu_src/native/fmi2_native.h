@@ -35,6 +35,11 @@ typedef struct {
 #include "variables.h"  /* N_VARIABLES, VR_<name>, VARIABLES[] (generated) */
 #include "config.h"     /* MODEL_IDENTIFIER, STATE_FORMAT, ModelData (per model) */
 
+/* The interfaces fmi2Instantiate accepts (fmuType, as FMI2_TYPE_BIT(...)); a model's config.h may widen it. */
+#ifndef NATIVE_FMU_TYPES
+#define NATIVE_FMU_TYPES FMI2_TYPE_BIT(fmi2CoSimulation)
+#endif
+
 #define HALT_MESSAGE 640
 
 /* Everything that decides an instance's future: plain data (the FMU state). */

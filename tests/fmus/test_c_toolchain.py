@@ -31,7 +31,7 @@ def units():
     fmi = [f"-I{FMU_SRC / 'fmi'}", toolchain.fmi_include()]
     core = [(f"core/{path.name}", toolchain.KERNEL, [f"-I{FMU_SRC / 'core'}"], path, ())
             for path in sorted((FMU_SRC / "core").glob("*.c"))]
-    shim = [(path.name, toolchain.SHIM, [*fmi, f"-I{FMU_SRC}"], path, ("-DSTATUS_VR=0",))
+    shim = [(path.name, toolchain.SHIM, [*fmi, f"-I{FMU_SRC}"], path, ("-DSTATUS_VR=0", '-DFMU_GUID="guid"'))
             for path in (FMU_SRC / "fmi2_status_shim.c", FMU_SRC / "pyloader.c", FMU_SRC / "fmi" / "fmi2_layer.c")]
     hosts = [(path.name, toolchain.HOST, toolchain.host_includes(), path, ())
              for path in (paths.C_HOST_DIR / "fmi2_host.c", paths.C_HOST_DIR / "instance_cycles.c",

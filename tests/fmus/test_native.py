@@ -469,7 +469,8 @@ def _wine_and_linux(c_host, unpacked, outputs, parameters, tmp_path):
     prefix = Path(os.environ.get("WINEPREFIX") or Path(tempfile.gettempdir()) / "vibrofmu-wineprefix")
     env = {**os.environ, "WINEPREFIX": str(prefix), "WINEDEBUG": "-all"}
     vr = {v.name: v.valueReference for v in md.modelVariables}
-    proc = subprocess.run(["wine", str(host), "Z:" + str(dll).replace("/", "\\"), "file:///unused", "guid",
+    proc = subprocess.run(["wine", str(host), "Z:" + str(dll).replace("/", "\\"),
+                           "file:///Z:" + str(Path(unpacked) / "resources"), md.guid,  # checked (issue 25)
                            "0.0", "200.0", "0.1", ",".join(str(vr[n]) for n in outputs),
                            *(f"{vr[n]}={value!r}" for n, value in parameters.items())],
                           capture_output=True, text=True, env=env, timeout=300)

@@ -9,6 +9,8 @@
 #define STATE_FORMAT "HertzEAClosedLoop native state 4"
 /* Model Exchange (fmi2_me.c, me_model.h): states (x, v, theta^[9]); event indicators contact 1 + 2x/3, upper gap,
    lower gap */
+/* Model Exchange beside Co-Simulation (fmi2_me.c): fmi2Instantiate accepts both */
+#define NATIVE_FMU_TYPES (FMI2_TYPE_BIT(fmi2CoSimulation) | FMI2_TYPE_BIT(fmi2ModelExchange))
 #define ME_N_STATES VL_DIM
 #define ME_N_INDICATORS 3
 /* der(v), der(theta^_i) are computed when read (model_lazy_locals) */

@@ -8,6 +8,8 @@
 #define MODEL_IDENTIFIER "HertzEAOscillator"
 #define STATE_FORMAT "HertzEAOscillator native state 4"
 /* Model Exchange (fmi2_me.c, me_model.h): states (x, v); event indicators contact 1 + 2x/3, upper gap, lower gap */
+/* Model Exchange beside Co-Simulation (fmi2_me.c): fmi2Instantiate accepts both */
+#define NATIVE_FMU_TYPES (FMI2_TYPE_BIT(fmi2CoSimulation) | FMI2_TYPE_BIT(fmi2ModelExchange))
 #define ME_N_STATES 2
 #define ME_N_INDICATORS 3
 /* FMI 3.0 co-simulation returns early at contact loss and re-contact (model_do_step_early) */

@@ -56,8 +56,17 @@ def _model_identifier_and_check_vr(model_description: bytes, status_vr: int) -> 
     raise ValueError(f"no Integer variable with valueReference {status_vr} in the FMU")
 
 
-def _compile_shim(status_vr: int, out: Path) -> None:
-    cmd = [*toolchain.c_compiler(), *toolchain.SHIM, f"-DSTATUS_VR={int(status_vr)}", f"-I{FMI_DIR}",
+def _guid(model_description: bytes) -> str:
+    """modelDescription.xml's guid, which fmi2Instantiate checks (compiled into the shim as a C string)."""
+    guid = ET.fromstring(model_description).get("guid") or ""
+    if not guid or any(c in guid for c in '"\\\n') or not guid.isascii():
+        raise ValueError(f"modelDescription.xml's guid {guid!r} cannot be compiled into the shim")
+    return guid
+
+
+def _compile_shim(status_vr: int, out: Path, guid: str = "") -> None:
+    cmd = [*toolchain.c_compiler(), *toolchain.SHIM, f"-DSTATUS_VR={int(status_vr)}", f'-DFMU_GUID="{guid}"',
+           f"-I{FMI_DIR}",
            toolchain.fmi_include(), "-o", str(out), str(SHIM_SOURCE), str(LAYER_SOURCE), str(PYLOADER_SOURCE),
            *toolchain.SHIM_LIBS]
     proc = subprocess.run(cmd, capture_output=True, text=True)
@@ -86,7 +95,7 @@ def install_status_shim(fmu_path: Path, status_vr: int) -> None:
 
         with tempfile.TemporaryDirectory() as tmp:
             shim_so = Path(tmp) / "shim.so"
-            _compile_shim(status_vr, shim_so)
+            _compile_shim(status_vr, shim_so, _guid(zin.read("modelDescription.xml")))
             fd, tmp_fmu = tempfile.mkstemp(suffix=".fmu", dir=fmu_path.parent)
             os.close(fd)
             try:

@@ -9,6 +9,7 @@ import math
 import shutil
 import time
 import ctypes
+import weakref
 from ctypes import byref
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -17,7 +18,7 @@ import numpy as np
 from fmpy import calloc, extract, free, read_model_description
 from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import (FMU2Slave, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE,
-                       fmi2CallbackFunctions, fmi2CallbackLoggerTYPE)
+                       fmi2CallbackFunctions, fmi2CallbackLoggerTYPE, printLogMessage)
 from fmpy.logging import addLoggerProxy
 
 from vibrofmu import interrupts
@@ -61,26 +62,56 @@ class RunResult:
         return all(bool(np.all(np.isfinite(np.asarray(v, dtype=float)))) for v in values)
 
 
+# FMPy's native logger proxy (fmpy/logging: logMessage formats the message, then calls ONE process-wide Python
+# callback, s_logger, set by the last addLoggerProxy) keeps pointing at the callback of the last logger it was given
+# after that logger's ctypes objects are freed: the next message of ANY FMU, in a run without a logger of its own
+# (FMPy's default callbacks already hold logMessage, so they do not re-point it), jumps into freed memory
+# (SIGSEGV or SIGILL; issue 25's "second-run crash", reproduced with the native FMUs too: FMPy's, not the FMUs').
+# So the proxy only ever points at _dispatch, which lives as long as the process and passes each message to the
+# current FmuLog while it lives, else to FMPy's own printer.
+_current_log: weakref.ref | None = None
+
+
+def _dispatch(env, instance, status, category, message):
+    log = _current_log() if _current_log is not None else None
+    if log is not None:
+        log._receive(instance, status, message)
+    else:
+        printLogMessage(env, instance, status, category, message)
+
+
+_DISPATCH = fmi2CallbackLoggerTYPE(_dispatch)  # module-level: never freed
+
+
+def restore_fmpy_logger() -> None:
+    """Point FMPy's logger proxy at a callback that lives as long as the process. Call it after an
+    fmpy.simulate_fmu(..., logger=f) whose f is about to be freed (FMPy keeps pointing at it; see above)."""
+    callbacks = fmi2CallbackFunctions()
+    callbacks.logger = _DISPATCH
+    addLoggerProxy(byref(callbacks))  # sets the proxy's target to _DISPATCH (callbacks.logger becomes the proxy)
+
+
 class FmuLog:
-    """FMI logger callback that keeps the messages (and the ctypes objects alive).
+    """FMI logger callback that keeps the messages.
 
     FMPy's native logger proxy is process-wide: the last FmuLog created receives the messages of every
     instance, so FMUs that run together share one FmuLog and tell their messages apart by instance name."""
 
     def __init__(self):
+        global _current_log
         self.messages: list[str] = []
         self.instances: list[str] = []  # the instance name of each message
-
-        def logger(_env, instance, status, category, message):
-            label = STATUS_NAMES[status] if 0 <= status < len(STATUS_NAMES) else str(status)
-            self.messages.append(f"[{label}] {message.decode(errors='replace')}")
-            self.instances.append(instance.decode(errors="replace") if instance else "")
-
         self.callbacks = fmi2CallbackFunctions()
-        self.callbacks.logger = fmi2CallbackLoggerTYPE(logger)
+        self.callbacks.logger = _DISPATCH
         self.callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
         self.callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
-        addLoggerProxy(byref(self.callbacks))
+        addLoggerProxy(byref(self.callbacks))  # the proxy -> _DISPATCH (never a callback that can be freed)
+        _current_log = weakref.ref(self)
+
+    def _receive(self, instance, status, message):
+        label = STATUS_NAMES[status] if 0 <= status < len(STATUS_NAMES) else str(status)
+        self.messages.append(f"[{label}] {(message or b'').decode(errors='replace')}")
+        self.instances.append(instance.decode(errors="replace") if instance else "")
 
     def of(self, instance: str) -> list[str]:
         return [m for m, name in zip(self.messages, self.instances) if name == instance]
