@@ -483,15 +483,22 @@ def _wine_and_linux(c_host, unpacked, outputs, parameters, tmp_path):
     return rows, linux
 
 
-def test_win64_dll_under_wine_agrees_with_linux64(c_host, native_unpacked, tmp_path):
-    """The default experiment through the win64 DLL (a Windows host under wine) against linux64. Windows'
-    libm (sin, cos, pow, sqrt of mingw-w64's runtime) need not round as glibc's does: the last bits of a
-    step can differ and propagate through the adaptive steps. 1e-13 is issue 23's bound (issue 14's was 1e-12);
-    measured 3.8e-14 (v; x 1.6e-14)."""
+@pytest.mark.parametrize("parameters,bound", [
+    # issue 14's bound at the default settings: Windows' libm (sin, cos, pow of mingw-w64's runtime) need not round
+    # as glibc's does, and since issue 25 the adaptive step is clamped at the drive's ceiling 2.25/(2 Omega): whether
+    # a step is clamped can turn on the last bit, and then the two step grids differ by a step, a difference of two
+    # local errors far below rtol. Measured 2.1e-13 (x) and 7.7e-13 (v); 3.8e-14 before the ceiling.
+    ({}, 1e-12),
+    # issue 23's bound, at the accuracy headline's rtol 1e-10 (README): the clamp decides no step there (the
+    # proposed steps stay below the ceiling); measured 3.8e-15 (x), 6.4e-15 (v).
+    ({"rtol": 1e-10}, 1e-13),
+], ids=["default", "rtol 1e-10"])
+def test_win64_dll_under_wine_agrees_with_linux64(c_host, native_unpacked, tmp_path, parameters, bound):
+    """The default experiment through the win64 DLL (a Windows host under wine) against linux64."""
     outputs = ["x", "v", "a", "F_contact", "F_electrostatic"]
-    rows, linux = _wine_and_linux(c_host, native_unpacked, outputs, {}, tmp_path)
+    rows, linux = _wine_and_linux(c_host, native_unpacked, outputs, parameters, tmp_path)
     for j, name in enumerate(outputs):
-        assert np.max(np.abs(rows[:, j + 1] - linux.outputs[name])) <= 1e-13, name
+        assert np.max(np.abs(rows[:, j + 1] - linux.outputs[name])) <= bound, name
 
 
 # ---- the native controller FMU ---------------------------------------------------------------------------

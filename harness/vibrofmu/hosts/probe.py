@@ -161,8 +161,8 @@ def scenario_instantiate(probe: Probe) -> None:
               ("NULL GUID", here, "NULL", CO_SIMULATION, b"probe", False),
               ("NULL instanceName", here, None, CO_SIMULATION, None, False),
               ("blank instanceName", here, None, CO_SIMULATION, b" \t", False)]
-    if probe.md.modelExchange is None:
-        cases.append(("Model Exchange", here, None, MODEL_EXCHANGE, b"probe", False))
+    offers_me = probe.md.modelExchange is not None  # the native plant and closed loop (fmi2_me.c)
+    cases.append(("Model Exchange", here, None, MODEL_EXCHANGE, b"probe", offers_me))
     for label, uri, guid, kind, name, accept in cases:
         c = probe.instantiate(uri, guid, kind, name)
         accepted = bool(c)
