@@ -25,6 +25,7 @@ import pytest
 from fmpy import extract, read_model_description, simulate_fmu
 from fmpy.validation import validate_fmu
 from message_text import canonical_tree
+from required_tools import require
 
 from vibrofmu.hosts.doctor import compile_host, compile_windows_host, run_host
 from vibrofmu.fmus.native import series_probe_library
@@ -429,11 +430,11 @@ def test_series_equal_vibromodel_forces_bit_for_bit(tmp_path):
             assert list(out) == expected, (printed, alpha, gamma, R)
 
 
-@pytest.mark.skipif(shutil.which("cmake") is None, reason="FMPy's build_platform_binary needs cmake")
 def test_fmpy_builds_the_sources(native_plant_fmu, tmp_path):
     """fmpy.build.build_platform_binary compiles sources/ (its own CMake project, Release flags) into a
     binary that gives the same x as the packed one: no FMA on x86-64 without -march, no fast-math, so the
     same arithmetic."""
+    require("cmake", "cmake", "FMPy's build_platform_binary needs it")
     from fmpy.build import build_platform_binary
 
     unzipped = Path(extract(str(native_plant_fmu), unzipdir=str(tmp_path / "fmu")))
@@ -660,10 +661,10 @@ def test_controller_win64_dll_under_wine_agrees_with_linux64(c_host, native_cont
         assert np.max(np.abs(rows[:, j + 1] - linux.outputs[name])) <= 1e-13, name
 
 
-@pytest.mark.skipif(shutil.which("valgrind") is None, reason="valgrind is not installed")
 @pytest.mark.parametrize("which", ["plant", "controller"])
 def test_no_invalid_memory_access(which, c_host, native_unpacked, native_controller_fmu, tmp_path):
     """The native FMUs in the C host under valgrind: a run, and a run refused at initialisation."""
+    require("valgrind", "valgrind", "this test runs the C host under it")
     if which == "plant":
         unzipped, output, good, bad = native_unpacked, "x", {}, {"R": -1.0}
     else:
@@ -794,9 +795,9 @@ def test_closed_loop_win64_dll_under_wine_agrees_with_linux64(c_host, native_clo
         assert np.max(np.abs(rows[:, j + 1] - linux.outputs[name])) <= 1e-13, name
 
 
-@pytest.mark.skipif(shutil.which("valgrind") is None, reason="valgrind is not installed")
 def test_closed_loop_no_invalid_memory_access(c_host, native_closed_loop_fmu, tmp_path):
     """The native closed loop in the C host under valgrind: a run, and a run refused for its reference."""
+    require("valgrind", "valgrind", "this test runs the C host under it")
     unzipped = Path(extract(str(native_closed_loop_fmu), unzipdir=str(tmp_path / "n")))
     wrapper = ["valgrind", "--error-exitcode=99", "-q"]
     for parameters, code in (({}, 0), ({"Delta": 0.001}, 2)):
