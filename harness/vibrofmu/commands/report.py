@@ -110,6 +110,9 @@ def run(args) -> int:
 
     # every document written to a temporary name first, then all renamed: a Ctrl-C leaves each document either
     # as it was or updated, never half-written (and none is touched before every block was generated)
+    # the documents as they are now, not as they were when the run started: an edit made while the studies ran
+    # (minutes) is kept, only the generated blocks change
+    texts = {doc: doc.read_text() for doc in texts}
     changed = {doc: new for doc, text in texts.items() if (new := replace_blocks(text, bodies)) != text}
     with contextlib.ExitStack() as stack:
         for doc, new in changed.items():
