@@ -14,6 +14,7 @@
  * The FMI 2.0 functions are linked in but not exported (harness/vibrofmu/fmus/native.py links with a version
  * script on linux64), so another FMU's fmi2 symbols cannot interpose.
  */
+#include <ctype.h>
 #include <math.h>
 #include <stdarg.h>
 #include <stdbool.h>
@@ -115,6 +116,26 @@ EXPORT3 fmi3Status fmi3SetDebugLogging(fmi3Instance instance, fmi3Boolean loggin
     return to3(fmi2SetDebugLogging(w->c, loggingOn, nCategories, categories));
 }
 
+/* FMI 2.0 takes the resources as a file URI, FMI 3.0 as a path (with '\\' on Windows, any character): the path as
+ * a URI, percent-encoded, so that fmi2Instantiate's check (fmi/fmi2_layer.c) decodes it to the same path:
+ * "/tmp/a b/resources/" -> "file:///tmp/a%20b/resources/", "C:\\x\\resources\\" -> "file:///C:/x/resources/". FMI 3.0
+ * lets resourcePath be NULL (no resources folder, or no file system path): the native FMUs read no resources, so
+ * then the check is given the file system's root, a folder that exists. NULL only if out of memory. */
+static char *resource_uri(fmi3String path)
+{
+    if (path == NULL) path = "/";
+    char *uri = malloc(3 * strlen(path) + 9), *out = uri;
+    if (uri == NULL) return NULL;
+    out += sprintf(out, "file://%s", path[0] == '/' || path[0] == '\\' ? "" : "/");
+    for (const unsigned char *p = (const unsigned char *)path; *p; p++) {
+        unsigned char c = *p == '\\' ? '/' : *p;
+        if (isalnum(c) || strchr("-._~/:", c) != NULL) *out++ = (char)c;
+        else out += sprintf(out, "%%%02X", c);
+    }
+    *out = '\0';
+    return uri;
+}
+
 static W3 *instantiate(fmi3String name, fmi3String token, fmi3String resourcePath, fmi3Boolean visible,
                        fmi3Boolean loggingOn, fmi3InstanceEnvironment env, fmi3LogMessageCallback log, int me)
 {
@@ -127,10 +148,9 @@ static W3 *instantiate(fmi3String name, fmi3String token, fmi3String resourcePat
     w->cb.allocateMemory = calloc;
     w->cb.freeMemory = free;
     w->cb.componentEnvironment = w;
-    char *uri = NULL; /* FMI 2.0 takes the resources as a file URI, FMI 3.0 as a path */
-    if (resourcePath != NULL && (uri = malloc(strlen(resourcePath) + 8)) != NULL)
-        sprintf(uri, "file://%s", resourcePath);
-    w->c = fmi2Instantiate(name, me ? fmi2ModelExchange : fmi2CoSimulation, token, uri, &w->cb, visible, loggingOn);
+    char *uri = resource_uri(resourcePath);
+    w->c = uri == NULL ? NULL : fmi2Instantiate(name, me ? fmi2ModelExchange : fmi2CoSimulation, token, uri, &w->cb,
+                                                visible, loggingOn);
     free(uri);
     if (w->c == NULL) {
         free(w);

@@ -448,3 +448,24 @@ def test_directional_derivatives_are_the_finite_differences(native_plant_fmu, pl
     with pytest.raises(FMICallException):  # nSensitivity must be nUnknowns
         cs.getDirectionalDerivative([vr["a"]], [vr["x"]], [1.0], nSensitivity=2)
     cs.freeInstance()
+
+
+def test_fmi3_takes_any_resource_path_and_none(native_plant_fmu, plant_fmi3, tmp_path):
+    """FMI 3.0 gives the resources as a file system path (any characters: here a space and a '%') or NULL (no
+    resources folder, or no path to give); the FMI 3.0 layer turns it into the percent-encoded file URI that
+    fmi2Instantiate's check decodes back to the same folder (a raw 'file://' + path failed for both)."""
+    from fmpy.fmi3 import fmi3IntermediateUpdateCallback, fmi3LogMessageCallback
+
+    folder = extract(str(plant_fmi3), str(tmp_path / "a b%20c"))
+    three = simulate_fmu(folder, stop_time=1.0, output_interval=0.1, output=["x"])
+    two = simulate_fmu(str(native_plant_fmu), stop_time=1.0, output_interval=0.1, output=["x"])
+    np.testing.assert_array_equal(three["x"], two["x"])  # the same bits: FMI 3.0 maps each call onto FMI 2.0's
+    md = read_model_description(folder)
+    fmu = FMU3Slave(guid=md.guid, unzipDirectory=folder, modelIdentifier=md.coSimulation.modelIdentifier,
+                    instanceName="null")
+    log = fmi3LogMessageCallback(lambda *args: None)
+    c = fmu.fmi3InstantiateCoSimulation(b"null", md.guid.encode(), None, False, False, False, False, None, 0, None,
+                                        log, fmi3IntermediateUpdateCallback())
+    assert c  # NULL resourcePath: the native FMU reads no resources
+    fmu.fmi3FreeInstance(c)
+    fmu.freeLibrary()
