@@ -337,3 +337,32 @@ def test_report_keeps_an_edit_made_while_it_ran(tmp_path, monkeypatch, capsys):
     robustness = (root / "docs" / "robustness.md").read_text()
     assert robustness.endswith(edit)
     assert "<!-- report:ranges -->\ngenerated ranges table\n<!-- /report:ranges -->" in robustness
+
+
+def test_report_leaves_the_blocks_of_a_failed_study_alone(monkeypatch, tmp_path, capsys):
+    """A study that fails (here the bench) leaves every block that reads its summary as it is -- the speed block
+    gathers oafm, stability and bench, and from the first two alone it lost the bench's lines -- and the report
+    exits 1. The studies are stand-ins; the FMUs are stand-in files (no FMU runs)."""
+    import shutil
+    from dataclasses import replace
+
+    import vibrofmu.report as report
+    from vibrofmu.commands import bench, oafm, stability
+    from vibrofmu.paths import CLOSED_LOOP_NAME, CONTROLLER_NAME, PLANT_NAME
+
+    checkout = Path(__file__).resolve().parents[2]
+    root = tmp_path / "root"
+    shutil.copytree(checkout / "docs", root / "docs")
+    shutil.copy(checkout / "README.md", root / "README.md")
+    fmus = tmp_path / "fmus"
+    fmus.mkdir()
+    for name in (PLANT_NAME, CONTROLLER_NAME, CLOSED_LOOP_NAME):
+        (fmus / name).write_bytes(b"")
+    monkeypatch.setattr(oafm, "COMMAND", replace(oafm.COMMAND, run=lambda args: 0))
+    monkeypatch.setattr(stability, "COMMAND", replace(stability.COMMAND, run=lambda args: 0))
+    monkeypatch.setattr(bench, "COMMAND", replace(bench.COMMAND, run=lambda args: 1))
+    asked = []
+    monkeypatch.setattr(report, "generate", lambda names, *args: asked.extend(names) or {})
+    assert main(["report", "--only", "oafm", "speed", "--root", str(root), "--fmu-dir", str(fmus)]) == 1
+    assert asked == ["oafm"]
+    assert "the blocks that read its summary (speed) are not updated" in capsys.readouterr().err

@@ -25,9 +25,14 @@ def options(p):
                                                           "rewritten (default: this checkout)")
 
 
-def run_studies(fmu_dir: Path, work_dir: Path, quick: bool) -> list[Path] | None:
+# The studies each generated block reads: a block is rewritten only when every one of them completed (the speed block
+# gathers the three summaries; from two of them it would silently lose the bench's lines).
+BLOCK_STUDIES = {"oafm": {"oafm"}, "stability": {"stability"}, "speed": {"oafm", "stability", "bench"}}
+
+
+def run_studies(fmu_dir: Path, work_dir: Path, quick: bool, failed: set | None = None) -> list[Path] | None:
     """Run oafm, stability and bench (quick: fewer orders, quick bench) into work_dir; the folders of those that
-    completed (a failure is printed and skipped)."""
+    completed (a failure is printed, added to `failed` and skipped)."""
     plant = str(fmu_dir / paths.PLANT_NAME)
     runs = {"oafm": (oafm.COMMAND, ["--fmu", plant] + (["--study-max-order", "3"] if quick else [])),
             "stability": (stability.COMMAND, ["--fmu", plant]),
@@ -42,8 +47,11 @@ def run_studies(fmu_dir: Path, work_dir: Path, quick: bool) -> list[Path] | None
             # (Ctrl-C is no Exception: it stops the report before any document is rewritten)
             code = f"{type(error).__name__}: {error}"
         if code != 0:
-            print(f"error: vibrofmu {name} failed ({code}); the blocks from its summary are not updated",
-                  file=sys.stderr)
+            blocks = sorted(block for block, studies in BLOCK_STUDIES.items() if name in studies)
+            print(f"error: vibrofmu {name} failed ({code}); the blocks that read its summary ({', '.join(blocks)}) "
+                  "are not updated", file=sys.stderr)
+            if failed is not None:
+                failed.add(name)
             continue
         folders.append(folder)
     return folders
@@ -85,11 +93,13 @@ def run(args) -> int:
                   f"asked for ({text})", file=sys.stderr)
             return 2
     fmu_dir = built_all(Path(args.fmu_dir or paths.build_dir()))
+    failed = set()  # the studies that did not complete
     with tempfile.TemporaryDirectory() as work_dir:
         if not sources and any(name in FROM_SUMMARIES for name in names):
-            sources = run_studies(fmu_dir, Path(work_dir), args.quick)
+            sources = run_studies(fmu_dir, Path(work_dir), args.quick, failed)
             if sources is None:
                 return 1
+            names = [name for name in names if not BLOCK_STUDIES.get(name, set()) & failed]
         bodies = generate(names, fmu_dir, sources, args.quick, Path(work_dir), start)
     missing = [name for name in names if name not in bodies]  # never silent (a failed study said why above)
     if missing:
@@ -121,7 +131,7 @@ def run(args) -> int:
         print(f"updated {doc.relative_to(root)}: " + ", ".join(n for n in found[doc] if n in bodies))
     if not changed:
         print(f"report: blocks {', '.join(bodies) or 'none'} regenerated; the documents already hold them")
-    return 0
+    return 1 if failed else 0  # the other blocks were written; a failed study still fails the report
 
 
 COMMAND = Command("report", "regenerate the numbers in README.md and docs/*.md (blocks between "
