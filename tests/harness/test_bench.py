@@ -217,9 +217,9 @@ def test_full_plan_covers_the_issues_grid():
                {(3, None), (4, None)}
         for method in ("RK45", "DOP853", "LSODA"):
             assert all(("solve_ivp", interval, 0, 0, r, 0.0, None, method) in keys for r in decades)
-        assert all(("floor", interval, 0, 0, r, 0.0, None, None) in keys for r in decades)
+        assert all(("floor", interval, 0, 0, r, bench.NO_CEILING, None, None) in keys for r in decades)
     for r in (10 ** -6.5, 10 ** -8.5, 10 ** -10.5):  # the target's search between decades
-        assert ("fmu", 0.1, 0, 0, r, bench.NO_CEILING, 0, None) in keys and ("floor", 0.1, 0, 0, r, 0.0, None, None) in keys
+        assert ("fmu", 0.1, 0, 0, r, bench.NO_CEILING, 0, None) in keys and ("floor", 0.1, 0, 0, r, bench.NO_CEILING, None, None) in keys
         assert ("solve_ivp", 0.1, 0, 0, r, 0.0, None, "LSODA") in keys
 
 

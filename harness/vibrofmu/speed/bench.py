@@ -81,8 +81,8 @@ MODEL_ERROR_NOTE = ("fidelities 3 and 4 are approximations of Eq. 3: their error
                     "reference of its own model), fidelity 1 of ~1e-12")
 
 
-# The FMU's adaptive cases run without the drive's step ceiling (max_step = 1000, the rule's top: no step of the
-# default experiment is that long), as solve_ivp and the compiled floor do: each work-precision line is then the
+# The FMU's adaptive cases and the compiled floor run without the drive's step ceiling (max_step = 1000, the rule's
+# top: no step of the default experiment is that long), as solve_ivp does: each work-precision line is then the
 # error control's own (tolerance proportionality), and the FMU and SciPy are compared on the same terms. With the
 # default max_step = 0 the ceiling 2.25/(fastest forcing) holds loose tolerances to its error (README, accuracy).
 NO_CEILING = 1000.0
@@ -155,7 +155,7 @@ def make_plan(quick: bool, repeats: int | None = None) -> Plan:
         cases += [Case("fmu", interval, fidelity, kernel=Kernel.COMPILED) for fidelity in APPROXIMATIONS]  # C evaluators
         cases += [Case("solve_ivp", interval, rtol=rtol, method=method) for method in SOLVE_IVP_METHODS
                   for rtol in near]
-        cases += [Case("floor", interval, rtol=rtol) for rtol in near]
+        cases += [Case("floor", interval, rtol=rtol, max_step=NO_CEILING) for rtol in near]  # as the FMU's
     if repeats is None:
         repeats = QUICK_REPEATS if quick else FULL_REPEATS
     return Plan(quick, QUICK_STOP if quick else FULL_STOP, repeats, tuple(cases))
