@@ -293,3 +293,13 @@ def test_basins_headline_says_what_the_margin_leaves_out():
                                              "by_margin": {"0": {"agreeing": 59, "compared": 64}}}}
     assert ("agreement with the averaged prediction 1.000 (56/56) farther than 0.03 from the predicted boundary; "
             "all points 59/64") in headline(summary)
+
+
+def test_parameter_axes_name_the_symbol():
+    """branch.png and diagram.png label their parameter axis as the other plots do (forcing frequency ω, load
+    amplitude Δ); a name without a symbol is shown as it is."""
+    from vibrofmu.output.export import parameter_label
+
+    assert parameter_label("omega") == r"forcing frequency $\omega$"
+    assert parameter_label("Delta") == r"load amplitude $\Delta$"
+    assert parameter_label("V_bias") == "V_bias"

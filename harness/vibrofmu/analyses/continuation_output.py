@@ -14,7 +14,7 @@ from vibromodel import averaging as av
 from vibromodel.parameters import Scene
 
 from vibrofmu.analyses import continuation as cont
-from vibrofmu.output.export import _legend_below, _save, plt, write_json, write_parquet, wrapped
+from vibrofmu.output.export import _legend_below, _save, parameter_label, plt, write_json, write_parquet, wrapped
 
 EVENT_MARKERS = {"fold": ("s", "tab:red"), "period-doubling": ("D", "tab:purple"),
                  "neimark-sacker": ("*", "tab:olive"), "grazing": ("o", "tab:orange")}
@@ -76,7 +76,7 @@ def plot_branch(path: Path, result: cont.Branch, title: str) -> None:
                      fontsize=8, color="tab:orange", xytext=(0, 3), textcoords="offset points")
     axes[0].set_ylabel(r"amplitude $(x_{max} - x_{min})/2$")
     axes[1].set_ylabel(r"$x_{min}$ over the orbit")
-    axes[1].set_xlabel(result.problem.param)
+    axes[1].set_xlabel(parameter_label(result.problem.param))
     for ax in axes:
         ax.grid(True, alpha=0.3)
     fig.suptitle(wrapped(title, fig.get_figwidth(), 11), fontsize=11)

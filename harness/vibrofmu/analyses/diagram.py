@@ -514,9 +514,9 @@ def plot(d: Diagram, path, title: str = "") -> None:
             ax2.plot([e.value for e in exps], [e.largest for e in exps], ".-", ms=3, lw=0.8, color=COLOURS[direction],
                      label=f"largest Lyapunov exponent, {direction}")
         ax2.axhline(0.0, color="black", lw=0.8)
-        ax2.set_ylabel("lambda_1 (per unit tau)")
+        ax2.set_ylabel(r"$\lambda_1$ (per unit $\tau$)")
         ax2.legend(loc="best", fontsize=8)
-    axes[-1, 0].set_xlabel(d.name)
+    axes[-1, 0].set_xlabel(export.parameter_label(d.name))
     fig.tight_layout()
     export.save_figure(fig, path, dpi=140)  # atomic, then closed
 

@@ -299,6 +299,14 @@ def plot_frequency_response(path: Path, curve, continuation, sweeps, folds, omeg
 
 
 ESTIMATE_SYMBOLS = {"mu": r"\mu", "Delta": r"\Delta", "beta": r"\beta", "gamma": r"\gamma"}
+PARAMETER_LABELS = {"omega": r"forcing frequency $\omega$", "Omega": r"AC frequency $\Omega$",
+                    "Delta": r"load amplitude $\Delta$", "mu": r"damping $\mu$", "alpha": r"$\alpha$",
+                    "beta": r"$\beta$", "gamma": r"$\gamma$", "R": "electrode gap R"}
+
+
+def parameter_label(name: str) -> str:
+    """An axis label for a scene parameter: its symbol (omega -> forcing frequency ω), else the name itself."""
+    return PARAMETER_LABELS.get(name, name)
 
 
 def figures_closed_loop(time, series: dict, theta: dict, title: str) -> dict:
