@@ -31,13 +31,13 @@ from dataclasses import dataclass, field, replace
 from typing import Callable
 
 import numpy as np
-from scipy.integrate import solve_ivp
 from scipy.optimize import brentq
 
 from vibromodel import forces
 from vibromodel.parameters import Scene
 
-from vibrofmu.analyses.shooting import ATOL, NEWTON_TOL, RTOL, TWO_PI, PeriodicModel, ShootingError, _events
+from vibrofmu.analyses.shooting import (NEWTON_TOL, RTOL, TWO_PI, PeriodicModel, ShootingError, integrate_pieces,
+                                        piecewise_x)
 
 PARAMETERS = ("omega", "Delta", "mu", "alpha", "gamma")  # what a branch can be continued in
 EVENTS = ("fold", "period-doubling", "neimark-sacker", "grazing")
@@ -98,27 +98,9 @@ class MapResult:
 
 def n_period_map(scene: Scene, param: str, z0, periods: int = 1, rtol: float = RTOL) -> MapResult:
     """Integrate s in [0, 2 pi n] from z0 with the variational equations, restarting at contact crossings
-    (shooting.period_map's integration, for any parameter and n periods)."""
-    rhs = _rhs(scene, param)
-    contact, upper_gap, lower_gap, turning_point = _events(scene.R)
-    y = np.concatenate([np.asarray(z0, dtype=float), [1.0, 0.0, 0.0, 1.0, 0.0, 0.0]])
-    s, s_end, segments, extrema, crossings = 0.0, TWO_PI * periods, [], [float(y[0])], 0
-    contact.direction = -1.0 if contact(0.0, y) > 0.0 else 1.0
-    while True:
-        sol = solve_ivp(rhs, (s, s_end), y, method="DOP853", rtol=rtol, atol=ATOL, dense_output=True,
-                        events=(contact, upper_gap, lower_gap, turning_point))
-        if sol.status < 0:
-            raise ShootingError(f"DOP853 failed at s = {sol.t[-1]:.6g}: {sol.message}")
-        segments.append(sol.sol)
-        extrema.extend(float(y_event[0]) for y_event in sol.y_events[3])
-        if sol.t_events[1].size or sol.t_events[2].size:
-            raise ShootingError(f"pull-in (an electrode gap below 1e-3) at x = {sol.y[0, -1]:.6g}")
-        y, s = sol.y[:, -1], sol.t[-1]
-        if sol.status == 0:
-            break
-        crossings += 1
-        contact.direction = -contact.direction
-    extrema.append(float(y[0]))
+    (shooting.integrate_pieces, period_map's loop, for any parameter and n periods)."""
+    y, segments, turning, crossings = integrate_pieces(_rhs(scene, param), scene.R, z0, TWO_PI * periods, rtol)
+    extrema = [float(z0[0]), *turning, float(y[0])]  # the ends too: x_min, x_max over the orbit
     return MapResult(end=y[:2].copy(), monodromy=np.array([[y[2], y[4]], [y[3], y[5]]]), d_param=y[6:8].copy(),
                      x_min=min(extrema), x_max=max(extrema), crossings=crossings, segments=segments)
 
@@ -594,12 +576,7 @@ class FreeOrbit:
 
     def x(self, s: np.ndarray) -> np.ndarray:
         """x at rescaled time s = 2 pi tau / T in [0, 2 pi]."""
-        s = np.asarray(s, dtype=float)
-        out = np.empty_like(s)
-        for sol in self.segments:
-            inside = (s >= sol.t_min) & (s <= sol.t_max)
-            out[inside] = sol(s[inside])[0]
-        return out
+        return piecewise_x(self.segments, s)
 
 
 def free_orbits(energies, rtol: float = RTOL, R: float = 3.0) -> list[FreeOrbit]:

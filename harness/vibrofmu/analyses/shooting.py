@@ -145,35 +145,48 @@ class PeriodMap:
 
     def x(self, s: np.ndarray) -> np.ndarray:
         """x(s) on [0, 2 pi] from the dense output of the piece that holds s."""
-        s = np.asarray(s, dtype=float)
-        out = np.empty_like(s)
-        for sol in self.segments:
-            inside = (s >= sol.t_min) & (s <= sol.t_max)
-            out[inside] = sol(s[inside])[0]
-        return out
+        return piecewise_x(self.segments, s)
 
 
-def period_map(model: PeriodicModel, z0, omega: float, rtol: float = RTOL) -> PeriodMap:
-    """Integrate one period s in [0, 2 pi] with DOP853 (dense output), restarting at each contact crossing."""
-    rhs = _variational_rhs(model, omega)
-    contact, upper_gap, lower_gap, turning_point = _events(model.scene.R)
+def piecewise_x(segments, s) -> np.ndarray:
+    """x(s) from the dense outputs `segments` (OdeSolutions of consecutive pieces), each s from the piece holding it."""
+    s = np.asarray(s, dtype=float)
+    out = np.empty_like(s)
+    for sol in segments:
+        inside = (s >= sol.t_min) & (s <= sol.t_max)
+        out[inside] = sol(s[inside])[0]
+    return out
+
+
+def integrate_pieces(rhs, R: float, z0, s_end: float, rtol: float, where: str = ""):
+    """The variational system `rhs` (state, fundamental matrix from the identity, parameter derivative from 0) from
+    z0 at s = 0 to s_end with DOP853 (dense output), restarted at each contact crossing: (the final y, the pieces'
+    OdeSolutions, x at each turning point v = 0, the number of contact crossings). A solver failure or pull-in is a
+    ShootingError; `where` (e.g. ", omega = 0.93") places it in the message."""
+    contact, upper_gap, lower_gap, turning_point = _events(R)
     y = np.concatenate([np.asarray(z0, dtype=float), [1.0, 0.0, 0.0, 1.0, 0.0, 0.0]])
     s, segments, extrema, crossings = 0.0, [], [], 0
     contact.direction = -1.0 if contact(0.0, y) > 0.0 else 1.0
     while True:
-        sol = solve_ivp(rhs, (s, TWO_PI), y, method="DOP853", rtol=rtol, atol=ATOL, dense_output=True,
+        sol = solve_ivp(rhs, (s, s_end), y, method="DOP853", rtol=rtol, atol=ATOL, dense_output=True,
                         events=(contact, upper_gap, lower_gap, turning_point))
         if sol.status < 0:
-            raise ShootingError(f"DOP853 failed at s = {sol.t[-1]:.6g}, omega = {omega:.10g}: {sol.message}")
+            raise ShootingError(f"DOP853 failed at s = {sol.t[-1]:.6g}{where}: {sol.message}")
         segments.append(sol.sol)
-        extrema.extend(y_event[0] for y_event in sol.y_events[3])
+        extrema.extend(float(y_event[0]) for y_event in sol.y_events[3])
         if sol.t_events[1].size or sol.t_events[2].size:
-            raise ShootingError(f"pull-in at omega = {omega:.10g}, x = {sol.y[0, -1]:.6g}")
+            raise ShootingError(f"pull-in (an electrode gap below {PULL_IN_GAP:g}) at x = {sol.y[0, -1]:.6g}{where}")
         y, s = sol.y[:, -1], sol.t[-1]
         if sol.status == 0:
-            break
+            return y, segments, extrema, crossings
         crossings += 1
         contact.direction = -contact.direction  # the next crossing is the way back
+
+
+def period_map(model: PeriodicModel, z0, omega: float, rtol: float = RTOL) -> PeriodMap:
+    """Integrate one period s in [0, 2 pi] with DOP853 (dense output), restarting at each contact crossing."""
+    y, segments, extrema, crossings = integrate_pieces(_variational_rhs(model, omega), model.scene.R, z0, TWO_PI,
+                                                       rtol, f", omega = {omega:.10g}")
     return PeriodMap(omega=omega, z0=np.asarray(z0, dtype=float), end=y[:2].copy(),
                      monodromy=np.array([[y[2], y[4]], [y[3], y[5]]]), d_omega=y[6:8].copy(),
                      segments=segments, extrema=np.array(extrema), contact_crossings=crossings)
