@@ -328,7 +328,11 @@ EXPORT fmi2Status fmi2ExitInitializationMode(fmi2Component c)
         I->s.halt_message[0] = '\0';
         model_initialise(I, &I->s);
 #ifdef ME_N_STATES
-        if (I->model_exchange && !I->s.halted) model_me_start(I, &I->s);
+        if (I->model_exchange && !I->s.halted) {
+            I->s.model.me.mode = ME_EVENT_MODE; /* Model Exchange leaves initialisation in event mode */
+            I->s.model.me.stopped = 0;
+            model_me_start(I, &I->s);
+        }
 #endif
     }
     return settle(I, 0);

@@ -13,7 +13,8 @@
 
 
 #ifdef ME_N_STATES
-/* After a successful model_initialise of a Model Exchange instance: the states and t from the model's start. */
+/* After a successful model_initialise of a Model Exchange instance: the states and t from the model's start (the
+   caller sets the mode and the stop flag). */
 void model_me_start(Instance *inst, State *s);
 /* Derivatives of the states s->model.me.x at s->model.me.t (inputs from s->value); 0, or 1 after native_error. */
 int model_me_derivatives(Instance *inst, State *s, double *dx);

@@ -285,8 +285,6 @@ void model_me_start(Instance *inst, State *s)
 {
     (void)inst;
     MeData *me = &s->model.me;
-    me->mode = ME_EVENT_MODE;
-    me->stopped = 0;
     me->t = s->model.loop.t;
     state_of_outputs(&s->model.loop, me->x);
 }

@@ -295,8 +295,6 @@ void model_me_start(Instance *inst, State *s)
 {
     (void)inst;
     MeData *me = &s->model.me;
-    me->mode = ME_EVENT_MODE;
-    me->stopped = 0;
     me->t = s->model.plant.plant_t;
     me->x[0] = s->value[VR_x];
     me->x[1] = s->value[VR_v];
