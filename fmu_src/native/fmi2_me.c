@@ -15,6 +15,7 @@
 #include "me_model.h"
 
 #ifdef ME_N_STATES
+#include "plant.h" /* vk_solver_message: the co-simulation's pull-in message (me_stop_at_pull_in) */
 
 #define EXPORT FMI2_Export
 
@@ -210,6 +211,25 @@ EXPORT fmi2Status fmi2GetNominalsOfContinuousStates(fmi2Component c, fmi2Real x_
     if (!sized(I, "fmi2GetNominalsOfContinuousStates", "nx", x_nominal, nx, ME_N_STATES)) return settled(I);
     for (size_t i = 0; i < nx; i++) x_nominal[i] = 1.0; /* x, v in units of the static compression */
     return settled(I);
+}
+
+int me_stop_at_pull_in(Instance *inst, const VkModel *model, const MeData *me, const double *z, int *terminate)
+{
+    for (int i = 1; i < ME_N_INDICATORS; i++) {
+        if (z[i] > 0.0) continue;
+        DopReport r; /* the co-simulation's pull-in message (vk_solver_message) */
+        memset(&r, 0, sizeof r);
+        r.t = me->t;
+        r.y[0] = me->x[0];
+        r.y[1] = me->x[1];
+        r.event = i;
+        char text[DOP_MESSAGE];
+        vk_solver_message(model, DOP_TERMINAL, &r, text, sizeof text);
+        native_log(inst, fmi2Warning, "simulation stopped: %s (terminateSimulation)", text);
+        *terminate = 1;
+        return 1;
+    }
+    return 0;
 }
 
 #endif

@@ -338,19 +338,6 @@ int model_me_event(Instance *inst, State *s, int *terminate)
     const MeData *me = &s->model.me;
     double z[ME_N_INDICATORS];
     model_me_indicators(s, z);
-    for (int i = 1; i < ME_N_INDICATORS; i++) {
-        if (z[i] > 0.0) continue;
-        DopReport r;
-        memset(&r, 0, sizeof r);
-        r.t = me->t;
-        r.y[0] = me->x[0];
-        r.y[1] = me->x[1];
-        r.event = i;
-        char text[VL_MESSAGE];
-        vk_solver_message(&s->model.loop.model, DOP_TERMINAL, &r, text, sizeof text);
-        native_log(inst, fmi2Warning, "simulation stopped: %s (terminateSimulation)", text);
-        *terminate = 1;
-        return 0;
-    }
+    me_stop_at_pull_in(inst, &s->model.loop.model, me, z, terminate);
     return 0;
 }

@@ -363,20 +363,7 @@ int model_me_event(Instance *inst, State *s, int *terminate)
     if (fabs(z[CONTACT_EVENT]) > CONTACT_BAND) in_contact = z[CONTACT_EVENT] > 0.0;
     else if (me->x[1] != 0.0) in_contact = me->x[1] > 0.0;
     s->value[VR_in_contact] = in_contact;
-    for (int i = 1; i < ME_N_INDICATORS; i++) {
-        if (z[i] > 0.0) continue;
-        DopReport r; /* the co-simulation's pull-in message (vk_solver_message) */
-        memset(&r, 0, sizeof r);
-        r.t = me->t;
-        r.y[0] = me->x[0];
-        r.y[1] = me->x[1];
-        r.event = i;
-        char text[VK_MESSAGE];
-        vk_solver_message(&p->model, DOP_TERMINAL, &r, text, sizeof text);
-        native_log(inst, fmi2Warning, "simulation stopped: %s (terminateSimulation)", text);
-        *terminate = 1;
-        return 0;
-    }
+    me_stop_at_pull_in(inst, &p->model, me, z, terminate);
     return 0;
 }
 
