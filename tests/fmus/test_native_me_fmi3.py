@@ -469,3 +469,24 @@ def test_fmi3_takes_any_resource_path_and_none(native_plant_fmu, plant_fmi3, tmp
     assert c  # NULL resourcePath: the native FMU reads no resources
     fmu.fmi3FreeInstance(c)
     fmu.freeLibrary()
+
+
+def test_model_exchange_stops_at_pull_in_with_the_co_simulations_message(native_plant_fmu):
+    """Pull-in under Model Exchange (the plant's me_stop_at_pull_in): CVode stops at the upper gap's indicator zero,
+    the FMU asks the host to stop (terminateSimulation) with one warning, the co-simulation's pull-in message, whose
+    tau is the last output time (printed to 10 digits: 1e-9) and whose gap 1 - 2x/(3R) there is PULL_IN_GAP (CVode's
+    event location to its root tolerance, far below 1e-9)."""
+    import re
+
+    log = []
+    scene = dict(alpha=0.025, R=0.2, x_start=0.2)  # the upper electrode pulls the plate in at tau ~ 1.92
+    result = simulate_fmu(str(native_plant_fmu), fmi_type="ModelExchange", solver="CVode", relative_tolerance=1e-10,
+                          start_values=scene, stop_time=5.0, output_interval=0.01, output=["x"],
+                          logger=lambda c, i, status, category, message: log.append((status, message.decode())))
+    stopped = [(status, text) for status, text in log if "simulation stopped" in text]
+    assert len(stopped) == 1 and stopped[0][0] == 1, stopped  # one fmi2Warning
+    match = re.fullmatch(r"simulation stopped: pull-in: upper gap 1 - 2x/\(3R\) below 0\.001 at tau = (\S+), "
+                         r"x = \S+ \(terminateSimulation\)", stopped[0][1])
+    assert match, stopped[0][1]
+    assert abs(result["time"][-1] - float(match.group(1))) <= 1e-9
+    assert abs(1.0 - 2.0 * result["x"][-1] / (3.0 * scene["R"]) - 1e-3) <= 1e-9
