@@ -42,6 +42,9 @@ typedef struct {
 /* Every function returning int gives DOP_OK or DOP_TERMINAL / DOP_FAILED / DOP_RAISED with the report filled. */
 typedef struct {
     const char *name;  /* as the notes and logs name it: "DOP853", "RK4" */
+    /* 1: its error control reads rtol (solvers.SolverEntry.family "adaptive": the tolerance factor of a long, lightly
+       damped run applies, models.solver_tolerance); 0: a fixed step */
+    int reads_tolerance;
     /* start afresh at (t, y[0..n-1]) (Dop853._restart; a fixed-step solver takes the state) */
     int (*restart)(VkSolverSlots s, const VkRhs *f, void *context, double t, const double *y, DopReport *r);
     /* integrator.set_input(t, U) for a held input U that the right-hand side reads: 1 -- if U changed, restart at
@@ -90,7 +93,7 @@ static inline const double *vk_dop853_state(VkSolverSlots s, double *t)
 
 static inline double vk_dop853_max_step(VkSolverSlots s) { return s.adaptive->max_step; }
 
-#define VK_OPS_dop853 {"DOP853", vk_dop853_restart, 1, vk_dop853_advance, vk_dop853_value_at, vk_dop853_state, \
+#define VK_OPS_dop853 {"DOP853", 1, vk_dop853_restart, 1, vk_dop853_advance, vk_dop853_value_at, vk_dop853_state, \
                        vk_dop853_max_step, NULL}
 
 /* RK4 (rk4.c) */
@@ -132,7 +135,7 @@ static inline const double *vk_rk4_state(VkSolverSlots s, double *t)
 
 static inline double vk_rk4_max_step(VkSolverSlots s) { return s.fixed->max_step; }
 
-#define VK_OPS_rk4 {"RK4", vk_rk4_restart, 0, vk_rk4_advance, vk_rk4_value_at, vk_rk4_state, vk_rk4_max_step, \
+#define VK_OPS_rk4 {"RK4", 0, vk_rk4_restart, 0, vk_rk4_advance, vk_rk4_value_at, vk_rk4_state, vk_rk4_max_step, \
                     rk4_drive_gain_x}
 
 /* Every solver, in the order of vibromodel/solvers.py's SOLVERS (position = the `solver` setting): X(name) for each,

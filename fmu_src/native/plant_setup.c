@@ -18,6 +18,22 @@ double native_drive_ceiling(const State *s, double extra)
     return fastest > 0.0 ? NATIVE_DRIVE_STEP_TURN / fastest : INFINITY;
 }
 
+double native_error_memory(const State *s)
+{
+    const double mu = s->value[VR_mu], span = s->stop_time - s->start_time;
+    double memory = mu > 0.0 ? 2.0 / mu : INFINITY;
+    if (s->has_stop && span > 0.0 && span < memory) memory = span;
+    return memory;
+}
+
+double native_tolerance_factor(const State *s)
+{
+    double factor = RULE_ERROR_MEMORY_REFERENCE / native_error_memory(s);
+    if (factor < RULE_TOLERANCE_FACTOR_FLOOR) factor = RULE_TOLERANCE_FACTOR_FLOOR;
+    if (factor > 1.0) factor = 1.0;
+    return factor;
+}
+
 void native_plant_model(VkModel *m, const State *s, int fidelity)
 {
     const double Delta = s->value[VR_Delta], alpha = s->value[VR_alpha], beta = s->value[VR_beta],

@@ -15,6 +15,12 @@ void native_plant_model(VkModel *m, const State *s, int fidelity);
    fastest forcing term switched on (omega if Delta != 0, Omega if beta != 0, 2 Omega if gamma != 0) and `extra` (a
    closed loop's reference); INFINITY when none. */
 double native_drive_ceiling(const State *s, double extra);
+/* models.error_memory: 2/mu (INFINITY for mu = 0), or the span stop - start of fmi2SetupExperiment if declared, > 0
+   and shorter. */
+double native_error_memory(const State *s);
+/* models.tolerance_factor: RULE_ERROR_MEMORY_REFERENCE / native_error_memory, within [RULE_TOLERANCE_FACTOR_FLOOR, 1]:
+   the adaptive plant's solver runs at rtol times it (not below RULE_MIN_RTOL). */
+double native_tolerance_factor(const State *s);
 /* settings.checked_settings's drive warnings for a solver that has them (solver->drive_gain_x: RK4): the forcing
    terms its steps of max_step do not resolve (plant.rk4_drive_warnings), logged as fmi2Warning; none for another. */
 void native_drive_warnings(Instance *inst, const State *s, const VkSolverOps *solver, double max_step);

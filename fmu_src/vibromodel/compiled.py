@@ -24,7 +24,7 @@ from .core_layouts import (DOP_MAX_EVENTS, DOP_STAGES, VK_BAD_INPUT, VK_BAD_STEP
                            Rk4 as Rk4State, VkModel, VkPlant)
 from .fidelities import REGISTRY, CModel, entry
 from .integrate import ATOL_PER_RTOL, IntegrationError, TerminalEvent
-from .models import drive_step_ceiling, pull_in_slope
+from .models import drive_step_ceiling, pull_in_slope, solver_tolerance
 from .parameters import PULL_IN_GAP, validate
 from .settings import Outputs, Settings, check_step, checked_settings
 from .solvers import BY_VALUE as SOLVERS_BY_VALUE, solver_entry
@@ -193,7 +193,7 @@ def _constant_ranges():
 class CompiledPlant:
     """plant.Plant for the integrated fidelities with a compiled model (supports) with either solver, on the kernel `library` (load_library)."""
 
-    def __init__(self, scene, settings: Settings, library, t0: float = 0.0):
+    def __init__(self, scene, settings: Settings, library, t0: float = 0.0, stop_time: float | None = None):
         validate(scene)
         settings, self.warnings = checked_settings(scene, settings)  # what Plant runs with (rtol clamped)
         if not supports(settings):
@@ -206,11 +206,13 @@ class CompiledPlant:
         self._plant = VkPlant()
         self._address = ctypes.addressof(self._plant)
         max_step = settings.max_step or drive_step_ceiling(scene)  # as Plant gives Dop853
+        rtol, note = solver_tolerance(scene, settings.rtol, None if stop_time is None else stop_time - t0)  # as Plant
+        self.notes += [] if note is None or solver_entry(settings.solver).fixed_step else [note]
         model_struct = self._plant.model
         for name, value in _model_fields(scene, model, level.c_model).items():
             setattr(model_struct, name, value if isinstance(value, (int, float)) else (_double * 6)(*value))
         dop, rk4 = self._plant.dop, self._plant.rk4
-        dop.rtol, dop.atol, dop.max_step = settings.rtol, settings.rtol * ATOL_PER_RTOL, max_step
+        dop.rtol, dop.atol, dop.max_step = rtol, rtol * ATOL_PER_RTOL, max_step
         dop.step_budget = plant.MAX_STEPS_PER_DOSTEP
         rk4.max_step = settings.max_step or plant.RK4_DEFAULT_STEP  # as Plant gives Rk4
         self._plant.solver = int(settings.solver)

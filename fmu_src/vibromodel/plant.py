@@ -6,13 +6,14 @@ directly (no FMI) to measure what the FMI layer costs.
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 from . import forces
 from .compiled import CompiledPlant, supports
 from .compiled_open_loop import CompiledOpenLoopPlant
 from .fidelities import entry
 from .integrate import IntegrationError
-from .models import drive_step_ceiling
+from .models import drive_step_ceiling, solver_tolerance
 from .parameters import ParameterError, Scene, validate
 from .settings import (DEFAULT_EXPERIMENT, MAX_STEPS_PER_DOSTEP, RK4_DEFAULT_STEP, TIME_TOLERANCE, Kernel, Outputs,
                        Settings, Solver, check_step, checked_settings, rk4_drive_warnings)
@@ -51,9 +52,11 @@ class Plant:
             self.solution, notes = level.open_loop(scene, settings, t0, stop_time, cache_dirs)
             self.notes += notes
             self.warnings += getattr(self.solution, "warnings", [])  # the rung's doubts about its own domain
-        else:  # the solver of the settings (solvers.SOLVERS)
+        else:  # the solver of the settings (solvers.SOLVERS), at the rtol of a long, lightly damped run
+            rtol, note = solver_tolerance(scene, settings.rtol, None if stop_time is None else stop_time - t0)
+            self.notes += [] if note is None or solver_entry(settings.solver).fixed_step else [note]
             self.integrator = solver_entry(settings.solver).make(
-                self.model.accel, self.model.events, t0, scene.x_start, scene.v_start, 0.0, settings,
+                self.model.accel, self.model.events, t0, scene.x_start, scene.v_start, 0.0, replace(settings, rtol=rtol),
                 phased=(self.model.drive_frequencies, self.model.accel_phased), step_budget=MAX_STEPS_PER_DOSTEP,
                 drive_ceiling=drive_step_ceiling(scene))
 
@@ -136,7 +139,7 @@ def make_plant(scene: Scene, settings: Settings, t0: float = 0.0, stop_time: flo
         return wrapped if wrapped is not None else plant
     wanted = settings.kernel == Kernel.COMPILED and supports(settings)
     if wanted and compiled is not None:
-        plant = CompiledPlant(scene, settings, compiled, t0)
+        plant = CompiledPlant(scene, settings, compiled, t0, stop_time)
         plant.notes.append(f"{solver_entry(settings.solver).name} on the {reason}")
         return plant
     plant = Plant(scene, settings, t0, stop_time, cache_dirs)

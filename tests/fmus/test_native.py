@@ -106,6 +106,9 @@ PARITY_CASES = [
     ({"fidelity": 2}, 20.0),
     ({"kernel": 1}, 5.0),
     ({"Delta": 1.2, "mu": 0.05, "R": 5.0}, 30.0),  # the load lifts the mass off: contact lost and re-made
+    # lightly damped, long: the solver's tolerance factor (models.tolerance_factor) 150/400 and 150/1000 (2/mu)
+    ({"mu": 0.002, "Delta": 0.003, "interval": 2.0}, 400.0), ({"mu": 0.002, "Delta": 0.003, "interval": 5.0}, 3000.0),
+    ({"mu": 0.0, "Delta": 0.0, "interval": 5.0}, 600.0),  # undamped: the run's span alone, 150/600
     ({"x_start": 0.29, "R": 0.2}, 5.0),  # pull-in during doStep
     ({"rtol": 1e-20}, 2.0),
     ({"solver": 1}, 20.0), ({"solver": 1, "fidelity": 1}, 5.0), ({"solver": 1, "kernel": 1}, 2.0),

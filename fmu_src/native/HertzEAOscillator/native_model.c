@@ -114,8 +114,11 @@ void model_initialise(Instance *inst, State *s)
     memset(p, 0, sizeof *p);
     native_plant_model(&p->model, s, fidelity); /* compiled._model_fields */
     const double max_step = s->value[VR_max_step];
-    p->dop.rtol = rtol;
-    p->dop.atol = rtol * RULE_ATOL_PER_RTOL;
+    const double factor = native_tolerance_factor(s); /* models.solver_tolerance */
+    double solver_rtol = rtol * factor;
+    if (solver_rtol < RULE_MIN_RTOL) solver_rtol = RULE_MIN_RTOL;
+    p->dop.rtol = solver_rtol;
+    p->dop.atol = solver_rtol * RULE_ATOL_PER_RTOL;
     p->dop.max_step = max_step != 0.0 ? max_step : native_drive_ceiling(s, 0.0);  /* models.drive_step_ceiling */
     p->dop.step_budget = RULE_MAX_STEPS_PER_DOSTEP;
     p->rk4.max_step = max_step != 0.0 ? max_step : RULE_RK4_DEFAULT_STEP;
@@ -131,6 +134,10 @@ void model_initialise(Instance *inst, State *s)
     int code = vk_init(p, s->start_time, s->value[VR_x_start], s->value[VR_v_start]);
     if (code == VK_OK) { /* the slave's _start: notes (fmi2OK), warnings, the first outputs */
         native_log(inst, fmi2OK, "%s on the native FMU's compiled kernel (no Python)", vk_solvers[solver]->name);
+        if (factor != 1.0 && vk_solvers[solver]->reads_tolerance)
+            native_log(inst, fmi2OK, "the solver runs at rtol = %.3g (rtol %.3g x %.3g): the lightly damped response "
+                       "remembers its errors over tau = %.4g (2/mu or the run's span), rtol is kept per %g of it",
+                       solver_rtol, rtol, factor, native_error_memory(s), RULE_ERROR_MEMORY_REFERENCE);
         if (clamped) {
             char requested[64];
             native_repr(rtol_requested, requested, sizeof requested);

@@ -105,7 +105,8 @@ def contact_loss_campaign(n_scenes: int, seed: int = 0, stop_time: float = 10.0,
 
         def make(solver: Solver, compiled: bool):
             chosen = Settings(rtol=rtol, solver=solver)
-            return CompiledPlant(scene, chosen, library) if compiled and library is not None else Plant(scene, chosen)
+            return (CompiledPlant(scene, chosen, library, 0.0, stop_time) if compiled and library is not None
+                    else Plant(scene, chosen, 0.0, stop_time))
 
         times, x, stop = run_plant(make(Solver.ADAPTIVE, True), stop_time, interval)
         result.runs["dop853"] += 1
@@ -261,7 +262,7 @@ def graze_sweep(depth_exponents=np.arange(1.0, 12.01, 0.5), rtols=(1e-3, 1e-4, 1
     for k in depth_exponents:
         reference = graze_reference(10.0 ** -float(k))
         for rtol in rtols:
-            plant = Plant(graze_scene(reference), Settings(rtol=rtol, kernel=1))
+            plant = Plant(graze_scene(reference), Settings(rtol=rtol, kernel=1), 0.0, stop_time)
             times, x, exits = count_contact_losses(plant, stop_time, interval)
             x_ref = reference.x(times)
             rows.append({"depth": reference.depth, "rtol": rtol, "exits": exits, "reference_exits":

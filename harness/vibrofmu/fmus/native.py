@@ -165,7 +165,7 @@ def rules_header() -> str:
     """rules.h: vibromodel.parameters' table of valid ranges (rules_as_records, in checking order, each with the
     refusal text Rule.refusal gives), the constants the models' own checks use, and the scene's names and
     defaults -- all taken from vibromodel, so that the native FMUs check and word what the Python slaves do."""
-    from vibromodel import integrate, parameters, plant
+    from vibromodel import integrate, models, parameters, plant
     from vibromodel.parameters import RULES, Scene, rules_as_records, scene_names
 
     constants = {
@@ -173,6 +173,7 @@ def rules_header() -> str:
         "MAX_STEPS_PER_DOSTEP": float(plant.MAX_STEPS_PER_DOSTEP), "TIME_TOLERANCE": plant.TIME_TOLERANCE,
         "ATOL_PER_RTOL": integrate.ATOL_PER_RTOL, "RK4_DEFAULT_STEP": plant.RK4_DEFAULT_STEP,
         "RK4_DRIVE_THETA": integrate.RK4_DRIVE_THETA, "RK4_DRIVE_ERROR": integrate.RK4_DRIVE_ERROR,
+        "ERROR_MEMORY_REFERENCE": models.ERROR_MEMORY_REFERENCE, "TOLERANCE_FACTOR_FLOOR": models.TOLERANCE_FACTOR_FLOOR,
     }
     texts = {
         "STEP_SIZE": _reason(plant.check_step, 0.0, 0.0, 0.0, 0.0, math.inf),
