@@ -53,8 +53,17 @@ def _installed(name: str) -> Path:
 
 
 @pytest.fixture(scope="session")
+def libcosim_packages(tmp_path_factory) -> Path:
+    """A folder with libcosimpy (a link): the default suite's host, installed by the test extra."""
+    folder = tmp_path_factory.mktemp("libcosim_packages")
+    (folder / "libcosimpy").symlink_to(_installed("libcosimpy"))
+    return folder
+
+
+@pytest.fixture(scope="session")
 def host_packages(tmp_path_factory) -> Path:
-    """A folder with libcosimpy (a link) and ecospy (a copy, its programs executable)."""
+    """A folder with libcosimpy (a link) and ecospy (a copy, its programs executable): the slow tests' hosts (the
+    hosts extra)."""
     folder = tmp_path_factory.mktemp("host_packages")
     (folder / "libcosimpy").symlink_to(_installed("libcosimpy"))
     ecospy = folder / "ecospy"
@@ -94,14 +103,25 @@ def pyenv_python(version: str) -> str:
     return str(Path(proc.stdout.strip()) / "bin" / "python3")
 
 
-@pytest.fixture(scope="session")
-def bare_venv(host_packages, tmp_path_factory) -> Path:
-    """A venv of this Python with the host packages and no numpy, scipy or pythonfmu."""
-    python = make_venv(sys.executable, tmp_path_factory.mktemp("venv") / "bare", host_packages)
+def _bare_venv(folder: Path, packages: Path) -> Path:
+    """A venv of this Python with the host packages in `packages` and no numpy, scipy or pythonfmu."""
+    python = make_venv(sys.executable, folder, packages)
     for name in ("numpy", "scipy", "pythonfmu"):
         probe = subprocess.run([str(python), "-c", f"import {name}"], capture_output=True)
         assert probe.returncode != 0, f"the bare venv imports {name}"
     return python
+
+
+@pytest.fixture(scope="session")
+def bare_venv(host_packages, tmp_path_factory) -> Path:
+    """Both hosts, no numpy, scipy or pythonfmu (the slow tests)."""
+    return _bare_venv(tmp_path_factory.mktemp("venv") / "bare", host_packages)
+
+
+@pytest.fixture(scope="session")
+def libcosim_venv(libcosim_packages, tmp_path_factory) -> Path:
+    """libcosimpy alone, no numpy, scipy or pythonfmu (the default suite: it needs only the test extra)."""
+    return _bare_venv(tmp_path_factory.mktemp("venv") / "libcosim", libcosim_packages)
 
 
 @pytest.fixture(scope="session")
@@ -187,16 +207,16 @@ def check_refusal(proc, fmu_id: str, needed: str, found: str) -> None:
 
 # ---- default suite ----
 
-def test_libcosimpy_without_numpy_runs_the_pythonfmu_plant(bare_venv, plant_fmu, tmp_path):
+def test_libcosimpy_without_numpy_runs_the_pythonfmu_plant(libcosim_venv, plant_fmu, tmp_path):
     """The issue's failure: libcosimpy in a venv without numpy got NULL from fmi2Instantiate (then crashed). Now
     the FMU imports numpy and scipy from the folders it recorded and runs the paper scene, bit-equal to FMPy."""
     outputs = outputs_of(plant_fmu)
-    proc, data = run_host(bare_venv, "libcosimpy", plant_fmu, outputs)
+    proc, data = run_host(libcosim_venv, "libcosimpy", plant_fmu, outputs)
     assert proc.returncode == 0, proc.stderr[-3000:]
     check_same_as_fmpy("libcosimpy", data, plant_fmu, outputs, tmp_path)
 
 
-def test_a_python_host_of_another_version_gets_one_line(bare_venv, plant_fmu, plant_unzipped, tmp_path):
+def test_a_python_host_of_another_version_gets_one_line(libcosim_venv, plant_fmu, plant_unzipped, tmp_path):
     """The record says the FMU was built by Python 3.10 (VIBROFMU_PYTHON_ENV replaces resources/python_env.txt,
     in a Python host too): fmi2Instantiate fails with the one line; the real other versions are the slow test
     below."""
@@ -206,7 +226,7 @@ def test_a_python_host_of_another_version_gets_one_line(bare_venv, plant_fmu, pl
     forged.write_text(record.replace(f"python_version={sys.version_info[0]}.{sys.version_info[1]}\n",
                                      "python_version=3.10\n"))
     env = {"PATH": "/usr/bin:/bin", ENV_VARIABLE: str(forged)}
-    proc, _ = run_host(bare_venv, "libcosimpy", plant_fmu, ["x"], env=env)
+    proc, _ = run_host(libcosim_venv, "libcosimpy", plant_fmu, ["x"], env=env)
     found = "%d.%d.%d" % sys.version_info[:3]
     check_refusal(proc, "HertzEAOscillator", "3.10", found)
     # libcosim shows the FMU's log at its default level, on stdout: the same line, with status error
@@ -214,7 +234,7 @@ def test_a_python_host_of_another_version_gets_one_line(bare_venv, plant_fmu, pl
     assert len(logged) == 1 and "[error]" in logged[0] and "status=error" in logged[0], proc.stdout[-3000:]
 
 
-def test_a_module_missing_from_host_and_record_is_one_line(bare_venv, plant_unzipped, plant_fmu, tmp_path):
+def test_a_module_missing_from_host_and_record_is_one_line(libcosim_venv, plant_unzipped, plant_fmu, tmp_path):
     """The host's version, but scipy neither in the host nor in the recorded folders (a record whose `path` holds
     numpy only): one line naming scipy, the host's Python and the native FMU."""
     site = tmp_path / "numpy_only"
@@ -226,7 +246,7 @@ def test_a_module_missing_from_host_and_record_is_one_line(bare_venv, plant_unzi
     record = parse_env((Path(plant_unzipped) / "resources" / ENV_FILE).read_text())
     forged = tmp_path / ENV_FILE
     forged.write_text("".join(f"{key}={site if key == 'path' else value}\n" for key, value in record.items()))
-    proc, _ = run_host(bare_venv, "libcosimpy", plant_fmu, ["x"], env={"PATH": "/usr/bin:/bin",
+    proc, _ = run_host(libcosim_venv, "libcosimpy", plant_fmu, ["x"], env={"PATH": "/usr/bin:/bin",
                                                                          ENV_VARIABLE: str(forged)})
     raw = [line for line in proc.stderr.splitlines() if line.startswith("vibrofmu: ")]
     assert len(raw) == 1, proc.stderr[-3000:]
