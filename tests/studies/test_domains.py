@@ -32,18 +32,20 @@ def test_extreme_input_grid(plant_fmu):
 
 
 @pytest.mark.slow
-def test_long_lightly_damped_grazing_runs_with_the_drive_ceiling(capsys):
-    """217 runs (tau up to 5,000, mu down to 1e-3), as many as the campaign that found issue 25's 13 failures: more
-    runs within 100 rtol max|x| with the drive's step ceiling than without it. The count is printed (measured with
-    seed 0: 211 of 217 within, 208 without; the 6 left, at mu <= 2.1e-3 over tau = 680 ... 4,500, err 1.1 ... 2.3
-    times the bound, the worst the same without the ceiling: the per-step error control's accumulation over
-    lightly damped periods, not the drive; docs/rungs.md, Domains)."""
+def test_long_lightly_damped_grazing_runs_are_within_100_rtol_max_x(capsys):
+    """217 runs (tau up to 5,000, mu down to 1e-3), as many as the campaign that found issue 25's 13 failures: the
+    issue's acceptance, at least 99 % within 100 rtol max|x| with the defaults (the drive's step ceiling and the
+    tolerance factor), and fewer within with the solver at the rtol asked (the factor off), so that the count could
+    fail. Measured with seed 0: 217 with the defaults (worst 0.22 of the bound), 217 without the ceiling, 211 with
+    the rtol asked (the 6 left at mu <= 2.1e-3, 1.1 ... 2.3 times the bound; docs/rungs.md, Domains)."""
     result = domains.graze_campaign(217, 0)
     summary = result["summary"]
     with capsys.disabled():
         print(f"\ngrazing runs within 100 rtol max|x|: {summary['within_100_rtol_max_x_with_ceiling']} of 217 with the "
-              f"ceiling, {summary['within_100_rtol_max_x_without']} without")
-    assert summary["within_100_rtol_max_x_with_ceiling"] > summary["within_100_rtol_max_x_without"]
+              f"defaults, {summary['within_100_rtol_max_x_without']} without the ceiling, "
+              f"{summary['within_100_rtol_max_x_rtol_as_asked']} at the rtol asked")
+    assert summary["within_100_rtol_max_x_with_ceiling"] >= 0.99 * 217
+    assert summary["within_100_rtol_max_x_rtol_as_asked"] < summary["within_100_rtol_max_x_with_ceiling"]
 
 
 @pytest.mark.slow
