@@ -97,11 +97,12 @@ def drive_step_ceiling(s: Scene, extra: float = 0.0) -> float:
 # f = 1, 0.5, 0.25, 0.1, 0.01: 2.26, 1.45, 0.60, 0.28, 0.024 of the bound on the worst run). So the solver runs at
 # rtol * tolerance_factor: ERROR_MEMORY_REFERENCE / M (at most 1, at least TOLERANCE_FACTOR_FLOOR), i.e. rtol is
 # what the run may lose per ERROR_MEMORY_REFERENCE time units of memory. Why 150: measured over 1,217 campaign runs
-# (seeds 0 and 1), the largest error was 2.48 bounds with no factor (17 + 6 runs above 1) and 0.36 with 150 (0.55 with
-# 200, 0.59 with 300), for 5.5 % more RHS calls than no factor. A scene with mu >= 2/150 = 0.0133 (the paper's mu =
-# 0.1 among them), or a span <= 150, runs at rtol unchanged: its results are the same bits. The floor 0.01 is reached
-# for M >= 15,000 (mu = 0 with an open-ended or very long run): DOP853's cost grows as factor^(-1/8), 1.78 times at the
-# floor.
+# (seeds 0 and 1), the largest error was 2.48 bounds with no factor (6 and 17 runs above 1) and 0.36 with 150 (0.55
+# with 200, 0.59 with 300), for 5.5 ... 7.9 % more RHS calls than no factor; on seed 2, run after the choice, 1,000 of
+# 1,000 runs within, the worst at 0.31 (13 above 1 without the factor; docs/rungs.md, Domains). A scene with
+# mu >= 2/150 = 0.0133 (the paper's mu = 0.1 among them), or a span <= 150, runs at rtol unchanged: its results are
+# the same bits. The floor 0.01 is reached for M >= 15,000 (mu = 0 with an open-ended or very long run): DOP853's
+# cost grows as factor^(-1/8), 1.78 times at the floor.
 ERROR_MEMORY_REFERENCE = 150.0
 TOLERANCE_FACTOR_FLOOR = 0.01
 
