@@ -145,6 +145,18 @@ def test_parity_with_the_pythonfmu_fmu(values, stop, plant_fmu, native_plant_fmu
     assert canonical_tree(native.after_failure) == canonical_tree(python.after_failure)
 
 
+def test_both_fmus_log_the_tolerance_factor_of_a_long_lightly_damped_run(plant_fmu, native_plant_fmu):
+    """mu = 0.002 over a declared span of 400: memory min(2/mu, 400) = 400, factor 150/400 = 0.375, so the solver
+    runs at 1e-8 x 0.375 = 3.75e-9 (models.solver_tolerance); both FMUs say so once at initialisation (fmi2OK), and
+    neither does for the paper's mu = 0.1 (memory 20, factor 1)."""
+    expected = ("the solver runs at rtol = 3.75e-09 (rtol 1e-08 x 0.375): the lightly damped response remembers its "
+                "errors over tau = 400 (2/mu or the run's span), rtol is kept per 150 of it")
+    for fmu in (plant_fmu, native_plant_fmu):
+        run = run_fmu(fmu, {"mu": 0.002}, 400.0, 100.0)
+        assert run.completed and sum(expected in m for m in run.log) == 1, run.log
+        assert not any("the solver runs at rtol" in m for m in run_fmu(fmu, {}, 400.0, 100.0).log)
+
+
 def test_the_cases_cover_events_and_errors(plant_fmu):
     """The parity cases exercise what they claim: contact loss, pull-in, warnings, refusals."""
     lifted = run_fmu(plant_fmu, {"Delta": 1.2, "mu": 0.05, "R": 5.0}, 30.0, 0.1)
