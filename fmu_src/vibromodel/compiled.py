@@ -206,8 +206,8 @@ class CompiledPlant:
         self._plant = VkPlant()
         self._address = ctypes.addressof(self._plant)
         max_step = settings.max_step or drive_step_ceiling(scene)  # as Plant gives Dop853
-        rtol, note = solver_tolerance(scene, settings.rtol, None if stop_time is None else stop_time - t0)  # as Plant
-        self.notes += [] if note is None or solver_entry(settings.solver).fixed_step else [note]
+        rtol, notes = solver_tolerance(scene, settings, t0, stop_time)  # as Plant gives its integrator
+        self.notes += notes
         model_struct = self._plant.model
         for name, value in _model_fields(scene, model, level.c_model).items():
             setattr(model_struct, name, value if isinstance(value, (int, float)) else (_double * 6)(*value))

@@ -12,6 +12,7 @@ from typing import Callable
 
 from . import forces
 from .parameters import MIN_RTOL, PULL_IN_GAP, ParameterError, Scene
+from .solvers import solver_entry
 
 R_OUT_OF_RANGE = "out of range of the series of Eq. 7 (powers of R up to R^5 overflow or vanish)"
 
@@ -128,16 +129,21 @@ def tolerance_factor(s: Scene, span: float | None = None) -> float:
     return factor
 
 
-def solver_tolerance(s: Scene, rtol: float, span: float | None = None) -> tuple[float, str | None]:
-    """(the rtol the adaptive plant's solver runs with, a note for the log or None): rtol * tolerance_factor, not below
-    MIN_RTOL; the note says so when the factor is below 1 (core twin: the native plant's model_initialise)."""
+def solver_tolerance(s: Scene, settings, t0: float = 0.0, stop_time: float | None = None) -> tuple[float, list[str]]:
+    """(the rtol the plant's solver runs with, notes for the log) for `settings` (settings.Settings: rtol, solver) over
+    [t0, stop_time] (None: open-ended): rtol * tolerance_factor, not below MIN_RTOL; one note when the factor is below
+    1 and the solver reads rtol (a fixed-step solver ignores it). Plant and CompiledPlant both call it (core twin: the
+    native plant's model_initialise)."""
+    span = None if stop_time is None else stop_time - t0
     factor = tolerance_factor(s, span)
     if factor == 1.0:
-        return rtol, None
-    solver_rtol = max(MIN_RTOL, rtol * factor)
-    return solver_rtol, (f"the solver runs at rtol = {solver_rtol:.3g} (rtol {rtol:.3g} x {factor:.3g}): the lightly "
-                         f"damped response remembers its errors over tau = {error_memory(s, span):.4g} (2/mu or "
-                         f"the run's span), rtol is kept per {ERROR_MEMORY_REFERENCE:g} of it")
+        return settings.rtol, []
+    solver_rtol = max(MIN_RTOL, settings.rtol * factor)
+    if solver_entry(settings.solver).fixed_step:
+        return solver_rtol, []
+    return solver_rtol, [f"the solver runs at rtol = {solver_rtol:.3g} (rtol {settings.rtol:.3g} x {factor:.3g}): the "
+                         f"lightly damped response remembers its errors over tau = {error_memory(s, span):.4g} (2/mu "
+                         f"or the run's span), rtol is kept per {ERROR_MEMORY_REFERENCE:g} of it"]
 
 
 class ExactModel:

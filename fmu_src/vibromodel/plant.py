@@ -53,8 +53,8 @@ class Plant:
             self.notes += notes
             self.warnings += getattr(self.solution, "warnings", [])  # the rung's doubts about its own domain
         else:  # the solver of the settings (solvers.SOLVERS), at the rtol of a long, lightly damped run
-            rtol, note = solver_tolerance(scene, settings.rtol, None if stop_time is None else stop_time - t0)
-            self.notes += [] if note is None or solver_entry(settings.solver).fixed_step else [note]
+            rtol, notes = solver_tolerance(scene, settings, t0, stop_time)
+            self.notes += notes
             self.integrator = solver_entry(settings.solver).make(
                 self.model.accel, self.model.events, t0, scene.x_start, scene.v_start, 0.0, replace(settings, rtol=rtol),
                 phased=(self.model.drive_frequencies, self.model.accel_phased), step_budget=MAX_STEPS_PER_DOSTEP,

@@ -49,11 +49,13 @@ def test_the_factor_is_the_reference_over_the_memory_within_its_floor_and_1():
 
 
 def test_the_solver_tolerance_is_not_below_the_floor_and_says_what_it_did():
-    assert solver_tolerance(Scene(), 1e-8, 200.0) == (1e-8, None)
-    rtol, note = solver_tolerance(Scene(mu=0.002), 1e-6, 5000.0)
-    assert rtol == 1e-6 * 0.15
-    assert "rtol = 1.5e-07 (rtol 1e-06 x 0.15)" in note and "tau = 1000" in note
-    assert solver_tolerance(Scene(mu=0.0), 1e-13)[0] == MIN_RTOL  # 1e-15 would be rounding noise
+    assert solver_tolerance(Scene(), Settings(rtol=1e-8), 0.0, 200.0) == (1e-8, [])
+    rtol, notes = solver_tolerance(Scene(mu=0.002), Settings(rtol=1e-6), 0.0, 5000.0)
+    assert rtol == 1e-6 * 0.15 and len(notes) == 1
+    assert "rtol = 1.5e-07 (rtol 1e-06 x 0.15)" in notes[0] and "tau = 1000" in notes[0]
+    assert solver_tolerance(Scene(mu=0.0), Settings(rtol=1e-13))[0] == MIN_RTOL  # 1e-15 would be rounding noise
+    # RK4 reads no rtol: its (unused) rtol is scaled alike, but nothing is said about it
+    assert solver_tolerance(Scene(mu=0.002), Settings(rtol=1e-6, solver=1), 0.0, 5000.0) == (1e-6 * 0.15, [])
 
 
 @pytest.mark.parametrize("kind", [Kernel.COMPILED, Kernel.PYTHON])
