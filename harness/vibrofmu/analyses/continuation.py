@@ -3,9 +3,11 @@
 Model: shooting.PeriodicModel (Eq. 3 with the AC drive at its mean; docs/continuation.md), with the Hertz force
 zero once the contact opens. A branch is a curve of fixed points of the n-period map P^n(z; p) (n = 1, or 2 on
 a branch switched to at a period doubling), continued in one parameter p (PARAMETERS) by Keller's
-pseudo-arclength method, exactly as shooting.continue_branch does in omega, generalised to any p:
+pseudo-arclength method:
 
-- the state and its variational equations Phi' = J Phi, z_p' = J z_p + df/dp are integrated together with
+- the period map, Newton's corrector, the pseudo-arclength corrector, the tangent and the multipliers are
+  shooting.py's (one engine: period_map, newton_shoot, arclength_correct, branch_tangent, multipliers); the
+  state and its variational equations Phi' = J Phi, z_p' = J z_p + df/dp are integrated together with
   DOP853 (rtol 1e-11, the accuracy argument of shooting.py), restarted at each contact crossing;
 - multipliers: eig of the monodromy M = Phi(nT); stable when max |rho| < 1;
 - test functions, each evaluated at every point and located by Brent's method on the arclength where it
@@ -36,73 +38,19 @@ from scipy.optimize import brentq
 from vibromodel import forces
 from vibromodel.parameters import Scene
 
-from vibrofmu.analyses.shooting import (NEWTON_TOL, RTOL, TWO_PI, PeriodicModel, ShootingError, integrate_pieces,
-                                        piecewise_x)
+from vibrofmu.analyses import shooting as sh
+from vibrofmu.analyses.shooting import NEWTON_TOL, RTOL, TWO_PI, PeriodicModel, ShootingError, piecewise_x
 
-PARAMETERS = ("omega", "Delta", "mu", "alpha", "gamma")  # what a branch can be continued in
+PARAMETERS = sh.PARAMETERS  # what a branch can be continued in
 EVENTS = ("fold", "period-doubling", "neimark-sacker", "grazing")
 CONTACT_EDGE = -1.5  # 1 + 2x/3 = 0
 
 
-# ----- the n-period map with the sensitivity to one parameter -------------------------------------------
+# ----- the n-period map with the sensitivity to one parameter: shooting's ----------------------------------
 
-def _parameter_field(scene: Scene, param: str) -> Callable[[float, float, float], tuple[float, float]]:
-    """df/dp (x, v, s) of the rescaled field f = (v/omega, (Delta cos s - mu v - g(x))/omega), p != omega
-    (omega's is -f/omega, handled in _rhs). g is linear in alpha and gamma: dg/dalpha = -F_em,mean(x; 1, 0)."""
-    w, R = 1.0 / scene.omega, scene.R
-    em = forces.electrostatic_mean
-    if param == "Delta":
-        return lambda x, v, s: (0.0, math.cos(s) * w)
-    if param == "mu":
-        return lambda x, v, s: (0.0, -v * w)
-    if param == "alpha":
-        return lambda x, v, s: (0.0, em(x, 1.0, 0.0, R) * w)
-    if param == "gamma":
-        return lambda x, v, s: (0.0, em(x, 0.0, 1.0, R) * w)
-    raise ValueError(f"parameter {param!r}: continuation supports {', '.join(PARAMETERS)}")
-
-
-def _rhs(scene: Scene, param: str):
-    """f(s, y), y = (x, v, Phi11, Phi21, Phi12, Phi22, x_p, v_p), s = omega tau (shooting._variational_rhs
-    with dz/domega replaced by dz/dp for any p of PARAMETERS)."""
-    g, g_x = PeriodicModel(scene).restoring()
-    mu, Delta, w = scene.mu, scene.Delta, 1.0 / scene.omega
-    cos = math.cos
-    dfdp = None if param == "omega" else _parameter_field(scene, param)
-
-    def rhs(s, y):
-        x, v, p11, p21, p12, p22, xp, vp = y
-        dx = v * w
-        dv = (Delta * cos(s) - mu * v - g(x)) * w
-        kx, kv = -g_x(x) * w, -mu * w
-        if dfdp is None:
-            fx, fv = -dx * w, -dv * w
-        else:
-            fx, fv = dfdp(x, v, s)
-        return [dx, dv, p21 * w, kx * p11 + kv * p21, p22 * w, kx * p12 + kv * p22,
-                vp * w + fx, kx * xp + kv * vp + fv]
-
-    return rhs
-
-
-@dataclass
-class MapResult:
-    end: np.ndarray  # P^n(z0)
-    monodromy: np.ndarray
-    d_param: np.ndarray  # dP^n/dp
-    x_min: float
-    x_max: float
-    crossings: int  # contact crossings over the n periods
-    segments: list = field(repr=False)  # dense outputs (s, y)
-
-
-def n_period_map(scene: Scene, param: str, z0, periods: int = 1, rtol: float = RTOL) -> MapResult:
-    """Integrate s in [0, 2 pi n] from z0 with the variational equations, restarting at contact crossings
-    (shooting.integrate_pieces, period_map's loop, for any parameter and n periods)."""
-    y, segments, turning, crossings = integrate_pieces(_rhs(scene, param), scene.R, z0, TWO_PI * periods, rtol)
-    extrema = [float(z0[0]), *turning, float(y[0])]  # the ends too: x_min, x_max over the orbit
-    return MapResult(end=y[:2].copy(), monodromy=np.array([[y[2], y[4]], [y[3], y[5]]]), d_param=y[6:8].copy(),
-                     x_min=min(extrema), x_max=max(extrema), crossings=crossings, segments=segments)
+def n_period_map(scene: Scene, param: str, z0, periods: int = 1, rtol: float = RTOL) -> sh.PeriodMap:
+    """shooting.period_map of the scene's PeriodicModel over `periods` periods with the sensitivity to `param`."""
+    return sh.period_map(PeriodicModel(scene), z0, scene.omega, rtol, param, periods)
 
 
 # ----- points of a branch ---------------------------------------------------------------------------------
@@ -144,10 +92,9 @@ class Point:
                 "grazing": self.x_min - CONTACT_EDGE}
 
 
-def _point(scene: Scene, param: str, p: float, z0, periods: int, result: MapResult) -> Point:
+def _point(scene: Scene, param: str, p: float, z0, periods: int, result: sh.PeriodMap) -> Point:
     s = scene if param is None else scene.with_values(**{param: p})
-    rho = np.linalg.eigvals(result.monodromy).astype(complex)
-    rho = rho[np.argsort(np.abs(rho))]
+    rho = sh.multipliers(result.monodromy)
     period = TWO_PI * periods / s.omega
     return Point(p=p, z0=np.asarray(z0, dtype=float).copy(), periods=periods, period=period,
                  monodromy=result.monodromy, d_param=result.d_param, multipliers=rho, x_min=result.x_min,
@@ -173,23 +120,17 @@ class Problem:
     def at(self, p: float) -> Scene:
         return self.scene.with_values(**{self.param: float(p)})
 
-    def map(self, z0, p: float) -> MapResult:
+    def map(self, z0, p: float) -> sh.PeriodMap:
         return n_period_map(self.at(p), self.param, z0, self.periods, self.rtol)
 
-    def point(self, z0, p: float, result: MapResult | None = None) -> Point:
+    def point(self, z0, p: float, result: sh.PeriodMap | None = None) -> Point:
         result = result or self.map(z0, p)
         return _point(self.at(p), self.param, p, z0, self.periods, result)
 
     def shoot(self, p: float, z_guess, max_iter: int = 25) -> Point:
-        """Newton on P^n(z) - z = 0 at fixed p (shooting.shoot for n periods and any parameter)."""
-        z = np.asarray(z_guess, dtype=float)
-        for _ in range(max_iter):
-            result = self.map(z, p)
-            residual = result.end - z
-            if np.max(np.abs(residual)) <= self.tol:
-                return self.point(z, p, result)
-            z = z - np.linalg.solve(result.monodromy - np.eye(2), residual)
-        raise ShootingError(f"Newton shooting did not converge in {max_iter} iterations at {self.param} = {p:.10g}")
+        """shooting.newton_shoot on P^n at fixed p."""
+        result = sh.newton_shoot(lambda z: self.map(z, p), z_guess, self.tol, max_iter, f" at {self.param} = {p:.10g}")
+        return self.point(result.z0, p, result)
 
     def linear_guess(self, p: float) -> np.ndarray:
         """z0 of the linearised response about the equilibrium (shooting.linear_guess)."""
@@ -210,31 +151,14 @@ class Continuation:
         return np.array([point.z0[0], point.z0[1], point.p / self.scale])
 
     def tangent(self, point: Point, previous: np.ndarray) -> np.ndarray:
-        jac = np.column_stack([point.monodromy - np.eye(2), point.d_param * self.scale])
-        t = np.cross(jac[0], jac[1])
-        norm = np.linalg.norm(t)
-        if norm == 0.0:
-            raise ShootingError(f"singular branch Jacobian at {self.problem.param} = {point.p:.10g}")
-        t /= norm
-        return t if np.dot(t, previous) >= 0.0 else -t
+        return sh.branch_tangent(point.monodromy, point.d_param, self.scale, previous,
+                                 f" at {self.problem.param} = {point.p:.10g}")
 
     def correct(self, u_pred: np.ndarray, normal: np.ndarray, max_iter: int = 8) -> tuple[Point, int]:
-        """Newton on (P^n(z, p) - z, normal . (u - u_pred)) = 0."""
-        u = u_pred.copy()
-        for iteration in range(max_iter):
-            p = u[2] * self.scale
-            result = self.problem.map(u[:2], p)
-            residual = result.end - u[:2]
-            if np.max(np.abs(residual)) <= self.problem.tol:
-                return self.problem.point(u[:2], p, result), iteration
-            jac = np.zeros((3, 3))
-            jac[:2, :2] = result.monodromy - np.eye(2)
-            jac[:2, 2] = result.d_param * self.scale
-            jac[2] = normal
-            u = u - np.linalg.solve(jac, np.append(residual, np.dot(normal, u - u_pred)))
-            if not np.all(np.isfinite(u)):
-                break
-        raise ShootingError(f"corrector did not converge at {self.problem.param} ~ {u[2] * self.scale:.10g}")
+        """shooting.arclength_correct on P^n in the continued parameter."""
+        result, p, iterations = sh.arclength_correct(self.problem.map, u_pred, normal, self.scale, self.problem.tol,
+                                                     max_iter, self.problem.param)
+        return self.problem.point(result.z0, p, result), iterations
 
     def point_at(self, u0: np.ndarray, t0: np.ndarray, h: float) -> Point:
         point, _ = self.correct(u0 + h * t0, t0)

@@ -86,26 +86,52 @@ class PeriodicModel:
         return TWO_PI / omega
 
 
-def _variational_rhs(model: PeriodicModel, omega: float):
-    """f(s, y) for y = (x, v, Phi11, Phi21, Phi12, Phi22, x_omega, v_omega) in rescaled time s = omega tau.
+PARAMETERS = ("omega", "Delta", "mu", "alpha", "gamma")  # what the period map has the sensitivity to
+
+
+def _parameter_field(model: PeriodicModel, omega: float, param: str) -> Callable[[float, float, float], tuple]:
+    """df/dp (x, v, s) of the rescaled field f = (v/omega, (Delta cos s - mu v - g(x))/omega) for p != omega
+    (omega's, -f/omega, is formed in variational_rhs). g is linear in alpha and gamma: dg/dalpha = -F_em,mean(x; 1, 0)."""
+    w, R = 1.0 / omega, model.scene.R
+    em = forces.electrostatic_mean
+    if param == "Delta":
+        return lambda x, v, s: (0.0, math.cos(s) * w)
+    if param == "mu":
+        return lambda x, v, s: (0.0, -v * w)
+    if param in ("alpha", "gamma") and model.polynomial:
+        raise ValueError(f"parameter {param!r}: the polynomial model has no sensitivity to it")
+    if param == "alpha":
+        return lambda x, v, s: (0.0, em(x, 1.0, 0.0, R) * w)
+    if param == "gamma":
+        return lambda x, v, s: (0.0, em(x, 0.0, 1.0, R) * w)
+    raise ValueError(f"parameter {param!r}: the period map supports {', '.join(PARAMETERS)}")
+
+
+def variational_rhs(model: PeriodicModel, omega: float, param: str = "omega"):
+    """f(s, y) for y = (x, v, Phi11, Phi21, Phi12, Phi22, x_p, v_p) in rescaled time s = omega tau, p = `param`.
 
     Phi' = J Phi with J = [[0, 1/omega], [-g'(x)/omega, -mu/omega]];
-    z_omega' = J z_omega + df/domega, df/domega = -(x', v')/omega (the explicit 1/omega of the field).
+    z_p' = J z_p + df/dp, with df/domega = -(x', v')/omega (the explicit 1/omega of the field).
     Plain Python floats: numpy arithmetic on 8-element arrays only adds call overhead.
     """
     g, g_x = model.restoring()
     mu, Delta, w = model.scene.mu, model.scene.Delta, 1.0 / omega
     cos = math.cos
+    dfdp = None if param == "omega" else _parameter_field(model, omega, param)
 
     def rhs(s, y):
-        x, v, p11, p21, p12, p22, xw, vw = y
+        x, v, p11, p21, p12, p22, xp, vp = y
         dx = v * w
         dv = (Delta * cos(s) - mu * v - g(x)) * w
         kx, kv = -g_x(x) * w, -mu * w
+        if dfdp is None:
+            fx, fv = -dx * w, -dv * w
+        else:
+            fx, fv = dfdp(x, v, s)
         return [dx, dv,
                 p21 * w, kx * p11 + kv * p21,
                 p22 * w, kx * p12 + kv * p22,
-                vw * w - dx * w, kx * xw + kv * vw - dv * w]
+                vp * w + fx, kx * xp + kv * vp + fv]
 
     return rhs
 
@@ -132,16 +158,41 @@ def _events(R: float):
 
 @dataclass
 class PeriodMap:
-    """One period of the variational system from z0 at omega: P(z0), M = dP/dz0, P_omega = dP/domega."""
+    """n periods of the variational system from z0 at omega: P^n(z0), M = dP^n/dz0, dP^n/dp for p = `param`."""
 
     omega: float
     z0: np.ndarray
     end: np.ndarray
     monodromy: np.ndarray
-    d_omega: np.ndarray
+    d_param: np.ndarray
     segments: list  # OdeSolution per smooth piece (split at contact crossings)
     extrema: np.ndarray  # x at v = 0
     contact_crossings: int
+    param: str = "omega"
+    periods: int = 1
+
+    @property
+    def d_omega(self) -> np.ndarray:
+        if self.param != "omega":
+            raise AttributeError(f"this period map has the sensitivity to {self.param}, not omega")
+        return self.d_param
+
+    @property
+    def residual(self) -> np.ndarray:
+        return self.end - self.z0
+
+    @property
+    def x_min(self) -> float:
+        """min x over the orbit: the turning points and both ends."""
+        return float(min(self.z0[0], self.end[0], *self.extrema))
+
+    @property
+    def x_max(self) -> float:
+        return float(max(self.z0[0], self.end[0], *self.extrema))
+
+    @property
+    def crossings(self) -> int:
+        return self.contact_crossings
 
     def x(self, s: np.ndarray) -> np.ndarray:
         """x(s) on [0, 2 pi] from the dense output of the piece that holds s."""
@@ -183,13 +234,75 @@ def integrate_pieces(rhs, R: float, z0, s_end: float, rtol: float, where: str = 
         contact.direction = -contact.direction  # the next crossing is the way back
 
 
-def period_map(model: PeriodicModel, z0, omega: float, rtol: float = RTOL) -> PeriodMap:
-    """Integrate one period s in [0, 2 pi] with DOP853 (dense output), restarting at each contact crossing."""
-    y, segments, extrema, crossings = integrate_pieces(_variational_rhs(model, omega), model.scene.R, z0, TWO_PI,
-                                                       rtol, f", omega = {omega:.10g}")
-    return PeriodMap(omega=omega, z0=np.asarray(z0, dtype=float), end=y[:2].copy(),
-                     monodromy=np.array([[y[2], y[4]], [y[3], y[5]]]), d_omega=y[6:8].copy(),
-                     segments=segments, extrema=np.array(extrema), contact_crossings=crossings)
+def period_map(model: PeriodicModel, z0, omega: float, rtol: float = RTOL, param: str = "omega",
+               periods: int = 1) -> PeriodMap:
+    """Integrate `periods` periods, s in [0, 2 pi periods], with DOP853 (dense output), restarting at each contact
+    crossing, with the sensitivity to `param` (PARAMETERS). The one period map of the package: shooting,
+    continuation in any parameter and the two-parameter curves all call it."""
+    y, segments, extrema, crossings = integrate_pieces(variational_rhs(model, omega, param), model.scene.R, z0,
+                                                       TWO_PI * periods, rtol, f", omega = {omega:.10g}")
+    return PeriodMap(omega=omega, z0=np.asarray(z0, dtype=float).copy(), end=y[:2].copy(),
+                     monodromy=np.array([[y[2], y[4]], [y[3], y[5]]]), d_param=y[6:8].copy(),
+                     segments=segments, extrema=np.array(extrema), contact_crossings=crossings, param=param,
+                     periods=periods)
+
+
+def multipliers(monodromy: np.ndarray) -> np.ndarray:
+    """Floquet multipliers eig(M), complex, sorted by modulus."""
+    rho = np.linalg.eigvals(monodromy).astype(complex)
+    return rho[np.argsort(np.abs(rho))]
+
+
+def newton_shoot(map_of: Callable[[np.ndarray], PeriodMap], z_guess, tol: float = NEWTON_TOL, max_iter: int = 25,
+                 where: str = "") -> PeriodMap:
+    """Newton on P(z) - z = 0 (Jacobian M - I) for the period map `map_of` at a fixed parameter: the period map
+    at the last iterate z (no extrapolated step) once |P(z) - z|_inf <= tol. Near a fold M - I is nearly
+    singular: the residual is then the meaningful measure, the state error is ~ tol / sigma_min(M - I)."""
+    z = np.asarray(z_guess, dtype=float)
+    for _ in range(max_iter):
+        pmap = map_of(z)
+        residual = pmap.end - z
+        if np.max(np.abs(residual)) <= tol:
+            return pmap
+        z = z - np.linalg.solve(pmap.monodromy - np.eye(2), residual)
+    raise ShootingError(f"Newton shooting did not converge in {max_iter} iterations{where}")
+
+
+def branch_tangent(monodromy: np.ndarray, d_param: np.ndarray, scale: float, previous: np.ndarray,
+                   where: str = "") -> np.ndarray:
+    """Unit null vector of dG/du = [M - I, dP/dp * scale] in u = (x0, v0, p / scale) (the cross product of its two
+    rows), oriented along `previous`."""
+    jac = np.column_stack([monodromy - np.eye(2), d_param * scale])
+    t = np.cross(jac[0], jac[1])
+    norm = np.linalg.norm(t)
+    if norm == 0.0:
+        raise ShootingError(f"singular branch Jacobian{where}")
+    t /= norm
+    return t if np.dot(t, previous) >= 0.0 else -t
+
+
+def arclength_correct(map_of: Callable[[np.ndarray, float], PeriodMap], u_pred: np.ndarray, normal: np.ndarray,
+                      scale: float, tol: float = NEWTON_TOL, max_iter: int = 8,
+                      name: str = "omega") -> tuple[PeriodMap, float, int]:
+    """Keller's pseudo-arclength corrector: Newton on (P(z, p) - z, normal . (u - u_pred)) = 0 in
+    u = (x0, v0, p / scale), `map_of(z, p)` the period map with the sensitivity to p.
+    Returns (the period map at the converged point, p, the iteration count); ShootingError if the residual does
+    not reach tol."""
+    u = np.array(u_pred, dtype=float)
+    for iteration in range(max_iter):
+        p = u[2] * scale
+        pmap = map_of(u[:2], p)
+        residual = pmap.end - u[:2]
+        if np.max(np.abs(residual)) <= tol:
+            return pmap, p, iteration
+        jac = np.zeros((3, 3))
+        jac[:2, :2] = pmap.monodromy - np.eye(2)
+        jac[:2, 2] = pmap.d_param * scale
+        jac[2] = normal
+        u = u - np.linalg.solve(jac, np.append(residual, np.dot(normal, u - u_pred)))
+        if not np.all(np.isfinite(u)):
+            break
+    raise ShootingError(f"corrector did not converge at {name} ~ {u[2] * scale:.10g}")
 
 
 @dataclass
@@ -235,8 +348,7 @@ def orbit_harmonic(pmap: PeriodMap) -> tuple[complex, float]:
 def orbit_from(model: PeriodicModel, pmap: PeriodMap) -> Orbit:
     """Floquet multipliers, Liouville check, first harmonic, mean and extrema of the orbit through pmap.z0."""
     c1, mean = orbit_harmonic(pmap)
-    rho = np.linalg.eigvals(pmap.monodromy).astype(complex)
-    rho = rho[np.argsort(np.abs(rho))]
+    rho = multipliers(pmap.monodromy)
     x_ends = np.concatenate([pmap.extrema, pmap.z0[:1]])
     return Orbit(
         omega=pmap.omega, z0=pmap.z0, monodromy=pmap.monodromy, multipliers=rho,
@@ -254,14 +366,8 @@ def shoot(model: PeriodicModel, omega: float, z_guess, tol: float = NEWTON_TOL, 
     extrapolated step). Near a fold M - I is nearly singular: the residual is then the meaningful measure,
     the state error is ~ tol / sigma_min(M - I).
     """
-    z = np.asarray(z_guess, dtype=float)
-    for _ in range(max_iter):
-        pmap = period_map(model, z, omega)
-        residual = pmap.end - z
-        if np.max(np.abs(residual)) <= tol:
-            return orbit_from(model, pmap)
-        z = z - np.linalg.solve(pmap.monodromy - np.eye(2), residual)
-    raise ShootingError(f"Newton shooting did not converge in {max_iter} iterations at omega = {omega:.10g}")
+    pmap = newton_shoot(lambda z: period_map(model, z, omega), z_guess, tol, max_iter, f" at omega = {omega:.10g}")
+    return orbit_from(model, pmap)
 
 
 def linear_guess(model: PeriodicModel, omega: float) -> np.ndarray:
@@ -314,31 +420,15 @@ class _Branch:
         return np.array([orbit.z0[0], orbit.z0[1], orbit.omega / self.scale])
 
     def tangent(self, orbit: Orbit, previous: np.ndarray | None) -> np.ndarray:
-        """Unit null vector of dG/du = [M - I, P_omega * scale] (cross product of its two rows),
-        oriented along `previous` (or towards increasing omega at the start)."""
-        jac = np.column_stack([orbit.monodromy - np.eye(2), orbit.d_omega * self.scale])
-        t = np.cross(jac[0], jac[1])
-        t /= np.linalg.norm(t)
+        """branch_tangent oriented along `previous` (or towards increasing omega at the start)."""
         reference = previous if previous is not None else np.array([0.0, 0.0, 1.0])
-        return t if np.dot(t, reference) >= 0.0 else -t
+        return branch_tangent(orbit.monodromy, orbit.d_omega, self.scale, reference)
 
     def correct(self, u_pred: np.ndarray, t: np.ndarray, max_iter: int = 8) -> tuple[Orbit, int]:
-        """Newton on (P(z, omega) - z, t . (u - u_pred)) = 0 (Keller's pseudo-arclength corrector).
-
-        Returns the orbit and the iteration count; ShootingError if the residual does not reach tol.
-        """
-        u = u_pred.copy()
-        for iteration in range(max_iter):
-            pmap = period_map(self.model, u[:2], u[2] * self.scale)
-            residual = pmap.end - u[:2]
-            if np.max(np.abs(residual)) <= self.tol:
-                return orbit_from(self.model, pmap), iteration
-            jac = np.zeros((3, 3))
-            jac[:2, :2] = pmap.monodromy - np.eye(2)
-            jac[:2, 2] = pmap.d_omega * self.scale
-            jac[2] = t
-            u = u - np.linalg.solve(jac, np.append(residual, np.dot(t, u - u_pred)))
-        raise ShootingError(f"corrector did not converge at omega ~ {u[2] * self.scale:.10g}")
+        """arclength_correct on the period map in omega: the orbit and the iteration count."""
+        pmap, _, iterations = arclength_correct(lambda z, omega: period_map(self.model, z, omega), u_pred, t,
+                                                self.scale, self.tol, max_iter)
+        return orbit_from(self.model, pmap), iterations
 
     def point_at(self, u0: np.ndarray, t0: np.ndarray, h: float) -> tuple[Orbit, np.ndarray]:
         """The branch point on the hyperplane t0 . (u - u0) = h, and its tangent."""
