@@ -22,10 +22,10 @@ from . import settings as plant
 from .core_layouts import (DOP_MAX_EVENTS, DOP_STAGES, VK_BAD_INPUT, VK_BAD_STEP, VK_BAD_TIME, VK_FAILED,
                            VK_MESSAGE, VK_OK, VK_RAISED, VK_TERMINAL, VK_TOO_MANY_STEPS, Dop853 as Dop853State,
                            Rk4 as Rk4State, VkModel, VkPlant)
-from .fidelities import REGISTRY, CModel, entry
+from .fidelities import REGISTRY, entry
 from .integrate import ATOL_PER_RTOL, IntegrationError, TerminalEvent
-from .models import drive_step_ceiling, pull_in_slope, solver_tolerance
-from .parameters import PULL_IN_GAP, validate
+from .models import drive_step_ceiling, solver_tolerance
+from .parameters import validate
 from .settings import Outputs, Settings, check_step, checked_settings
 from .solvers import BY_VALUE as SOLVERS_BY_VALUE, solver_entry
 
@@ -170,18 +170,11 @@ def supports(settings: Settings) -> bool:
     return level.integrated and level.c_model is not None and solver is not None and solver.compiled
 
 
-def _model_fields(scene, model, c_model: CModel) -> dict:
-    """The model's constants and switches (models.ExactModel / PolynomialModel: the terms they evaluate); c_model:
-    the level's compiled model (fidelities.FidelityEntry.c_model): VkModel.polynomial = 0 for Eq. 3, 1 for Eq. 7."""
-    polynomial = int(c_model != CModel.EXACT)
-    fields = {name: getattr(scene, name) for name in ("mu", "Delta", "omega", "alpha", "beta", "gamma", "Omega", "R")}
-    ac = scene.beta != 0.0 or scene.gamma != 0.0
-    fields.update(pull_in_c=pull_in_slope(scene.R), pull_in_gap=PULL_IN_GAP, load_forcing=scene.Delta != 0.0, ac=ac)
-    if not polynomial:
-        fields.update(polynomial=0, electrostatics=scene.alpha != 0.0 or ac)
-    else:
-        fields.update(polynomial=1, electrostatics=ac, poly=model.a, g1=model.g1, g2=model.g2, g3=model.g3)
-    return fields
+def fill_model(structure: VkModel, model) -> None:
+    """Fill a VkModel from a model object (models.ExactModel / PolynomialModel): its compiled_fields(), the constants
+    of its own scene, so the C computes what the model's accel does (the registry's model is the one source)."""
+    for name, value in model.compiled_fields().items():
+        setattr(structure, name, value if isinstance(value, (int, float)) else (_double * 6)(*value))
 
 
 def _constant_ranges():
@@ -208,9 +201,7 @@ class CompiledPlant:
         max_step = settings.max_step or drive_step_ceiling(scene)  # as Plant gives Dop853
         rtol, notes = solver_tolerance(scene, settings, t0, stop_time)  # as Plant gives its integrator
         self.notes += notes
-        model_struct = self._plant.model
-        for name, value in _model_fields(scene, model, level.c_model).items():
-            setattr(model_struct, name, value if isinstance(value, (int, float)) else (_double * 6)(*value))
+        fill_model(self._plant.model, model)
         dop, rk4 = self._plant.dop, self._plant.rk4
         dop.rtol, dop.atol, dop.max_step = rtol, rtol * ATOL_PER_RTOL, max_step
         dop.step_budget = plant.MAX_STEPS_PER_DOSTEP

@@ -250,7 +250,7 @@ class CompiledClosedLoop(_FastPath):
     STEP_FUNCTION = "vl_do_step"  # vl_do_step(VlLoop *, t, h)
 
     def __init__(self, python, library):
-        from .compiled import ATOL_PER_RTOL, _model_fields
+        from .compiled import ATOL_PER_RTOL, fill_model
         from .compiled_open_loop import OafmProgram, oafm_hints
         from .plant import RK4_DEFAULT_STEP
         from .solvers import solver_entry
@@ -270,8 +270,7 @@ class CompiledClosedLoop(_FastPath):
         if c_model is None:
             self.problem = f"the compiled core has no model of fidelity {settings.fidelity}"
             return
-        for name, value in _model_fields(python.scene, python.model, c_model).items():
-            setattr(l.model, name, value if isinstance(value, (int, float)) else (_double * 6)(*value))
+        fill_model(l.model, python.model)
         fill_controller(l.controller, python.controller, python.scene, library)
         l.solver, l.time_tolerance = int(settings.solver), TIME_TOLERANCE
         l.dop.rtol, l.dop.atol = settings.rtol, settings.rtol * ATOL_PER_RTOL  # as ClosedLoop gives Dop853

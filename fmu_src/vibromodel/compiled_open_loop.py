@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .compiled import VkPlant, _model_fields
+from .compiled import VkPlant, fill_model
 # oafm_eval.h's and openloop_plant.h's constants and structures, generated from the headers (core_layouts.py)
 from .core_layouts import (OE_BASES, OE_ITEMS, OE_POWERS, OE_RESYNC, OE_STEP_SLACK, OL_BEYOND, OL_REFUSED, OeCache,
                            OePiece, OeSolution, OlPlant, SfTable)
@@ -341,8 +341,7 @@ class CompiledOpenLoopPlant:
         self._plant = OlPlant()
         self._address = ctypes.addressof(self._plant)
         k = self._plant.plant  # the exact model's constants (its forces), the plant's time, input and outputs
-        for name, value in _model_fields(self.scene, python_plant.model, level.c_model).items():  # its forces
-            setattr(k.model, name, value if isinstance(value, (int, float)) else (_d * 6)(*value))
+        fill_model(k.model, python_plant.model)  # its forces
         k.time_tolerance, k.plant_t, k.U_input, k.enabled = TIME_TOLERANCE, python_plant.t, 0.0, 1
         self._plant.fidelity = int(self.settings.fidelity)  # C reads the level's evaluator (core/fidelity.h)
         if self._evaluator == Evaluator.SLOWFLOW:

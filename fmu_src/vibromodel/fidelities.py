@@ -17,7 +17,7 @@ from enum import IntEnum
 from typing import Callable
 
 from .analytic import cached_solve, check_fit, covering
-from .models import ExactModel, PolynomialModel
+from .models import CModel, ExactModel, PolynomialModel, scene_model
 from .parameters import ParameterError, Rule, Scene
 
 
@@ -27,14 +27,6 @@ class Fidelity(IntEnum):
     POLYNOMIAL_PAPER = 2
     AVERAGED = 3  # slow flow (averaging.py, slowflow.py); its forces are those of Eq. 3 at x
     ANALYTIC = 4  # OAFM closed form (analytic.py); its forces are those of Eq. 3 at x~
-
-
-class CModel(IntEnum):
-    """The compiled core's model of a level's forces (and x'' of an integrated level): core/model.h's VkModel
-    (polynomial = 0 or 1) and, for the native FMUs, which coefficients of Eq. 7 (native/series.c)."""
-    EXACT = 0  # Eq. 3 (models.ExactModel)
-    POLYNOMIAL = 1  # Eq. 7 with the corrected a0..a5 (models.PolynomialModel)
-    POLYNOMIAL_PRINTED = 2  # Eq. 7 with the paper's printed a0..a5 (models.PolynomialModel(printed=True))
 
 
 class Evaluator(IntEnum):
@@ -50,8 +42,12 @@ class FidelityEntry:
     model(scene): the forces (and x'' for an integrated level) of the level.
     integrated: the plant steps model.accel with DOP853 or RK4 (Eq. 3 or Eq. 7); such a level can be a closed
     loop's plant.
-    c_model: the compiled core's model of the level's forces (CModel), None if the core has none (then the level runs
-    in Python only, and the native FMUs must refuse it).
+    c_model: the compiled core's model of the level's forces (models.CModel), None if the core has none (then the
+    level runs in Python only, and the native FMUs must refuse it). It must be the c_model of the level's model
+    objects: the compiled plants fill the core's model from the model object (compiled_fields()), so they compute
+    what the Python plant does; the native FMUs fill it from their parameters (native/plant_setup.c), so they run
+    the level only if its model is the scene's own model of that kind (native_mismatch), else c_header() refuses
+    the level unless native_refusal says why the native FMUs cannot run it.
     open_loop(scene, settings, t0, stop_time, cache_dirs) -> (solution, notes): for a level whose doStep evaluates a
     precomputed solution (solution.state(t) -> (x, x', x'')) with U = 0; None for integrated levels.
     evaluator: the compiled per-output evaluator of an open-loop level (Evaluator.NONE: none, Python evaluates).
@@ -230,6 +226,45 @@ def open_loop_rule_levels() -> tuple[int, ...]:
     return tuple(int(level) for level in open_loop())
 
 
+# What c_header() says when the native FMUs cannot compute a level's model
+NATIVE_CANNOT = ("the native FMUs compute the compiled model from the FMU's parameters alone (native/plant_setup.c), "
+                 "so they cannot run this level: give its registry entry a native_refusal (they then refuse it) or a "
+                 "c_model whose native set-up computes it")
+
+
+def probe_scenes() -> dict[str, Scene]:
+    """The scenes native_mismatch compares on, by name: the paper scene, every parameter moved off it, the forcing
+    off."""
+    paper = Scene()
+    return {"the paper scene": paper,
+            "the paper scene with every parameter moved": paper.with_values(
+                mu=0.137, Delta=0.0011, omega=1.3, Omega=1.7, alpha=0.0023, beta=0.00031, gamma=0.00047, R=1.9,
+                x_start=0.03, v_start=0.01),
+            "the paper scene without forcing": paper.with_values(Delta=0.0, alpha=0.0, beta=0.0, gamma=0.0)}
+
+
+def compiled_kind_mismatch(e: FidelityEntry) -> str | None:
+    """None if the level's model object is of the entry's compiled kind (its c_model), else what it is."""
+    model = e.model(Scene())
+    kind = getattr(model, "c_model", None)
+    if kind != e.c_model:
+        return (f"its model {type(model).__name__} has compiled model {getattr(kind, 'name', kind)}, the entry says "
+                f"{e.c_model.name}")
+    return None
+
+
+def native_mismatch(e: FidelityEntry) -> str | None:
+    """None if the level's model object is, on every probe scene, the scene's own model of its compiled kind (the
+    same VkModel fields to the bit: what the native FMUs compute from their parameters), else the first difference."""
+    for where, scene in probe_scenes().items():
+        ours, native = e.model(scene).compiled_fields(), scene_model(scene, e.c_model).compiled_fields()
+        for name, value in ours.items():
+            if repr(value) != repr(native[name]):
+                return (f"its model's {name} is {value!r} on {where}, where the native FMUs' set-up from the "
+                        f"parameters (the scene's {e.c_model.name} model) gives {native[name]!r}")
+    return None
+
+
 def c_header() -> str:
     """core/fidelity.h: the registry for the C of fmu_src/core and fmu_src/native (they branch on these properties,
     never on level numbers). Committed; tests/model/test_fidelity_registry.py checks that it is current."""
@@ -241,6 +276,12 @@ def c_header() -> str:
                     f"  /* {int(e.level)} {e.key} */")
         if e.c_model is None and refusal is None:
             raise ValueError(f"fidelity {int(e.level)} has no compiled model: the native FMUs must refuse it")
+        problem = None if e.c_model is None else compiled_kind_mismatch(e)
+        if problem is not None:
+            raise ValueError(f"fidelity {int(e.level)} ({e.key}): {problem}")
+        problem = None if e.c_model is None or refusal is not None else native_mismatch(e)
+        if problem is not None:
+            raise ValueError(f"fidelity {int(e.level)} ({e.key}): {problem}: {NATIVE_CANNOT}")
     if list(REGISTRY) != list(range(len(REGISTRY))):
         raise ValueError("the C indexes VK_FIDELITIES by level: levels must run 0..N-1")
     lines = ["/* fidelity.h -- the fidelity registry (vibromodel/fidelities.py) for the C of fmu_src/core and",

@@ -8,11 +8,23 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from enum import IntEnum
 from typing import Callable
 
 from . import forces
 from .parameters import MIN_RTOL, PULL_IN_GAP, ParameterError, Scene
 from .solvers import solver_entry
+
+
+
+class CModel(IntEnum):
+    """The compiled core's model of a level's forces (and x'' of an integrated level): core/model.h's VkModel
+    (polynomial = 0 or 1) and, for the native FMUs, which coefficients of Eq. 7 (native/series.c). Each model class
+    says which it is (`c_model`) and gives its VkModel's fields (`compiled_fields()`)."""
+    EXACT = 0  # Eq. 3 (ExactModel)
+    POLYNOMIAL = 1  # Eq. 7 with the corrected a0..a5 (PolynomialModel)
+    POLYNOMIAL_PRINTED = 2  # Eq. 7 with the paper's printed a0..a5 (PolynomialModel(printed=True))
+
 
 R_OUT_OF_RANGE = "out of range of the series of Eq. 7 (powers of R up to R^5 overflow or vanish)"
 
@@ -146,8 +158,25 @@ def solver_tolerance(s: Scene, settings, t0: float = 0.0, stop_time: float | Non
                          f"or the run's span), rtol is kept per {ERROR_MEMORY_REFERENCE:g} of it"]
 
 
+def scene_fields(s: Scene) -> dict:
+    """The VkModel fields (core/model.h) every model fills from its own scene: the parameters, the pull-in events'
+    constants and the switches of the drive terms."""
+    fields = {name: getattr(s, name) for name in ("mu", "Delta", "omega", "alpha", "beta", "gamma", "Omega", "R")}
+    ac = s.beta != 0.0 or s.gamma != 0.0
+    fields.update(pull_in_c=pull_in_slope(s.R), pull_in_gap=PULL_IN_GAP, load_forcing=int(s.Delta != 0.0), ac=int(ac))
+    return fields
+
+
 class ExactModel:
     """Eq. 3 with U added: x'' = 1 + Delta cos(omega t) + F_em(t, x) - H(x) - mu x' + U."""
+
+    c_model = CModel.EXACT
+
+    def compiled_fields(self) -> dict:
+        """core/model.h's VkModel of this model, from its own scene (compiled*.py hand it to the C; the native FMUs
+        compute it from their parameters in native/plant_setup.c, which fidelities.native_mismatch checks)."""
+        fields = scene_fields(self.scene)
+        return fields | dict(polynomial=0, electrostatics=int(self.scene.alpha != 0.0 or bool(fields["ac"])))
 
     def __init__(self, scene: Scene):
         self.scene = scene
@@ -199,6 +228,7 @@ class PolynomialModel:
 
     def __init__(self, scene: Scene, printed: bool = False):
         self.scene = scene
+        self.c_model = CModel.POLYNOMIAL_PRINTED if printed else CModel.POLYNOMIAL
         self.events: tuple[Event, ...] = pull_in_events(scene.R)
         make = forces.coefficients_printed if printed else forces.coefficients
         try:
@@ -240,9 +270,22 @@ class PolynomialModel:
 
         return accel, accel_phased
 
+    def compiled_fields(self) -> dict:
+        """ExactModel.compiled_fields for Eq. 7: its coefficients and series."""
+        fields = scene_fields(self.scene)
+        return fields | dict(polynomial=1, electrostatics=fields["ac"], poly=self.a, g1=self.g1, g2=self.g2,
+                             g3=self.g3)
+
     def forces(self, t: float, x: float) -> tuple[float, float]:
         """(G1(x), alpha G2(x) + (beta sin + gamma(1 - cos 2 Omega t)) G3(x)): the series of Eq. 5."""
         s = self.scene
         drive = s.beta * math.sin(s.Omega * t) + s.gamma * (1.0 - math.cos(2.0 * s.Omega * t))
         return forces.horner(self.g1, x), s.alpha * forces.horner(self.g2, x) + drive * forces.horner(self.g3, x)
 
+
+
+def scene_model(scene: Scene, c_model: CModel):
+    """The model of kind c_model made from the scene alone: what the native FMUs compute from their parameters
+    (native/plant_setup.c native_plant_model, native/series.c)."""
+    return ExactModel(scene) if c_model == CModel.EXACT else PolynomialModel(
+        scene, printed=c_model == CModel.POLYNOMIAL_PRINTED)

@@ -18,6 +18,7 @@ import tempfile
 from pathlib import Path
 
 from vibromodel import compiled
+from vibromodel.fidelities import c_header
 
 from vibrofmu import paths
 from vibrofmu.fmus import toolchain
@@ -39,9 +40,23 @@ def kernel_headers() -> list[Path]:
 GCC_COMMAND = ("gcc", *toolchain.KERNEL)
 
 
+def check_fidelity_header() -> None:
+    """Raise RuntimeError unless the committed core/fidelity.h is the registry's c_header(): a level added to the
+    registry without it, or one the native FMUs cannot compute (c_header's ValueError names what is missing), stops
+    the build of the kernel and of the native FMUs here instead of running another model in C."""
+    try:
+        current = c_header()
+    except ValueError as error:
+        raise RuntimeError(f"the fidelity registry cannot be built into C: {error}") from None
+    if FIDELITY_HEADER.read_text() != current:
+        raise RuntimeError(f"{FIDELITY_HEADER} is not the fidelity registry's: regenerate it with "
+                           "`python3 -m vibrofmu.fmus.kernel`")
+
+
 def compile_kernel(out_path: Path) -> Path:
     """Compile fmu_src/core/*.c into the shared library out_path; raises RuntimeError with gcc's output on failure."""
     out_path = Path(out_path)
+    check_fidelity_header()
     cmd = [*toolchain.c_compiler(), *GCC_COMMAND[1:], "-o", str(out_path), *map(str, kernel_sources()), "-lm"]  # $CC for gcc
     proc = subprocess.run(cmd, capture_output=True, text=True)
     if proc.returncode != 0:
@@ -138,8 +153,6 @@ def tableau_header() -> str:
 
 
 if __name__ == "__main__":
-    from vibromodel.fidelities import c_header
-
     TABLEAU_HEADER.write_text(tableau_header())
     FIDELITY_HEADER.write_text(c_header())
     print(f"wrote {TABLEAU_HEADER} and {FIDELITY_HEADER}")

@@ -29,6 +29,7 @@ from pathlib import Path
 
 from vibrofmu import paths
 from vibrofmu.fmus import toolchain
+from vibrofmu.fmus.kernel import check_fidelity_header
 from vibrofmu.fmus.state_fields import state_fields_header
 
 FMU_SRC = paths.FMU_SRC  # a checkout's fmu_src/ or the installed package's copy
@@ -484,6 +485,7 @@ def build_native(pythonfmu_fmu: Path, out_dir: Path, win64: bool | None = None, 
     """out_dir/<id>.fmu from the pythonfmu FMU's interface (see the module's text); win64 None: when mingw is
     installed. reference: pack the default experiment's result into documentation/ (FMI 2.0 only).
     fmi_version 3: the FMI 3.0 FMU (fmi3_native.c over the same sources; FMPy's fmi3 headers)."""
+    check_fidelity_header()  # the registry's levels as the C runs them (a level it cannot compute is refused here)
     with zipfile.ZipFile(pythonfmu_fmu) as z:
         md = with_derivative_variables(z.read("modelDescription.xml"))
     model_id = ET.fromstring(md).find("CoSimulation").get("modelIdentifier")
