@@ -10,6 +10,7 @@ import tempfile
 from pathlib import Path
 
 import pytest
+import required_tools
 
 os.environ["VIBROFMU_CACHE_DIR"] = tempfile.mkdtemp(prefix="vibrofmu-test-cache-")
 
@@ -160,7 +161,7 @@ def pytest_collection_modifyitems(config, items):
     for item in items:
         if FMU_FIXTURES & set(getattr(item, "fixturenames", ())):
             item.add_marker(pytest.mark.fmu)
-        if not any(item.get_closest_marker(name) for name in ("fmu", "long", "slow")):
+        if not any(item.get_closest_marker(name) for name in ("fmu", "long", "slow", "tools")):
             item.add_marker(pytest.mark.fast)
 
 
@@ -187,5 +188,52 @@ class FmuTierGuard:
         _unmarked(item, FMU_FIXTURES & set(getattr(getattr(item, "_request", None), "_fixture_defs", ())))
 
 
+# The `tools` tier: tests that need a program beyond Python and the C compiler (@pytest.mark.tools("valgrind"),
+# tests/required_tools.py). The default run (pyproject.toml's addopts) leaves them out and ends with one line saying
+# how many and how to run them; `python3 -m pytest -m tools` runs them, and a missing program fails the test at
+# set-up with one line naming what to install (never a skip). Under pytest-xdist the workers collect and deselect:
+# each sends its count to the master (workeroutput), which prints the line.
+TOOLS_RUN = "python3 -m pytest -m tools"
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_runtest_setup(item):
+    marks = list(item.iter_markers("tools"))
+    if marks:
+        line = required_tools.missing([program for mark in marks for program in mark.args])
+        if line:
+            pytest.fail(line, pytrace=False)
+
+
+class ToolsLeftOut:
+    def __init__(self, config):
+        self.config, self.count, self.programs = config, 0, set()
+
+    def pytest_deselected(self, items):
+        for item in items:
+            marks = list(item.iter_markers("tools"))
+            if marks:
+                self.count += 1
+                self.programs.update(program for mark in marks for program in mark.args)
+
+    def pytest_sessionfinish(self):
+        if hasattr(self.config, "workeroutput"):  # an xdist worker: tell the master
+            self.config.workeroutput["tools_left_out"] = (self.count, sorted(self.programs))
+
+    @pytest.hookimpl(optionalhook=True)
+    def pytest_testnodedown(self, node, error):  # the xdist master: every worker collected the same tests
+        count, programs = getattr(node, "workeroutput", {}).get("tools_left_out", (0, []))
+        self.count = max(self.count, count)
+        self.programs.update(programs)
+
+    def pytest_terminal_summary(self, terminalreporter):
+        if self.count and not hasattr(self.config, "workeroutput"):
+            names = ", ".join(sorted(self.programs))
+            tests = f"{self.count} test{'s' * (self.count != 1)}"
+            terminalreporter.write_line(f"left out: {tests} of the `tools` tier (they need {names}); "
+                                        f"run them with `{TOOLS_RUN}`")
+
+
 def pytest_configure(config):
     config.pluginmanager.register(FmuTierGuard(), "vibrofmu-fmu-tier-guard")
+    config.pluginmanager.register(ToolsLeftOut(config), "vibrofmu-tools-left-out")

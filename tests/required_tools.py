@@ -1,9 +1,27 @@
-"""Programs some tests need (valgrind, cmake): such a test fails with one line naming what to install, it never
-skips itself (.ci/run installs them with apt-get when they are missing and it runs as root)."""
+"""Programs outside Python and the C compiler that some tests need: mingw-w64 and wine (the win64 binaries), valgrind
+(the C hosts under it), cmake (FMPy's build of an FMU's sources/). Such a test is marked `tools` with the programs it
+needs (@pytest.mark.tools("valgrind")): the default run leaves the tier out and says so in one line
+(tests/conftest.py); `python3 -m pytest -m tools` runs it, and a test whose program is missing fails with one line
+naming what to install, it never skips itself (.ci/run installs them with apt-get when it runs as root)."""
 import shutil
 
+# program -> the Debian packages that provide it
+PACKAGES = {
+    "x86_64-w64-mingw32-gcc": "gcc-mingw-w64-x86-64",
+    "wine": "wine wine64",
+    "valgrind": "valgrind",
+    "cmake": "cmake",
+}
+WIN64 = ("x86_64-w64-mingw32-gcc", "wine")
 
-def require(program: str, debian_package: str, why: str) -> None:
-    assert shutil.which(program) is not None, (
-        f"{program} not on PATH: {why}; install Debian's {debian_package} (apt-get install {debian_package}; "
-        ".ci/run does when it runs as root)")
+
+def missing(programs) -> str | None:
+    """None when every program is on PATH, else one line naming the missing ones and what to install."""
+    unknown = [program for program in programs if program not in PACKAGES]
+    assert not unknown, f"tests/required_tools.py does not know {unknown}"
+    absent = [program for program in programs if shutil.which(program) is None]
+    if not absent:
+        return None
+    packages = " ".join(dict.fromkeys(PACKAGES[program] for program in absent))
+    return (f"{' and '.join(absent)} not on PATH: this test of the `tools` tier needs it; install Debian's "
+            f"{packages} (apt-get install {packages}; .ci/run does when it runs as root)")

@@ -13,7 +13,6 @@ import ctypes
 import math
 import os
 import re
-import shutil
 import subprocess
 import tempfile
 import xml.etree.ElementTree as ET
@@ -25,7 +24,7 @@ import pytest
 from fmpy import extract, read_model_description, simulate_fmu
 from fmpy.validation import validate_fmu
 from message_text import canonical_tree
-from required_tools import require
+from required_tools import WIN64
 
 from vibrofmu.hosts.doctor import compile_host, compile_windows_host, run_host
 from vibrofmu.fmus.native import series_probe_library
@@ -69,12 +68,16 @@ def test_contents(native_plant_fmu):
     assert {"binaries/linux64/HertzEAOscillator.so", "sources/buildDescription.xml", "sources/variables.h",
             "sources/rules.h", "sources/plant.c", "sources/fmi2_native.c", "sources/native_model.c",
             "documentation/HertzEAOscillator_ref.csv"} <= names
-    _win64_tools()
-    assert "binaries/win64/HertzEAOscillator.dll" in names
     assert not any(name.startswith("resources/") and name.endswith(".py") for name in names)
     build = ET.fromstring(zipfile.ZipFile(native_plant_fmu).read("sources/buildDescription.xml"))
     listed = {f.get("name") for f in build.iter("SourceFile")}
     assert listed == {n.removeprefix("sources/") for n in names if n.startswith("sources/") and n.endswith(".c")}
+
+
+@pytest.mark.tools(*WIN64)
+def test_contents_win64(native_plant_fmu):
+    """With mingw-w64 on PATH the build adds the win64 DLL."""
+    assert "binaries/win64/HertzEAOscillator.dll" in zipfile.ZipFile(native_plant_fmu).namelist()
 
 
 def test_validate_fmu_is_silent(native_plant_fmu, plant_fmu):
@@ -445,11 +448,11 @@ def test_series_equal_vibromodel_forces_bit_for_bit(tmp_path):
             assert list(out) == expected, (printed, alpha, gamma, R)
 
 
+@pytest.mark.tools("cmake")  # FMPy's build_platform_binary runs it
 def test_fmpy_builds_the_sources(native_plant_fmu, tmp_path):
     """fmpy.build.build_platform_binary compiles sources/ (its own CMake project, Release flags) into a
     binary that gives the same x as the packed one: no FMA on x86-64 without -march, no fast-math, so the
     same arithmetic."""
-    require("cmake", "cmake", "FMPy's build_platform_binary needs it")
     from fmpy.build import build_platform_binary
 
     unzipped = Path(extract(str(native_plant_fmu), unzipdir=str(tmp_path / "fmu")))
@@ -463,21 +466,10 @@ def test_fmpy_builds_the_sources(native_plant_fmu, tmp_path):
     np.testing.assert_array_equal(rebuilt["x"], original["x"])
 
 
-WIN64_TOOLS = ("wine", "x86_64-w64-mingw32-gcc")
-
-
-def _win64_tools() -> None:
-    """The win64 tests need wine and mingw-w64 and fail, never skip, without them (issue 23: CI installs them)."""
-    missing = [tool for tool in WIN64_TOOLS if shutil.which(tool) is None]
-    assert not missing, (f"{' and '.join(missing)} not on PATH: the win64 binaries are built and checked with Debian's "
-                         "gcc-mingw-w64-x86-64 and wine (apt-get install gcc-mingw-w64-x86-64 wine wine64; .ci/run "
-                         "installs them when it runs as root)")
-
-
 def _wine_and_linux(c_host, unpacked, outputs, parameters, tmp_path):
     """The default experiment of an unpacked native FMU through its win64 DLL (the C host cross-compiled for
-    Windows, under wine) and through its linux64 library: (Windows rows, linux64 HostRun)."""
-    _win64_tools()
+    Windows, under wine) and through its linux64 library: (Windows rows, linux64 HostRun). Its callers are marked
+    tools(*WIN64)."""
     md = read_model_description(str(unpacked))
     model_id = md.coSimulation.modelIdentifier
     host = compile_windows_host(tmp_path)
@@ -509,6 +501,7 @@ def _wine_and_linux(c_host, unpacked, outputs, parameters, tmp_path):
     # proposed steps stay below the ceiling); measured 3.8e-15 (x), 6.4e-15 (v).
     ({"rtol": 1e-10}, 1e-13),
 ], ids=["default", "rtol 1e-10"])
+@pytest.mark.tools(*WIN64)
 def test_win64_dll_under_wine_agrees_with_linux64(c_host, native_unpacked, tmp_path, parameters, bound):
     """The default experiment through the win64 DLL (a Windows host under wine) against linux64."""
     outputs = ["x", "v", "a", "F_contact", "F_electrostatic"]
@@ -666,6 +659,7 @@ def test_controller_c_host_without_python(c_host, native_controller_fmu, control
         np.testing.assert_array_equal(native.outputs[name], python.outputs[name], err_msg=name)
 
 
+@pytest.mark.tools(*WIN64)
 def test_controller_win64_dll_under_wine_agrees_with_linux64(c_host, native_controller_fmu, tmp_path):
     """As the plant's: the controller's sin/cos (regressor and its exact integral) come from Windows' libm;
     its estimates integrate their last-bit differences over 2000 steps. Same 1e-13 bound; measured 4.4e-16 (U)."""
@@ -677,9 +671,9 @@ def test_controller_win64_dll_under_wine_agrees_with_linux64(c_host, native_cont
 
 
 @pytest.mark.parametrize("which", ["plant", "controller"])
+@pytest.mark.tools("valgrind")
 def test_no_invalid_memory_access(which, c_host, native_unpacked, native_controller_fmu, tmp_path):
     """The native FMUs in the C host under valgrind: a run, and a run refused at initialisation."""
-    require("valgrind", "valgrind", "this test runs the C host under it")
     if which == "plant":
         unzipped, output, good, bad = native_unpacked, "x", {}, {"R": -1.0}
     else:
@@ -707,8 +701,11 @@ def test_closed_loop_same_interface_and_validate_is_silent(closed_loop_fmu, nati
         names = set(z.namelist())
     assert {"binaries/linux64/HertzEAClosedLoop.so", "sources/reference.h", "sources/closedloop.c",
             "sources/buildDescription.xml"} <= names
-    _win64_tools()
-    assert "binaries/win64/HertzEAClosedLoop.dll" in names
+
+
+@pytest.mark.tools(*WIN64)
+def test_closed_loop_contents_win64(native_closed_loop_fmu):
+    assert "binaries/win64/HertzEAClosedLoop.dll" in zipfile.ZipFile(native_closed_loop_fmu).namelist()
 
 
 def test_closed_loop_default_experiment_equals_the_pythonfmu_fmu_bit_for_bit(closed_loop_fmu, native_closed_loop_fmu):
@@ -798,6 +795,7 @@ def test_closed_loop_c_host_without_python(c_host, native_closed_loop_fmu, close
     assert refused.returncode != 0 and "parameter Delta = 0.001" in refused.stderr, refused.stderr
 
 
+@pytest.mark.tools(*WIN64)
 def test_closed_loop_win64_dll_under_wine_agrees_with_linux64(c_host, native_closed_loop_fmu, tmp_path):
     """As the plant's: the loop's reference, regressor and drive call Windows' exp/sin/cos, whose last bits may
     differ from glibc's; the loop integrates those differences over 2000 adaptive steps (DOP853's error control,
@@ -810,9 +808,9 @@ def test_closed_loop_win64_dll_under_wine_agrees_with_linux64(c_host, native_clo
         assert np.max(np.abs(rows[:, j + 1] - linux.outputs[name])) <= 1e-13, name
 
 
+@pytest.mark.tools("valgrind")
 def test_closed_loop_no_invalid_memory_access(c_host, native_closed_loop_fmu, tmp_path):
     """The native closed loop in the C host under valgrind: a run, and a run refused for its reference."""
-    require("valgrind", "valgrind", "this test runs the C host under it")
     unzipped = Path(extract(str(native_closed_loop_fmu), unzipdir=str(tmp_path / "n")))
     wrapper = ["valgrind", "--error-exitcode=99", "-q"]
     for parameters, code in (({}, 0), ({"Delta": 0.001}, 2)):
@@ -821,6 +819,7 @@ def test_closed_loop_no_invalid_memory_access(c_host, native_closed_loop_fmu, tm
         assert "Invalid read" not in host.stderr and "Invalid write" not in host.stderr
 
 
+@pytest.mark.tools("cmake")  # FMPy's build_platform_binary runs it
 def test_closed_loop_fmpy_builds_the_sources(native_closed_loop_fmu, tmp_path):
     """As the plant's: FMPy's CMake build of sources/ (reference.h included) gives the packed binary's bits."""
     from fmpy.build import build_platform_binary

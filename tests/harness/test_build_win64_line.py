@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import shutil
 
+import pytest
+
 from vibrofmu.commands.common import say_compiled_parts
 from vibrofmu.fmus import toolchain
 
@@ -27,6 +29,7 @@ def test_build_says_in_one_line_that_it_skips_win64(tmp_path, monkeypatch, capsy
     assert "apt-get install gcc-mingw-w64-x86-64" in lines[0]
 
 
+@pytest.mark.tools("x86_64-w64-mingw32-gcc")
 def test_build_says_nothing_of_win64_with_mingw(tmp_path, monkeypatch, capsys):
     monkeypatch.delenv("CC", raising=False)
     monkeypatch.setenv("PATH", _path_with(tmp_path, "gcc", toolchain.WIN64_COMPILER))

@@ -14,7 +14,6 @@ from fmpy import extract, simulate_fmu
 
 from vibrofmu.cli import main
 from vibrofmu.hosts.doctor import compile_host, host_environment, run_host
-from required_tools import require
 
 VALGRIND_SUPPRESSIONS = Path(__file__).resolve().parents[1] / "c_host" / "valgrind.supp"
 FMI2_ERROR = 3
@@ -73,13 +72,13 @@ def test_pull_in_during_do_step_is_an_fmi2_error(run):
     assert 1 <= len(host.time) < 51  # the rows up to the failing step were printed
 
 
+@pytest.mark.tools("valgrind")
 def test_no_invalid_memory_access_up_to_process_exit(run):
     """pythonfmu 0.7.0 reads freed memory at exit in a C host (see fmi2_status_shim.c, "Process
     exit"); the shim works around it.  PYTHONMALLOC=malloc lets valgrind see Python's blocks.
     Uninitialised-value checks are off: CPython's own start-up (int.from_bytes while it sets up
     its codec registry) gives such reports, unrelated to the FMU; this test is about invalid
     reads and writes."""
-    require("valgrind", "valgrind", "this test runs the C host under it")
     wrapper = ["valgrind", "--error-exitcode=99", "--undef-value-errors=no",
                f"--suppressions={VALGRIND_SUPPRESSIONS}"]
     host = run(1.0, 0.1, wrapper=wrapper, extra_env={"PYTHONMALLOC": "malloc"})

@@ -9,8 +9,9 @@ def options(p):
 def run(args) -> int:
     from vibrofmu.fmus.build import build_all
 
+    folder = out_folder(args.out_dir)  # the user's arguments checked before any warning
     say_compiled_parts(natives=True)
-    for fmu in build_all(out_folder(args.out_dir)):
+    for fmu in build_all(folder):
         print(f"built {fmu}")
     return 0
 

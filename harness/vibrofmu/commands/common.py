@@ -167,22 +167,35 @@ def plant_fmu(given: str | None) -> Path:
 
 
 def built_plant(path: Path) -> Path:
-    """`path` (from plant_fmu), built first when it is the missing default."""
-    if not path.exists():
+    """`path` (from plant_fmu), built first when it is the missing default (or one an interrupted build of an
+    earlier version left half-done: archive.finished)."""
+    if not path.exists() or not _finished(path):
         from vibrofmu.fmus.build import build_plant
 
-        print(f"building {path} ...", file=sys.stderr)
+        print(f"building {path} ...{_half_done(path)}", file=sys.stderr)
         say_compiled_parts()
         build_plant(path.parent)
     return checked_fmu(path, PLANT_MODEL)
 
 
+def _finished(path: Path) -> bool:
+    from vibrofmu.fmus.archive import finished
+
+    return finished(path)
+
+
+def _half_done(path: Path) -> str:
+    """The note of a default FMU rebuilt because the one there is incomplete, or ""."""
+    return f" ({path} is incomplete: an interrupted build)" if path.exists() and not _finished(path) else ""
+
+
 def built_all(fmu_dir: Path, names=(PLANT_NAME, CONTROLLER_NAME, CLOSED_LOOP_NAME)) -> Path:
-    """`fmu_dir`, after building the three FMUs into it when one of `names` is missing there."""
-    if not all((fmu_dir / name).exists() for name in names):
+    """`fmu_dir`, after building the three FMUs into it when one of `names` is missing there (or half-done)."""
+    if not all((fmu_dir / name).exists() and _finished(fmu_dir / name) for name in names):
         from vibrofmu.fmus.build import build_all
 
-        print(f"building the FMUs into {fmu_dir} ...", file=sys.stderr)
+        half = "".join(dict.fromkeys(_half_done(fmu_dir / name) for name in names))
+        print(f"building the FMUs into {fmu_dir} ...{half}", file=sys.stderr)
         say_compiled_parts(natives=True)
         build_all(fmu_dir)
     return fmu_dir

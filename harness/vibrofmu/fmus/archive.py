@@ -5,10 +5,17 @@ Python's zipfile gives `writestr(name, data)` entries mode 0600 and no file type
 and pythonfmu's builder writes its own zip the same way; `unzip` then makes files only their owner can read,
 and tools that look at the type bits (a file or a folder?) see neither. `normalize_entries` rewrites the archive
 once it is complete: every entry keeps its name, bytes, date, compression and order; only its attributes change.
+
+Every archive the project builds (the FMUs, the SSPs, the container FMU) is assembled in a staging folder inside its
+destination folder (`staging`) and moved to its final name by `publish` (os.replace: atomic on one file system), so
+an interrupted build leaves the previous file or none, never half of one. `finished` tells an archive whose build
+ran to its end (normalize_entries is its last step) from one a build of an earlier version left half-done.
 """
 from __future__ import annotations
 
+import contextlib
 import os
+import shutil
 import tempfile
 import zipfile
 from pathlib import Path
@@ -48,3 +55,35 @@ def normalize_entries(path: Path) -> Path:
             Path(tmp).unlink(missing_ok=True)
             raise
     return path
+
+
+@contextlib.contextmanager
+def staging(destination: Path):
+    """Yield a fresh hidden folder inside `destination` (created if missing) to assemble archives in; `publish`
+    moves each finished one to its final name. The folder and whatever is left in it are removed when the block
+    ends, however it ends (an exception, Ctrl-C)."""
+    destination = Path(destination)
+    destination.mkdir(parents=True, exist_ok=True)
+    folder = Path(tempfile.mkdtemp(prefix=".building-", dir=destination))
+    try:
+        yield folder
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)
+
+
+def publish(staged: Path, final: Path) -> Path:
+    """Move the finished archive `staged` (in a staging folder of final's folder) to `final`, replacing the
+    previous file at once (os.replace); returns final."""
+    os.replace(staged, final)
+    return Path(final)
+
+
+def finished(path: Path) -> bool:
+    """True when `path` is a readable zip whose every entry has the attributes normalize_entries gives (the last
+    step of every build): an archive a build finished, not one an interrupted build of an earlier version left."""
+    try:
+        with zipfile.ZipFile(path) as archive:
+            infos = archive.infolist()
+    except (OSError, zipfile.BadZipFile):
+        return False
+    return bool(infos) and all(i.create_system == UNIX and i.external_attr == entry_attributes(i) for i in infos)

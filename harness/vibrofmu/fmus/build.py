@@ -21,7 +21,7 @@ from vibromodel.parameters import Scene
 from vibromodel.plant import DEFAULT_EXPERIMENT
 
 from vibrofmu import paths
-from vibrofmu.fmus.archive import normalize_entries
+from vibrofmu.fmus.archive import normalize_entries, publish, staging
 from vibrofmu.fmus.entry import importable, pythonfmu_entry
 from vibrofmu.fmus.fmu_variables import annotate
 from vibrofmu.fmus.kernel import compile_kernel
@@ -66,22 +66,24 @@ def build_fmu(slave: Path, out_dir: Path | None = None, extra_resources: tuple[P
     the status shim installed and the reference result packed. It declares state save/restore and serialization:
     the slaves save their whole state (slave_support.StatusSlave; pythonfmu alone saves registered variables only)."""
     out_dir = Path(out_dir) if out_dir is not None else paths.build_dir()
-    out_dir.mkdir(parents=True, exist_ok=True)
-    with tempfile.TemporaryDirectory() as tmp, importable(FMU_SRC):  # an entry script in front (vibrofmu.fmus.entry)
-        entry, implementation = pythonfmu_entry(slave, Path(tmp))
-        project_files = [paths.vibromodel_dir(), FMU_SRC / "slave_support.py", FMU_SRC / "fast_path.py",
-                         implementation, *extra_resources]
-        fmu = Path(FmuBuilder.build_FMU(entry, dest=out_dir, project_files=project_files,
-                                        canGetAndSetFMUstate=True, canSerializeFMUstate=True))
-    if compiled_parts() is None:
-        status = next(v for v in read_model_description(str(fmu)).modelVariables if v.name == "fmi_status")
-        install_status_shim(fmu, status.valueReference)
-        pack_python_env(fmu)  # the Python the FMU finds in a C host (resources/python_env.txt; read by the shim)
-    pack_reference(fmu)
-    annotate(fmu)
-    normalize_entries(fmu)  # pythonfmu's builder and zipfile.writestr leave entries 0600 without a file type
-    os.chmod(fmu, FMU_MODE)
-    return fmu
+    # assembled in a staging folder in out_dir, moved to its name when complete (archive.staging: an interrupted
+    # build leaves the previous FMU or none)
+    with staging(out_dir) as stage:
+        with tempfile.TemporaryDirectory() as tmp, importable(FMU_SRC):  # an entry script in front (fmus.entry)
+            entry, implementation = pythonfmu_entry(slave, Path(tmp))
+            project_files = [paths.vibromodel_dir(), FMU_SRC / "slave_support.py", FMU_SRC / "fast_path.py",
+                             implementation, *extra_resources]
+            fmu = Path(FmuBuilder.build_FMU(entry, dest=stage, project_files=project_files,
+                                            canGetAndSetFMUstate=True, canSerializeFMUstate=True))
+        if compiled_parts() is None:
+            status = next(v for v in read_model_description(str(fmu)).modelVariables if v.name == "fmi_status")
+            install_status_shim(fmu, status.valueReference)
+            pack_python_env(fmu)  # the Python the FMU finds in a C host (resources/python_env.txt; read by the shim)
+        pack_reference(fmu)
+        annotate(fmu)
+        normalize_entries(fmu)  # pythonfmu's builder and zipfile.writestr leave entries 0600 without a file type
+        os.chmod(fmu, FMU_MODE)
+        return publish(fmu, out_dir / fmu.name)
 
 
 def build_with_default_oafm(slave: Path, scene: Scene, out_dir: Path, extra_resources: tuple[Path, ...] = ()) -> Path:

@@ -22,7 +22,6 @@ import math
 import re
 import shutil
 import subprocess
-import tempfile
 import xml.etree.ElementTree as ET
 import zipfile
 from pathlib import Path
@@ -489,10 +488,12 @@ def build_native(pythonfmu_fmu: Path, out_dir: Path, win64: bool | None = None, 
     with zipfile.ZipFile(pythonfmu_fmu) as z:
         md = with_derivative_variables(z.read("modelDescription.xml"))
     model_id = ET.fromstring(md).find("CoSimulation").get("modelIdentifier")
+    from vibrofmu.fmus.archive import normalize_entries, publish, staging
+    from vibrofmu.fmus.refresult import pack_reference
+
     out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    fmu = out_dir / f"{model_id}.fmu"
-    with tempfile.TemporaryDirectory() as tmp:
+    with staging(out_dir) as tmp:  # assembled here, moved to its name when complete (archive.staging)
+        fmu = tmp / f"{model_id}.fmu"
         sources = Path(tmp) / "sources"
         c_files = write_sources(model_id, md, sources, fmi_version)
         linux64, win64_dir = ("linux64", "win64") if fmi_version == 2 else FMI3_PLATFORMS
@@ -508,13 +509,10 @@ def build_native(pythonfmu_fmu: Path, out_dir: Path, win64: bool | None = None, 
                 z.write(path, name)
             for path in sorted(sources.iterdir()):
                 z.write(path, f"sources/{path.name}")
-    if reference and fmi_version == 2:
-        from vibrofmu.fmus.refresult import pack_reference
-
-        pack_reference(fmu)
-    from vibrofmu.fmus.archive import normalize_entries
-
-    return normalize_entries(fmu)  # entries 0644, regular files
+        if reference and fmi_version == 2:
+            pack_reference(fmu)
+        normalize_entries(fmu)  # entries 0644, regular files
+        return publish(fmu, out_dir / fmu.name)
 
 
 def series_probe_library(out_dir: Path):

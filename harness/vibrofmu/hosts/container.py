@@ -20,7 +20,7 @@ import shutil
 import tempfile
 from pathlib import Path
 
-from vibrofmu.fmus.archive import normalize_entries
+from vibrofmu.fmus.archive import normalize_entries, publish, staging
 
 
 CONTAINER_NAME = "HertzEAClosedLoopContainer"
@@ -111,13 +111,12 @@ def build_container(fmu_dir: Path, out: Path, step: float = DEFAULT_STEP) -> Pat
                                       variableMappings=mappings)
         unzip_dir = Path(tmp) / "container"
         unzip_dir.mkdir()
-        out.parent.mkdir(parents=True, exist_ok=True)
-        if out.exists():
-            out.unlink()
-        create_container_fmu(configuration, unzip_dir, out.resolve())
-    normalize_entries(out)
-    out.chmod(0o644)
-    return out
+        with staging(out.parent) as stage:  # assembled beside out, moved to its name when complete
+            staged = stage / out.name
+            create_container_fmu(configuration, unzip_dir, staged.resolve())
+            normalize_entries(staged)
+            staged.chmod(0o644)
+            return publish(staged, out)
 
 
 def _float64(variable):

@@ -26,7 +26,7 @@ import tempfile
 import zipfile
 from pathlib import Path
 
-from vibrofmu.fmus.archive import normalize_entries
+from vibrofmu.fmus.archive import normalize_entries, publish, staging
 from vibrofmu.hosts.scene import (Connection, CosimScene, FmuSpec, SceneError, check_numbers, fmu_spec,
                                   read_scene)
 
@@ -120,14 +120,15 @@ def scene_to_ssd(scene: CosimScene, name: str = "closed_loop") -> str:
 def write_ssp(scene: CosimScene, path: Path, name: str = "closed_loop") -> Path:
     """Write the scene as an .ssp archive: the SSD and every FMU it uses (each file once)."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with zipfile.ZipFile(path, "w", compression=zipfile.ZIP_DEFLATED) as archive:
-        archive.writestr(SSD_NAME, scene_to_ssd(scene, name))
-        for fmu in dict.fromkeys(spec.path for spec in scene.fmus):
-            archive.write(fmu, f"resources/{fmu.name}")
-    normalize_entries(path)
-    path.chmod(0o644)
-    return path
+    with staging(path.parent) as stage:  # assembled beside path, moved to its name when complete
+        staged = stage / path.name
+        with zipfile.ZipFile(staged, "w", compression=zipfile.ZIP_DEFLATED) as archive:
+            archive.writestr(SSD_NAME, scene_to_ssd(scene, name))
+            for fmu in dict.fromkeys(spec.path for spec in scene.fmus):
+                archive.write(fmu, f"resources/{fmu.name}")
+        normalize_entries(staged)
+        staged.chmod(0o644)
+        return publish(staged, path)
 
 
 def load_ssp(path: Path | str, unzip_dir: Path | None = None) -> CosimScene:
