@@ -12,20 +12,24 @@ and `vibrofmu report` rewrites the text between them (the markers stay). Blocks:
              max |x - x_ref| for rtol 1e-4 ... 1e-12 and RK4 steps (deterministic on one machine).
 - ssp:       fmpy.ssp.simulate_ssp on the closed-loop .ssp against the project's master with FMPy's ordering
              (deterministic).
-- ssp_orderings: the same scene with each ordering against the monolithic FMU, per H (deterministic, but a
-             minute of runs: not part of --check).
+- ssp_orderings: the same scene with each ordering against the monolithic FMU, per H (deterministic: a minute of
+             runs).
 - container: the container FMU against the monolithic closed-loop FMU and the master, per H.
 - oafm:      the paper's OAFM formulas and our harmonic basis against the reference, from an oafm summary.json.
 - stability: slow flow against shooting and the FMU sweeps, from a stability summary.json.
 - ranges:    the valid range of every FMU parameter and input, from vibromodel.parameters.RULES (the table the
              FMUs and the command line check against; deterministic).
 - speed:     ratios from the summaries of `bench`, `oafm` and `stability` found in the --from folders
-             (bench.json, summary.json); timings, so never compared by --check.
+             (bench.json, summary.json); timings and instruction counts, which depend on the machine (the block
+             says so), so never compared by --check.
 
 Without --from, the oafm, stability and speed blocks come from fresh runs of `vibrofmu oafm`, `stability` and
 `bench` (quick: oafm study to order 3, `bench --quick`). `--check` regenerates the deterministic blocks
-(accuracy, ssp, container, ranges) and compares them with the documents' text: exit 1 naming the block that differs.
-`--quick` also skips the container's H = 0.01.
+(accuracy, ssp, ssp_orderings, container, ranges; with --from also oafm and stability from the given summaries) and
+compares them with the documents' text: exit 1 naming the block that differs; it prints the blocks it does not
+compare and why. `--quick` also skips the container's H = 0.01. `--quick` and `--from` never rewrite the
+documents: they write the documents with their blocks to a folder (--out, default out/report); only a full run
+rewrites them in place.
 """
 from __future__ import annotations
 
@@ -43,7 +47,7 @@ OPEN = re.compile(r"<!-- report:([a-z_]+) -->")
 CLOSE = re.compile(r"<!-- /report:([a-z_]+) -->")
 NAMES = ("machine", "accuracy", "ssp", "ssp_orderings", "container", "oafm", "stability", "speed", "ranges")
 FROM_SUMMARIES = ("oafm", "stability", "speed")  # filled from the --from folders only
-DETERMINISTIC = ("accuracy", "ssp", "container", "ranges")
+DETERMINISTIC = ("accuracy", "ssp", "ssp_orderings", "container", "ranges")
 SOURCE_FILES = {"oafm": "an oafm summary.json", "stability": "a stability summary.json",
                 "speed": "a bench.json or an oafm/stability summary.json"}  # what a FROM_SUMMARIES block reads
 ACCURACY_TAUS = (10.0, 25.0, 50.0, 100.0, 200.0)

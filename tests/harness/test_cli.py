@@ -19,6 +19,15 @@ from vibrofmu.commands.closed_loop import study_cell as _study_cell
 from vibrofmu.commands.common import HelpFormatter
 
 
+def stand_in_fmu(path: Path) -> Path:
+    """A finished archive (vibrofmu.fmus.archive.finished) standing in for an FMU: no build is started for it."""
+    from vibrofmu.fmus.archive import normalize_entries
+
+    with zipfile.ZipFile(path, "w") as z:
+        z.writestr("modelDescription.xml", "<fmiModelDescription/>")
+    return normalize_entries(path)
+
+
 def test_simulate_with_compare_writes_all_results(tmp_path, plant_fmu, capsys):
     from vibrofmu.analyses import simulate
 
@@ -323,7 +332,7 @@ def test_report_keeps_an_edit_made_while_it_ran(tmp_path, monkeypatch, capsys):
     fmus = tmp_path / "fmus"
     fmus.mkdir()
     for name in (PLANT_NAME, CONTROLLER_NAME, CLOSED_LOOP_NAME):
-        (fmus / name).write_bytes(b"")
+        stand_in_fmu(fmus / name)
     edit = "\nA line the user wrote while the report ran.\n"
 
     def generate(names, *args):
@@ -357,7 +366,7 @@ def test_report_leaves_the_blocks_of_a_failed_study_alone(monkeypatch, tmp_path,
     fmus = tmp_path / "fmus"
     fmus.mkdir()
     for name in (PLANT_NAME, CONTROLLER_NAME, CLOSED_LOOP_NAME):
-        (fmus / name).write_bytes(b"")
+        stand_in_fmu(fmus / name)
     monkeypatch.setattr(oafm, "COMMAND", replace(oafm.COMMAND, run=lambda args: 0))
     monkeypatch.setattr(stability, "COMMAND", replace(stability.COMMAND, run=lambda args: 0))
     monkeypatch.setattr(bench, "COMMAND", replace(bench.COMMAND, run=lambda args: 1))

@@ -16,13 +16,23 @@ def options(p):
     p.add_argument("--quick", action="store_true", help="container comparison at H = 0.1, 0.05 only; oafm study to "
                                                         "order 3; bench --quick (default: off: the full runs)")
     p.add_argument("--check", action="store_true",
-                   help="re-compute the deterministic blocks (accuracy, ssp, container, ranges) and compare with the "
-                        "documents; "
-                        "write nothing (default: off)")
+                   help="re-compute the deterministic blocks (accuracy, ssp, ssp_orderings, container, ranges; with "
+                        "--from also oafm and stability) and compare with the documents; write nothing (default: off)")
+    p.add_argument("--out", default=None, metavar="DIR",
+                   help="write the documents with the regenerated blocks to DIR (README.md, docs/*.md) instead of "
+                        f"rewriting them; --quick and --from always do (default: {QUICK_OUT} with --quick or --from, "
+                        "else the documents under --root are rewritten)")
     p.add_argument("--only", nargs="+", choices=NAMES, default=None, help="regenerate these blocks only (default: all)")
     p.add_argument("--fmu-dir", default=None, help="where the FMUs are (default: build/; built when missing)")
     p.add_argument("--root", default=str(REPO_ROOT), help="the repository whose README.md and docs/ are "
                                                           "rewritten (default: this checkout)")
+
+
+QUICK_OUT = "out/report"  # where --quick and --from write their documents: never the published ones
+# the blocks --check does not compare, and why (printed by every --check)
+NOT_CHECKED = {"machine": "where and when the numbers were taken", "speed": "timings and instruction counts: they "
+               "depend on the machine (CPU, compiler, libm) and its load"}
+FROM_CHECKED = ("oafm", "stability")  # compared by --check when --from gives their summaries
 
 
 # The studies each generated block reads: a block is rewritten only when every one of them completed (the speed block
@@ -84,7 +94,20 @@ def run(args) -> int:
     except ReportError as error:
         print(f"error: {error}", file=sys.stderr)
         return 2
-    names = DETERMINISTIC if args.check else (args.only or NAMES)
+    out = None  # the folder the documents are written to, None: rewritten in place (a full run only)
+    if not args.check and (args.out is not None or args.quick or sources):
+        from vibrofmu.commands.common import UserError, writable_folder
+
+        try:
+            out = writable_folder(args.out or QUICK_OUT)
+        except UserError as error:
+            print(f"error: {error}", file=sys.stderr)
+            return 2
+        if any((out / doc.relative_to(root)).resolve() == doc.resolve() for doc in texts):
+            print(f"error: --out {out}: that would rewrite the documents under {root} (give another folder)",
+                  file=sys.stderr)
+            return 2
+    names = (DETERMINISTIC + (FROM_CHECKED if sources else ())) if args.check else (args.only or NAMES)
     if sources and args.only:  # a block asked for by name whose summary is in no --from folder: say so now
         missing = [name for name in names if name in FROM_SUMMARIES and summary_block(name, sources) is None]
         if missing:
@@ -115,6 +138,9 @@ def run(args) -> int:
             return 1
         checked = sorted({name for blocks in found.values() for name in blocks if name in bodies})
         print(f"report --check: blocks {', '.join(checked) or 'none'} match a fresh run")
+        skipped = {**NOT_CHECKED, **({} if sources else {name: f"needs the summary of a full `vibrofmu {name}` run: "
+                                                             "give its folder with --from" for name in FROM_CHECKED})}
+        print("report --check: not compared: " + "; ".join(f"{name} ({why})" for name, why in skipped.items()))
         return 0
     from vibrofmu.output.export import atomic
 
@@ -123,6 +149,18 @@ def run(args) -> int:
     # the documents as they are now, not as they were when the run started: an edit made while the studies ran
     # (minutes) is kept, only the generated blocks change
     texts = {doc: doc.read_text() for doc in texts}
+    if out is not None:  # --quick, --from or --out: every document, the blocks regenerated, into out
+        targets = {doc: out / doc.relative_to(root) for doc in texts}
+        with contextlib.ExitStack() as stack:
+            for doc, text in texts.items():
+                targets[doc].parent.mkdir(parents=True, exist_ok=True)
+                stack.enter_context(atomic(targets[doc])).write_text(replace_blocks(text, bodies))
+        for doc, target in targets.items():
+            regenerated = [n for n in found[doc] if n in bodies]
+            print(f"wrote {target}" + (f": {', '.join(regenerated)}" if regenerated else ""))
+        print(f"report: the documents under {root} are unchanged (--quick and --from write to a folder: only a full "
+              "run rewrites them)" if args.quick or sources else f"report: the documents under {root} are unchanged")
+        return 1 if failed else 0
     changed = {doc: new for doc, text in texts.items() if (new := replace_blocks(text, bodies)) != text}
     with contextlib.ExitStack() as stack:
         for doc, new in changed.items():

@@ -443,8 +443,8 @@ def ladder_lines(ladder: dict) -> list[str]:
     info = ladder.get("instructions") or {}
     if info.get("measured"):
         intervals = info["intervals"]
-        lines.append("  instructions per output of doStep + getReal(x), C host under callgrind (deterministic), ratio "
-                     "to exact f0:")
+        lines.append("  instructions per output of doStep + getReal(x), C host under callgrind (repeatable on one "
+                     "machine; the counts depend on its compiler, libm and CPU), ratio to exact f0:")
         lines.append("  rung            " + "".join(f"interval {i:g}".rjust(24) for i in intervals))
         for rung in ladder["rungs"]:
             cells = "".join(f"{c['instructions_per_output']:12.4g} {c['over_exact_f0']:8.3g}x".rjust(24)

@@ -1,0 +1,88 @@
+"""`vibrofmu report --quick` and `--from` never rewrite the published documents: they write the documents with the
+regenerated blocks to a folder (--out, default out/report); `--out` onto the documents themselves is refused in one
+line; `--check` names the blocks it does not compare. The blocks are stand-ins (report.generate patched) and the
+FMUs stand-in archives: no FMU runs here."""
+from __future__ import annotations
+
+import hashlib
+import shutil
+from pathlib import Path
+
+import pytest
+from test_cli import stand_in_fmu
+
+from vibrofmu.cli import main
+from vibrofmu.paths import CLOSED_LOOP_NAME, CONTROLLER_NAME, PLANT_NAME
+
+CHECKOUT = Path(__file__).resolve().parents[2]
+BLOCK = "<!-- report:ranges -->\ngenerated ranges table\n<!-- /report:ranges -->"
+
+
+def digests(folder: Path) -> dict:
+    return {str(p.relative_to(folder)): hashlib.sha256(p.read_bytes()).hexdigest()
+            for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+@pytest.fixture
+def stand_ins(tmp_path, monkeypatch):
+    """(a copy of the documents, a folder of stand-in FMUs); report.generate gives the ranges block only."""
+    import vibrofmu.report as report
+
+    root = tmp_path / "root"
+    shutil.copytree(CHECKOUT / "docs", root / "docs")
+    shutil.copy(CHECKOUT / "README.md", root / "README.md")
+    fmus = tmp_path / "fmus"
+    fmus.mkdir()
+    for name in (PLANT_NAME, CONTROLLER_NAME, CLOSED_LOOP_NAME):
+        stand_in_fmu(fmus / name)
+    monkeypatch.setattr(report, "generate", lambda names, *args: {"ranges": "generated ranges table\n"})
+    monkeypatch.chdir(tmp_path)
+    return root, fmus
+
+
+@pytest.mark.parametrize("extra", [["--quick"], ["--from", "{summaries}"]], ids=["quick", "from"])
+def test_quick_and_from_write_a_folder_not_the_documents(stand_ins, tmp_path, capsys, extra):
+    root, fmus = stand_ins
+    (tmp_path / "summaries").mkdir()
+    extra = [arg.format(summaries=tmp_path / "summaries") for arg in extra]
+    before = digests(root)
+    assert main(["report", "--only", "ranges", *extra, "--root", str(root), "--fmu-dir", str(fmus)]) == 0
+    assert digests(root) == before  # the published documents untouched
+    out = tmp_path / "out" / "report"  # the default folder, under the working folder
+    assert sorted(digests(out)) == ["README.md", *sorted(f"docs/{p.name}" for p in (root / "docs").glob("*.md"))]
+    assert BLOCK in (out / "docs" / "robustness.md").read_text()
+    assert "wrote out/report/docs/robustness.md: ranges" in capsys.readouterr().out  # the folder as given
+
+
+def test_out_onto_the_documents_is_refused(stand_ins, capsys):
+    root, fmus = stand_ins
+    before = digests(root)
+    assert main(["report", "--quick", "--out", str(root), "--root", str(root), "--fmu-dir", str(fmus)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: --out") and "would rewrite the documents" in err and len(err.splitlines()) == 1
+    assert digests(root) == before
+
+
+def test_a_full_run_still_rewrites_the_documents(stand_ins, capsys):
+    root, fmus = stand_ins
+    assert main(["report", "--only", "ranges", "--root", str(root), "--fmu-dir", str(fmus)]) == 0
+    assert BLOCK in (root / "docs" / "robustness.md").read_text()
+    assert not (Path.cwd() / "out").exists()
+
+
+def test_check_names_the_blocks_it_does_not_compare(stand_ins, monkeypatch, capsys):
+    import vibrofmu.report as report
+
+    root, fmus = stand_ins
+    robustness = root / "docs" / "robustness.md"
+    text = robustness.read_text()
+    start, end = text.index("<!-- report:ranges -->"), text.index("<!-- /report:ranges -->")
+    robustness.write_text(text[:start] + BLOCK + text[end + len("<!-- /report:ranges -->"):])
+    before = digests(root)
+    monkeypatch.setattr(report, "DETERMINISTIC", ("ranges",))
+    assert main(["report", "--check", "--root", str(root), "--fmu-dir", str(fmus)]) == 0
+    out = capsys.readouterr().out
+    assert "blocks ranges match a fresh run" in out
+    assert "not compared: machine (" in out and "speed (timings and instruction counts" in out
+    assert "oafm (needs the summary of a full `vibrofmu oafm` run" in out
+    assert digests(root) == before
