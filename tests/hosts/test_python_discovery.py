@@ -184,7 +184,7 @@ def test_python_host_without_scipy_imports_it_from_the_recorded_site(plant_fmu, 
               "import json; print(json.dumps({'x': r['x'].tolist(), 'lines': lines,\n"
               "                               'scipy': importlib.util.find_spec('scipy') is not None}))\n")
     proc = subprocess.run([sys.executable, "-S", "-c", script, str(site), str(plant_fmu)], capture_output=True,
-                          text=True, timeout=120)
+                          text=True, timeout=600)
     assert proc.returncode == 0, proc.stderr
     out = json.loads(proc.stdout.splitlines()[-1])
     assert out["scipy"] and out["lines"] == [], out["lines"]

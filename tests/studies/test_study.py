@@ -27,6 +27,9 @@ BIN = Path(sys.executable).parent
 # mu = 0.02: the transient decays 5x slower than at the paper's mu = 0.1, so a case takes ~0.1 s and a
 # study of 24 is still running when the test interrupts it or kills a worker
 SLOW_CASES = ["--set", "mu=0.02", "--set", "samples=24"]
+# waits for a study's first part file, or its exit after SIGINT: only end a run that hangs (a loaded 2-core machine
+# stretches seconds to minutes); the tests check what happened (exit code, rows, files), not how fast
+WAIT_S = 900
 
 
 @pytest.fixture(scope="module")
@@ -116,7 +119,7 @@ def test_a_killed_worker_loses_and_duplicates_no_row(tmp_path, cluster):
     killed = {}
 
     def kill_when_running():
-        deadline = time.monotonic() + 120
+        deadline = time.monotonic() + WAIT_S
         while time.monotonic() < deadline:
             parts = list((out / "parts").glob("*.parquet")) if (out / "parts").exists() else []
             if parts:  # the pilot is written: batches are running on both workers
@@ -144,12 +147,12 @@ def test_ctrl_c_leaves_a_readable_parquet_file(tmp_path):
                                 "--out", str(out), "--set", "mu=0.01", "--set", "samples=200"],
                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
     try:
-        deadline = time.monotonic() + 120
+        deadline = time.monotonic() + WAIT_S
         while not (out / "parts").exists() or not list((out / "parts").glob("*.parquet")):
             assert process.poll() is None and time.monotonic() < deadline, process.stderr.read() if process.poll() is not None else "timeout"
             time.sleep(0.05)
         os.killpg(process.pid, signal.SIGINT)  # as Ctrl-C in a terminal: the command and its worker processes
-        _, err = process.communicate(timeout=120)
+        _, err = process.communicate(timeout=WAIT_S)
     finally:
         if process.poll() is None:
             process.kill()
