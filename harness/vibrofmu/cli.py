@@ -28,13 +28,25 @@ def make_parser(selected=None) -> argparse.ArgumentParser:
     """The parser; `selected` names the sub-commands whose options are defined (None: all). The options import
     the model (choices, defaults), so `vibrofmu --help` defines none."""
     parser = Parser(prog="vibrofmu", description=__doc__.split("\n\n")[0])
+    parser.add_argument("--version", action="version", version=f"vibrofmu {version()}",
+                        help="print the version of vibrofmu and exit")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for command in commands():
         p = sub.add_parser(command.name, help=command.help, description=command.help)
-        p.set_defaults(func=command.run)
+        p.set_command(command)
         if selected is None or command.name in selected:
             command.options(p)
     return parser
+
+
+def version() -> str:
+    """The installed package's version (its metadata: pyproject.toml's version)."""
+    from importlib import metadata
+
+    try:
+        return metadata.version("vibrofmu")
+    except metadata.PackageNotFoundError:  # run from a checkout that pip never installed
+        return "(not installed: no package metadata)"
 
 
 def main(argv=None) -> int:

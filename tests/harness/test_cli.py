@@ -146,6 +146,40 @@ MORE_MISTAKES = [
     (["nosuch"], "invalid choice: 'nosuch'"),
     ([], "required: COMMAND"),
 ]
+# Options the run would ignore (given the others): refused by name before anything runs, instead of a run that
+# silently leaves them out (commands.common.check_given and each command's `unused` rule).
+IGNORED = [
+    (["closed-loop", "--scene", "/nonexist.toml", "--out", "o"], "--scene /nonexist.toml: only --mode cosim reads it"),
+    (["closed-loop", "--no-study", "--out", "o"], "--no-study: only --mode cosim reads it"),
+    (["closed-loop", "--mode", "cosim", "--reference", "oafm", "--out", "o"], "--reference oafm: only --mode monolithic"),
+    (["simulate", "--solver", "rk4", "--rtol", "1e-6", "--out", "o"], "--rtol 1e-06: --solver rk4 (fixed-step RK4) has "
+                                                                      "no tolerance"),
+    (["simulate", "--fidelity", "exact", "--set", "R=2", "--set", "oafm_order=3", "--out", "o"],
+     "--set oafm_order=3: --fidelity exact does not read it"),
+    (["simulate", "--fidelity", "analytic", "--solver", "rk4", "--out", "o"], "--solver rk4: --fidelity analytic"),
+    (["simulate", "--fidelity", "averaged", "--solver", "adaptive", "--out", "o"], "--solver adaptive: --fidelity "
+                                                                                   "averaged"),
+    (["simulate", "--fidelity", "analytic", "--rtol", "1e-6", "--out", "o"], "--rtol 1e-06: --fidelity analytic"),
+    (["simulate", "--fidelity", "analytic", "--max-step", "0.5", "--out", "o"], "--max-step 0.5: --fidelity analytic"),
+    (["simulate", "--set", "R=2", "--set", "R=3", "--out", "o"], "--set R given twice (R=2, then R=3)"),
+    (["stability", "--set", "mu=0.1", "--set", " mu=0.2", "--out", "o"], "--set mu given twice"),
+    (["simulate", "--rtol", "1e-6", "--rtol", "1e-7", "--out", "o"], "--rtol given twice (1e-06, then 1e-07)"),
+    (["simulate", "--fidelity", "exact", "--fidelity", "analytic", "--out", "o"], "--fidelity given twice"),
+    (["oafm", "--no-fmu", "--fmu", "{other}", "--out", "o"], "--no-fmu skips the FMU check"),
+    (["oafm", "--basis", "paper", "--order", "4", "--out", "o"], "--order 4: --basis paper has no order"),
+    (["oafm", "--basis", "paper", "--fmu", "{other}", "--out", "o"], "with --basis paper there is no FMU check"),
+    (["stability", "--no-fmu", "--sweep-points", "5", "--out", "o"], "--sweep-points 5: --no-fmu skips the FMU sweeps"),
+    (["bench", "--ladder-only", "--repeats", "2", "--out", "o"], "--repeats 2: --ladder-only runs no work-precision"),
+    (["continuation", "--bench", "--param", "mu", "--out", "o"], "--param mu: --bench continues its own branch"),
+    (["continuation", "--bench", "--points", "5", "--out", "o"], "--points 5: --bench continues its own branch"),
+    (["continuation", "--param", "omega", "--from", "1", "--to", "2", "--delta", "0.1", "--out", "o"],
+     "--delta 0.1: only --confirm runs the FMU"),
+    (["diagram", "--param", "omega", "--from", "1", "--to", "2", "--workers", "2", "--scheduler", "tcp://127.0.0.1:1",
+      "--out", "o"], "--workers 2: --scheduler tcp://127.0.0.1:1 runs on that scheduler's workers"),
+    (["study", "basins", "--scheduler", "tcp://127.0.0.1:1", "--workers", "2", "--out", "o"], "--workers 2: --scheduler"),
+    (["study", "basins", "--engine", "core", "--fmu", "{other}", "--out", "o"], "--engine core runs the compiled kernel"),
+    (["report", "--check", "--only", "accuracy", "--root", "{dir}"], "--only accuracy: --check compares every"),
+]
 
 
 def _filled(argv, fragment, tmp_path, other):
@@ -177,6 +211,45 @@ def test_more_mistakes_in_process(argv, fragment, tmp_path, not_plant, monkeypat
     monkeypatch.chdir(tmp_path)
     code = main(argv)
     _assert_one_line(code, capsys.readouterr().err, fragment, tmp_path)
+
+
+@pytest.mark.parametrize("argv, fragment", IGNORED, ids=[" ".join(a) for a, _ in IGNORED])
+def test_an_option_the_run_would_ignore_is_refused(argv, fragment, tmp_path, not_plant, monkeypatch, capsys):
+    argv, fragment = _filled(argv, fragment, tmp_path, not_plant)
+    monkeypatch.chdir(tmp_path)
+    code = main(argv)
+    _assert_one_line(code, capsys.readouterr().err, fragment, tmp_path)
+
+
+def test_the_ignored_option_of_the_issue_runs_as_a_user_runs_it(tmp_path):
+    """`closed-loop --scene` in the default (monolithic) mode ran without reading it and exited 0."""
+    proc = run_cli(["closed-loop", "--scene", "nonexist.toml", "--out", "o"], tmp_path)
+    _assert_one_line(proc.returncode, proc.stderr, "--scene nonexist.toml: only --mode cosim reads it", tmp_path)
+
+
+def test_an_option_given_once_or_used_is_accepted():
+    """The check refuses only what the run ignores: the same options in the mode or with the settings that read
+    them pass it (the rule of each command, without running the command)."""
+    from vibrofmu.commands.common import check_given
+
+    for argv in (["closed-loop", "--mode", "cosim", "--scene", "s.toml", "--no-study", "--out", "o"],
+                 ["closed-loop", "--reference", "oafm", "--out", "o"],
+                 ["simulate", "--solver", "adaptive", "--rtol", "1e-6", "--max-step", "0.5", "--out", "o"],
+                 ["simulate", "--solver", "rk4", "--max-step", "0.05", "--out", "o"],
+                 ["simulate", "--fidelity", "averaged", "--rtol", "1e-6", "--max-step", "2", "--out", "o"],
+                 ["simulate", "--fidelity", "analytic", "--set", "oafm_order=3", "--set", "R=2", "--out", "o"],
+                 ["continuation", "--bench", "--chart", "0.1", "0.2", "3", "--points", "5", "--out", "o"],
+                 ["oafm", "--basis", "paper", "--no-fmu", "--out", "o"],
+                 ["study", "basins", "--quick", "--quick", "--set", "sigma=0.1", "--set", "R=2", "--out", "o"]):
+        args = make_parser({argv[0]}).parse_args(argv)
+        check_given(args)  # no UserError
+
+
+def test_version_prints_the_package_version(tmp_path):
+    from importlib import metadata
+
+    proc = run_cli(["--version"], tmp_path)
+    assert proc.returncode == 0 and proc.stdout == f"vibrofmu {metadata.version('vibrofmu')}\n", proc.stderr
 
 
 def test_importing_the_cli_imports_no_heavy_module():

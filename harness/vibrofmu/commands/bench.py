@@ -1,7 +1,7 @@
 """`vibrofmu bench`: work-precision of every fidelity, solver and setting; the speed-accuracy ladder."""
 import sys
 
-from vibrofmu.commands.common import FMU_HELP, Command, built_plant, count, out_folder, plant_fmu
+from vibrofmu.commands.common import FMU_HELP, Command, Unused, built_plant, count, out_folder, plant_fmu
 
 
 def options(p):
@@ -46,5 +46,10 @@ def run(args) -> int:
     return 0
 
 
+def unused(args) -> list[Unused]:
+    return [Unused("repeats", "--ladder-only runs no work-precision cases (the ladder's rounds are --ladder-rounds); "
+                              "leave it out")] if args.ladder_only else []
+
+
 COMMAND = Command("bench", "work-precision: error vs wall time of every fidelity, solver and setting, beside "
-                           "solve_ivp and the compiled floor; the speed targets", options, run)
+                           "solve_ivp and the compiled floor; the speed targets", options, run, unused)

@@ -3,8 +3,8 @@ import sys
 from pathlib import Path
 
 from vibrofmu import paths
-from vibrofmu.commands.common import (CLOSED_LOOP_NAME, Command, UserError, built_all, checked_fmu, out_folder,
-                                      positive, progress_printer)
+from vibrofmu.commands.common import (CLOSED_LOOP_NAME, Command, Unused, UserError, built_all, checked_fmu,
+                                      out_folder, positive, progress_printer)
 
 
 def options(p):
@@ -97,5 +97,14 @@ def study_cell(row: dict) -> str:
     return f"H={row['H']:g}: {row['max_abs_error_x']:.2e}{order}"
 
 
+def unused(args) -> list[Unused]:
+    """The options of the other mode."""
+    if args.mode == "cosim":
+        return [Unused("reference", "only --mode monolithic reads it (a co-simulation's reference is the scene "
+                                    "file's reference FMU); leave it out")]
+    return [Unused(dest, "only --mode cosim reads it; add --mode cosim or leave it out")
+            for dest in ("scene", "no_study")]
+
+
 COMMAND = Command("closed-loop", "adaptive Lyapunov controller on the plant: monolithic FMU or co-simulation",
-                  options, run)
+                  options, run, unused)

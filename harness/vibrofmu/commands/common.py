@@ -28,14 +28,29 @@ from vibrofmu.paths import CLOSED_LOOP_NAME, CONTROLLER_NAME, PLANT_MODEL, PLANT
 
 
 @dataclass(frozen=True)
+class Unused:
+    """An option given on the command line that the run would not read: `dest` (its argparse dest), `why` (the
+    option's values or the other options that make it unused, and what to do). `harmless`: ignoring it changes
+    nothing the user asked for (a `warning:` line); otherwise the command stops with `error:` and exit code 2."""
+
+    dest: str
+    why: str
+    harmless: bool = False
+    shown: str | None = None  # how the message names it (default: the option and its value as given)
+
+
+@dataclass(frozen=True)
 class Command:
     """One sub-command: `name` on the command line, `help` its one-line description, `options(parser)` defines
-    its options (called only when the command is on the command line), `run(args) -> exit code`."""
+    its options (called only when the command is on the command line), `run(args) -> exit code`;
+    `unused(args) -> [Unused]`: the options the run would ignore given the others (checked by `run` for the
+    options given on the command line only, before the command runs)."""
 
     name: str
     help: str
     options: Callable[[argparse.ArgumentParser], None]
     run: Callable[[argparse.Namespace], int]
+    unused: Callable[[argparse.Namespace], list[Unused]] | None = None
 
 
 class UserError(Exception):
@@ -54,24 +69,95 @@ class HelpFormatter(argparse.HelpFormatter):
         return f"{text} (default: %(default)s)"
 
 
+GIVEN = "_given"  # Namespace attribute: [(action, option string, value)] of every option on the command line
+UNUSED = "_unused"  # Namespace attribute: the command's Command.unused (Parser.set_command)
+
+
+def _recording(action_class):
+    """`action_class` that also appends (itself, the option string typed, the value) to the namespace's GIVEN list:
+    what the command line gave, as opposed to a default (argparse does not tell them apart)."""
+
+    class Recording(action_class):
+        def __call__(self, parser, namespace, values, option_string=None):
+            if option_string is not None:  # (a positional with nargs="?" is called with its default too)
+                vars(namespace).setdefault(GIVEN, []).append((self, option_string, values))
+            super().__call__(parser, namespace, values, option_string)
+
+    Recording.__name__ = action_class.__name__
+    return Recording
+
+
 class Parser(argparse.ArgumentParser):
-    """argparse with one-line errors (exit code 2) and HelpFormatter; sub-commands use the same class."""
+    """argparse with one-line errors (exit code 2) and HelpFormatter; sub-commands use the same class. Every
+    option records that it was given (GIVEN), for check_given."""
 
     def __init__(self, *args, **kwargs):
         kwargs.setdefault("formatter_class", HelpFormatter)
         super().__init__(*args, **kwargs)
+        for name, action in (("store", argparse._StoreAction), (None, argparse._StoreAction),
+                             ("store_const", argparse._StoreConstAction), ("store_true", argparse._StoreTrueAction),
+                             ("store_false", argparse._StoreFalseAction), ("append", argparse._AppendAction)):
+            self.register("action", name, _recording(action))
 
     def error(self, message):
         self.exit(2, f"error: {self.prog}: {message} (see {self.prog} --help)\n")
 
+    def set_command(self, command: "Command") -> None:
+        """This parser runs `command`: its run (func) and its unused options' rule."""
+        self.set_defaults(func=command.run, **{UNUSED: command.unused})
+
+
+def _shown(value) -> str:
+    """An option's value as the command line gave it (after its type: 1e-06, [0.9, 1.1, 11.0] -> 0.9 1.1 11)."""
+    if isinstance(value, (list, tuple)):
+        return " ".join(_shown(v) for v in value)
+    return f"{value:g}" if isinstance(value, float) else str(value)
+
+
+def check_given(args: argparse.Namespace) -> None:
+    """Refuse (UserError) an option the run would ignore: given twice (the last value wins in argparse), a --set
+    NAME given twice, or one the command's `unused` rule names; print a `warning:` line for a harmless one."""
+    given = getattr(args, GIVEN, None) or []
+    first: dict[str, tuple[str, object]] = {}
+    for action, option, value in given:
+        if isinstance(action, argparse._AppendAction) or action.nargs == 0:  # repeatable, or a flag said twice
+            continue
+        if action.dest in first:
+            raise UserError(f"{option} given twice ({_shown(first[action.dest][1])}, then {_shown(value)}): only "
+                            f"the last would be used; give it once")
+        first[action.dest] = (option, value)
+    names: dict[str, str] = {}
+    for action, _, item in given:
+        if action.dest == "set" and isinstance(item, str):
+            name = item.partition("=")[0].strip()
+            if name in names:
+                raise UserError(f"--set {name} given twice ({names[name]}, then {item}): only the last would be "
+                                f"used; give each name once")
+            names[name] = item
+    rule = getattr(args, UNUSED, None)
+    if rule is None or not given:
+        return
+    options = {action.dest: (option, value, action.nargs == 0) for action, option, value in given}
+    for unused in rule(args):
+        if unused.dest not in options:
+            continue
+        option, value, flag = options[unused.dest]
+        shown = unused.shown or (option if flag else f"{option} {_shown(value)}")
+        if unused.harmless:
+            print(f"warning: {shown}: {unused.why}", file=sys.stderr)
+        else:
+            raise UserError(f"{shown}: {unused.why}")
+
 
 def run(command: Callable[[argparse.Namespace], int], args: argparse.Namespace) -> int:
-    """Run one command: a user mistake is one line `error: ...` and exit code 2. Ctrl-C is not caught here: it
-    stops the whole `vibrofmu` process (cli.main answers it), also when one command runs another (invoke).
-    An output folder the command created (out_folder) and left empty is removed when the command fails."""
+    """Run one command: a user mistake is one line `error: ...` and exit code 2 (an option the run would ignore
+    included: check_given). Ctrl-C is not caught here: it stops the whole `vibrofmu` process (cli.main answers
+    it), also when one command runs another (invoke). An output folder the command created (out_folder) and left
+    empty is removed when the command fails."""
     created = len(_CREATED)
     code = 2
     try:
+        check_given(args)
         code = command(args)
         return code
     except (UserError, ParameterError) as error:
@@ -102,6 +188,7 @@ def invoke(command: Command, argv: list[str]) -> int:
     """Parse `argv` as the options of `command` and run it (another command's use of a command, e.g. report)."""
     parser = Parser(prog=f"vibrofmu {command.name}")
     command.options(parser)
+    parser.set_command(command)
     try:
         args = parser.parse_args(argv)
     except SystemExit as stop:
@@ -270,6 +357,12 @@ def parse_set(items: list[str], names=None) -> dict[str, float]:
     if names is None:
         Scene().with_values(**values)  # unknown names fail here (ParameterError)
     return values
+
+
+def scheduler_workers(args) -> list[Unused]:
+    """--workers starts a local cluster; with --scheduler the scheduler's workers run (study, diagram)."""
+    return [Unused("workers", f"--scheduler {args.scheduler} runs on that scheduler's workers; leave --workers "
+                              "out")] if args.scheduler else []
 
 
 def progress_printer(label: str):

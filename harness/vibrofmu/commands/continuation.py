@@ -3,8 +3,8 @@ with folds, period doublings, Neimark-Sacker points and grazing located (docs/co
 import math
 import sys
 
-from vibrofmu.commands.common import (FMU_HELP, SET_HELP, Command, UserError, built_plant, count, out_folder,
-                                      parse_set, plant_fmu, positive)
+from vibrofmu.commands.common import (FMU_HELP, SET_HELP, Command, Unused, UserError, built_plant, count,
+                                      out_folder, parse_set, plant_fmu, positive)
 
 PARAMETERS = ("omega", "Delta", "mu", "alpha", "gamma")  # analyses.continuation.PARAMETERS (checked by a test)
 BENCH_SCENE = {"mu": 0.05, "Delta": 0.1, "R": 3.0}  # the benchmark's branch: omega 0.6 -> 1.2, two folds, grazing
@@ -153,6 +153,17 @@ def run(args) -> int:
     return status
 
 
+def unused(args) -> list[Unused]:
+    """--bench fixes the branch (parameter, range, points); --delta and --fmu serve --confirm only."""
+    found = [Unused(dest, f"--bench continues its own branch (omega 0.6 -> 1.2, {BENCH_POINTS} points); leave it "
+                          "out") for dest in ("param", "start", "stop") if args.bench]
+    if args.bench and not args.chart:  # (--chart reads --points)
+        found.append(Unused("points", f"--bench continues its own branch ({BENCH_POINTS} points); leave it out"))
+    if not args.confirm:
+        found += [Unused(dest, "only --confirm runs the FMU; add --confirm or leave it out") for dest in ("delta", "fmu")]
+    return found
+
+
 COMMAND = Command("continuation", "periodic orbits continued in one parameter through contact loss: folds, "
                                   "period doubling, grazing; the (omega, Delta) chart of the averaging's validity",
-                  options, run)
+                  options, run, unused)

@@ -2,8 +2,8 @@
 states) and the largest Lyapunov exponent along it, serial or on Dask (analyses/diagram.py)."""
 import sys
 
-from vibrofmu.commands.common import (SET_HELP, Command, UserError, count, non_negative_int, out_folder,
-                                      parse_set)
+from vibrofmu.commands.common import (SET_HELP, Command, Unused, UserError, count, non_negative_int, out_folder,
+                                      parse_set, scheduler_workers)
 
 
 def options(p):
@@ -130,5 +130,9 @@ def run(args) -> int:
     return 0
 
 
+def unused(args) -> list[Unused]:
+    return scheduler_workers(args)
+
+
 COMMAND = Command("diagram", "bifurcation diagram by simulation (up and down sweeps) and the largest Lyapunov "
-                             "exponent along it, serial or on Dask", options, run)
+                             "exponent along it, serial or on Dask", options, run, unused)

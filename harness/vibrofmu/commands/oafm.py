@@ -1,6 +1,6 @@
 """`vibrofmu oafm`: the OAFM analytic solution fitted, against the reference, and the FMU's fidelity 4."""
-from vibrofmu.commands.common import (FMU_HELP, SET_HELP, Command, built_plant, count, failed, non_negative,
-                                      non_negative_int, out_folder, parse_set, plant_fmu, positive)
+from vibrofmu.commands.common import (FMU_HELP, SET_HELP, Command, Unused, built_plant, count, failed,
+                                      non_negative, non_negative_int, out_folder, parse_set, plant_fmu, positive)
 
 
 def options(p):
@@ -35,7 +35,7 @@ def run(args) -> int:
     settings = OafmSettings(basis=args.basis, order=args.order, tau_star=args.tau_star, tau_end=args.tau_end,
                             grid=Grid(panel=args.panel, nodes=args.nodes))
     orders = range(1, args.study_max_order + 1) if args.study_max_order else ()
-    fmu = None if args.no_fmu else plant_fmu(args.fmu)
+    fmu = None if args.no_fmu or args.basis != "harmonic" else plant_fmu(args.fmu)
     out = out_folder(args.out)
     summary = run_oafm(scene, settings, out, study_orders=orders, fmu=fmu and built_plant(fmu))
     for domain in summary["domains"]:
@@ -56,4 +56,18 @@ def run(args) -> int:
     return 0
 
 
-COMMAND = Command("oafm", "OAFM analytic solution: fit, compare with the reference, reproduce the paper", options, run)
+def unused(args) -> list[Unused]:
+    """--fmu without the FMU check (--no-fmu, or the paper's basis, which the FMU's fidelity 4 does not fit); the
+    harmonic basis's order with the paper's basis."""
+    found = []
+    if args.no_fmu:
+        found.append(Unused("fmu", "--no-fmu skips the FMU check; leave one of them out"))
+    if args.basis != "harmonic":
+        found += [Unused("order", f"--basis {args.basis} has no order (only the harmonic basis does); leave it out"),
+                  Unused("fmu", f"the FMU's fidelity 4 fits the harmonic basis: with --basis {args.basis} there is "
+                                "no FMU check; leave it out")]
+    return found
+
+
+COMMAND = Command("oafm", "OAFM analytic solution: fit, compare with the reference, reproduce the paper", options, run,
+                  unused)

@@ -5,7 +5,7 @@ from pathlib import Path
 
 from vibrofmu import paths
 from vibrofmu.commands import bench, oafm, stability
-from vibrofmu.commands.common import Command, built_all, invoke
+from vibrofmu.commands.common import Command, Unused, built_all, invoke
 from vibrofmu.report import NAMES, REPO_ROOT  # a light module: the standard library only at its top
 
 
@@ -172,5 +172,10 @@ def run(args) -> int:
     return 1 if failed else 0  # the other blocks were written; a failed study still fails the report
 
 
+def unused(args) -> list[Unused]:
+    """--check compares the deterministic blocks, whichever --only names."""
+    return [Unused("only", "--check compares every deterministic block; leave --only out")] if args.check else []
+
+
 COMMAND = Command("report", "regenerate the numbers in README.md and docs/*.md (blocks between "
-                            "<!-- report:NAME --> markers)", options, run)
+                            "<!-- report:NAME --> markers)", options, run, unused)

@@ -1,6 +1,7 @@
 """`vibrofmu simulate`: the plant FMU under FMPy, exported, optionally against the reference."""
-from vibrofmu.commands.common import (FMU_HELP, SIMULATE_SET_HELP, Command, UserError, built_plant, non_negative,
-                                      out_folder, plant_fmu, positive, progress_printer, split_set, writable_folder)
+from vibrofmu.commands.common import (FMU_HELP, OAFM_SETTINGS, SIMULATE_SET_HELP, Command, Unused, UserError,
+                                      built_plant, non_negative, out_folder, plant_fmu, positive, progress_printer,
+                                      split_set, writable_folder)
 
 
 def options(p):
@@ -71,4 +72,33 @@ def run(args) -> int:
     return 0
 
 
-COMMAND = Command("simulate", "run the plant FMU under FMPy and export the results", options, run)
+def unused(args) -> list[Unused]:
+    """The settings the fidelity and solver asked for do not read (fidelities and solvers registries)."""
+    from vibromodel import fidelities, solvers
+
+    from vibrofmu.analyses.simulate import FIDELITIES, SOLVERS
+
+    if args.fidelity not in FIDELITIES:  # a fidelity chosen at run time: no setting is known to be unused
+        return []
+    level = fidelities.entry(FIDELITIES[args.fidelity])
+    solver = solvers.solver_entry(SOLVERS[args.solver])
+    where = f"--fidelity {args.fidelity} ({level.name}) does not read it; leave it out"
+    found = []
+    if not level.integrated:  # an open-loop level: no solver steps Eq. 3 or 7
+        found.append(Unused("solver", f"--fidelity {args.fidelity} ({level.name}) does not read it (only the "
+                                      "fidelities that integrate the equation of motion do); leave it out"))
+    if not level.uses_rtol:
+        found.append(Unused("rtol", where))
+        # the levels that integrate nothing (no rtol) have no step either
+        found.append(Unused("max_step", where))
+    elif level.integrated and "rtol" not in dict(solver.parameters):
+        found.append(Unused("rtol", f"--solver {args.solver} ({solver.description}) has no tolerance: --max-step "
+                                    f"sets its step; leave --rtol out"))
+    if not level.oafm_settings:
+        found += [Unused("set", f"--fidelity {args.fidelity} does not read it (only --fidelity analytic fits the "
+                                f"OAFM solution); leave it out", shown=f"--set {item}")
+                  for item in args.set if item.partition("=")[0].strip() in OAFM_SETTINGS]
+    return found
+
+
+COMMAND = Command("simulate", "run the plant FMU under FMPy and export the results", options, run, unused)

@@ -2,8 +2,8 @@
 import math
 import sys
 
-from vibrofmu.commands.common import (FMU_HELP, SET_HELP, Command, UserError, built_plant, count, failed, out_folder,
-                                      parse_set, plant_fmu, positive)
+from vibrofmu.commands.common import (FMU_HELP, SET_HELP, Command, Unused, UserError, built_plant, count, failed,
+                                      out_folder, parse_set, plant_fmu, positive)
 
 
 def options(p):
@@ -78,4 +78,10 @@ def run(args) -> int:
     return 0
 
 
-COMMAND = Command("stability", "steady vibrations vs omega: slow flow, shooting/Floquet, FMU sweeps", options, run)
+def unused(args) -> list[Unused]:
+    return [Unused(dest, "--no-fmu skips the FMU sweeps; leave one of them out") for dest in ("fmu", "sweep_points")
+            if args.no_fmu]
+
+
+COMMAND = Command("stability", "steady vibrations vs omega: slow flow, shooting/Floquet, FMU sweeps", options, run,
+                  unused)

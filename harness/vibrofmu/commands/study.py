@@ -1,7 +1,7 @@
 """`vibrofmu study KIND`: response map, basins or Monte Carlo on Dask (vibrofmu.study)."""
 import sys
 
-from vibrofmu.commands.common import FMU_HELP, Command, plant_fmu, writable_folder
+from vibrofmu.commands.common import FMU_HELP, Command, Unused, plant_fmu, scheduler_workers, writable_folder
 
 
 def options(p):
@@ -40,5 +40,13 @@ def run(args) -> int:
         return 2
 
 
+def unused(args) -> list[Unused]:
+    """--workers with --scheduler; --fmu with --engine core (a spec file's engine is checked by study.run)."""
+    found = scheduler_workers(args)
+    if args.engine == "core":
+        found.append(Unused("fmu", "--engine core runs the compiled kernel, no FMU; leave it out"))
+    return found
+
+
 COMMAND = Command("study", "response map, basins or Monte Carlo on Dask; Parquet results, plots, and agreement "
-                           "with the averaged prediction", options, run)
+                           "with the averaged prediction", options, run, unused)
