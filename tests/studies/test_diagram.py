@@ -187,6 +187,8 @@ def test_command_writes_the_tables_and_plots(tmp_path, capsys):
         assert abs(s + 0.1) <= 2 * BENETTIN_ERROR_PER_PERIOD / (2 * math.pi / 0.85)
     assert (out / "diagram.png").stat().st_size > 0 and (out / "lyapunov_convergence.png").stat().st_size > 0
     assert len(pq.read_table(out / "convergence.parquet")) == 4 * 6
+    wrote = next(line for line in capsys.readouterr().out.splitlines() if line.startswith("wrote "))
+    assert sorted(wrote.removeprefix(f"wrote {out}/").split(", ")) == sorted(p.name for p in out.iterdir())
 
 
 @pytest.mark.slow

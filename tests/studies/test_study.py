@@ -216,3 +216,64 @@ def test_unreachable_scheduler_gives_one_line_and_exit_2(tmp_path, capsys):
                  "--out", str(tmp_path / "out")]) == 2
     err = [line for line in capsys.readouterr().err.strip().splitlines() if line.startswith("error")]
     assert len(err) == 1 and "cannot reach the Dask scheduler" in err[0]
+    assert not (tmp_path / "out").exists()  # no spec.json and empty parts/ left behind
+
+
+class _FakeClient:
+    """A client of a scheduler (no local cluster): enough for study.run to reach execute."""
+
+    def scheduler_info(self, n_workers=-1):
+        return {"workers": {}}
+
+    def register_plugin(self, plugin):
+        pass
+
+    def close(self, timeout=None):
+        pass
+
+
+def _interrupted_study(monkeypatch, tmp_path, *extra):
+    """`study basins` on a (fake) scheduler, interrupted before any case is back: (exit code, out folder)."""
+    from vibrofmu.study import scheduling
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(scheduling, "connect", lambda scheduler, workers: (_FakeClient(), None))
+    monkeypatch.setattr(scheduling, "execute", interrupted)
+    out = tmp_path / "out"
+    return main(["study", "basins", "--quick", "--engine", "core", "--scheduler", "tcp://127.0.0.1:1",
+                 "--out", str(out), *extra]), out
+
+
+def test_an_interrupt_before_any_case_names_what_exists_and_lists_what_it_wrote(monkeypatch, tmp_path, capsys):
+    code, out = _interrupted_study(monkeypatch, tmp_path)
+    assert code == 130
+    captured = capsys.readouterr()
+    line = next(line for line in captured.err.splitlines() if line.startswith("interrupted: "))
+    assert line.startswith("interrupted: 0/") and f"cases in {out};" in line  # not the results.parquet it has not
+    wrote = [line for line in captured.out.splitlines() if line.startswith("wrote ")]
+    assert len(wrote) == 1
+    names = wrote[0].removeprefix(f"wrote {out}/").split(", ")
+    assert sorted(names) == ["spec.json", "summary.json"] == sorted(p.name for p in out.iterdir() if p.is_file())
+
+
+def test_an_interrupted_resume_leaves_no_plot_of_an_earlier_run(monkeypatch, tmp_path, capsys):
+    (tmp_path / "out").mkdir()
+    (tmp_path / "out" / "basins.png").write_bytes(b"an earlier run's plot")
+    code, out = _interrupted_study(monkeypatch, tmp_path, "--resume")
+    assert code == 130 and not (out / "basins.png").exists()
+
+
+def test_end_children_ends_a_spawned_child(tmp_path):
+    """Before os._exit, study.run ends every process it started (a worker being spawned printed an EOFError
+    traceback once its parent was gone)."""
+    import multiprocessing
+
+    from vibrofmu.study import _end_children
+
+    child = multiprocessing.get_context("spawn").Process(target=time.sleep, args=(60,))
+    child.start()
+    _end_children()
+    child.join(timeout=30)
+    assert child.exitcode == -signal.SIGKILL

@@ -91,7 +91,22 @@ def test_byte_flips_never_change_a_value_silently(stored, tmp_path, capsys):
     assert tally["silently_changed"] == 0
     assert tally["set_aside"] > 0  # the flips were seen (a flip in padding or unused metadata may be harmless)
     for line in capsys.readouterr().err.splitlines():
-        assert line.startswith("warning: ") and "set aside as" in line and "recomputed" in line
+        assert line.startswith("warning: ") and "set aside as" in line
+        # a results file's cases are recomputed; spec.json holds no cases: it is written anew
+        assert ("spec is written in its place" if f"/{SPEC} is damaged" in line else "recomputed") in line, line
+
+
+def test_a_damaged_spec_is_written_anew_and_no_case_is_said_to_be_recomputed(stored, tmp_path, capsys):
+    folder, record, truth = stored
+    copy = tmp_path / "out"
+    shutil.copytree(folder, copy)
+    (copy / SPEC).write_text("{not json")
+    found, store = loaded(copy, record)
+    assert sorted(found) == sorted(truth)  # every case kept: nothing to recompute
+    assert json.loads((copy / SPEC).read_text()) == record
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and f"{copy / SPEC} is damaged" in err[0] and "spec is written in its place" in err[0]
+    assert "recomputed" not in err[0]
 
 
 @pytest.mark.slow

@@ -126,7 +126,9 @@ def run(args) -> int:
     if pulled:
         print(f"note: {pulled} points ended in pull-in (no samples; the next point restarted from the scene's "
               f"start state)", file=sys.stderr)
-    print(f"wrote {out}/diagram.parquet, lyapunov.parquet, summary.json, diagram.png")
+    written = ["diagram.parquet", "lyapunov.parquet"] + (["convergence.parquet"] if args.lyapunov_periods else []) + \
+        ["summary.json", "diagram.png"] + (["lyapunov_convergence.png"] if args.lyapunov_periods else [])
+    print(f"wrote {out}/" + ", ".join(written))
     return 0
 
 

@@ -58,6 +58,28 @@ def _end_workers(cluster) -> None:
                 os.kill(pid, signal.SIGKILL)
 
 
+def _end_children() -> None:
+    """End every process this one started with multiprocessing (the local cluster's workers, also one still being
+    spawned, which no nanny knows the pid of yet) before os._exit: a spawned child whose parent is gone while it reads
+    its start-up data prints a multiprocessing traceback (EOFError) on the terminal after our last line."""
+    import multiprocessing
+
+    for child in multiprocessing.active_children():
+        if child.pid:
+            with contextlib.suppress(OSError):
+                os.kill(child.pid, signal.SIGKILL)
+
+
+PLOTS = ("monte_carlo.png", "basins.png", "response_map.png")  # plots.plot's files, one per kind
+
+
+def _remove_stale(out: Path) -> None:
+    """Remove the plots and cusp test an earlier run left in DIR: they described that run's results; this run
+    writes its own when it completes (an interrupted or failed run leaves none, rather than an old one)."""
+    for name in (*PLOTS, "cusp_test.json"):
+        (out / name).unlink(missing_ok=True)
+
+
 def _end_resource_tracker() -> None:
     """End multiprocessing's resource tracker (our child process) before os._exit: the workers' semaphores it
     would report are gone with the process anyway (Linux unlinks them at creation)."""
@@ -88,10 +110,15 @@ def run(args) -> int:
     cases = make_cases(spec)
     if not cases:
         raise SpecError("empty study: no cases")
+    if args.fmu is not None and spec.engine != "fmu":
+        raise SpecError(f"--fmu {args.fmu}: the study's engine is {spec.engine!r} (the compiled kernel, no FMU); "
+                        "leave --fmu out")
     out = Path(args.out)
     store = Store(out)
+    new_folder = not out.exists()
     store.prepare({"digest": spec.digest(), "spec": spec.as_dict(), "cases": len(cases)}, args.resume)
     resumed = len(store.written)
+    _remove_stale(out)
 
     fmu_digest = plugin = None
     if spec.engine == "fmu":
@@ -108,11 +135,16 @@ def run(args) -> int:
     started = time.perf_counter()
     try:
         client, cluster = connect(args.scheduler, args.workers)
+    except SpecError:  # no scheduler there: nothing of the study is left behind (a new folder goes again)
+        if new_folder:
+            store.discard()
+        raise
     except KeyboardInterrupt:
         print("interrupted while starting the cluster: nothing computed", file=sys.stderr)
         if not args.scheduler:  # a local cluster half started: its workers end with this process (see the end)
             sys.stdout.flush()
             sys.stderr.flush()
+            _end_children()
             _end_resource_tracker()
             os._exit(130)
         return 130
@@ -155,21 +187,27 @@ def run(args) -> int:
                "scheduler": args.scheduler or "LocalCluster", "spec": spec.as_dict(), "run": run}
     if run:
         summary["projection_64_workers"] = analysis.projection(run, 64)
+    written = [out / "spec.json"] + ([out / "results.parquet"] if (out / "results.parquet").exists() else [])
+    if tests is not None:
+        written.append(out / "cusp_test.json")
     if not interrupted and table is not None:
         result = analysis.analyse(spec, table, tests)
         summary.update(result["summary"])
-        plots.plot(spec, table, result, out)
+        written += plots.plot(spec, table, result, out)
     export.write_json(out / "summary.json", summary)
+    written.append(out / "summary.json")
     print(analysis.headline(summary), file=sys.stderr)
+    print(f"wrote {out}/" + ", ".join(path.name for path in written))
     if interrupted:
-        print(f"interrupted: {done}/{len(cases)} cases in {out / 'results.parquet'}; continue with --resume",
-              file=sys.stderr)
+        where = out / "results.parquet" if (out / "results.parquet").exists() else out
+        print(f"interrupted: {done}/{len(cases)} cases in {where}; continue with --resume", file=sys.stderr)
         if cluster is not None:
             # everything is on disk (each file written whole and renamed); the local cluster's scheduler and nannies
             # live in this process and its workers are ended: closing them gracefully took 5-15 s more (timeouts,
             # then Dask's exit handlers), so the process ends here, within the few seconds a Ctrl-C may take
             sys.stdout.flush()
             sys.stderr.flush()
+            _end_children()  # (a worker still being spawned would print a traceback)
             _end_resource_tracker()  # (else it lists the workers' semaphores as "leaked", a dozen lines)
             os._exit(130)
         return 130

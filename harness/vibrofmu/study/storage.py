@@ -122,12 +122,23 @@ class Store:
         os.replace(tmp, spec_path)
         self.written = set(self.load_cases())
 
+    def discard(self) -> None:
+        """Remove what prepare wrote into a folder it made (spec.json, the empty parts/, the folder): a study that
+        cannot start leaves nothing behind."""
+        (self.dir / SPEC).unlink(missing_ok=True)
+        for folder in (self.parts, self.dir):
+            try:
+                folder.rmdir()  # only an empty folder goes
+            except OSError:
+                pass
+
     def files(self) -> list[Path]:
         results = self.dir / RESULTS
         return ([results] if results.exists() else []) + sorted(self.parts.glob("*.parquet"))
 
     def _set_aside(self, path: Path, reason: str) -> None:
-        """Rename a damaged file to NAME.corrupt (a free name) and say so in one line."""
+        """Rename a damaged file to NAME.corrupt (a free name) and say so in one line: a results file's cases are
+        recomputed; spec.json is written anew (every results file carries the spec digest it was written for)."""
         target = path.with_name(path.name + SET_ASIDE)
         k = 1
         while target.exists():
@@ -135,8 +146,9 @@ class Store:
             target = path.with_name(f"{path.name}{SET_ASIDE}{k}")
         os.replace(path, target)
         self.set_aside.append(target)
-        print(f"warning: {path} is damaged: {reason}; set aside as {target.name}, its cases are recomputed "
-              "(--resume)", file=sys.stderr)
+        then = ("this study's spec is written in its place (each results file is checked against it)"
+                if path.name == SPEC else "its cases are recomputed (--resume)")
+        print(f"warning: {path} is damaged: {reason}; set aside as {target.name}, {then}", file=sys.stderr)
 
     def tables(self) -> list[pa.Table]:
         """The rows of every stored file that passes read_checked; the others are set aside."""
