@@ -179,6 +179,7 @@ IGNORED = [
     (["study", "basins", "--scheduler", "tcp://127.0.0.1:1", "--workers", "2", "--out", "o"], "--workers 2: --scheduler"),
     (["study", "basins", "--engine", "core", "--fmu", "{other}", "--out", "o"], "--engine core runs the compiled kernel"),
     (["report", "--check", "--only", "accuracy", "--root", "{dir}"], "--only accuracy: --check compares every"),
+    (["report", "--check", "--out", "{dir}", "--root", "{dir}"], "--check writes nothing"),
 ]
 
 

@@ -173,8 +173,9 @@ def run(args) -> int:
 
 
 def unused(args) -> list[Unused]:
-    """--check compares the deterministic blocks, whichever --only names."""
-    return [Unused("only", "--check compares every deterministic block; leave --only out")] if args.check else []
+    """--check compares the deterministic blocks, whichever --only names, and writes nothing."""
+    return [Unused("only", "--check compares every deterministic block; leave --only out"),
+            Unused("out", "--check writes nothing; leave --out out")] if args.check else []
 
 
 COMMAND = Command("report", "regenerate the numbers in README.md and docs/*.md (blocks between "
