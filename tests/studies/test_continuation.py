@@ -227,9 +227,47 @@ def test_cli_writes_a_branch_anyone_can_read(tmp_path, capsys):
     assert set(cont.COLUMNS) <= set(table.column_names)
     events = [e for e in table.column("event").to_pylist() if e]
     assert events == ["period-doubling"]
-    assert json.loads(table.schema.metadata[b"vibrofmu"])["param"] == "omega"
+    meta = json.loads(table.schema.metadata[b"vibrofmu"])
+    assert meta["param"] == "omega" and "omega" not in meta["scene"]  # continued, not a fixed value
+    assert meta["continued"]["param"] == "omega"
+    assert meta["continued"]["from"] == 1.96 and meta["continued"]["to"] >= 1.965
     assert (tmp_path / "branch.png").stat().st_size > 10000
     assert "period-doubling at omega = 1.9627" in capsys.readouterr().out
+
+
+def test_a_branch_stopped_by_its_budget_says_where(tmp_path, capsys, monkeypatch):
+    # a budget of 3 points (40 points per range sets the step: 3 points cannot cross omega 1.90 .. 2.05)
+    branch = cont.branch
+
+    def budget_of_three(*args, **kwargs):
+        return branch(*args, **{**kwargs, "max_points": 3})
+
+    monkeypatch.setattr(cont, "branch", budget_of_three)
+    code = main(["continuation", "--param", "omega", "--from", "1.90", "--to", "2.05", "--points", "40",
+                 "--no-doubling", "--set", "mu=0.01", "--set", "Delta=0.6", "--set", "R=3", "--out", str(tmp_path)])
+    assert code == 0
+    table = pq.read_table(tmp_path / "branch.parquet")
+    values = table.column("value").to_pylist()
+    assert table.num_rows == 3 and values[-1] < 2.05
+    out = capsys.readouterr().out
+    assert f"branch stopped at 3 points at omega = {values[-1]:.8g} before omega = 2.05; raise --points" in out, out
+    assert json.loads(table.schema.metadata[b"vibrofmu"])["stop_reasons"][0].startswith("stopped at 3 points")
+
+
+@pytest.mark.slow
+def test_the_delta_branch_reaches_its_end_with_both_folds_and_the_grazing():
+    # the documented Delta scene with default settings (200 points): the step grows where the branch winds in
+    # the state, so the branch is not starved before the lower fold and reaches Delta = 0.5
+    scene = Scene(mu=0.05, R=2.0, omega=0.8, beta=0.0, gamma=0.0)
+    result = cont.branch(scene, "Delta", 0.002, 0.5, double=False)
+    assert result.stop_reason == "reached the end of the range"
+    assert result.points[-1].p >= 0.5
+    events = [pt.event for pt in result.events()]
+    assert events.count("fold") == 2 and "grazing" in events
+    # beyond the lower fold the orbit has lost contact and is stable until the period doubling
+    fold_low = min(pt.p for pt in result.events() if pt.event == "fold")
+    after = [pt for pt in result.points if pt.p > fold_low and pt.x_min < cont.CONTACT_EDGE and pt.stable]
+    assert after and all(pt.crossings == 2 for pt in after)
 
 
 @pytest.mark.parametrize("argv, fragment", [

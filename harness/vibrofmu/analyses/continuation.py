@@ -43,6 +43,10 @@ from vibrofmu.analyses.shooting import NEWTON_TOL, RTOL, TWO_PI, PeriodicModel, 
 
 PARAMETERS = sh.PARAMETERS  # what a branch can be continued in
 EVENTS = ("fold", "period-doubling", "neimark-sacker", "grazing")
+# the longest arclength step, in units of the step that advances the parameter by max_step: where the branch
+# runs in the state (a fold, a winding stretch through contact loss) the step may grow to 8 x max_step, bounded
+# by the 0.2 rad turning criterion; 8 keeps >= 20 points on a loop of unit size at the default 200 points
+STRETCH = 8.0
 CONTACT_EDGE = -1.5  # 1 + 2x/3 = 0
 
 
@@ -209,9 +213,19 @@ def continue_from(problem: Problem, start: Point, p_stop: float, *, scale: float
                   direction: np.ndarray | None = None, p_bounds: tuple[float, float] | None = None,
                   progress: Callable[[int, Point], None] | None = None) -> tuple[list[Point], str]:
     """Pseudo-arclength continuation from `start` until p passes p_stop (or leaves p_bounds, or max_points),
-    locating every event between consecutive points (shooting.continue_branch's step control).
+    locating every event between consecutive points. Step control: a step is accepted if the corrector converges
+    in <= 5 iterations and the tangent turns by less than 0.2 rad; it grows by 1.5 after an easy step (<= 2
+    iterations), halves on rejection, and is capped by step_cap (max_step in the parameter, STRETCH x max_step
+    in the arclength at most).
     Returns (points, stop reason)."""
     cont = Continuation(problem, scale)
+
+    def step_cap(t):
+        """max_step in the parameter: the arclength step is max_step / |t_p|, at most STRETCH max_step where the
+        branch runs in the state (near folds, winding through contact loss): a straight branch keeps its points
+        per range, a winding one is not starved of them (the turning and Newton criteria still bound the step)."""
+        return max_step / max(abs(float(t[2])), 1.0 / STRETCH)
+
     sign = 1.0 if p_stop >= start.p else -1.0
     reference = direction if direction is not None else np.array([0.0, 0.0, sign])
     u = cont.u_of(start)
@@ -228,7 +242,7 @@ def continue_from(problem: Problem, start: Point, p_stop: float, *, scale: float
             reason = "left the parameter range"
             break
         if len(points) >= max_points:
-            reason = f"stopped at {max_points} points"
+            reason = f"stopped at {len(points)} points at {problem.param} = {last.p:.8g}"
             break
         try:
             point, iterations = cont.correct(u + h * t, t)
@@ -258,7 +272,7 @@ def continue_from(problem: Problem, start: Point, p_stop: float, *, scale: float
         if progress is not None:
             progress(len(points) - 1, point)
         u, t = cont.u_of(point), t_new
-        h = min(max_step, 1.5 * h) if iterations <= 2 else h
+        h = min(step_cap(t), 1.5 * h) if iterations <= 2 else min(step_cap(t), h)
     return points, reason
 
 
@@ -290,9 +304,10 @@ def branch(scene: Scene, param: str, lo: float, hi: float, *, points: int = 200,
            progress: Callable[[int, Point], None] | None = None) -> Branch:
     """The branch of T-periodic orbits from p = lo (started from the linear response, or start_guess) to
     p = hi, with events located; at each period doubling the doubled branch is switched to and continued
-    (inside [lo, hi], at most `points` points). The step is sized so that the branch has about `points`
-    points when it is straight: max_step = 1.5 / points of the scaled arclength (range = 1); a branch that
-    winds (folds, large amplitudes) takes more, up to max_points (default 4 points)."""
+    (inside [lo, hi]). The step is sized so that the branch has about `points` points when it is straight:
+    max_step = 1.5 / points of the scaled parameter (range = 1); where the branch runs in the state the
+    arclength step grows up to STRETCH x max_step (continue_from); each branch stops at max_points (default
+    4 points) with the stop reason saying so."""
     t0, c0 = time.perf_counter(), time.process_time()
     problem = Problem(scene, param, rtol=rtol, tol=tol)
     scale = abs(hi - lo)
@@ -306,7 +321,8 @@ def branch(scene: Scene, param: str, lo: float, hi: float, *, points: int = 200,
             try:
                 first = switch_to_doubled(problem, pd, scale)
                 doubled_points, why = continue_from(replace(problem, periods=2), first, hi, scale=scale,
-                                                    step=max_step / 2, max_step=max_step, max_points=points,
+                                                    step=max_step / 2, max_step=max_step,
+                                                    max_points=max_points or 4 * points,
                                                     direction=first.tangent, p_bounds=(min(lo, hi), max(lo, hi)))
                 result.doubled.append(Branch(replace(problem, periods=2), doubled_points, stop_reason=why))
             except ShootingError as error:

@@ -21,10 +21,17 @@ EVENT_MARKERS = {"fold": ("s", "tab:red"), "period-doubling": ("D", "tab:purple"
 
 
 def write_branch(path: Path, result: cont.Branch) -> None:
-    """branch.parquet: one row per orbit (continuation.COLUMNS); the scene and the parameter in the schema's
-    metadata (key b'vibrofmu', JSON)."""
+    """branch.parquet: one row per orbit (continuation.COLUMNS); in the schema's metadata (key b'vibrofmu', JSON)
+    the fixed parameters ("scene", without the continued one), the continued one ("param", and "continued":
+    its name and range as run) and why each branch stopped."""
     table = pa.Table.from_pylist(cont.rows(result))
-    meta = {"scene": result.problem.scene.as_dict(), "param": result.problem.param,
+    param = result.problem.param
+    values = [pt.p for pt in result.points]
+    fixed = {k: v for k, v in result.problem.scene.as_dict().items() if k != param}
+    meta = {"scene": fixed, "param": param,
+            "continued": {"param": param, "from": values[0] if values else None,
+                          "to": values[-1] if values else None},
+            "stop_reasons": [br.stop_reason for br in [result, *result.doubled]],
             "columns": "see docs/continuation.md, branch.parquet"}
     table = table.replace_schema_metadata({b"vibrofmu": json.dumps(meta).encode()})
     write_parquet(table, path)
@@ -71,6 +78,14 @@ def plot_branch(path: Path, result: cont.Branch, title: str) -> None:
                 axes[0].plot(pt.p, (pt.x_max - pt.x_min) / 2, marker, color=c, ms=7, mfc="none", mew=1.6,
                              label=pt.event if show else None)
                 axes[1].plot(pt.p, pt.x_min, marker, color=c, ms=7, mfc="none", mew=1.6)
+        if br.stop_reason and not br.stop_reason.startswith(("reached", "left")):
+            last = pts[-1]
+            label = "branch stopped short (point budget or step)"
+            show = label not in seen
+            seen.add(label)
+            axes[0].plot(last.p, (last.x_max - last.x_min) / 2, "X", color="tab:red", ms=10,
+                         label=label if show else None)
+            axes[1].plot(last.p, last.x_min, "X", color="tab:red", ms=10)
     axes[1].axhline(cont.CONTACT_EDGE, color="tab:orange", lw=0.8, ls=":")
     axes[1].annotate("contact edge 1 + 2x/3 = 0", (0.01, cont.CONTACT_EDGE), xycoords=("axes fraction", "data"),
                      fontsize=8, color="tab:orange", xytext=(0, 3), textcoords="offset points")

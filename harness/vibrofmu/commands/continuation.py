@@ -121,6 +121,9 @@ def run(args) -> int:
     for index, br in enumerate(result.doubled, 1):
         print(f"doubled branch {index}: {len(br.points)} orbits of period 2T ({br.stop_reason})"
               + "".join(f"; {pt.event} at {pt.p:.8g}" for pt in br.events()))
+    for name, br in [("branch", result)] + [(f"doubled branch {i}", b) for i, b in enumerate(result.doubled, 1)]:
+        if br.stop_reason.startswith("stopped at"):
+            print(f"warning: {name} {br.stop_reason} before {args.param} = {args.stop:g}; raise --points")
     status = 0
     if args.confirm:
         delta = args.delta or 0.01 * abs(args.stop - args.start)
