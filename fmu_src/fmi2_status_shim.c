@@ -276,7 +276,7 @@ static void detach(Shim *s) { memset(&s->fast, 0, sizeof s->fast); }
 /* How many doSteps of instance c the fast path has done (tests and benchmarks check that it is used). */
 EXPORT unsigned long long vibro_fast_path_steps(fmi2Component c)
 {
-    return c == NULL ? 0 : ((const Shim *)c)->fast_steps;
+    return fmi2_live(c, FMI2_LIVE_INSTANCE) ? ((const Shim *)c)->fast_steps : 0;
 }
 
 /* Called by the slave (ctypes) while the shim forwards a call to it; outside such a call it does nothing.
@@ -424,8 +424,13 @@ static int before_stop(const Shim *s, fmi2Real t, fmi2Real h)
     return !s->stop_defined || t + h <= s->stop_time + 1e-9 * (scale > 1.0 ? scale : 1.0);
 }
 
-/* Guards.  S: the shim pointer; NULL components give fmi2Error. */
-#define SHIM(c) Shim *S = (Shim *)(c); if (S == NULL) return fmi2Error
+/* Guards.  S: the shim pointer; a pointer that is not a live instance of this binary (NULL, freed, another FMU's)
+   gives fmi2Error and is never dereferenced (fmi2_live). */
+#define SHIM(c) Shim *S = (Shim *)(c); if (!fmi2_live(S, FMI2_LIVE_INSTANCE)) return fmi2Error
+/* The pointer arguments of call F: an array of n values (or a result pointer) that is NULL is refused (logged),
+   before pythonfmu would dereference it. */
+#define ARRAYS(F, n, a, b) FMI2_ARRAYS(&S->fmi, #F, n, a, b)
+#define POINTER(F, p) do { if (FMI2_NULL_POINTER(&S->fmi, #F, p) != fmi2OK) return fmi2Error; } while (0)
 /* The error mode's guard of call F (the state table, fmi2_calls.h): after a fatal fmi2Fatal; in the error state
    fmi2Error and "call F not allowed after an error" unless the table allows F there. */
 #define ALLOWED(F)                                                                           \
@@ -512,13 +517,20 @@ EXPORT fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, 
         free(s);
         return NULL;
     }
+    if (!fmi2_live_add(s, FMI2_LIVE_INSTANCE)) {
+        fmi2_layer_log(&s->fmi, fmi2Error, "fmi2Instantiate: out of memory");
+        inner.FreeInstance(s->inner);
+        fmi2_layer_free(&s->fmi);
+        free(s);
+        return NULL;
+    }
     return s;
 }
 
 EXPORT void fmi2FreeInstance(fmi2Component c)
 {
     Shim *S = (Shim *)c;
-    if (S == NULL) return;
+    if (!fmi2_live_remove(S, FMI2_LIVE_INSTANCE)) return; /* NULL, freed already, or not this binary's */
     if (S->fmi.mode == FMI2_MODE_FATAL) {
         /* pythonfmu's destructor would DECREF already-released Python objects
            again (use-after-free): leak the inner instance, and keep this
@@ -536,6 +548,7 @@ EXPORT void fmi2FreeInstance(fmi2Component c)
 EXPORT fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingOn, size_t n, const fmi2String cats[])
 {
     SHIM(c); ALLOWED(fmi2SetDebugLogging);
+    if (FMI2_NULL_ARRAY(&S->fmi, "fmi2SetDebugLogging", cats, n) != fmi2OK) return fmi2Error;
     fmi2_layer_set_logging(&S->fmi, loggingOn, n, cats);
     return fmi2OK;
 }
@@ -582,7 +595,7 @@ EXPORT fmi2Status fmi2Reset(fmi2Component c)
 #define GETTER(Name, T)                                                                         \
     EXPORT fmi2Status fmi2Get##Name(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, T value[]) \
     {                                                                                           \
-        SHIM(c); ALLOWED(fmi2Get##Name);                                                              \
+        SHIM(c); ALLOWED(fmi2Get##Name); ARRAYS(fmi2Get##Name, nvr, vr, value);                       \
         FAST;                                                                                   \
         S->error_logged = 0;                                                                    \
         return CHECK(checked_getter(S, note(S, inner.Get##Name(S->inner, vr, nvr, value))));    \
@@ -607,7 +620,7 @@ GETTER(Boolean, fmi2Boolean)
 #define SETTER(Name, T)                                                                         \
     EXPORT fmi2Status fmi2Set##Name(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const T value[]) \
     {                                                                                           \
-        SHIM(c); ALLOWED(fmi2Set##Name);                                                   \
+        SHIM(c); ALLOWED(fmi2Set##Name); ARRAYS(fmi2Set##Name, nvr, vr, value);                 \
         FAST;                                                                                   \
         return settle(S, inner.Set##Name(S->inner, vr, nvr, value), 0);                         \
     }
@@ -617,6 +630,14 @@ SETTER(Real, fmi2Real)
 #define FAST
 SETTER(Integer, fmi2Integer)
 SETTER(Boolean, fmi2Boolean)
+#undef FAST
+/* pythonfmu makes a std::string of each value: a NULL one threw a C++ exception that aborted the host */
+#define FAST                                                                                    \
+    for (size_t i = 0; i < nvr; i++)                                                            \
+        if (value[i] == NULL) {                                                                 \
+            fmi2_layer_log(&S->fmi, fmi2Error, "fmi2SetString refused: value[%zu] = NULL", i);   \
+            return fmi2Error;                                                                   \
+        }
 SETTER(String, fmi2String)
 #undef FAST
 
@@ -698,6 +719,8 @@ EXPORT fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueR
                                                const fmi2Real dvK[], fmi2Real dvU[])
 {
     SHIM(c); ALLOWED(fmi2GetDirectionalDerivative);
+    ARRAYS(fmi2GetDirectionalDerivative, nU, vU, dvU);
+    ARRAYS(fmi2GetDirectionalDerivative, nK, vK, dvK);
     return note(S, inner.GetDirectionalDerivative(S->inner, vU, nU, vK, nK, dvK, dvU));
 }
 
@@ -705,6 +728,8 @@ EXPORT fmi2Status fmi2SetRealInputDerivatives(fmi2Component c, const fmi2ValueRe
                                               const fmi2Integer order[], const fmi2Real value[])
 {
     SHIM(c); ALLOWED(fmi2SetRealInputDerivatives);
+    ARRAYS(fmi2SetRealInputDerivatives, nvr, vr, value);
+    ARRAYS(fmi2SetRealInputDerivatives, nvr, order, value);
     return note(S, inner.SetRealInputDerivatives(S->inner, vr, nvr, order, value));
 }
 
@@ -712,6 +737,8 @@ EXPORT fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueR
                                                const fmi2Integer order[], fmi2Real value[])
 {
     SHIM(c); ALLOWED(fmi2GetRealOutputDerivatives);
+    ARRAYS(fmi2GetRealOutputDerivatives, nvr, vr, value);
+    ARRAYS(fmi2GetRealOutputDerivatives, nvr, order, value);
     return note(S, inner.GetRealOutputDerivatives(S->inner, vr, nvr, order, value));
 }
 
@@ -734,7 +761,7 @@ EXPORT fmi2Status fmi2CancelStep(fmi2Component c)
 #define STATUS_GETTER(Name, T)                                                                  \
     EXPORT fmi2Status fmi2Get##Name(fmi2Component c, const fmi2StatusKind k, T *value)          \
     {                                                                                           \
-        SHIM(c); ALLOWED(fmi2Get##Name);                                                              \
+        SHIM(c); ALLOWED(fmi2Get##Name); POINTER(fmi2Get##Name, value);                               \
         return note(S, inner.Get##Name(S->inner, k, value));                                    \
     }
 STATUS_GETTER(Status, fmi2Status)

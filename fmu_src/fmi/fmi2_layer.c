@@ -4,6 +4,8 @@
 #include "fmi2_layer.h"
 
 #include <math.h>
+#include <stdatomic.h>
+#include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -152,6 +154,114 @@ fmi2Status fmi2_layer_refuse_nonfinite(Fmi2Layer *L, fmi2Status st, const fmi2Va
         return fmi2Error;
     }
     return st;
+}
+
+/* ---- pointer arguments ---- */
+
+fmi2Status fmi2_layer_null_refusal(const Fmi2Layer *L, const char *call, const char *argument, const char *count,
+                                   size_t n)
+{
+    if (count != NULL) fmi2_layer_log(L, fmi2Error, "%s refused: %s = NULL with %s = %zu", call, argument, count, n);
+    else fmi2_layer_log(L, fmi2Error, "%s refused: %s = NULL", call, argument);
+    return fmi2Error;
+}
+
+/* ---- live instances: an open-addressing hash set (linear probing, deletion by backward shift) ---- */
+
+typedef struct {
+    const void *instance;
+    int kind;
+} LiveEntry;
+
+static atomic_flag live_lock = ATOMIC_FLAG_INIT;
+static LiveEntry *live_table = NULL;
+static size_t live_capacity = 0, live_count = 0; /* capacity: 0 or a power of 2, at most half full */
+
+static void live_acquire(void)
+{
+    while (atomic_flag_test_and_set_explicit(&live_lock, memory_order_acquire)) {
+    }
+}
+
+static void live_release(void) { atomic_flag_clear_explicit(&live_lock, memory_order_release); }
+
+static size_t live_home(const void *instance, size_t capacity)
+{
+    uint64_t h = (uint64_t)(uintptr_t)instance * 0x9E3779B97F4A7C15ULL;
+    return (size_t)(h >> 32) & (capacity - 1);
+}
+
+/* The slot of instance, or of the empty slot where it would go. */
+static size_t live_slot(const LiveEntry *table, size_t capacity, const void *instance)
+{
+    size_t i = live_home(instance, capacity);
+    while (table[i].instance != NULL && table[i].instance != instance) i = (i + 1) & (capacity - 1);
+    return i;
+}
+
+static int live_grow(void)
+{
+    size_t capacity = live_capacity == 0 ? 64 : 2 * live_capacity;
+    LiveEntry *table = calloc(capacity, sizeof *table);
+    if (table == NULL) return 0;
+    for (size_t i = 0; i < live_capacity; i++)
+        if (live_table[i].instance != NULL) table[live_slot(table, capacity, live_table[i].instance)] = live_table[i];
+    free(live_table);
+    live_table = table;
+    live_capacity = capacity;
+    return 1;
+}
+
+int fmi2_live_add(const void *instance, int kind)
+{
+    if (instance == NULL) return 0;
+    live_acquire();
+    int ok = 2 * (live_count + 1) <= live_capacity || live_grow();
+    if (ok) {
+        size_t i = live_slot(live_table, live_capacity, instance);
+        if (live_table[i].instance == NULL) live_count++;
+        live_table[i].instance = instance;
+        live_table[i].kind = kind;
+    }
+    live_release();
+    return ok;
+}
+
+int fmi2_live(const void *instance, int kind)
+{
+    if (instance == NULL) return 0;
+    live_acquire();
+    int found = live_capacity > 0 && live_table[live_slot(live_table, live_capacity, instance)].instance == instance &&
+                live_table[live_slot(live_table, live_capacity, instance)].kind == kind;
+    live_release();
+    return found;
+}
+
+int fmi2_live_remove(const void *instance, int kind)
+{
+    if (instance == NULL) return 0;
+    live_acquire();
+    int found = 0;
+    if (live_capacity > 0) {
+        const size_t mask = live_capacity - 1;
+        size_t i = live_slot(live_table, live_capacity, instance);
+        if (live_table[i].instance == instance && live_table[i].kind == kind) {
+            found = 1;
+            live_count--;
+            for (size_t j = (i + 1) & mask; live_table[j].instance != NULL; j = (j + 1) & mask) {
+                size_t home = live_home(live_table[j].instance, live_capacity);
+                /* the entry at j may move to the hole at i when its home is not in (i, j] (cyclically) */
+                if (((j - home) & mask) >= ((j - i) & mask)) {
+                    live_table[i] = live_table[j];
+                    i = j;
+                }
+            }
+            live_table[i].instance = NULL;
+            live_table[i].kind = 0;
+        }
+    }
+    live_release();
+    return found;
 }
 
 /* ---- fmi2Instantiate's arguments ---- */

@@ -87,6 +87,33 @@ static inline fmi2Status fmi2_layer_finite_reals(Fmi2Layer *L, fmi2Status st, co
     return st; /* inline: the loop the shim and the native layer each had (no call on the getters' path) */
 }
 
+/* ---- pointer arguments ----
+   A NULL array of n > 0 values (or a NULL pointer to store a result in): fmi2Error, logged "<call> refused:
+   <argument> = NULL with <count> = <n>" (or "<call> refused: <argument> = NULL"); the instance is left as it was.
+   FMI2_ARRAYS(L, call, n, a, b): both arrays of n values given, else that refusal for the first NULL one. */
+fmi2Status fmi2_layer_null_refusal(const Fmi2Layer *L, const char *call, const char *argument, const char *count,
+                                   size_t n);
+#define FMI2_NULL_ARRAY(L, call, array, n)                                                                        \
+    ((n) > 0 && (array) == NULL ? fmi2_layer_null_refusal((L), (call), #array, #n, (n)) : fmi2OK)
+#define FMI2_NULL_POINTER(L, call, pointer)                                                                       \
+    ((pointer) == NULL ? fmi2_layer_null_refusal((L), (call), #pointer, NULL, 0) : fmi2OK)
+#define FMI2_ARRAYS(L, call, n, a, b)                                                                             \
+    do {                                                                                                          \
+        if (FMI2_NULL_ARRAY((L), (call), a, n) != fmi2OK || FMI2_NULL_ARRAY((L), (call), b, n) != fmi2OK)         \
+            return fmi2Error;                                                                                     \
+    } while (0)
+
+/* ---- live instances ----
+   Every instance a binary hands out is in its set of live instances from fmi2Instantiate (fmi3Instantiate...) to
+   fmi2FreeInstance (fmi3FreeInstance); every call first asks the set, so a freed, foreign or made-up instance
+   pointer is answered fmi2Error (or ignored by FreeInstance: a second fmi2FreeInstance is a no-op) and never
+   dereferenced.  The set is this binary's (hidden symbols: each FMU its own), a hash set under a spin lock (C11
+   atomics, no thread library); `kind` tells the FMI 2.0 instances from the FMI 3.0 layer's wrappers. */
+int fmi2_live_add(const void *instance, int kind);      /* 0 when out of memory */
+int fmi2_live_remove(const void *instance, int kind);   /* 1 when it was live (then it is no more) */
+int fmi2_live(const void *instance, int kind);
+enum { FMI2_LIVE_INSTANCE = 1, FMI2_LIVE_FMI3 = 2 };
+
 /* ---- fmi2Instantiate's arguments (issue 25) ----
    fmuResourceLocation as a local folder: 1 and its path (no trailing '/') in `path`, or 0 and why in `why`.
    Accepted, as FMI 2.0 (section 2.1.5: an RFC 3986 URI of scheme "file") and RFC 8089 allow: file:/abs,

@@ -95,7 +95,7 @@ static int sized(Instance *I, const char *call, const char *what, const void *ar
 #define ME_CALL(F, ERROR_MASK, MODES)                                                                        \
     Instance *I = (Instance *)c;                                                                             \
     fmi2Status st_;                                                                                          \
-    if (I == NULL) return fmi2Error;                                                                         \
+    if (!fmi2_live(I, FMI2_LIVE_INSTANCE)) return fmi2Error;                                                 \
     if (!me_allowed(I, #F, (ERROR_MASK), (MODES), &st_)) return st_;                                          \
     State *S = native_state(I)
 

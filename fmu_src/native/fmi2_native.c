@@ -205,7 +205,11 @@ static fmi2Status settle(Instance *inst, int may_clear_error)
     return fmi2OK;
 }
 
-#define INST(c) Instance *I = (Instance *)(c); if (I == NULL) return fmi2Error
+/* A live instance of this binary (fmi2_live: never a freed, foreign or NULL pointer), else fmi2Error */
+#define INST(c) Instance *I = (Instance *)(c); if (!fmi2_live(I, FMI2_LIVE_INSTANCE)) return fmi2Error
+/* The pointer arguments of call F: an array of n values (or a result pointer) that is NULL is refused (logged). */
+#define ARRAYS(F, n, a, b) FMI2_ARRAYS(&I->fmi, #F, n, a, b)
+#define POINTER(F, p) do { if (FMI2_NULL_POINTER(&I->fmi, #F, p) != fmi2OK) return fmi2Error; } while (0)
 /* The error mode's guard of call F (the state table): in the error state fmi2Error and "call F not allowed after an
    error" unless the table allows F there. */
 #define ALLOWED(F)                                                                           \
@@ -279,13 +283,19 @@ EXPORT fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, 
         return NULL;
     }
     reset_state(&inst->s);
+    if (!fmi2_live_add(inst, FMI2_LIVE_INSTANCE)) {
+        fmi2_layer_log(&inst->fmi, fmi2Error, "fmi2Instantiate: out of memory");
+        fmi2_layer_free(&inst->fmi);
+        free(inst);
+        return NULL;
+    }
     return inst;
 }
 
 EXPORT void fmi2FreeInstance(fmi2Component c)
 {
     Instance *I = (Instance *)c;
-    if (I == NULL) return;
+    if (!fmi2_live_remove(I, FMI2_LIVE_INSTANCE)) return; /* NULL, freed already, or not this binary's */
     fmi2_layer_free(&I->fmi);
     free(I);
 }
@@ -293,6 +303,7 @@ EXPORT void fmi2FreeInstance(fmi2Component c)
 EXPORT fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingOn, size_t n, const fmi2String cats[])
 {
     INST(c); ALLOWED(fmi2SetDebugLogging);
+    if (FMI2_NULL_ARRAY(&I->fmi, "fmi2SetDebugLogging", cats, n) != fmi2OK) return fmi2Error;
     fmi2_layer_set_logging(&I->fmi, loggingOn, n, cats);
     return fmi2OK;
 }
@@ -401,7 +412,7 @@ static fmi2Status get_values(Instance *I, const fmi2ValueReference vr[], size_t 
 #define GETTER(Name, T, TYPE, CONVERT, CHECK)                                                             \
     EXPORT fmi2Status fmi2Get##Name(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, T value[])  \
     {                                                                                                     \
-        INST(c); ALLOWED(fmi2Get##Name);                                                                  \
+        INST(c); ALLOWED(fmi2Get##Name); ARRAYS(fmi2Get##Name, nvr, vr, value);                            \
         fmi2Status worst = fmi2OK;                                                                        \
         for (size_t done = 0; done < nvr; done += MAX_GET) {                                              \
             size_t n = nvr - done < MAX_GET ? nvr - done : MAX_GET;                                       \
@@ -424,7 +435,7 @@ GETTER(Boolean, fmi2Boolean, T_BOOLEAN, AS_BOOLEAN, NO_CHECK)
 
 EXPORT fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2String value[])
 {
-    INST(c); ALLOWED(fmi2GetString);
+    INST(c); ALLOWED(fmi2GetString); ARRAYS(fmi2GetString, nvr, vr, value);
     fmi2Status worst = fmi2OK;
     for (size_t i = 0; i < nvr; i++) {
         double ignored;
@@ -494,7 +505,7 @@ static fmi2Status set_values(Instance *I, const fmi2ValueReference vr[], size_t 
 #define SETTER(Name, T, Type, FORMAT)                                                                     \
     EXPORT fmi2Status fmi2Set##Name(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const T value[]) \
     {                                                                                                     \
-        INST(c); ALLOWED(fmi2Set##Name);                                                                  \
+        INST(c); ALLOWED(fmi2Set##Name); ARRAYS(fmi2Set##Name, nvr, vr, value);                            \
         fmi2Status worst = fmi2OK;                                                                        \
         for (size_t done = 0; done < nvr; done += MAX_SET) {                                              \
             size_t n = nvr - done < MAX_SET ? nvr - done : MAX_SET;                                       \
@@ -520,7 +531,7 @@ SETTER(Boolean, fmi2Boolean, T_BOOLEAN, FORMAT_BOOLEAN)
 
 EXPORT fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2String value[])
 {
-    INST(c); ALLOWED(fmi2SetString);
+    INST(c); ALLOWED(fmi2SetString); ARRAYS(fmi2SetString, nvr, vr, value);
     for (size_t i = 0; i < nvr; i++) {
         char quoted[256];
         py_str_repr(value[i] ? value[i] : "", quoted, sizeof quoted);
@@ -705,6 +716,8 @@ EXPORT fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueR
                                                const fmi2Real dvK[], fmi2Real dvU[])
 {
     INST(c); ALLOWED(fmi2GetDirectionalDerivative);
+    ARRAYS(fmi2GetDirectionalDerivative, nU, vU, dvU);
+    ARRAYS(fmi2GetDirectionalDerivative, nK, vK, dvK);
 #ifdef HAS_DIRECTIONAL_DERIVATIVES
     return native_directional_derivative(I, vU, nU, vK, nK, dvK, dvU); /* fmi2_me.c */
 #endif
@@ -717,6 +730,8 @@ EXPORT fmi2Status fmi2SetRealInputDerivatives(fmi2Component c, const fmi2ValueRe
                                               const fmi2Integer order[], const fmi2Real value[])
 {
     INST(c); ALLOWED(fmi2SetRealInputDerivatives);
+    ARRAYS(fmi2SetRealInputDerivatives, nvr, vr, value);
+    ARRAYS(fmi2SetRealInputDerivatives, nvr, order, value);
     (void)vr; (void)nvr; (void)order; (void)value;
     native_log(I, fmi2Error, "fmi2SetRealInputDerivatives is not provided (canInterpolateInputs=false)");
     return fmi2Error;
@@ -726,6 +741,8 @@ EXPORT fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueR
                                                const fmi2Integer order[], fmi2Real value[])
 {
     INST(c); ALLOWED(fmi2GetRealOutputDerivatives);
+    ARRAYS(fmi2GetRealOutputDerivatives, nvr, vr, value);
+    ARRAYS(fmi2GetRealOutputDerivatives, nvr, order, value);
     (void)vr; (void)nvr; (void)order; (void)value;
     native_log(I, fmi2Error, "fmi2GetRealOutputDerivatives is not provided (maxOutputDerivativeOrder=0)");
     return fmi2Error;
@@ -733,7 +750,7 @@ EXPORT fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueR
 
 EXPORT fmi2Status fmi2GetStatus(fmi2Component c, const fmi2StatusKind s, fmi2Status *value)
 {
-    INST(c); ALLOWED(fmi2GetStatus);
+    INST(c); ALLOWED(fmi2GetStatus); POINTER(fmi2GetStatus, value);
     if (s != fmi2DoStepStatus) return fmi2Discard;
     *value = I->fmi.mode == FMI2_MODE_OK ? fmi2OK : fmi2Error;
     return fmi2OK;
@@ -741,28 +758,28 @@ EXPORT fmi2Status fmi2GetStatus(fmi2Component c, const fmi2StatusKind s, fmi2Sta
 
 EXPORT fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind s, fmi2Real *value)
 {
-    INST(c); ALLOWED(fmi2GetRealStatus);
+    INST(c); ALLOWED(fmi2GetRealStatus); POINTER(fmi2GetRealStatus, value);
     (void)s; (void)value;
     return fmi2Discard;
 }
 
 EXPORT fmi2Status fmi2GetIntegerStatus(fmi2Component c, const fmi2StatusKind s, fmi2Integer *value)
 {
-    INST(c); ALLOWED(fmi2GetIntegerStatus);
+    INST(c); ALLOWED(fmi2GetIntegerStatus); POINTER(fmi2GetIntegerStatus, value);
     (void)s; (void)value;
     return fmi2Discard;
 }
 
 EXPORT fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind s, fmi2Boolean *value)
 {
-    INST(c); ALLOWED(fmi2GetBooleanStatus);
+    INST(c); ALLOWED(fmi2GetBooleanStatus); POINTER(fmi2GetBooleanStatus, value);
     (void)s; (void)value;
     return fmi2Discard;
 }
 
 EXPORT fmi2Status fmi2GetStringStatus(fmi2Component c, const fmi2StatusKind s, fmi2String *value)
 {
-    INST(c); ALLOWED(fmi2GetStringStatus);
+    INST(c); ALLOWED(fmi2GetStringStatus); POINTER(fmi2GetStringStatus, value);
     (void)s; (void)value;
     return fmi2Discard;
 }

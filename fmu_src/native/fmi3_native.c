@@ -84,6 +84,13 @@ static fmi3Status refuse(W3 *w, const char *format, ...)
     return fmi3Error;
 }
 
+/* A NULL array of n > 0 values: fmi3Error naming the call and the argument */
+#define NULL_ARRAY3(call, array, n)                                                                           \
+    do {                                                                                                      \
+        if ((n) > 0 && (array) == NULL)                                                                       \
+            return refuse(w, "%s refused: %s = NULL with %s = %zu", call, #array, #n, (size_t)(n));           \
+    } while (0)
+
 /* Call F allowed in the modes of `modes` (bits 1 << W_*)? else fmi3Error naming the mode */
 static int in_mode(W3 *w, const char *call, unsigned modes, fmi3Status *st)
 {
@@ -101,7 +108,7 @@ static int in_mode(W3 *w, const char *call, unsigned modes, fmi3Status *st)
 #define W3_CALL(F, MODES)                                                                                  \
     W3 *w = (W3 *)instance;                                                                                \
     fmi3Status st_ = fmi3OK;                                                                               \
-    if (w == NULL) return fmi3Error;                                                                       \
+    if (!fmi2_live(w, FMI2_LIVE_FMI3)) return fmi3Error;                                              \
     if (!in_mode(w, #F, (MODES), &st_)) return st_
 #define ANY_MODE (BIT(W_INSTANTIATED) | BIT(W_INITIALIZATION) | BIT(W_EVENT) | BIT(W_STEP) | BIT(W_CONTINUOUS) | \
                   BIT(W_TERMINATED))
@@ -113,6 +120,8 @@ EXPORT3 fmi3Status fmi3SetDebugLogging(fmi3Instance instance, fmi3Boolean loggin
                                        const fmi3String categories[])
 {
     W3_CALL(fmi3SetDebugLogging, ANY_MODE);
+    if (nCategories > 0 && categories == NULL)
+        return refuse(w, "fmi3SetDebugLogging refused: categories = NULL with nCategories = %zu", nCategories);
     return to3(fmi2SetDebugLogging(w->c, loggingOn, nCategories, categories));
 }
 
@@ -157,6 +166,11 @@ static W3 *instantiate(fmi3String name, fmi3String token, fmi3String resourcePat
         return NULL;
     }
     w->mode = W_INSTANTIATED;
+    if (!fmi2_live_add(w, FMI2_LIVE_FMI3)) {
+        fmi2FreeInstance(w->c);
+        free(w);
+        return NULL;
+    }
     return w;
 }
 
@@ -213,7 +227,7 @@ EXPORT3 fmi3Instance fmi3InstantiateScheduledExecution(fmi3String instanceName, 
 EXPORT3 void fmi3FreeInstance(fmi3Instance instance)
 {
     W3 *w = (W3 *)instance;
-    if (w == NULL) return;
+    if (!fmi2_live_remove(w, FMI2_LIVE_FMI3)) return; /* NULL, freed already, or not this binary's */
     fmi2FreeInstance(w->c);
     free(w);
 }
@@ -264,7 +278,7 @@ EXPORT3 fmi3Status fmi3Terminate(fmi3Instance instance)
 EXPORT3 fmi3Status fmi3Reset(fmi3Instance instance)
 {
     W3 *w = (W3 *)instance;
-    if (w == NULL) return fmi3Error;
+    if (!fmi2_live(w, FMI2_LIVE_FMI3)) return fmi3Error;
     fmi2Status st = fmi2Reset(w->c);
     w->mode = W_INSTANTIATED;
     w->time = 0.0;
@@ -284,7 +298,8 @@ static int sizes_match(W3 *w, const char *call, size_t nvr, size_t nValues, fmi3
 static int arrays_given(W3 *w, const char *call, const void *vr, const void *values, size_t n, fmi3Status *st)
 {
     if (n == 0 || (vr != NULL && values != NULL)) return 1;
-    *st = refuse(w, "%s: valueReferences or values is NULL", call);
+    *st = refuse(w, "%s refused: %s = NULL with nValueReferences = %zu", call, vr == NULL ? "valueReferences"
+                 : "values", n);
     return 0;
 }
 
@@ -636,7 +651,7 @@ EXPORT3 fmi3Status fmi3GetOutputDerivatives(fmi3Instance instance, const fmi3Val
 EXPORT3 fmi3Status fmi3GetFMUState(fmi3Instance instance, fmi3FMUState *FMUState)
 {
     W3_CALL(fmi3GetFMUState, ANY_MODE);
-    if (FMUState == NULL) return refuse(w, "fmi3GetFMUState: FMUState is NULL");
+    if (FMUState == NULL) return refuse(w, "fmi3GetFMUState refused: FMUState = NULL (the pointer to store it in)");
     W3State *s = *FMUState != NULL ? (W3State *)*FMUState : calloc(1, sizeof *s);
     if (s == NULL) return refuse(w, "fmi3GetFMUState: out of memory");
     fmi2Status st = fmi2GetFMUstate(w->c, &s->inner);
@@ -653,8 +668,8 @@ EXPORT3 fmi3Status fmi3GetFMUState(fmi3Instance instance, fmi3FMUState *FMUState
 EXPORT3 fmi3Status fmi3SetFMUState(fmi3Instance instance, fmi3FMUState FMUState)
 {
     W3 *w = (W3 *)instance;
-    if (w == NULL) return fmi3Error;
-    if (FMUState == NULL) return refuse(w, "fmi3SetFMUState: FMUState is NULL");
+    if (!fmi2_live(w, FMI2_LIVE_FMI3)) return fmi3Error;
+    if (FMUState == NULL) return refuse(w, "fmi3SetFMUState refused: FMUState = NULL (no state given)");
     const W3State *s = FMUState;
     fmi2Status st = fmi2SetFMUstate(w->c, s->inner);
     if (st <= fmi2Warning) {
@@ -667,7 +682,7 @@ EXPORT3 fmi3Status fmi3SetFMUState(fmi3Instance instance, fmi3FMUState FMUState)
 EXPORT3 fmi3Status fmi3FreeFMUState(fmi3Instance instance, fmi3FMUState *FMUState)
 {
     W3 *w = (W3 *)instance;
-    if (w == NULL) return fmi3Error;
+    if (!fmi2_live(w, FMI2_LIVE_FMI3)) return fmi3Error;
     if (FMUState == NULL || *FMUState == NULL) return fmi3OK;
     W3State *s = *FMUState;
     fmi2Status st = fmi2FreeFMUstate(w->c, &s->inner);
@@ -682,8 +697,9 @@ EXPORT3 fmi3Status fmi3FreeFMUState(fmi3Instance instance, fmi3FMUState *FMUStat
 EXPORT3 fmi3Status fmi3SerializedFMUStateSize(fmi3Instance instance, fmi3FMUState FMUState, size_t *size)
 {
     W3 *w = (W3 *)instance;
-    if (w == NULL) return fmi3Error;
-    if (FMUState == NULL || size == NULL) return refuse(w, "fmi3SerializedFMUStateSize: FMUState or size is NULL");
+    if (!fmi2_live(w, FMI2_LIVE_FMI3)) return fmi3Error;
+    if (FMUState == NULL || size == NULL)
+        return refuse(w, "fmi3SerializedFMUStateSize refused: %s = NULL", FMUState == NULL ? "FMUState" : "size");
     size_t inner = 0;
     fmi2Status st = fmi2SerializedFMUstateSize(w->c, ((W3State *)FMUState)->inner, &inner);
     *size = inner + W3_HEADER;
@@ -694,9 +710,10 @@ EXPORT3 fmi3Status fmi3SerializeFMUState(fmi3Instance instance, fmi3FMUState FMU
                                          size_t size)
 {
     W3 *w = (W3 *)instance;
-    if (w == NULL) return fmi3Error;
-    if (FMUState == NULL || serializedState == NULL || size < W3_HEADER)
-        return refuse(w, "fmi3SerializeFMUState: no state, no buffer, or %zu bytes are too few", size);
+    if (!fmi2_live(w, FMI2_LIVE_FMI3)) return fmi3Error;
+    if (FMUState == NULL || serializedState == NULL)
+        return refuse(w, "fmi3SerializeFMUState refused: %s = NULL", FMUState == NULL ? "FMUState" : "serializedState");
+    if (size < W3_HEADER) return refuse(w, "fmi3SerializeFMUState refused: size = %zu bytes are too few", size);
     const W3State *s = FMUState;
     int64_t mode = s->mode;
     memcpy(serializedState, &mode, sizeof mode);
@@ -708,9 +725,11 @@ EXPORT3 fmi3Status fmi3DeserializeFMUState(fmi3Instance instance, const fmi3Byte
                                            fmi3FMUState *FMUState)
 {
     W3 *w = (W3 *)instance;
-    if (w == NULL) return fmi3Error;
-    if (serializedState == NULL || FMUState == NULL || size < W3_HEADER)
-        return refuse(w, "fmi3DeserializeFMUState: no bytes, no FMUState, or %zu bytes are too few", size);
+    if (!fmi2_live(w, FMI2_LIVE_FMI3)) return fmi3Error;
+    if (serializedState == NULL || FMUState == NULL)
+        return refuse(w, "fmi3DeserializeFMUState refused: %s = NULL", serializedState == NULL ? "serializedState"
+                      : "FMUState (the pointer to store it in)");
+    if (size < W3_HEADER) return refuse(w, "fmi3DeserializeFMUState refused: size = %zu bytes are too few", size);
     int64_t mode;
     double time;
     memcpy(&mode, serializedState, sizeof mode);
@@ -850,6 +869,7 @@ EXPORT3 fmi3Status fmi3SetContinuousStates(fmi3Instance instance, const fmi3Floa
 {
     W3_CALL(fmi3SetContinuousStates, BIT(W_CONTINUOUS));
     ME_ONLY("fmi3SetContinuousStates");
+    NULL_ARRAY3("fmi3SetContinuousStates", continuousStates, nContinuousStates);
     return to3(ME2_CALL(fmi2SetContinuousStates(w->c, continuousStates, nContinuousStates)));
 }
 
@@ -860,6 +880,7 @@ EXPORT3 fmi3Status fmi3GetContinuousStateDerivatives(fmi3Instance instance, fmi3
 {
     W3_CALL(fmi3GetContinuousStateDerivatives, AFTER_INIT);
     ME_ONLY("fmi3GetContinuousStateDerivatives");
+    NULL_ARRAY3("fmi3GetContinuousStateDerivatives", derivatives, nContinuousStates);
     return to3(ME2_CALL(fmi2GetDerivatives(w->c, derivatives, nContinuousStates)));
 }
 
@@ -868,6 +889,7 @@ EXPORT3 fmi3Status fmi3GetEventIndicators(fmi3Instance instance, fmi3Float64 eve
 {
     W3_CALL(fmi3GetEventIndicators, AFTER_INIT);
     ME_ONLY("fmi3GetEventIndicators");
+    NULL_ARRAY3("fmi3GetEventIndicators", eventIndicators, nEventIndicators);
     return to3(ME2_CALL(fmi2GetEventIndicators(w->c, eventIndicators, nEventIndicators)));
 }
 
@@ -876,6 +898,7 @@ EXPORT3 fmi3Status fmi3GetContinuousStates(fmi3Instance instance, fmi3Float64 co
 {
     W3_CALL(fmi3GetContinuousStates, AFTER_INIT);
     ME_ONLY("fmi3GetContinuousStates");
+    NULL_ARRAY3("fmi3GetContinuousStates", continuousStates, nContinuousStates);
     return to3(ME2_CALL(fmi2GetContinuousStates(w->c, continuousStates, nContinuousStates)));
 }
 
@@ -884,6 +907,7 @@ EXPORT3 fmi3Status fmi3GetNominalsOfContinuousStates(fmi3Instance instance, fmi3
 {
     W3_CALL(fmi3GetNominalsOfContinuousStates, BIT(W_INSTANTIATED) | AFTER_INIT);
     ME_ONLY("fmi3GetNominalsOfContinuousStates");
+    NULL_ARRAY3("fmi3GetNominalsOfContinuousStates", nominals, nContinuousStates);
     return to3(ME2_CALL(fmi2GetNominalsOfContinuousStates(w->c, nominals, nContinuousStates)));
 }
 

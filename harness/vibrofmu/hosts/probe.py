@@ -9,6 +9,8 @@ last case that finished (`run_probe` reads it).  Scenarios:
                 {"case", "uri", "accepted", "log"}
   states        fmi2SetFMUstate(NULL), then fmi2Reset and a run; fmi2FreeFMUstate sets the pointer to NULL; NULL
                 arguments to the other state calls: {"case", "status", "log", ...}
+  pointers      NULL arrays and result pointers in every FMI 2.0 function, freed and foreign instance pointers
+                (vibrofmu.hosts.pointers); pointers3: the same in FMI 3.0
   forged N SEED [sweep]  N forged serialized states (see `forge`; sweep: native states, every word in turn):
                 each restored and stepped; {"case", "deserialize", "set", "step", "log"} every 500th state, then a
                 summary line.
@@ -30,6 +32,7 @@ from fmpy.fmi2 import (fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYP
                        fmi2CallbackLoggerTYPE, fmi2StepFinishedTYPE)
 
 from vibrofmu.hosts.forge import emit, scenario_forged
+from vibrofmu.hosts.pointers import Probe3, scenario_pointers, scenario_pointers3
 
 OK, WARNING, DISCARD, ERROR, FATAL = 0, 1, 2, 3, 4
 MODEL_EXCHANGE, CO_SIMULATION = 0, 1
@@ -82,6 +85,9 @@ class Probe:
         guid = self.md.guid if guid is None else guid
         return self.lib.fmi2Instantiate(name, kind, None if guid == "NULL" else guid.encode(),
                                         None if uri is None else uri.encode(), ctypes.byref(self.callbacks), 0, 0)
+
+    def real_output_vr(self) -> int:
+        return next(v.valueReference for v in self.md.modelVariables if v.causality == "output" and v.type == "Real")
 
     def resources_uri(self) -> str:
         return (self.unzipped / "resources").as_uri()
@@ -230,11 +236,16 @@ def main(argv: list[str]) -> int:
     scenario, fmu, *rest = argv
     with tempfile.TemporaryDirectory(prefix="vibrofmu_probe_") as tmp:
         unzipped = Path(fmu) if Path(fmu).is_dir() else Path(extract(fmu, os.path.join(tmp, "fmu")))
+        if scenario == "pointers3":
+            scenario_pointers3(Probe3(unzipped, read_model_description(str(unzipped))))
+            return 0
         probe = Probe(unzipped)
         if scenario == "instantiate":
             scenario_instantiate(probe)
         elif scenario == "states":
             scenario_states(probe)
+        elif scenario == "pointers":
+            scenario_pointers(probe)
         elif scenario == "forged":
             scenario_forged(probe, int(rest[0]), int(rest[1]), sweep=rest[2:] == ["sweep"])
         else:
