@@ -651,17 +651,44 @@ static fmi2Status refuse_null(Shim *s, const char *call, const char *argument)
     return fmi2Error;
 }
 
+/* A state pointer that is not a live state of this binary (freed, another FMU's, made up): pythonfmu would use it
+   as its own; refused instead.  The states pythonfmu hands out are recorded (fmi2_live, kind FMI2_LIVE_STATE). */
+static int foreign_state(Shim *s, const char *call, const void *state)
+{
+    if (fmi2_live(state, FMI2_LIVE_STATE)) return 0;
+    fmi2_layer_log(&s->fmi, fmi2Error, "%s refused: FMUstate = %p is not a state of this FMU (freed, or another "
+                   "FMU's)", call, state);
+    return 1;
+}
+
+/* After pythonfmu stored a state in *state (old: what was there before): the new one recorded as live. */
+static fmi2Status record_state(Shim *s, fmi2Status st, fmi2FMUstate old, fmi2FMUstate *state)
+{
+    if (st > fmi2Warning || *state == NULL || *state == old) return st;
+    if (old != NULL) fmi2_live_remove(old, FMI2_LIVE_STATE); /* replaced: no longer a handle of the host's */
+    if (!fmi2_live_add(*state, FMI2_LIVE_STATE)) {
+        inner.FreeFMUstate(s->inner, state);
+        *state = NULL;
+        fmi2_layer_log(&s->fmi, fmi2Error, "out of memory while recording an FMU state");
+        return fmi2Error;
+    }
+    return st;
+}
+
 EXPORT fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *state)
 {
     SHIM(c); ALLOWED(fmi2GetFMUstate);
     if (state == NULL) return refuse_null(S, "fmi2GetFMUstate", "FMUstate (the pointer to store it in)");
-    return note(S, inner.GetFMUstate(S->inner, state));
+    if (*state != NULL && foreign_state(S, "fmi2GetFMUstate", *state)) return fmi2Error;
+    fmi2FMUstate old = *state;
+    return record_state(S, note(S, inner.GetFMUstate(S->inner, state)), old, state);
 }
 
 EXPORT fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate state)
 {
     SHIM(c); ALLOWED(fmi2SetFMUstate);
     if (state == NULL) return refuse_null(S, "fmi2SetFMUstate", "FMUstate (no state given)");
+    if (foreign_state(S, "fmi2SetFMUstate", state)) return fmi2Error;
     detach(S);
     calling_shim = S;
     fmi2Status st = inner.SetFMUstate(S->inner, state);
@@ -673,6 +700,8 @@ EXPORT fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *state)
 {
     SHIM(c); ALLOWED(fmi2FreeFMUstate);
     if (state == NULL || *state == NULL) return fmi2OK; /* nothing to free (FMI 2.0: a no-op) */
+    if (foreign_state(S, "fmi2FreeFMUstate", *state)) return fmi2Error;
+    fmi2_live_remove(*state, FMI2_LIVE_STATE);
     fmi2Status st = note(S, inner.FreeFMUstate(S->inner, state));
     if (st <= fmi2Warning) *state = NULL;
     return st;
@@ -683,6 +712,7 @@ EXPORT fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate state
     SHIM(c); ALLOWED(fmi2SerializedFMUstateSize);
     if (state == NULL) return refuse_null(S, "fmi2SerializedFMUstateSize", "FMUstate");
     if (size == NULL) return refuse_null(S, "fmi2SerializedFMUstateSize", "size (the pointer to store it in)");
+    if (foreign_state(S, "fmi2SerializedFMUstateSize", state)) return fmi2Error;
     return note(S, inner.SerializedFMUstateSize(S->inner, state, size));
 }
 
@@ -691,6 +721,7 @@ EXPORT fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate state, fmi
     SHIM(c); ALLOWED(fmi2SerializeFMUstate);
     if (state == NULL) return refuse_null(S, "fmi2SerializeFMUstate", "FMUstate");
     if (bytes == NULL) return refuse_null(S, "fmi2SerializeFMUstate", "serializedState (the buffer)");
+    if (foreign_state(S, "fmi2SerializeFMUstate", state)) return fmi2Error;
     size_t needed = 0;
     fmi2Status st = note(S, inner.SerializedFMUstateSize(S->inner, state, &needed));
     if (st > fmi2Warning) return st;
@@ -711,7 +742,9 @@ EXPORT fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte bytes[
     SHIM(c); ALLOWED(fmi2DeSerializeFMUstate);
     if (bytes == NULL) return refuse_null(S, "fmi2DeSerializeFMUstate", "serializedState (the bytes)");
     if (state == NULL) return refuse_null(S, "fmi2DeSerializeFMUstate", "FMUstate (the pointer to store it in)");
-    return note(S, inner.DeSerializeFMUstate(S->inner, bytes, size, state));
+    if (*state != NULL && foreign_state(S, "fmi2DeSerializeFMUstate", *state)) return fmi2Error;
+    fmi2FMUstate old = *state;
+    return record_state(S, note(S, inner.DeSerializeFMUstate(S->inner, bytes, size, state)), old, state);
 }
 
 EXPORT fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReference vU[], size_t nU,

@@ -112,7 +112,9 @@ fmi2Status fmi2_layer_null_refusal(const Fmi2Layer *L, const char *call, const c
 int fmi2_live_add(const void *instance, int kind);      /* 0 when out of memory */
 int fmi2_live_remove(const void *instance, int kind);   /* 1 when it was live (then it is no more) */
 int fmi2_live(const void *instance, int kind);
-enum { FMI2_LIVE_INSTANCE = 1, FMI2_LIVE_FMI3 = 2 };
+/* kinds: an FMI 2.0 instance, an FMI 3.0 instance, an FMU state of each (a state of another FMU, or one freed, is
+   refused by every state call: fmi3GetFMUState into another model's state overwrote it in place) */
+enum { FMI2_LIVE_INSTANCE = 1, FMI2_LIVE_FMI3 = 2, FMI2_LIVE_STATE = 3, FMI2_LIVE_FMI3_STATE = 4 };
 
 /* ---- fmi2Instantiate's arguments (issue 25) ----
    fmuResourceLocation as a local folder: 1 and its path (no trailing '/') in `path`, or 0 and why in `why`.

@@ -600,12 +600,23 @@ static fmi2Status refuse_null(Instance *I, const char *call, const char *argumen
     return fmi2Error;
 }
 
+/* A state pointer that is not a live state of this binary (freed, another FMU's, made up): never read or written. */
+static int foreign_state(Instance *I, const char *call, const void *state)
+{
+    if (fmi2_live(state, FMI2_LIVE_STATE)) return 0;
+    native_log(I, fmi2Error, "%s refused: FMUstate = %p is not a state of this FMU (freed, or another FMU's)", call,
+               state);
+    return 1;
+}
+
 EXPORT fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *state)
 {
     INST(c); ALLOWED(fmi2GetFMUstate);
     if (state == NULL) return refuse_null(I, "fmi2GetFMUstate", "FMUstate (the pointer to store it in)");
+    if (*state != NULL && foreign_state(I, "fmi2GetFMUstate", *state)) return fmi2Error;
     State *copy = *state != NULL ? (State *)*state : malloc(sizeof *copy);
-    if (copy == NULL) {
+    if (copy == NULL || (*state == NULL && !fmi2_live_add(copy, FMI2_LIVE_STATE))) {
+        if (*state == NULL) free(copy);
         native_log(I, fmi2Error, "fmi2GetFMUstate: out of memory");
         return fmi2Error;
     }
@@ -618,8 +629,10 @@ EXPORT fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate state)
 {
     INST(c); ALLOWED(fmi2SetFMUstate);
     if (state == NULL) return refuse_null(I, "fmi2SetFMUstate", "FMUstate (no state given)");
+    if (foreign_state(I, "fmi2SetFMUstate", state)) return fmi2Error;
     char why[512];
-    if (native_state_refusal((const State *)state, &I->s, why, sizeof why)) { /* state_checks.c (issue 25) */
+    if (native_interface_refusal((const State *)state, I->model_exchange, why, sizeof why) ||
+        native_state_refusal((const State *)state, &I->s, why, sizeof why)) { /* state_checks.c (issue 25) */
         native_log(I, fmi2Error, "fmi2SetFMUstate refused: %s", why);
         return fmi2Error;
     }
@@ -633,10 +646,14 @@ EXPORT fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate state)
 EXPORT fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *state)
 {
     INST(c); ALLOWED(fmi2FreeFMUstate);
-    if (state != NULL) {
-        free(*state);
-        *state = NULL;
+    if (state == NULL || *state == NULL) return fmi2OK; /* nothing to free (FMI 2.0: a no-op) */
+    if (!fmi2_live_remove(*state, FMI2_LIVE_STATE)) {
+        native_log(I, fmi2Error, "fmi2FreeFMUstate refused: FMUstate = %p is not a state of this FMU (freed, or "
+                   "another FMU's)", *state);
+        return fmi2Error;
     }
+    free(*state);
+    *state = NULL;
     return fmi2OK;
 }
 
@@ -645,6 +662,7 @@ EXPORT fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate state
     INST(c); ALLOWED(fmi2SerializedFMUstateSize);
     if (state == NULL) return refuse_null(I, "fmi2SerializedFMUstateSize", "FMUstate");
     if (size == NULL) return refuse_null(I, "fmi2SerializedFMUstateSize", "size (the pointer to store it in)");
+    if (foreign_state(I, "fmi2SerializedFMUstateSize", state)) return fmi2Error;
     *size = sizeof(StateHeader) + sizeof(State);
     return fmi2OK;
 }
@@ -653,6 +671,7 @@ EXPORT fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate state, fmi
 {
     INST(c); ALLOWED(fmi2SerializeFMUstate);
     if (bytes == NULL) return refuse_null(I, "fmi2SerializeFMUstate", "serializedState (the buffer)");
+    if (state != NULL && foreign_state(I, "fmi2SerializeFMUstate", state)) return fmi2Error;
     if (state == NULL || size < sizeof(StateHeader) + sizeof(State)) {
         native_log(I, fmi2Error, "fmi2SerializeFMUstate: no state, or %zu bytes are too few", size);
         return fmi2Error;
@@ -672,6 +691,7 @@ EXPORT fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte bytes[
     INST(c); ALLOWED(fmi2DeSerializeFMUstate);
     if (bytes == NULL) return refuse_null(I, "fmi2DeSerializeFMUstate", "serializedState (the bytes)");
     if (state == NULL) return refuse_null(I, "fmi2DeSerializeFMUstate", "FMUstate (the pointer to store it in)");
+    if (*state != NULL && foreign_state(I, "fmi2DeSerializeFMUstate", *state)) return fmi2Error;
     StateHeader header;
     if (size != sizeof header + sizeof(State)) {
         native_log(I, fmi2Error, "fmi2DeSerializeFMUstate refused: not a state of this FMU (%zu bytes, expected "
@@ -695,7 +715,8 @@ EXPORT fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte bytes[
     State *copy = malloc(sizeof *copy);
     if (copy == NULL) return fmi2Error;
     memcpy(copy, bytes + sizeof header, sizeof *copy);
-    if (native_state_refusal(copy, &I->s, why, sizeof why)) { /* a forged state: the checksum recomputed (issue 25) */
+    if (native_interface_refusal(copy, I->model_exchange, why, sizeof why) ||
+        native_state_refusal(copy, &I->s, why, sizeof why)) { /* a forged state: the checksum recomputed (issue 25) */
         free(copy);
         native_log(I, fmi2Error, "fmi2DeSerializeFMUstate refused: %s", why);
         return fmi2Error;
@@ -704,6 +725,11 @@ EXPORT fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte bytes[
         memcpy(*state, copy, sizeof *copy);
         free(copy);
         return fmi2OK;
+    }
+    if (!fmi2_live_add(copy, FMI2_LIVE_STATE)) {
+        free(copy);
+        native_log(I, fmi2Error, "fmi2DeSerializeFMUstate: out of memory");
+        return fmi2Error;
     }
     *state = copy;
     return fmi2OK;

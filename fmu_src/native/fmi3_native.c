@@ -648,13 +648,25 @@ EXPORT3 fmi3Status fmi3GetOutputDerivatives(fmi3Instance instance, const fmi3Val
 
 /* ---- FMU state: the FMI 2.0 instance's, with the FMI 3.0 mode and time ---- */
 
+/* A state pointer that is not a live FMI 3.0 state of this binary (freed, another FMU's): never read or written */
+static fmi3Status foreign_state3(W3 *w, const char *call, const void *state)
+{
+    return refuse(w, "%s refused: FMUState = %p is not a state of this FMU (freed, or another FMU's)", call, state);
+}
+
 EXPORT3 fmi3Status fmi3GetFMUState(fmi3Instance instance, fmi3FMUState *FMUState)
 {
     W3_CALL(fmi3GetFMUState, ANY_MODE);
     if (FMUState == NULL) return refuse(w, "fmi3GetFMUState refused: FMUState = NULL (the pointer to store it in)");
+    if (*FMUState != NULL && !fmi2_live(*FMUState, FMI2_LIVE_FMI3_STATE))
+        return foreign_state3(w, "fmi3GetFMUState", *FMUState);
     W3State *s = *FMUState != NULL ? (W3State *)*FMUState : calloc(1, sizeof *s);
     if (s == NULL) return refuse(w, "fmi3GetFMUState: out of memory");
     fmi2Status st = fmi2GetFMUstate(w->c, &s->inner);
+    if (st <= fmi2Warning && *FMUState == NULL && !fmi2_live_add(s, FMI2_LIVE_FMI3_STATE)) {
+        fmi2FreeFMUstate(w->c, &s->inner);
+        st = fmi2Error;
+    }
     if (st > fmi2Warning) {
         if (*FMUState == NULL) free(s);
         return to3(st);
@@ -670,7 +682,14 @@ EXPORT3 fmi3Status fmi3SetFMUState(fmi3Instance instance, fmi3FMUState FMUState)
     W3 *w = (W3 *)instance;
     if (!fmi2_live(w, FMI2_LIVE_FMI3)) return fmi3Error;
     if (FMUState == NULL) return refuse(w, "fmi3SetFMUState refused: FMUState = NULL (no state given)");
+    if (!fmi2_live(FMUState, FMI2_LIVE_FMI3_STATE)) return foreign_state3(w, "fmi3SetFMUState", FMUState);
     const W3State *s = FMUState;
+    const int step_mode = s->mode == W_STEP, continuous = s->mode == W_CONTINUOUS;
+    if ((w->model_exchange && step_mode) || (!w->model_exchange && continuous) ||
+        (!w->model_exchange && !w->event_mode_used && s->mode == W_EVENT))
+        return refuse(w, "fmi3SetFMUState refused: a state in %s, which this instance (%s%s) has not",
+                      MODE_NAMES[s->mode], w->model_exchange ? "Model Exchange" : "Co-Simulation",
+                      !w->model_exchange && !w->event_mode_used ? " without event mode" : "");
     fmi2Status st = fmi2SetFMUstate(w->c, s->inner);
     if (st <= fmi2Warning) {
         w->mode = s->mode;
@@ -684,6 +703,7 @@ EXPORT3 fmi3Status fmi3FreeFMUState(fmi3Instance instance, fmi3FMUState *FMUStat
     W3 *w = (W3 *)instance;
     if (!fmi2_live(w, FMI2_LIVE_FMI3)) return fmi3Error;
     if (FMUState == NULL || *FMUState == NULL) return fmi3OK;
+    if (!fmi2_live_remove(*FMUState, FMI2_LIVE_FMI3_STATE)) return foreign_state3(w, "fmi3FreeFMUState", *FMUState);
     W3State *s = *FMUState;
     fmi2Status st = fmi2FreeFMUstate(w->c, &s->inner);
     free(s);
@@ -700,6 +720,7 @@ EXPORT3 fmi3Status fmi3SerializedFMUStateSize(fmi3Instance instance, fmi3FMUStat
     if (!fmi2_live(w, FMI2_LIVE_FMI3)) return fmi3Error;
     if (FMUState == NULL || size == NULL)
         return refuse(w, "fmi3SerializedFMUStateSize refused: %s = NULL", FMUState == NULL ? "FMUState" : "size");
+    if (!fmi2_live(FMUState, FMI2_LIVE_FMI3_STATE)) return foreign_state3(w, "fmi3SerializedFMUStateSize", FMUState);
     size_t inner = 0;
     fmi2Status st = fmi2SerializedFMUstateSize(w->c, ((W3State *)FMUState)->inner, &inner);
     *size = inner + W3_HEADER;
@@ -714,6 +735,7 @@ EXPORT3 fmi3Status fmi3SerializeFMUState(fmi3Instance instance, fmi3FMUState FMU
     if (FMUState == NULL || serializedState == NULL)
         return refuse(w, "fmi3SerializeFMUState refused: %s = NULL", FMUState == NULL ? "FMUState" : "serializedState");
     if (size < W3_HEADER) return refuse(w, "fmi3SerializeFMUState refused: size = %zu bytes are too few", size);
+    if (!fmi2_live(FMUState, FMI2_LIVE_FMI3_STATE)) return foreign_state3(w, "fmi3SerializeFMUState", FMUState);
     const W3State *s = FMUState;
     int64_t mode = s->mode;
     memcpy(serializedState, &mode, sizeof mode);
@@ -737,10 +759,16 @@ EXPORT3 fmi3Status fmi3DeserializeFMUState(fmi3Instance instance, const fmi3Byte
     if (mode < W_INSTANTIATED || mode > W_TERMINATED || !isfinite(time))
         return refuse(w, "fmi3DeserializeFMUState refused: not a state of this FMU (mode %lld, time %g)",
                       (long long)mode, time);
+    if (*FMUState != NULL && !fmi2_live(*FMUState, FMI2_LIVE_FMI3_STATE))
+        return foreign_state3(w, "fmi3DeserializeFMUState", *FMUState);
     W3State *s = *FMUState != NULL ? (W3State *)*FMUState : calloc(1, sizeof *s);
     if (s == NULL) return refuse(w, "fmi3DeserializeFMUState: out of memory");
     fmi2Status st = fmi2DeSerializeFMUstate(w->c, (const fmi2Byte *)serializedState + W3_HEADER, size - W3_HEADER,
                                             &s->inner);
+    if (st <= fmi2Warning && *FMUState == NULL && !fmi2_live_add(s, FMI2_LIVE_FMI3_STATE)) {
+        fmi2FreeFMUstate(w->c, &s->inner);
+        st = fmi2Error;
+    }
     if (st > fmi2Warning) {
         if (*FMUState == NULL) free(s);
         return to3(st);

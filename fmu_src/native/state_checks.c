@@ -15,6 +15,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "me_model.h"
 #include "state_fields.h"
 
 _Static_assert(sizeof(((ModelData *)0)->STATE_MODEL_MEMBER) == STATE_MODEL_SIZE,
@@ -104,6 +105,80 @@ static int constants_refusal(const State *s, char *why, size_t size)
     return refused;
 }
 
+#ifdef ME_N_STATES
+static int finite_field(const char *name, double value, char *why, size_t size)
+{
+    if (isfinite(value)) return 0;
+    snprintf(why, size, "state field %s = %g is not finite", name, value);
+    return 1;
+}
+
+/* The Model Exchange and early-return block (me_data.h): its mode and flags in range, its times and states finite
+   (the continuous states are the model's state when mode != ME_OFF: what getters and derivatives read), and, when
+   the model is running, inside the model's domain: no pull-in event indicator (z[1] ...) at or below 0 (the states
+   beyond an electrode: the model stops there, me_stop_at_pull_in; so does a co-simulation). */
+static int me_refusal(const State *s, char *why, size_t size)
+{
+    const MeData *me = &s->model.me;
+    if (flag("model.me.mode", me->mode, ME_OFF, ME_TERMINATED, why, size) ||
+        flag("model.me.stopped", me->stopped, 0, 1, why, size) ||
+        flag("model.me.event_pending", me->event_pending, 0, 1, why, size) ||
+        flag("model.me.step_event", me->step_event, 0, 1, why, size) ||
+        flag("model.me.locals_stale", me->locals_stale, 0, 1, why, size) ||
+        finite_field("model.me.t", me->t, why, size) || finite_field("model.me.event_t", me->event_t, why, size) ||
+        finite_field("model.me.reached", me->reached, why, size))
+        return 1;
+    for (int i = 0; i < ME_MAX_STATES; i++) {
+        char name[32];
+        snprintf(name, sizeof name, "model.me.x[%d]", i);
+        if (finite_field(name, me->x[i], why, size)) return 1;
+    }
+    if (me->mode != ME_OFF && !s->model.built) {
+        snprintf(why, size, "state field model.me.mode = %lld without a built model", (long long)me->mode);
+        return 1;
+    }
+    return 0;
+}
+
+/* After the model's fields passed: a running state (built, not halted, not stopped) inside the domain. */
+static int domain_refusal(const State *s, char *why, size_t size)
+{
+    if (!s->model.built || s->halted || s->model.me.stopped) return 0;
+    double z[ME_MAX_INDICATORS];
+    model_me_indicators(s, z);
+    for (int i = 0; i < ME_N_INDICATORS; i++) {
+        if (!isfinite(z[i]) || (i > 0 && z[i] <= 0.0)) {
+            snprintf(why, size, "its %s (x = %g) is outside the model's domain: event indicator %d = %g%s",
+                     s->model.me.mode != ME_OFF ? "state model.me.x" : "model's state", s->model.me.mode != ME_OFF
+                     ? s->model.me.x[0] : s->value[VR_x], i, z[i], i > 0 ? " (at or beyond an electrode: pull-in)"
+                     : "");
+            return 1;
+        }
+    }
+    return 0;
+}
+#endif
+
+int native_interface_refusal(const State *s, int model_exchange, char *why, size_t size)
+{
+#ifdef ME_N_STATES
+    const int running = s->model.built && !s->halted && s->phase == PHASE_STEP_MODE;
+    if (!model_exchange && s->model.me.mode != ME_OFF) {
+        snprintf(why, size, "a Model Exchange state (model.me.mode = %lld) given to a Co-Simulation instance",
+                 (long long)s->model.me.mode);
+        return 1;
+    }
+    if (model_exchange && running && s->model.me.mode == ME_OFF) {
+        snprintf(why, size, "a Co-Simulation state (model.me.mode = 0 in step mode) given to a Model Exchange "
+                 "instance");
+        return 1;
+    }
+#else
+    (void)s; (void)model_exchange; (void)why; (void)size;
+#endif
+    return 0;
+}
+
 int native_state_refusal(const State *s, const State *current, char *why, size_t size)
 {
     if (flag("phase", s->phase, PHASE_INSTANTIATED, PHASE_TERMINATED, why, size) ||
@@ -137,6 +212,9 @@ int native_state_refusal(const State *s, const State *current, char *why, size_t
         snprintf(why, size, "state field model.built = 0 in step mode without a halt (no model to step)");
         return 1;
     }
+#ifdef ME_N_STATES
+    if (me_refusal(s, why, size)) return 1;
+#endif
     if (!s->model.built) return 0; /* the model's bytes are not read before it is built */
     if (s->phase != PHASE_STEP_MODE && s->phase != PHASE_TERMINATED) {
         snprintf(why, size, "state field model.built = 1 in phase %lld (only after initialisation)",
@@ -144,6 +222,9 @@ int native_state_refusal(const State *s, const State *current, char *why, size_t
         return 1;
     }
     if (model_fields_refusal((const unsigned char *)&s->model.STATE_MODEL_MEMBER, why, size)) return 1;
+#ifdef ME_N_STATES
+    if (domain_refusal(s, why, size)) return 1;
+#endif
     if (current != NULL && current->model.built && !(current->halted && !s->halted) && same_build(s, current))
         return 0; /* current's own build (valid): the rebuild would give the same */
     return constants_refusal(s, why, size);

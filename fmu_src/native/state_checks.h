@@ -15,6 +15,11 @@
    model constants, the rebuild is skipped (it would build current's; the common case, a host rolling back). */
 int native_state_refusal(const State *s, const State *current, char *why, size_t size);
 
+/* 1 and why when state s was left by an instance of the other interface: a Model Exchange state (its ME mode set)
+   given to a Co-Simulation instance, or a running Co-Simulation state given to a Model Exchange one (its continuous
+   states would be stale).  Called beside native_state_refusal by fmi2SetFMUstate and fmi2DeSerializeFMUstate. */
+int native_interface_refusal(const State *s, int model_exchange, char *why, size_t size);
+
 /* fmi2_native.c: the State that the parameters and experiment in s (inputs at their start values: they are not
    among the model's constants) build at
    fmi2ExitInitializationMode, into *fresh, in a silent scratch instance; 1 when the model was built (fresh->halted

@@ -296,3 +296,204 @@ def scenario_pointers3(probe: Probe3) -> None:
     f.fmi3FreeInstance(c)
     emit(case="second fmi3FreeInstance", call="fmi3FreeInstance", argument=None, status=OK, expected=OK,
          log=probe.take_log())
+
+
+# ---- FMU states: the Model Exchange block forged, states of another FMU or freed ----
+
+def _serialize(probe, c, state) -> bytes:
+    f = probe.lib
+    size = ctypes.c_size_t(0)
+    f.fmi2SerializedFMUstateSize(c, state, ctypes.byref(size))
+    buffer = ctypes.create_string_buffer(size.value)
+    f.fmi2SerializeFMUstate(c, state, buffer, size.value)
+    return buffer.raw
+
+
+def _restore(probe, c, data: bytes) -> tuple[int, int]:
+    """(deserialize status, set status; -1: not reached)"""
+    f = probe.lib
+    state = ctypes.c_void_p()
+    st = f.fmi2DeSerializeFMUstate(c, data, len(data), ctypes.byref(state))
+    if st > WARNING:
+        return st, -1
+    status = f.fmi2SetFMUstate(c, state)
+    f.fmi2FreeFMUstate(c, ctypes.byref(state))
+    return st, status
+
+
+def scenario_me_block(probe) -> None:
+    """A native FMU with Model Exchange: the ME block of a serialized state (me_data.h: mode, stopped, t, x[],
+    event_pending, event_t, reached, step_event, locals_stale) found by its values in a Model Exchange instance's
+    state (continuous-time mode, known states), each field forged with the checksum recomputed, restored into a
+    Model Exchange and a Co-Simulation instance: {"case", "instance", "deserialize", "set", "after", "log"}; after:
+    what the instance then answers (x and its status; a refused state leaves the instance as it was)."""
+    import struct
+
+    from vibrofmu.hosts.forge import NATIVE_HEADER, fnv1a
+
+    f = probe.lib
+    _declare(f, FMI2)
+    info = ctypes.create_string_buffer(64)
+    nx = len(probe.md.derivatives)
+
+    def me_instance():
+        c = probe.instantiate(probe.resources_uri(), kind=MODEL_EXCHANGE)
+        f.fmi2SetupExperiment(c, 0, 0.0, 0.0, 0, 0.0)
+        f.fmi2EnterInitializationMode(c)
+        f.fmi2ExitInitializationMode(c)
+        f.fmi2NewDiscreteStates(c, info)
+        f.fmi2EnterContinuousTimeMode(c)
+        return c
+
+    me = me_instance()
+    x = (ctypes.c_double * nx)()
+    f.fmi2GetContinuousStates(me, x, nx)
+    x[0], x[1] = 0.123456789, 0.987654321  # distinctive values to find the block by
+    f.fmi2SetTime(me, 0.5)
+    f.fmi2SetContinuousStates(me, x, nx)
+    state = ctypes.c_void_p()
+    f.fmi2GetFMUstate(me, ctypes.byref(state))
+    data = _serialize(probe, me, state)
+    f.fmi2FreeFMUstate(me, ctypes.byref(state))
+    pattern = struct.pack("<qqddd", 2, 0, 0.5, x[0], x[1])  # mode ME_CONTINUOUS_TIME_MODE, stopped 0, t, x[0], x[1]
+    payload = data[NATIVE_HEADER:]
+    where = payload.find(pattern)
+    emit(case="found the block", ok=where >= 0 and payload.count(pattern) == 1, log=probe.take_log())
+    if where < 0:
+        return
+    n_max = 16  # ME_MAX_STATES
+    offsets = {"mode": 0, "stopped": 8, "t": 16, "x[0]": 24, "x[1]": 32, "x[15]": 24 + 8 * 15}
+    tail = 24 + 8 * n_max
+    offsets.update({"event_pending": tail, "event_t": tail + 8, "reached": tail + 16, "step_event": tail + 24,
+                    "locals_stale": tail + 32})
+    forgeries = [("mode", "<q", 7), ("mode", "<q", -1), ("stopped", "<q", 5), ("t", "<d", float("inf")),
+                 ("x[0]", "<d", float("nan")), ("x[1]", "<d", float("inf")), ("x[15]", "<d", float("nan")),
+                 ("x[0]", "<d", 5.0), ("x[0]", "<d", -9.0), ("event_pending", "<q", 2), ("event_t", "<d", float("nan")),
+                 ("reached", "<d", float("-inf")), ("step_event", "<q", 2**62), ("locals_stale", "<q", -1)]
+
+    def forged(base: bytes, changes) -> bytes:
+        body = bytearray(base[NATIVE_HEADER:])
+        for field, fmt, value in changes:
+            body[where + offsets[field]:where + offsets[field] + 8] = struct.pack(fmt, value)
+        header = bytearray(base[:NATIVE_HEADER])
+        header[72:80] = struct.pack("<Q", fnv1a(bytes(body)))
+        return bytes(header + body)
+
+    def answer(c, model_exchange: bool):
+        if model_exchange:
+            out = (ctypes.c_double * nx)()
+            return f.fmi2GetContinuousStates(c, out, nx), out[0]
+        status, value = probe.steps(c, 0.5, 1)  # a doStep from where the state is, then x
+        return status, value
+
+    cs = probe.start()
+    f.fmi2DoStep(cs, 0.0, 0.5, 1)
+    cs_state = ctypes.c_void_p()
+    f.fmi2GetFMUstate(cs, ctypes.byref(cs_state))
+    cs_data = _serialize(probe, cs, cs_state)
+    f.fmi2FreeFMUstate(cs, ctypes.byref(cs_state))
+    f.fmi2FreeInstance(cs)
+    probe.take_log()
+    for field, fmt, value in forgeries:
+        for kind, base in (("ME", data), ("CS", cs_data)):
+            c = me_instance() if kind == "ME" else probe.start()
+            if kind == "CS":
+                f.fmi2DoStep(c, 0.0, 0.5, 1)
+            probe.take_log()
+            changes = [(field, fmt, value)] if kind == "ME" else [("mode", "<q", 2), (field, fmt, value)]
+            deserialize, status = _restore(probe, c, forged(base, changes))
+            after = answer(c, kind == "ME")
+            emit(case=f"{field} = {value!r}", instance=kind, deserialize=deserialize, set=status, after=after,
+                 log=probe.take_log())
+            f.fmi2FreeInstance(c)
+    # each interface's own state given to the other's instance
+    cs = probe.start()
+    probe.take_log()
+    emit(case="an ME state into a CS instance", instance="CS", **dict(zip(("deserialize", "set"),
+                                                                            _restore(probe, cs, data))),
+         after=answer(cs, False), log=probe.take_log())
+    f.fmi2FreeInstance(cs)
+    me2 = me_instance()
+    probe.take_log()
+    emit(case="a CS state into an ME instance", instance="ME", **dict(zip(("deserialize", "set"),
+                                                                            _restore(probe, me2, cs_data))),
+         after=answer(me2, True), log=probe.take_log())
+    emit(case="its own state into the ME instance", instance="ME", **dict(zip(("deserialize", "set"),
+                                                                                _restore(probe, me2, data))),
+         after=answer(me2, True), log=probe.take_log())
+    f.fmi2FreeInstance(me2)
+    f.fmi2FreeInstance(me)
+
+
+def scenario_foreign_states(probe, other) -> None:
+    """Two FMUs' binaries in one process: a state of the other FMU (and a freed state of this one) given to every
+    state call of this one; {"case", "status", "expected", "log"}; the other FMU's state must survive intact."""
+    f, g = probe.lib, other.lib
+    for lib in (f, g):
+        _declare(lib, FMI2)
+    a, b = probe.start(), other.start()
+    emit(case="start", ok=bool(a) and bool(b), log=probe.take_log() + other.take_log())
+    theirs, ours = ctypes.c_void_p(), ctypes.c_void_p()
+    g.fmi2GetFMUstate(b, ctypes.byref(theirs))
+    before = _serialize(other, b, theirs)
+    size = ctypes.c_size_t()
+    buffer = ctypes.create_string_buffer(1 << 16)
+    cases = [("fmi2GetFMUstate into another FMU's state", "fmi2GetFMUstate",
+              lambda s: f.fmi2GetFMUstate(a, ctypes.byref(s))),
+             ("fmi2SetFMUstate of another FMU's state", "fmi2SetFMUstate", lambda s: f.fmi2SetFMUstate(a, s)),
+             ("fmi2SerializedFMUstateSize of another FMU's state", "fmi2SerializedFMUstateSize",
+              lambda s: f.fmi2SerializedFMUstateSize(a, s, ctypes.byref(size))),
+             ("fmi2SerializeFMUstate of another FMU's state", "fmi2SerializeFMUstate",
+              lambda s: f.fmi2SerializeFMUstate(a, s, buffer, len(buffer))),
+             ("fmi2FreeFMUstate of another FMU's state", "fmi2FreeFMUstate",
+              lambda s: f.fmi2FreeFMUstate(a, ctypes.byref(s)))]
+    for case, call, make_call in cases:
+        pointer = ctypes.c_void_p(theirs.value)
+        _case(probe, case, call, "FMUstate", make_call(pointer))
+    emit(case="the other FMU's state intact", ok=_serialize(other, b, theirs) == before,
+         status=g.fmi2SetFMUstate(b, theirs), expected=OK, log=other.take_log())
+    f.fmi2GetFMUstate(a, ctypes.byref(ours))
+    freed = ours.value
+    f.fmi2FreeFMUstate(a, ctypes.byref(ours))
+    probe.take_log()
+    _case(probe, "fmi2SetFMUstate of a freed state", "fmi2SetFMUstate", "FMUstate", f.fmi2SetFMUstate(a, freed))
+    _case(probe, "fmi2FreeFMUstate of a freed state", "fmi2FreeFMUstate", "FMUstate",
+          f.fmi2FreeFMUstate(a, ctypes.byref(ctypes.c_void_p(freed))))
+    status, x = probe.steps(a, 0.0, 2)
+    emit(case="doStep after the refusals", status=status, expected=OK, x=x, log=probe.take_log())
+    g.fmi2FreeFMUstate(b, ctypes.byref(theirs))
+    f.fmi2FreeInstance(a)
+    g.fmi2FreeInstance(b)
+
+
+def scenario_foreign_states3(probe: Probe3, other: Probe3) -> None:
+    """scenario_foreign_states in FMI 3.0 (fmi3GetFMUState into another model's state corrupted the heap)."""
+    f, g = probe.lib, other.lib
+    a, b = probe.start(), other.start()
+    emit(case="start", ok=bool(a) and bool(b), log=probe.take_log() + other.take_log())
+    theirs, ours, size = ctypes.c_void_p(), ctypes.c_void_p(), ctypes.c_size_t()
+    g.fmi3GetFMUState(b, ctypes.byref(theirs))
+    buffer = ctypes.create_string_buffer(1 << 16)
+    cases = [("fmi3GetFMUState into another FMU's state", "fmi3GetFMUState",
+              lambda s: f.fmi3GetFMUState(a, ctypes.byref(s))),
+             ("fmi3SetFMUState of another FMU's state", "fmi3SetFMUState", lambda s: f.fmi3SetFMUState(a, s)),
+             ("fmi3SerializedFMUStateSize of another FMU's state", "fmi3SerializedFMUStateSize",
+              lambda s: f.fmi3SerializedFMUStateSize(a, s, ctypes.byref(size))),
+             ("fmi3SerializeFMUState of another FMU's state", "fmi3SerializeFMUState",
+              lambda s: f.fmi3SerializeFMUState(a, s, buffer, len(buffer))),
+             ("fmi3FreeFMUState of another FMU's state", "fmi3FreeFMUState",
+              lambda s: f.fmi3FreeFMUState(a, ctypes.byref(s)))]
+    for case, call, make_call in cases:
+        _case(probe, case, call, "FMUState", make_call(ctypes.c_void_p(theirs.value)))
+        f.fmi3FreeInstance(a)  # a refusal is an error of the instance: a fresh one for the next
+        a = probe.start()
+    emit(case="the other FMU's state intact", ok=True, status=g.fmi3SetFMUState(b, theirs), expected=OK,
+         log=other.take_log())
+    f.fmi3GetFMUState(a, ctypes.byref(ours))
+    freed = ours.value
+    f.fmi3FreeFMUState(a, ctypes.byref(ours))
+    probe.take_log()
+    _case(probe, "fmi3SetFMUState of a freed state", "fmi3SetFMUState", "FMUState", f.fmi3SetFMUState(a, freed))
+    g.fmi3FreeFMUState(b, ctypes.byref(theirs))
+    f.fmi3FreeInstance(a)
+    g.fmi3FreeInstance(b)

@@ -11,6 +11,8 @@ last case that finished (`run_probe` reads it).  Scenarios:
                 arguments to the other state calls: {"case", "status", "log", ...}
   pointers      NULL arrays and result pointers in every FMI 2.0 function, freed and foreign instance pointers
                 (vibrofmu.hosts.pointers); pointers3: the same in FMI 3.0
+  me_block      the Model Exchange block of a native state forged field by field, restored in ME and CS instances
+  foreign_states OTHER (foreign_states3: FMI 3.0)  states of FMU OTHER (loaded in the same process) and freed states given to FMU's state calls
   forged N SEED [sweep]  N forged serialized states (see `forge`; sweep: native states, every word in turn):
                 each restored and stepped; {"case", "deserialize", "set", "step", "log"} every 500th state, then a
                 summary line.
@@ -32,7 +34,8 @@ from fmpy.fmi2 import (fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYP
                        fmi2CallbackLoggerTYPE, fmi2StepFinishedTYPE)
 
 from vibrofmu.hosts.forge import emit, scenario_forged
-from vibrofmu.hosts.pointers import Probe3, scenario_pointers, scenario_pointers3
+from vibrofmu.hosts.pointers import (Probe3, scenario_foreign_states, scenario_foreign_states3, scenario_me_block,
+                                     scenario_pointers, scenario_pointers3)
 
 OK, WARNING, DISCARD, ERROR, FATAL = 0, 1, 2, 3, 4
 MODEL_EXCHANGE, CO_SIMULATION = 0, 1
@@ -239,6 +242,11 @@ def main(argv: list[str]) -> int:
         if scenario == "pointers3":
             scenario_pointers3(Probe3(unzipped, read_model_description(str(unzipped))))
             return 0
+        if scenario == "foreign_states3":
+            other = Path(rest[0]) if Path(rest[0]).is_dir() else Path(extract(rest[0], os.path.join(tmp, "other")))
+            scenario_foreign_states3(Probe3(unzipped, read_model_description(str(unzipped))),
+                                     Probe3(other, read_model_description(str(other))))
+            return 0
         probe = Probe(unzipped)
         if scenario == "instantiate":
             scenario_instantiate(probe)
@@ -246,6 +254,11 @@ def main(argv: list[str]) -> int:
             scenario_states(probe)
         elif scenario == "pointers":
             scenario_pointers(probe)
+        elif scenario == "me_block":
+            scenario_me_block(probe)
+        elif scenario == "foreign_states":
+            other = Path(rest[0]) if Path(rest[0]).is_dir() else Path(extract(rest[0], os.path.join(tmp, "other")))
+            scenario_foreign_states(probe, Probe(other))
         elif scenario == "forged":
             scenario_forged(probe, int(rest[0]), int(rest[1]), sweep=rest[2:] == ["sweep"])
         else:
