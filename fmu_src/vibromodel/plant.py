@@ -8,7 +8,7 @@ from __future__ import annotations
 import math
 from dataclasses import replace
 
-from . import forces
+from . import error_estimates, forces
 from .compiled import CompiledPlant, supports
 from .compiled_open_loop import CompiledOpenLoopPlant
 from .fidelities import entry
@@ -126,7 +126,16 @@ def make_plant(scene: Scene, settings: Settings, t0: float = 0.0, stop_time: flo
                cache_dirs: tuple = (), library: tuple = (None, "no library given")):
     """The plant of `settings`: on the compiled kernel (vibromodel.compiled.CompiledPlant) where it applies,
     settings.kernel asks for it and library = (vibromodel.compiled.load_library's result) holds one; else Plant.
-    The plant's notes say which it is."""
+    The plant's notes say which it is. Its `error_estimate` (error_estimates.attach) estimates max|x - x_exact| over
+    [t0, stop_time]; a rung whose estimate exceeds its share of the amplitude adds its warning."""
+    plant = _make_plant(scene, settings, t0, stop_time, cache_dirs, library)
+    error_estimates.attach(plant, t0, stop_time)
+    return plant
+
+
+def _make_plant(scene: Scene, settings: Settings, t0: float = 0.0, stop_time: float | None = None,
+               cache_dirs: tuple = (), library: tuple = (None, "no library given")):
+    """make_plant without the error estimate."""
     compiled, reason = library
     if settings.kernel == Kernel.COMPILED and entry(settings.fidelity).open_loop is not None:
         plant = Plant(scene, settings, t0, stop_time, cache_dirs)  # the set-up (table, fit) stays in Python
