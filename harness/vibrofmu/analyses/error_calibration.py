@@ -82,7 +82,7 @@ def slow_ac_grid(fmu, fidelities=(3, 4), stop: float = 50.0, h: float = 0.1, bet
                     relative = error / float(np.max(np.abs(exact[:n]))) if n else math.nan
                     rows.append({"beta": beta, "Omega": Omega, "fidelity": fidelity, "outcome": outcome,
                                  "relative_error": relative, "estimate": run["estimate"], "steps": n,
-                                 "exact_steps": len(exact), "warning": warned[0] if warned else None})
+                                 "exact_steps": len(exact), "warnings": warned})
                     if progress:
                         progress(f"beta {beta:g} Omega {Omega:g} fidelity {fidelity}: {outcome}, error {relative:.3g}"
                                  f" of max|x0|, estimate {run['estimate']:.3g}")
