@@ -361,6 +361,21 @@ def test_summary_json_is_always_valid_json(tmp_path):
     assert data == {"end_time": None, "r": [1.0, None, None], "n": 3, "ok": True, "a": [0.5, None]}
 
 
+def test_rk4_steps_longer_than_the_output_interval_are_not_warned_about_in_the_summary(tmp_path, plant_fmu):
+    """--max-step 5 at --output-interval 0.1: the result is bit for bit that of --max-step 0.1, and no warning of
+    the run (the harness's or the FMU's log) says the drive is wrong by more than 1000 %."""
+    runs = {}
+    for step in ("5", "0.1"):
+        out = tmp_path / step
+        assert main(["simulate", "--fmu", str(plant_fmu), "--solver", "rk4", "--max-step", step, "--stop-time", "20",
+                     "--out", str(out)]) == 0
+        runs[step] = ((out / "result.csv").read_bytes(), json.loads((out / "summary.json").read_text()))
+    assert runs["5"][0] == runs["0.1"][0]
+    summary = runs["5"][1]
+    assert summary["settings"]["max_step"] == 5 and summary["settings"]["fmu_max_step"] == 0.1
+    assert summary["warnings"] == [] and not any("does not resolve" in line for line in summary["fmu_log"])
+
+
 def test_the_rk4_warning_is_about_the_step_rk4_takes():
     """max_step 5 at output interval 0.1: every doStep is one RK4 step of 0.1, so the result is bit for bit that of
     max_step 0.1 and no warning is due; at output interval 1 the steps are 1 long and the warning names them."""
