@@ -121,6 +121,10 @@ MORE_MISTAKES = [
     (["simulate", "--stop-time", "0", "--out", "o"], "parameter stop-time = 0.0"),
     (["simulate", "--max-step", "-0.1", "--out", "o"], "--max-step: must be a finite number >= 0"),
     (["simulate", "--output-interval", "5", "--stop-time", "1", "--out", "o"], "longer than --stop-time"),
+    (["simulate", "--solver", "rk4", "--max-step", "1e-7", "--output-interval", "1", "--stop-time", "2", "--out", "o"],
+     "parameter output-interval = 1.0: needs more than 1000000 steps of --max-step 1e-07 per output"),
+    (["simulate", "--max-step", "1e-7", "--output-interval", "1", "--stop-time", "2", "--out", "o"],
+     "shorten --output-interval or raise --max-step"),
     (["simulate", "--fidelity", "bogus", "--out", "o"], "invalid choice: 'bogus'"),
     (["simulate"], "required: --out"),
     (["stability", "--set", "omega=0", "--out", "o"], "needs a forcing frequency omega > 0"),
@@ -251,6 +255,19 @@ def test_version_prints_the_package_version(tmp_path):
 
     proc = run_cli(["--version"], tmp_path)
     assert proc.returncode == 0 and proc.stdout == f"vibrofmu {metadata.version('vibrofmu')}\n", proc.stderr
+
+
+@pytest.mark.parametrize("argv", [["--stop-time", "1e6", "--output-interval", "1e-3"],
+                                  ["--fidelity", "analytic", "--stop-time", "3000"]])
+def test_the_note_on_the_scene_is_not_printed_before_an_error(argv, tmp_path, monkeypatch, capsys):
+    """The paper's scene has beta^2 != 8 alpha gamma: its note belongs to a run that starts, not before the one
+    line of a refused command line."""
+    from vibrofmu.analyses import simulate
+
+    simulate._NOTED.clear()
+    monkeypatch.chdir(tmp_path)
+    code = main(["simulate", *argv, "--out", "o"])
+    _assert_one_line(code, capsys.readouterr().err, "--stop-time", tmp_path)
 
 
 def test_importing_the_cli_imports_no_heavy_module():

@@ -10,7 +10,7 @@ import numpy as np
 from vibromodel import fidelities, solvers
 from vibromodel.analytic import covering
 from vibromodel.parameters import ParameterError, Scene, consistency_warning, validate
-from vibromodel.plant import Plant, Settings, checked_settings
+from vibromodel.plant import MAX_STEPS_PER_DOSTEP, Plant, Settings, checked_settings
 
 from vibrofmu.output import export
 from vibrofmu.analyses.compare import errors
@@ -85,21 +85,32 @@ def check_output_size(stop_time: float, output_interval: float, max_mb: float) -
 
 
 def check_inputs(scene: Scene, settings: Settings, stop_time: float, output_interval: float) -> list[str]:
-    """Raise ParameterError for bad input (before anything runs); return warnings (the FMU logs the settings'
-    ones too: rtol clamped, an RK4 step that does not resolve the forcing). A parameter set no voltages can
-    produce (beta^2 != 8 alpha gamma) is printed once as a note, not returned as a warning."""
+    """Raise ParameterError for bad input (before anything runs), named as the command line names it; return
+    warnings (the FMU logs the settings' ones too: rtol clamped, an RK4 step that does not resolve the forcing)."""
     validate(scene)
     for name, value in (("stop-time", stop_time), ("output-interval", output_interval)):
         if not (np.isfinite(value) and value > 0):
             raise ParameterError(name, value, "must be a finite number > 0")
-    _, warnings = checked_settings(scene, settings, interval=output_interval)  # the RK4 step really taken
-    if fidelities.entry(settings.fidelity).key == "analytic":  # the FMU's own check, before it is started
+    checked, warnings = checked_settings(scene, settings, interval=output_interval)  # the RK4 step really taken
+    level = fidelities.entry(settings.fidelity)
+    if level.integrated:  # the FMU's doStep refuses this (settings.check_step), naming communicationStepSize
+        step = solvers.solver_entry(checked.solver).step(checked.max_step)
+        if output_interval / step > MAX_STEPS_PER_DOSTEP:
+            raise ParameterError("output-interval", output_interval,
+                                 f"needs more than {MAX_STEPS_PER_DOSTEP} steps of --max-step {step:g} per output; "
+                                 "shorten --output-interval or raise --max-step")
+    if level.key == "analytic":  # the FMU's own check, before it is started
         covering(scene, settings.oafm, stop_time, strict=True)
+    return warnings
+
+
+def print_note(scene: Scene) -> None:
+    """A parameter set no voltages can produce (beta^2 != 8 alpha gamma): an explanation, not a problem, printed
+    once per process as a note when the run starts (never before an error)."""
     note = consistency_warning(scene)
-    if note and note not in _NOTED:  # an explanation, not a problem: once per process, as a note
+    if note and note not in _NOTED:
         _NOTED.add(note)
         print(f"note: {note}", file=sys.stderr)
-    return warnings
 
 
 def simulate(fmu: Path, scene: Scene, settings: Settings, stop_time: float, output_interval: float,
@@ -107,6 +118,7 @@ def simulate(fmu: Path, scene: Scene, settings: Settings, stop_time: float, outp
     """Run the FMU, write out_dir/result.csv, summary.json and x.png; return the run, the summary
     and the reference (None without compare)."""
     warnings = check_inputs(scene, settings, stop_time, output_interval)
+    print_note(scene)
     for warning in warnings:
         print(f"warning: {warning}", file=sys.stderr)
     given = fmu_settings(settings, output_interval)

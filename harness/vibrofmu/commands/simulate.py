@@ -40,7 +40,7 @@ def run(args) -> int:
     writable_folder(args.out)
     if 0 < args.stop_time < args.output_interval:
         raise UserError(f"--output-interval {args.output_interval:g} is longer than --stop-time {args.stop_time:g}")
-    # bad values raise ParameterError now; the last check (it may print the one-time note on the scene)
+    # bad values raise ParameterError now (the note on the scene is printed when the run starts: simulate)
     try:
         check_inputs(scene, settings, args.stop_time, args.output_interval)
     except ParameterError as error:
