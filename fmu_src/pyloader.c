@@ -11,7 +11,7 @@
  *      in a venv without numpy, scipy or pythonfmu), the recorded folders (`path`) missing from sys.path are
  *      appended to it, under the GIL, and the import is tried again.  Another version cannot run pythonfmu's
  *      library (built for one Python): one line says both versions and names the native FMU
- *      (build/native/<id>.fmu, no Python) as the working alternative.
+ *      (native/<id>.fmu beside it, no Python) as the working alternative.
  *   2. Otherwise the environment recorded at build time is read: the FMU's resources/python_env.txt
  *      (written by harness/vibrofmu/fmus/pythonenv.py), or the file $VIBROFMU_PYTHON_ENV names instead (for
  *      another machine; `vibrofmu doctor --env-file` writes one).  Lines "key=value":
@@ -263,7 +263,8 @@ static int check_modules(const PyApi *api, const PyEnv *env, const char *binary_
         if (host) /* pythonfmu's library runs in the Python it was built for only: no file or variable helps */
             say(message, size, "vibrofmu: this FMU (%s, pythonfmu) needs Python %s but the host runs Python %.*s, "
                 "and a pythonfmu FMU runs only in a Python host of the version it was built with: use the native "
-                "FMU build/native/%s.fmu (no Python at run time), or rebuild this one with Python %.*s "
+                "FMU %s.fmu from the native/ folder `vibrofmu build` wrote beside this FMU (no Python at run time), "
+                "or rebuild this one with Python %.*s "
                 "(`vibrofmu build`)", id, env->python_version, vlen, version, id, minor_length(version), version);
         else
             say(message, size, "vibrofmu: version mismatch: %s is loaded but this FMU needs Python %s" HINT, where,
@@ -289,7 +290,8 @@ static int check_modules(const PyApi *api, const PyEnv *env, const char *binary_
             if (host)
                 say(message, size, "vibrofmu: %s is missing, or broken: %s cannot import %s (%s), not even from "
                     "the folders this FMU was built with (%s); install it into the Python that runs the host (pip "
-                    "install %s), or use the native FMU build/native/%s.fmu (no Python at run time)", item, where,
+                    "install %s), or use the native FMU %s.fmu from the native/ folder `vibrofmu build` wrote beside "
+                    "this FMU (no Python at run time)", item, where,
                     item, why, env->path[0] ? env->path : "none recorded", item, id);
             else
                 say(message, size, "vibrofmu: %s is missing, or broken: %s cannot import %s (%s)" HINT, item, where,

@@ -130,6 +130,52 @@ def test_x_plot_marks_the_pull_in_where_the_fmu_says_it_happened():
     assert_readable(fig)
 
 
+def test_x_plot_title_names_only_the_settings_the_run_reads():
+    """The analytic fidelity has no solver and no rtol; RK4 has a step, not an rtol."""
+    from vibromodel.plant import Settings
+
+    from vibrofmu.analyses.simulate import FIDELITIES, SOLVERS, run_title
+
+    analytic = run_title(Settings(fidelity=FIDELITIES["analytic"]), 0.1)
+    assert "solver" not in analytic and "rtol" not in analytic and "OAFM harmonic basis, order 3" in analytic
+    rk4 = run_title(Settings(solver=SOLVERS["rk4"], max_step=5.0), 0.1)
+    assert "solver rk4, step 0.1" in rk4 and "rtol" not in rk4
+    assert run_title(Settings(rtol=1e-6), 0.1).endswith("fidelity exact, solver adaptive, rtol 1e-06")
+    assert run_title(Settings(fidelity=FIDELITIES["averaged"]), 0.1).endswith("averaged, slow-flow rtol 1e-08")
+
+
+def test_the_pull_in_marker_is_not_clipped_by_the_axes():
+    """The marker sits on the last point, often the top of the curve: drawn whole, over the axes' edge."""
+    time = np.arange(20) * 0.1
+    fig = export.figure_x(time, 0.2 + 0.005 * np.exp(2 * time), "pull-in", stop=(time[-1], "pull-in at tau = 1.9"))
+    marker = next(line for line in fig.axes[0].get_lines() if line.get_marker() == "X")
+    assert not marker.get_clip_on()
+
+
+def test_the_response_map_title_counts_the_differing_cells_it_does_not_count(tmp_path, captured):
+    """A "runs only" cell within the fold margin is drawn, but not counted: the title says so beside 1.000."""
+    _, result = _response_map_result()
+    cell = tuple(np.argwhere(result["near"])[0])
+    result["measured"] = result["measured"].copy()
+    result["measured"][cell] = True  # bistable by the runs only, within the margin
+    study_plots.response_map(result, tmp_path / "response_map.png")
+    title = captured[-1]._suptitle.get_text()
+    assert "agreement 1.000" in title and "1 within the margin differ, not counted" in title
+
+
+def test_diagram_labels_write_symbols_in_mathtext(tmp_path, captured):
+    """No ASCII Greek beside mathtext: the convergence plot's axis is $\\lambda_1$, its legend $\\omega$ = ...,
+    and titles list the scene in the same symbols."""
+    from vibrofmu.analyses import diagram
+
+    estimate = SimpleNamespace(running=list(-0.05 + 0.1 / np.arange(1, 30)), value=0.9, largest=-0.05)
+    diagram.plot_convergence(SimpleNamespace(name="omega", exponents={"up": [estimate]}), tmp_path / "c.png")
+    ax = captured[-1].axes[0]
+    assert ax.get_ylabel() == r"running estimate of $\lambda_1$"
+    assert [t.get_text() for t in ax.get_legend().get_texts()] == [r"$\omega$ = 0.9"]
+    assert export.scene_text({"mu": 0.1, "omega": 2.0, "R": 3.0}) == r"$\mu$ = 0.1, $\omega$ = 2, $R$ = 3"
+
+
 # -- frequency_response.png -----------------------------------------------------------------------------
 def _resonance(omega):
     return 0.007 / np.sqrt(1.0 + 400.0 * (omega - 1.0) ** 2)

@@ -504,10 +504,10 @@ def plot(d: Diagram, path, title: str = "") -> None:
         pulled = [p.value for p in points if p.pull_in]
         if pulled:  # pull-in: no samples; marked on the axis
             ax.plot(pulled, [0.0] * len(pulled), "x", color=COLOURS[direction], ms=2.5, label=f"pull-in ({direction})")
-    ax.axhline(-1.5, color="grey", lw=0.6, ls=":", label="contact loss x = -3/2")
-    ax.set_ylabel("x(kT) (stroboscopic, forcing phase 0)")
+    ax.axhline(-1.5, color="grey", lw=0.6, ls=":", label="contact loss $x = -3/2$")
+    ax.set_ylabel("$x(kT)$ (stroboscopic, forcing phase 0)")
     ax.legend(loc="best", markerscale=4, fontsize=8)
-    ax.set_title(title or f"bifurcation diagram in {d.name}")
+    ax.set_title(title or f"bifurcation diagram in {export.symbol(d.name)}")
     if with_exponents:
         ax2 = axes[1, 0]
         for direction, exps in d.exponents.items():
@@ -537,10 +537,10 @@ def plot_convergence(d: Diagram, path, count: int = 6) -> None:
     picks[top.value] = top
     fig, ax = plt.subplots(figsize=(8, 4.5))
     for e in sorted(picks.values(), key=lambda e: e.value):
-        ax.plot(np.arange(1, len(e.running) + 1), e.running, lw=0.9, label=f"{d.name} = {e.value:.6g}")
+        ax.plot(np.arange(1, len(e.running) + 1), e.running, lw=0.9, label=f"{export.symbol(d.name)} = {e.value:.6g}")
     ax.axhline(0.0, color="black", lw=0.8)
     ax.set_xlabel("forcing periods")
-    ax.set_ylabel("running estimate of lambda_1")
+    ax.set_ylabel(r"running estimate of $\lambda_1$")
     ax.set_title("Benettin: convergence of the largest exponent")
     ax.legend(fontsize=8)
     fig.tight_layout()

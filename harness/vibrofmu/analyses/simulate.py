@@ -55,6 +55,26 @@ def fmu_settings(settings: Settings, output_interval: float) -> Settings:
     return settings
 
 
+def run_title(settings: Settings, output_interval: float) -> str:
+    """x.png's title: the fidelity and the settings it reads (fidelities and solvers registries), nothing it does
+    not: an integrated level's solver and its rtol or RK4 step, the slow flow's rtol, the OAFM fit's order."""
+    level = fidelities.entry(settings.fidelity)
+    words = [f"fidelity {level.key}"]
+    if level.integrated:
+        solver = solvers.solver_entry(settings.solver)
+        words.append(f"solver {solver.option}")
+        if "rtol" in dict(solver.parameters):
+            words.append(f"rtol {settings.rtol:g}")
+        else:
+            words.append(f"step {min(solver.step(settings.max_step), output_interval):g}")
+    elif level.uses_rtol:
+        words.append(f"slow-flow rtol {settings.rtol:g}")
+    elif level.oafm_settings:
+        words.append(f"OAFM {settings.oafm.basis} basis" + (f", order {settings.oafm.order}"
+                                                            if settings.oafm.basis == "harmonic" else ""))
+    return "HertzEAOscillator: " + ", ".join(words)
+
+
 _NOTED: set[str] = set()  # notes already printed in this process
 
 # What a run keeps per output point: time and the plant's 6 outputs (x, v, a, F_contact, F_electrostatic,
@@ -148,11 +168,8 @@ def simulate(fmu: Path, scene: Scene, settings: Settings, stop_time: float, outp
         summary["error"] = errors(run.time, run.outputs["x"], run.outputs["v"], reference)
     export.write_csv(out_dir / "result.csv", run.time, run.outputs)
     export.write_json(out_dir / "summary.json", summary)
-    fidelity = {v: k for k, v in FIDELITIES.items()}[settings.fidelity]
-    solver = {v: k for k, v in SOLVERS.items()}[settings.solver]
     if len(run.time) >= 2:  # an FMU that failed before its first step has nothing to plot: no empty figure
-        export.plot_x(out_dir / "x.png", run.time, run.outputs["x"],
-                      f"HertzEAOscillator: fidelity {fidelity}, solver {solver}, rtol {settings.rtol:g}",
+        export.plot_x(out_dir / "x.png", run.time, run.outputs["x"], run_title(given, output_interval),
                       reference_x=reference_x, in_contact=run.outputs.get("in_contact"),
                       stop=None if run.completed else (run.end_time, run.stop_reason))
     return run, summary, reference

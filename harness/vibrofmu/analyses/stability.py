@@ -332,8 +332,8 @@ def write_study(study: dict, out_dir: Path) -> None:
     export.plot_frequency_response(
         out_dir / "frequency_response.png", response_curve(study["model"]),
         (response.omega, response.r, response.stable), study["sweeps"], study["folds"], study["summary"]["omega_range"],
-        f"frequency response: mu = {s.mu:g}, Delta = {s.Delta:g}, alpha = {s.alpha:g}, beta = {s.beta:g}, "
-        f"gamma = {s.gamma:g}, Omega = {s.Omega:g}")
+        "frequency response: " + export.scene_text({name: getattr(s, name) for name in
+                                                    ("mu", "Delta", "alpha", "beta", "gamma", "Omega")}))
 
 
 def multiplier_error_note(scene: Scene, model: av.Averaged, omega: float) -> str | None:

@@ -101,9 +101,8 @@ def run(args) -> int:
         print(f"error: continuation in {args.param} from {args.start:g}: {error}{hint}", file=sys.stderr)
         return 1
     output.write_branch(out / "branch.parquet", result)
-    others = ", ".join(f"{k} = {v:g}" for k, v in scene.as_dict().items()
-                       if k not in ("x_start", "v_start", args.param))
-    title = f"periodic orbits continued in {args.param} ({others})"
+    others = export.scene_text({k: v for k, v in scene.as_dict().items() if k not in ("x_start", "v_start", args.param)})
+    title = f"periodic orbits continued in {export.symbol(args.param)} ({others})"
     output.plot_branch(out / "branch.png", result, title)
     summary = {"scene": scene.as_dict(), "param": args.param, "from": args.start, "to": args.stop,
                "points": len(result.points), "stop_reason": result.stop_reason, "seconds": result.seconds,

@@ -93,8 +93,8 @@ def run(args) -> int:
     export.write_parquet(ly, out / "lyapunov.parquet")
     if args.lyapunov_periods:
         export.write_parquet(dg.convergence_table(result), out / "convergence.parquet")
-    title = (f"{args.param} from {lo:g} to {hi:g}; " + ", ".join(f"{k} = {v:g}" for k, v in base.as_dict().items()
-                                                                  if k not in ("x_start", "v_start", args.param)))
+    title = (f"{export.symbol(args.param)} from {lo:g} to {hi:g}; "
+             + export.scene_text({k: v for k, v in base.as_dict().items() if k not in ("x_start", "v_start", args.param)}))
     dg.plot(result, out / "diagram.png", title=export.wrapped(title, 9.0, 11))
     if args.lyapunov_periods:
         dg.plot_convergence(result, out / "lyapunov_convergence.png")

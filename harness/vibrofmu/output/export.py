@@ -185,7 +185,8 @@ def figure_x(time, x, title: str, reference_x=None, in_contact=None, stop=None):
         for panel in (ax, below) if below is not None else (ax,):
             panel.axvline(tau, color="k", lw=1.0, ls="--", label=f"{what} at $\\tau$ = {tau:.6g}" if panel is ax
                           else None)
-        ax.plot(tau, x[-1] if x_stop is None else x_stop, "X", ms=10, color="k", zorder=5)
+        # not clipped: the last point is often the top of the curve, on the axes' edge
+        ax.plot(tau, x[-1] if x_stop is None else x_stop, "X", ms=10, color="k", zorder=5, clip_on=False)
     (below if below is not None else ax).set_xlabel(TAU)
     if len(time) > 1:  # a stopped run: room after its end, so that the line marking the stop is not the frame
         ax.set_xlim(time[0], end + (0.03 * (end - time[0]) if stop is not None else 0.0))
@@ -302,6 +303,21 @@ ESTIMATE_SYMBOLS = {"mu": r"\mu", "Delta": r"\Delta", "beta": r"\beta", "gamma":
 PARAMETER_LABELS = {"omega": r"forcing frequency $\omega$", "Omega": r"AC frequency $\Omega$",
                     "Delta": r"load amplitude $\Delta$", "mu": r"damping $\mu$", "alpha": r"$\alpha$",
                     "beta": r"$\beta$", "gamma": r"$\gamma$", "R": "electrode gap R"}
+
+
+SYMBOLS = {"omega": r"$\omega$", "Omega": r"$\Omega$", "Delta": r"$\Delta$", "mu": r"$\mu$", "alpha": r"$\alpha$",
+           "beta": r"$\beta$", "gamma": r"$\gamma$", "R": "$R$", "x_start": "$x_0$", "v_start": "$v_0$",
+           "tau": r"$\tau$"}
+
+
+def symbol(name: str) -> str:
+    """A scene parameter as mathtext (omega -> $\\omega$), as the axis labels write it; else the name itself."""
+    return SYMBOLS.get(name, name)
+
+
+def scene_text(values: dict) -> str:
+    """"$\\mu$ = 0.1, $\\Delta$ = 0.05, ...": scene values for a title, in the symbols of the labels."""
+    return ", ".join(f"{symbol(name)} = {value:g}" for name, value in values.items())
 
 
 def parameter_label(name: str) -> str:
