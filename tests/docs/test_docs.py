@@ -63,6 +63,13 @@ def test_no_reference_to_material_outside_the_repository():
             assert word not in text, f"{doc.name} mentions {word}"
 
 
+def test_no_issue_numbers_in_the_user_documents():
+    """Users cannot see the project's issue tracker: the documents say what changed in their own words."""
+    for doc in DOCS:
+        found = re.findall(r"\bissues? #?\d+", doc.read_text(), flags=re.I)
+        assert not found, f"{doc.relative_to(ROOT)}: {found}"
+
+
 def test_report_blocks_are_well_formed_and_filled():
     seen = {}
     for doc in DOCS:
