@@ -126,6 +126,7 @@ def test_ctrl_c_during_build_leaves_complete_fmus_or_none(tmp_path):
 
 # -- the pieces, without a build ------------------------------------------------------------------------------
 def _zip(path: Path, normalized: bool) -> Path:
+    path.parent.mkdir(parents=True, exist_ok=True)
     with zipfile.ZipFile(path, "w") as z:
         z.writestr("modelDescription.xml", "<fmiModelDescription/>")
     return archive.normalize_entries(path) if normalized else path
@@ -159,6 +160,7 @@ def test_a_half_built_default_fmu_is_rebuilt_not_used(tmp_path, monkeypatch, cap
     from vibrofmu.fmus import build
 
     half = _zip(tmp_path / common.PLANT_NAME, normalized=False)
+    named = _zip(tmp_path / "named" / "plant.fmu", normalized=False)  # not the default: the user named it
     built = []
 
     def fake_build_plant(out_dir):
@@ -168,6 +170,8 @@ def test_a_half_built_default_fmu_is_rebuilt_not_used(tmp_path, monkeypatch, cap
     monkeypatch.setattr(build, "build_plant", fake_build_plant)
     monkeypatch.setattr(common, "say_compiled_parts", lambda natives=False: None)
     monkeypatch.setattr(common, "checked_fmu", lambda path, model=None: path)
+    monkeypatch.setattr(common.paths, "build_dir", lambda: tmp_path)
+    assert common.built_plant(named) == named and built == []  # used as it is
     assert common.built_plant(half) == half
     assert built == [tmp_path] and archive.finished(half)
     assert "is incomplete: an interrupted build" in capsys.readouterr().err

@@ -254,9 +254,10 @@ def plant_fmu(given: str | None) -> Path:
 
 
 def built_plant(path: Path) -> Path:
-    """`path` (from plant_fmu), built first when it is the missing default (or one an interrupted build of an
-    earlier version left half-done: archive.finished)."""
-    if not path.exists() or not _finished(path):
+    """`path` (from plant_fmu), built first when it is the missing default (or the default an interrupted build of
+    an earlier version left half-done: archive.finished; an FMU the user named is used as it is)."""
+    default = path.resolve() == (paths.build_dir() / PLANT_NAME).resolve()
+    if not path.exists() or (default and not _finished(path)):
         from vibrofmu.fmus.build import build_plant
 
         print(f"building {path} ...{_half_done(path)}", file=sys.stderr)
