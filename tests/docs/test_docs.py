@@ -89,7 +89,9 @@ def test_parse_blocks_rejects_malformed_markers():
     assert report.replace_blocks(body, {"ssp": "new"}) == "<!-- report:ssp -->\nnew\n<!-- /report:ssp -->"
 
 
-SLOW_CHECKS = ("container",)  # ~26 s of FMU runs (three H down to 0.01): checked by the slow test below
+# checked by the slow test below: the container (~26 s of FMU runs, three H down to 0.01) and the SSP orderings
+# (a minute of runs: three orderings at three H)
+SLOW_CHECKS = ("container", "ssp_orderings")
 
 
 def test_report_check_matches_a_fresh_run(plant_fmu, controller_fmu, closed_loop_fmu, capsys, monkeypatch):
@@ -105,4 +107,4 @@ def test_report_check_of_every_deterministic_block(plant_fmu, controller_fmu, cl
     """`vibrofmu report --check` as a user runs it: every deterministic block, the container's table too."""
     assert main(["report", "--check", "--fmu-dir", str(plant_fmu.parent), "--root", str(ROOT)]) == 0, \
         capsys.readouterr().err
-    assert "accuracy, container, ranges, ssp" in capsys.readouterr().out
+    assert "accuracy, container, ranges, ssp, ssp_orderings match" in capsys.readouterr().out
