@@ -270,6 +270,25 @@ def test_the_note_on_the_scene_is_not_printed_before_an_error(argv, tmp_path, mo
     _assert_one_line(code, capsys.readouterr().err, "--stop-time", tmp_path)
 
 
+def test_closed_loop_lists_only_the_files_it_wrote(tmp_path, monkeypatch, capsys):
+    """A run that stops at its first output has nothing to plot: the line names result.csv and summary.json only,
+    each of which exists (it named four plots that were never drawn)."""
+    from vibrofmu.analyses import closed_loop
+    from vibrofmu.commands import closed_loop as command
+
+    monkeypatch.setattr(command, "built_all", lambda folder: folder)
+    monkeypatch.setattr(command, "checked_fmu", lambda path, model: path)
+    stopped = {"time": np.array([0.0]), "series": {"x": np.array([0.1])}, "completed": False,
+               "stop_reason": "pull-in at tau = 0", "wall_time_s": 0.0, "log": []}
+    monkeypatch.setattr(closed_loop, "monolithic", lambda *args: stopped)
+    monkeypatch.setattr(closed_loop, "summarise", lambda result, theta: {"completed": False})
+    out = tmp_path / "out"
+    assert main(["closed-loop", "--fmu-dir", str(tmp_path), "--out", str(out)]) == 1
+    wrote = next(line for line in capsys.readouterr().out.splitlines() if line.startswith("wrote "))
+    names = wrote.removeprefix(f"wrote {out}/").split(" (")[0].split(", ")
+    assert names == ["result.csv", "summary.json"] and sorted(names) == sorted(p.name for p in out.iterdir())
+
+
 def test_importing_the_cli_imports_no_heavy_module():
     """`vibrofmu --help` must not pay for scipy, matplotlib, FMPy or numpy (each command imports its own)."""
     heavy = ("scipy", "matplotlib", "fmpy", "numpy")

@@ -76,7 +76,9 @@ def run(args) -> int:
                   file=sys.stderr)
             summary["convergence"] = closed_loop.convergence_study(scene, fmu_dir / CLOSED_LOOP_NAME)
     closed_loop.write_results(out, result, summary, theta, title)
-    print(f"wrote {out}/result.csv, summary.json, tracking.png, errors.png, lyapunov.png, estimates.png")
+    plots = [name for name in ("tracking.png", "errors.png", "lyapunov.png", "estimates.png") if (out / name).exists()]
+    print(f"wrote {out}/" + ", ".join(["result.csv", "summary.json", *plots])
+          + ("" if plots else " (no plots: the run stopped before its second output)"))
     if "V_end" in summary:
         print(f"V: {summary['V_start']:.6e} -> {summary['V_end']:.6e}, max increase between outputs "
               f"{summary['max_V_increase']:.3e}; final |e1| = {summary['final_abs_e1']:.3e}, "
