@@ -250,6 +250,22 @@ def test_an_option_given_once_or_used_is_accepted():
         check_given(args)  # no UserError
 
 
+def test_a_harmless_unused_option_is_a_warning_and_the_command_runs(capsys):
+    """Unused(harmless=True): one `warning:` line naming the option, then the command runs (exit code its own)."""
+    from vibrofmu.commands.common import Command, Parser, Unused, run
+
+    ran = []
+    command = Command("probe", "a probe", lambda p: p.add_argument("--level", type=int, default=1),
+                      lambda args: ran.append(args.level) or 0,
+                      lambda args: [Unused("level", "the probe reads no level", harmless=True)])
+    parser = Parser(prog="vibrofmu probe")
+    command.options(parser)
+    parser.set_command(command)
+    assert run(command.run, parser.parse_args(["--level", "3"])) == 0 and ran == [3]
+    assert capsys.readouterr().err == "warning: --level 3: the probe reads no level\n"
+    assert run(command.run, parser.parse_args([])) == 0 and capsys.readouterr().err == ""  # not given: no line
+
+
 def test_version_prints_the_package_version(tmp_path):
     from importlib import metadata
 
