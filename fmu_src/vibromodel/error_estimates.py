@@ -26,8 +26,9 @@ L = d^2/dt^2 + mu d/dt + a1; off resonance |e| ~ |R|/a1 (analytic.check_fit's es
 1/(mu p) overestimated the measured error 100-10,000 times (the residual's largest part is not at resonance), so the
 estimate is max|R|/a1 with a calibrated factor.
 
-A rung's estimate above its WARN share of the amplitude is logged as fmi2Warning, naming the estimate and the rung
-to use (Plant: `error_warnings`); a rung that cannot estimate (non-finite) warns likewise.
+Each level's estimator is its registry entry's `error_estimate` (fidelities.py); make_plant attaches the result to
+the plant (`attach`). A rung whose estimate exceeds its entry's `warn_share` of the amplitude adds an fmi2Warning
+naming the estimate and the rung to use; a rung that cannot estimate (non-finite) warns likewise.
 """
 from __future__ import annotations
 
@@ -41,10 +42,11 @@ from . import forces
 # is CALIBRATION[level] times its theoretical sum of terms, chosen so that the estimate bounds the measured error in
 # >= 99 % of the campaign's random scenes.
 CALIBRATION = {"averaged": 3.0, "analytic": 1.0, "adaptive": 1.0, "fixed": 1.0, "truncation": 1.0}
-# A fixed rung warns when its estimate exceeds this share of the run's amplitude max|x| (fidelity 3: the averaging's
-# own accuracy on the paper scene is ~1 %; fidelity 4: analytic.FIT_WARN).
-WARN_SHARE = {"averaged": 0.15, "analytic": 1e-4}
-USE_INSTEAD = {"averaged": "use fidelity 4 or 0", "analytic": "use fidelity 0"}
+# An approximate rung warns when its estimate exceeds its share of the run's amplitude max|x| (the registry's
+# FidelityEntry.warn_share): fidelity 3 AVERAGED_WARN_SHARE (its calibrated estimate is ~10 times its measured error
+# of ~1 % on the paper scene, which is not warned; every cell of the slow-AC grid that is not warned is within 5 %:
+# tests/fmus/test_error_estimates.py), fidelity 4 analytic.FIT_WARN.
+AVERAGED_WARN_SHARE = 0.15
 
 
 def linear_gain(k1: float, mu: float, s: float) -> complex:
@@ -109,18 +111,17 @@ def analytic_estimate(scene, solution, span: float) -> tuple[float, dict]:
     return CALIBRATION["analytic"] * terms["residual"] * terms["gain"], terms
 
 
-def warning(level: int, key: str, estimate: float, amplitude: float) -> list[str]:
-    """The fmi2Warning of a rung whose estimate exceeds WARN_SHARE[key] of the amplitude, or that cannot estimate
-    (non-finite); else [] (and [] for a rung without a WARN_SHARE: the integrated ones, whose settings the user
-    chose)."""
-    share = WARN_SHARE.get(key)
+def warning(level: int, share: float | None, estimate: float, amplitude: float) -> list[str]:
+    """The fmi2Warning of a rung whose estimate exceeds `share` (fidelities.FidelityEntry.warn_share) of the
+    amplitude, or that cannot estimate (non-finite); else [] (and [] for a rung without a share: the integrated
+    ones, whose solver settings the user chose)."""
     if share is None:
         return []
     if not math.isfinite(estimate):
-        return [f"fidelity {level} cannot estimate its error here (estimate {estimate!r}); {USE_INSTEAD[key]}"]
+        return [f"fidelity {level} cannot estimate its error here (estimate {estimate!r}); use fidelity 0"]
     if estimate > share * amplitude:
         return [f"fidelity {level}'s error estimate max|x - x_exact| ~ {estimate:.3g} exceeds {share:g} of the "
-                f"amplitude max|x| ~ {amplitude:.4g} (docs/rungs.md, Error estimates); {USE_INSTEAD[key]}"]
+                f"amplitude max|x| ~ {amplitude:.4g} (docs/rungs.md, Error estimates); use fidelity 0"]
     return []
 
 
@@ -201,25 +202,39 @@ def truncation_terms(scene, model, span: float) -> dict:
     return {"truncation": difference / a1, "amplitude": abs(x_s) + amplitude}
 
 
-def estimate(scene, settings, level_key: str, model=None, solution=None, span: float | None = None) -> dict:
-    """{"estimate": max|x - x_exact| over the run (x units), "amplitude": the run's amplitude scale, "terms": {...}}
-    for the rung `level_key` (fidelities.FidelityEntry.key) at `settings`; span None: the estimate over 1000."""
-    span = 1000.0 if span is None or not math.isfinite(span) else span
-    if level_key == "averaged":
-        from .averaging import averaged as averaged_model
-        value, terms = averaged_estimate(averaged_model(scene), solution, span)
-        amplitude = terms["amplitude"]
-    elif level_key == "analytic":
-        value, terms = analytic_estimate(scene, solution, span)
-        amplitude = abs(scene.gamma) + linear_amplitude(scene)[1]
-    else:
-        terms = solver_terms(scene, settings, span)
-        if level_key != "exact":
-            terms.update(truncation_terms(scene, model, span))
-        kind = "fixed" if _fixed(settings) else "adaptive"
-        value = CALIBRATION[kind] * terms["solver"] + CALIBRATION["truncation"] * terms.get("truncation", 0.0)
-        amplitude = terms["amplitude"]
+def _result(value: float, amplitude: float, terms: dict) -> dict:
     return {"estimate": float(value), "amplitude": float(amplitude), "terms": {k: float(v) for k, v in terms.items()}}
+
+
+def exact_estimate(scene, settings, model, solution, span: float) -> dict:
+    """Fidelity 0: the solver's error (solver_terms), calibrated per kind of solver."""
+    terms = solver_terms(scene, settings, span)
+    kind = "fixed" if _fixed(settings) else "adaptive"
+    return _result(CALIBRATION[kind] * terms["solver"], terms["amplitude"], terms)
+
+
+def polynomial_estimate(scene, settings, model, solution, span: float) -> dict:
+    """Fidelities 1 and 2: the solver's error and the polynomial's truncation (truncation_terms)."""
+    terms = {**solver_terms(scene, settings, span), **truncation_terms(scene, model, span)}
+    kind = "fixed" if _fixed(settings) else "adaptive"
+    value = CALIBRATION[kind] * terms["solver"] + CALIBRATION["truncation"] * terms["truncation"]
+    return _result(value, terms["amplitude"], terms)
+
+
+def averaged_plant_estimate(scene, settings, model, solution, span: float) -> dict:
+    """Fidelity 3: averaged_estimate of the plant's slow-flow solution."""
+    from .averaging import averaged as averaged_model  # fidelity 3's module (loaded by it)
+    value, terms = averaged_estimate(averaged_model(scene), solution, span)
+    return _result(value, terms["amplitude"], terms)
+
+
+def analytic_plant_estimate(scene, settings, model, solution, span: float) -> dict:
+    """Fidelity 4: analytic_estimate of the plant's OAFM solution; the amplitude is the linear prediction's."""
+    value, terms = analytic_estimate(scene, solution, span)
+    return _result(value, abs(scene.gamma) + linear_amplitude(scene)[1], terms)
+
+
+DEFAULT_SPAN = 1000.0  # the run estimated without a stop time (fidelity 3's set-up window, slowflow.WINDOW)
 
 
 def attach(plant, t0: float, stop_time: float | None) -> None:
@@ -228,15 +243,18 @@ def attach(plant, t0: float, stop_time: float | None) -> None:
     from .fidelities import entry
 
     level = entry(plant.settings.fidelity)
+    if level.error_estimate is None:
+        plant.error_estimate = None
+        return
     inner = getattr(plant, "python", plant)  # the compiled open-loop plant wraps the Python one
-    span = None if stop_time is None else stop_time - t0
+    span = DEFAULT_SPAN if stop_time is None or not math.isfinite(stop_time - t0) else stop_time - t0
     try:
-        result = estimate(plant.scene, plant.settings, level.key,
-                          getattr(inner, "model", None) or level.model(plant.scene),
-                          getattr(inner, "solution", None), span)
-    except (ArithmeticError, ValueError, ZeroDivisionError) as error:
+        result = level.error_estimate(plant.scene, plant.settings,
+                                      getattr(inner, "model", None) or level.model(plant.scene),
+                                      getattr(inner, "solution", None), span)
+    except (ArithmeticError, ValueError) as error:  # ZeroDivisionError and OverflowError are ArithmeticErrors
         result = {"estimate": math.nan, "amplitude": math.nan, "terms": {}, "error": str(error)}
     plant.error_estimate = result
     terms = ", ".join(f"{k} {v:.3g}" for k, v in result["terms"].items())
     plant.notes.append(f"error estimate: max|x - x_exact| ~ {result['estimate']:.3g} over the run ({terms})")
-    plant.warnings += warning(int(level.level), level.key, result["estimate"], result["amplitude"])
+    plant.warnings += warning(int(level.level), level.warn_share, result["estimate"], result["amplitude"])

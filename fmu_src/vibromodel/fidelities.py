@@ -16,6 +16,7 @@ from dataclasses import dataclass
 from enum import IntEnum
 from typing import Callable
 
+from . import error_estimates
 from .analytic import cached_solve, check_fit, covering
 from .models import CModel, ExactModel, PolynomialModel, scene_model
 from .parameters import ParameterError, Rule, Scene
@@ -60,7 +61,10 @@ class FidelityEntry:
     below_target: the level's own model error exceeds the bench's accuracy target (speed/bench.py THRESHOLD), so
     the bench does not search the target's settings for it.
     ladder: the level is a rung of the speed ladder (speed/ladder.py; the first such level is its base);
-    ladder_limit: the rung's acceptance limit there, cost per output over the base's (None: none)."""
+    ladder_limit: the rung's acceptance limit there, cost per output over the base's (None: none).
+    error_estimate(scene, settings, model, solution, span) -> {"estimate", "amplitude", "terms"}: the level's estimate
+    of max|x - x_exact| over a run of span (vibromodel/error_estimates.py); warn_share: above this share of the
+    amplitude the plant warns (fmi2Warning) with the estimate (None: never; the integrated levels)."""
 
     level: Fidelity
     key: str
@@ -78,6 +82,8 @@ class FidelityEntry:
     below_target: bool = False
     ladder: bool = False
     ladder_limit: float | None = None
+    error_estimate: Callable | None = None
+    warn_share: float | None = None
 
     @property
     def name(self) -> str:
@@ -142,20 +148,24 @@ def _check_oafm(settings) -> None:
 NATIVE_NEEDS_PYTHON = "needs Python"  # native_refusal's words before "; use the pythonfmu FMU ..."
 
 REGISTRY: dict[Fidelity, FidelityEntry] = {e.level: e for e in (
-    FidelityEntry(Fidelity.EXACT, "exact", "0 exact Eq. 3", ExactModel, True, CModel.EXACT, ladder=True),
+    FidelityEntry(Fidelity.EXACT, "exact", "0 exact Eq. 3", ExactModel, True, CModel.EXACT, ladder=True,
+                  error_estimate=error_estimates.exact_estimate),
     FidelityEntry(Fidelity.POLYNOMIAL, "polynomial", "1 polynomial Eq. 7", PolynomialModel, True, CModel.POLYNOMIAL,
-                  ladder=True),
+                  ladder=True, error_estimate=error_estimates.polynomial_estimate),
     FidelityEntry(Fidelity.POLYNOMIAL_PAPER, "polynomial-paper", "2 Eq. 7 printed coefficients",
                   lambda scene: PolynomialModel(scene, printed=True), True, CModel.POLYNOMIAL_PRINTED,
-                  below_target=True),  # its model error (~2e-8, the printed coefficients) is above the target's 1e-8
+                  below_target=True,  # its model error (~2e-8, the printed coefficients) is above the target's 1e-8
+                  error_estimate=error_estimates.polynomial_estimate),
     FidelityEntry(Fidelity.AVERAGED, "averaged", "3 averaged slow flow", ExactModel, False, CModel.EXACT,
                   open_loop=_averaged_solution, evaluator=Evaluator.SLOWFLOW, solution_in_snapshot=True,
                   work=_averaged_work, native_refusal="the native FMU cannot tabulate the averaged slow flow",
-                  ladder=True, ladder_limit=0.5),
+                  ladder=True, ladder_limit=0.5, error_estimate=error_estimates.averaged_plant_estimate,
+                  warn_share=error_estimates.AVERAGED_WARN_SHARE),
     FidelityEntry(Fidelity.ANALYTIC, "analytic", "4 OAFM analytic", ExactModel, False, CModel.EXACT,
                   open_loop=_analytic_solution, evaluator=Evaluator.OAFM, check_settings=_check_oafm,
                   work=_analytic_work, uses_rtol=False, native_refusal="the native FMU cannot fit the OAFM solution",
-                  ladder=True, ladder_limit=0.5),
+                  ladder=True, ladder_limit=0.5,  # analytic.check_fit warns with the same estimate, max|R|/a1
+                  error_estimate=error_estimates.analytic_plant_estimate),
 )}
 
 
