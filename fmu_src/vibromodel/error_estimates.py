@@ -237,12 +237,10 @@ def analytic_plant_estimate(scene, settings, model, solution, span: float) -> di
 DEFAULT_SPAN = 1000.0  # the run estimated without a stop time (fidelity 3's set-up window, slowflow.WINDOW)
 
 
-def attach(plant, t0: float, stop_time: float | None) -> None:
+def attach(plant, level, t0: float, stop_time: float | None) -> None:
     """Give a plant (plant.Plant, compiled.CompiledPlant, compiled_open_loop.CompiledOpenLoopPlant) its
-    `error_estimate` (estimate(...)'s dict) and add the rung's warning to its warnings."""
-    from .fidelities import entry
-
-    level = entry(plant.settings.fidelity)
+    `error_estimate` (its level's estimator's dict; level: the registry's entry, fidelities.FidelityEntry) and add
+    the rung's warning to its warnings."""
     if level.error_estimate is None:
         plant.error_estimate = None
         return

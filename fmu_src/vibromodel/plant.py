@@ -129,7 +129,7 @@ def make_plant(scene: Scene, settings: Settings, t0: float = 0.0, stop_time: flo
     The plant's notes say which it is. Its `error_estimate` (error_estimates.attach) estimates max|x - x_exact| over
     [t0, stop_time]; a rung whose estimate exceeds its share of the amplitude adds its warning."""
     plant = _make_plant(scene, settings, t0, stop_time, cache_dirs, library)
-    error_estimates.attach(plant, t0, stop_time)
+    error_estimates.attach(plant, entry(settings.fidelity), t0, stop_time)
     return plant
 
 
