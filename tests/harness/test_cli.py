@@ -52,7 +52,22 @@ def test_simulate_with_compare_writes_all_results(tmp_path, plant_fmu, capsys):
     assert summary["completed"] and summary["wall_time_s"] > 0
     # RK4 at h = 0.05 on the polynomial model: ~1e-8 (test_accuracy measures the order)
     assert 0 < summary["error"]["max_abs_error_x"] < 1e-6
+    # the plant's error estimate (RK4's phase error and the polynomial's truncation) bounds the measured error
+    assert summary["error"]["max_abs_error_x"] <= summary["error_estimate"] < 1.0
     assert (out / "x.png").stat().st_size > 10_000
+
+
+def test_simulate_fidelity_auto_chooses_by_the_tolerance(tmp_path, plant_fmu, capsys):
+    """--fidelity auto --tolerance 1e-3 on the paper scene: the analytic rung (the averaged one's estimate, 4e-3, is
+    above it); summary.json names the choice as --fidelity accepts it, its estimate, and with --compare the error."""
+    out = tmp_path / "auto"
+    code = main(["simulate", "--fmu", str(plant_fmu), "--fidelity", "auto", "--tolerance", "1e-3", "--stop-time", "20",
+                 "--compare", "--out", str(out)])
+    assert code == 0
+    assert "fidelity auto chose fidelity 4" in capsys.readouterr().out
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["fidelity_chosen"] == "analytic" and summary["tolerance"] == 1e-3
+    assert summary["error"]["max_abs_error_x"] <= summary["error_estimate"] <= 1e-3
 
 
 def test_simulate_reports_an_early_stop(tmp_path, plant_fmu, capsys):

@@ -21,6 +21,7 @@ import time
 
 import numpy as np
 
+from vibrofmu.analyses.simulate import logged_estimate
 from vibromodel.integrate import IntegrationError
 from vibromodel.parameters import ParameterError, Scene
 from vibromodel.plant import Settings, make_plant
@@ -57,9 +58,8 @@ def _fmu_run(fmu, unzip_dir, values: dict, stop: float, h: float) -> dict:
         log = list(instance.log.messages)
     finally:
         instance.close()
-    noted = [m for m in log if "error estimate: max|x - x_exact| ~ " in m]  # error_estimates.attach's log line
-    estimate = float(noted[0].split("~ ")[1].split()[0]) if noted else math.nan
-    return {"x": np.array(xs), "refused": refused, "log": log, "estimate": estimate}
+    estimate = logged_estimate(log)
+    return {"x": np.array(xs), "refused": refused, "log": log, "estimate": math.nan if estimate is None else estimate}
 
 
 def slow_ac_grid(fmu, fidelities=(3, 4), stop: float = 50.0, h: float = 0.1, betas=BETAS, omegas=OMEGAS,

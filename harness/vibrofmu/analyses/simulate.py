@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import dataclasses
+import math
 import sys
 from pathlib import Path
 
@@ -133,10 +134,28 @@ def print_note(scene: Scene) -> None:
         print(f"note: {note}", file=sys.stderr)
 
 
+ESTIMATE_NOTE = "error estimate: max|x - x_exact| ~ "  # vibromodel.error_estimates.attach's log line
+
+
+def logged_estimate(log: list[str]) -> float | None:
+    """The plant's estimate of max|x - x_exact| over the run, from its log line (None: not logged, or not a number,
+    as a rung that cannot estimate logs nan)."""
+    for message in log:
+        if ESTIMATE_NOTE in message:
+            try:
+                value = float(message.split(ESTIMATE_NOTE, 1)[1].split()[0])
+            except (IndexError, ValueError):
+                return None
+            return value if math.isfinite(value) else None
+    return None
+
+
 def simulate(fmu: Path, scene: Scene, settings: Settings, stop_time: float, output_interval: float,
-             out_dir: Path, compare: bool = False, progress=None) -> tuple[RunResult, dict, Reference | None]:
+             out_dir: Path, compare: bool = False, progress=None,
+             summary_extra: dict | None = None) -> tuple[RunResult, dict, Reference | None]:
     """Run the FMU, write out_dir/result.csv, summary.json and x.png; return the run, the summary
-    and the reference (None without compare)."""
+    and the reference (None without compare). summary_extra: entries added to the summary (fidelity auto's
+    choice)."""
     warnings = check_inputs(scene, settings, stop_time, output_interval)
     print_note(scene)
     for warning in warnings:
@@ -157,6 +176,8 @@ def simulate(fmu: Path, scene: Scene, settings: Settings, stop_time: float, outp
         "wall_time_s": run.wall_time,
         "instantiate_time_s": run.instantiate_time,
         "fmu_log": run.log[-20:],
+        "error_estimate": logged_estimate(run.log),
+        **(summary_extra or {}),
     }
     reference = reference_x = None
     if compare and len(run.time):

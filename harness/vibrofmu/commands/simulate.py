@@ -9,7 +9,12 @@ def options(p):
 
     from vibrofmu.analyses.simulate import FIDELITIES, MAX_OUTPUT_MB, SOLVERS
 
-    p.add_argument("--fidelity", choices=list(FIDELITIES), default="exact", help="plant model")
+    from vibromodel.auto import DEFAULT_TOLERANCE
+
+    p.add_argument("--fidelity", choices=[*FIDELITIES, "auto"], default="exact",
+                   help="plant model; auto: the cheapest rung whose error estimate meets --tolerance")
+    p.add_argument("--tolerance", type=positive, default=None,
+                   help=f"with --fidelity auto: the bound on max|x - x_exact| (default {DEFAULT_TOLERANCE:g})")
     p.add_argument("--solver", choices=list(SOLVERS), default="adaptive",
                    help=" or ".join(f"{entry.option}: {entry.description}" for entry in solvers.SOLVERS.values()))
     # rtol, stop time and output interval are checked with the scene (simulate.check_inputs: ParameterError)
@@ -34,8 +39,9 @@ def run(args) -> int:
 
     scene_values, oafm_values = split_set(args.set)
     scene = Scene().with_values(**scene_values)
-    settings = Settings(fidelity=FIDELITIES[args.fidelity], solver=SOLVERS[args.solver], rtol=args.rtol,
-                        max_step=args.max_step, oafm=OafmSettings(**oafm_values))
+    auto = args.fidelity == "auto"
+    settings = Settings(fidelity=0 if auto else FIDELITIES[args.fidelity], solver=SOLVERS[args.solver],
+                        rtol=args.rtol, max_step=args.max_step, oafm=OafmSettings(**oafm_values))
     fmu = plant_fmu(args.fmu)
     writable_folder(args.out)
     if 0 < args.stop_time < args.output_interval:
@@ -50,9 +56,13 @@ def run(args) -> int:
                   .replace("fidelity 0-3", "another --fidelity").replace("fidelity 4", "--fidelity analytic"))
         raise UserError(f"--stop-time {args.stop_time:g}: {advice}") from None
     check_output_size(args.stop_time, args.output_interval, args.max_output_mb)  # before anything runs
+    extra = None
+    if auto:  # the choice (vibromodel.auto), made here; the FMU then runs the chosen rung and setting
+        settings, extra = choose_settings(scene, settings, args.tolerance, args.stop_time)
+        print(extra["auto_choice"])
     out = out_folder(args.out)
     result, summary, _ = simulate(built_plant(fmu), scene, settings, args.stop_time, args.output_interval, out,
-                                  compare=args.compare, progress=progress_printer("simulate"))
+                                  compare=args.compare, progress=progress_printer("simulate"), summary_extra=extra)
     plotted = ", x.png" if (out / "x.png").exists() else " (no x.png: no run to plot)"
     print(f"wrote {out}/result.csv, summary.json{plotted} ({len(result.time)} points, "
           f"wall time {result.wall_time:.3f} s)")
@@ -72,6 +82,27 @@ def run(args) -> int:
     return 0
 
 
+def choose_settings(scene, settings, tolerance, stop_time):
+    """(the settings fidelity auto chooses for --tolerance, summary.json's entries on the choice). A tolerance no
+    rung meets is a user error naming it."""
+    from vibromodel.auto import DEFAULT_TOLERANCE, choose
+    from vibromodel.parameters import ParameterError
+    from vibromodel.plant import make_plant
+
+    from vibrofmu.analyses.simulate import FIDELITIES
+
+    tolerance = DEFAULT_TOLERANCE if tolerance is None else tolerance
+    try:
+        plant, chosen, log = choose(scene, settings, tolerance, lambda s: make_plant(scene, s, 0.0, stop_time))
+    except ParameterError as error:
+        if error.name != "tolerance":
+            raise
+        raise UserError(f"--tolerance {tolerance:g}: {error.reason}") from None
+    name = {level: key for key, level in FIDELITIES.items()}[chosen.fidelity]
+    return chosen, {"tolerance": tolerance, "fidelity_chosen": name, "rtol_chosen": chosen.rtol,
+                    "auto_choice": log[0], "auto_error_estimate": plant.error_estimate["estimate"]}
+
+
 def unused(args) -> list[Unused]:
     """The settings the fidelity and solver asked for do not read (fidelities and solvers registries)."""
     from vibromodel import fidelities, solvers
@@ -84,6 +115,9 @@ def unused(args) -> list[Unused]:
     solver = solvers.solver_entry(SOLVERS[args.solver])
     where = f"--fidelity {args.fidelity} ({level.name}) does not read it; leave it out"
     found = []
+    if args.tolerance is not None:
+        found.append(Unused("tolerance", f"--fidelity {args.fidelity} does not read it (only --fidelity auto "
+                                         "chooses by a tolerance); leave it out"))
     if not level.integrated:  # an open-loop level: no solver steps Eq. 3 or 7
         found.append(Unused("solver", f"--fidelity {args.fidelity} ({level.name}) does not read it (only the "
                                       "fidelities that integrate the equation of motion do); leave it out"))
