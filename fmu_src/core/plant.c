@@ -307,6 +307,45 @@ int vk_run(VkPlant *p, double dt, size_t n, double *x_out)
     return VK_OK;
 }
 
+/* The outputs of point k (time, out[0..4], in_contact) into its columns (vk_run_from) */
+static inline void put_outputs(const VkPlant *p, double *out, size_t output_stride, size_t k)
+{
+    out[k] = p->plant_t;
+    for (size_t j = 0; j < 5; j++) out[(j + 1) * output_stride + k] = p->out[j];
+    out[6 * output_stride + k] = (double)p->in_contact;
+}
+
+size_t vk_run_from(VkPlant *p, double t0, size_t k0, double dt, size_t n, double *out, size_t output_stride,
+                   int *code)
+{
+    PlantDoStep do_step = DO_STEP[p->solver];
+    *code = VK_OK;
+    for (size_t k = 0; k < n; k++) {
+        *code = do_step(p, t0 + (double)(k0 + k) * dt, dt);
+        if (*code) return k;
+        put_outputs(p, out, output_stride, k);
+    }
+    return n;
+}
+
+void vk_run_batch(VkPlant *plants, size_t m, double t0, const double *x0, const double *v0, double dt, size_t n,
+                  double *out, size_t output_stride, int64_t *n_done, int64_t *codes)
+{
+    for (size_t i = 0; i < m; i++) {
+        VkPlant *p = &plants[i];
+        double *rows = out + i * (n + 1), xva[3];
+        int code = vk_init(p, t0, x0[i], v0[i]);
+        if (!code) code = vk_plant_state(p, xva);
+        if (!code) code = vk_outputs_at(p, p->plant_t, xva[0], xva[1], &xva[2]);
+        n_done[i] = 0;
+        if (!code) {
+            put_outputs(p, rows, output_stride, 0);
+            n_done[i] = 1 + (int64_t)vk_run_from(p, t0, 0, dt, n, rows + 1, output_stride, &code);
+        }
+        codes[i] = code;
+    }
+}
+
 #define FIELD(name) offsetof(VkPlant, name)
 size_t vk_layout(size_t *offsets, size_t n_fields)
 {

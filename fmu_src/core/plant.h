@@ -98,5 +98,18 @@ double vk_step_ceiling(VkPlant *p);
 int vk_do_step(VkPlant *p, double t, double h);
 /* The compiled floor: n do_steps of dt, each from plant_t, x after each into x_out; stops at the first error. */
 int vk_run(VkPlant *p, double dt, size_t n, double *x_out);
+/* The Python API's runs (vibrofmu.api), outputs into columns: output j of point k goes to
+   out[j * output_stride + k], j = 0..6: time, x, v, a, F_contact, F_electrostatic, in_contact (0/1).
+   vk_run_from: n do_steps of dt from the host's times t0 + (k0 + k) dt, k = 0..n-1 (as a host computes them), the
+   outputs after step k into point k; returns the points written (n unless an error stopped it: it is then left
+   pending in p, or a pre-check's code is in *code). */
+size_t vk_run_from(VkPlant *p, double t0, size_t k0, double dt, size_t n, double *out, size_t output_stride,
+                   int *code);
+/* m scenes one after another: plants[i] set as vibromodel.compiled sets a plant, vk_init at (t0, x0[i], v0[i]), its
+   outputs there as point 0, then vk_run_from(t0, 0, dt, n) into points 1..n; scene i's rows start at
+   out + i * (n + 1).  n_done[i]: the points written (n + 1 unless scene i stopped: its error is then pending in
+   plants[i], or a pre-check's code in codes[i]); a scene's error does not stop the others. */
+void vk_run_batch(VkPlant *plants, size_t m, double t0, const double *x0, const double *v0, double dt, size_t n,
+                  double *out, size_t output_stride, int64_t *n_done, int64_t *codes);
 
 #endif

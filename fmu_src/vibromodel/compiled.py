@@ -117,6 +117,10 @@ def _declare(library) -> None:
         "vk_plant_advance": (status, [address, d, doubles]),
         "vk_do_step": (status, [address, d, d]),
         "vk_run": (status, [address, d, ctypes.c_size_t, doubles]),
+        "vk_run_from": (ctypes.c_size_t, [address, d, ctypes.c_size_t, d, ctypes.c_size_t, doubles, ctypes.c_size_t,
+                                          ctypes.POINTER(ctypes.c_int)]),
+        "vk_run_batch": (None, [address, ctypes.c_size_t, d, doubles, doubles, d, ctypes.c_size_t, doubles,
+                                ctypes.c_size_t, ctypes.POINTER(_int), ctypes.POINTER(_int)]),
     }
     for name, (restype, argtypes) in signatures.items():
         function = getattr(library, name)
@@ -370,18 +374,24 @@ class CompiledPlant:
 
     def _raise_pending(self) -> None:
         """Raise the kernel's pending error, if any, and clear it."""
-        p = self._plant
-        code = p.error
-        if code == VK_OK:
-            return
-        message, t, x, v = p.message.decode(), p.error_t, p.error_x, p.error_v
-        p.error, p.error_t, p.error_x, p.error_v = 0, 0.0, 0.0, 0.0
-        ctypes.memset(self._address + VkPlant.message.offset, 0, VK_MESSAGE)
-        if code == VK_TERMINAL:
-            raise TerminalEvent(message, t, x, v)
-        if code == VK_FAILED:
-            raise IntegrationError(message, t, x, v)
-        kind, _, text = message.partition(": ")
-        if code == VK_RAISED and kind in RAISED_TYPES:
-            raise RAISED_TYPES[kind](text)
-        raise RuntimeError(f"vibrokernel left error code {code}: {message}")
+        error = take_pending(self._plant)
+        if error is not None:
+            raise error
+
+
+def take_pending(p: VkPlant) -> BaseException | None:
+    """The exception Plant raises for the kernel's pending error in `p` (None: none), which is cleared."""
+    code = p.error
+    if code == VK_OK:
+        return None
+    message, t, x, v = p.message.decode(), p.error_t, p.error_x, p.error_v
+    p.error, p.error_t, p.error_x, p.error_v = 0, 0.0, 0.0, 0.0
+    ctypes.memset(ctypes.addressof(p) + VkPlant.message.offset, 0, VK_MESSAGE)
+    if code == VK_TERMINAL:
+        return TerminalEvent(message, t, x, v)
+    if code == VK_FAILED:
+        return IntegrationError(message, t, x, v)
+    kind, _, text = message.partition(": ")
+    if code == VK_RAISED and kind in RAISED_TYPES:
+        return RAISED_TYPES[kind](text)
+    return RuntimeError(f"vibrokernel left error code {code}: {message}")

@@ -93,9 +93,11 @@ class SweepStopped(RuntimeError):
     """The FMU refused a call during a sweep; the message carries its log message."""
 
 
-def settle_loop(step, scene: Scene, accept=None, rate: float | None = None) -> tuple[complex, float, bool, int]:
+def settle_loop(step, scene: Scene, accept=None, rate: float | None = None,
+                window=None) -> tuple[complex, float, bool, int]:
     """The settling loop of the module docstring on any stepper: step(t, h) advances one communication step
-    from t and returns x at t + h (it may raise to stop). Returns (c, mean, settled, periods).
+    from t and returns x at t + h (it may raise to stop); or window(k, h, count), if given: the x after each of
+    the count steps from k h, (k + 1) h, ... (the same steps in one call). Returns (c, mean, settled, periods).
 
     accept(c), if given, must also hold to stop: near a saddle of the slow flow c creeps as slowly as at a
     settled focus (its unstable eigenvalue is small), and a caller that knows where the attractors are can
@@ -106,10 +108,14 @@ def settle_loop(step, scene: Scene, accept=None, rate: float | None = None) -> t
     decay = 1.0 - math.exp(-(scene.mu / 2 if rate is None else rate) * WINDOW_PERIODS * T)
     c_previous, n, periods = complex(math.nan), 0, 0
     while True:
-        x = np.empty(WINDOW_PERIODS * SAMPLES_PER_PERIOD)
-        for k in range(len(x)):
-            x[k] = step(n * h, h)
-            n += 1
+        if window is not None:
+            x = window(n, h, WINDOW_PERIODS * SAMPLES_PER_PERIOD)
+            n += len(x)
+        else:
+            x = np.empty(WINDOW_PERIODS * SAMPLES_PER_PERIOD)
+            for k in range(len(x)):
+                x[k] = step(n * h, h)
+                n += 1
         periods += WINDOW_PERIODS
         c, mean = first_harmonic(np.roll(x, 1), SAMPLES_PER_PERIOD)  # x[k] is at (k + 1) h: roll so that index = phase
         settled = abs(c - c_previous) <= SETTLE_TOLERANCE * abs(c) * decay and (accept is None or accept(c))

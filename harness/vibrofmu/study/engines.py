@@ -2,7 +2,7 @@
 
 - `fmu`: the built plant FMU under FMPy (what users validate); a worker keeps its instances and starts each
   settled point with fmi2Reset (FmuEngine);
-- `core`: the compiled kernel directly (vibromodel.compiled.CompiledPlant), no FMI layer.
+- `core`: the compiled kernel directly (vibrofmu.api.Simulation: a window of steps per C call), no FMI layer.
 
 Both run the plant at fidelity 0 (exact contact force, adaptive DOP853, rtol 1e-8) through the same
 settling loop (sweep.settle_loop: the complex first harmonic settled over windows of forcing periods), so
@@ -21,12 +21,13 @@ import tempfile
 import time
 from dataclasses import asdict, dataclass
 
+import numpy as np
 from vibromodel.forces import contact_indentation
 from vibromodel.integrate import IntegrationError, TerminalEvent
 from vibromodel.parameters import ParameterError, Scene
 from vibromodel.plant import Settings
 
-from vibrofmu import interrupts
+from vibrofmu import api, interrupts
 from vibrofmu.analyses.sweep import settle_loop
 
 try:
@@ -78,24 +79,35 @@ class RunRefused(Exception):
 
 
 class CoreRun:
-    """One run of the compiled kernel from a scene's start state: step(t, h) -> x; end_state(); release()."""
+    """One run of the compiled kernel from a scene's start state (vibrofmu.api.Simulation): window(k, h, count)
+    -> x after each step; end_state(); release()."""
 
     errors = (TerminalEvent, IntegrationError, ParameterError, ArithmeticError)
 
     def __init__(self, library, scene: Scene):
-        from vibromodel.compiled import CompiledPlant
+        self.library, self.scene, self.simulation, self.contact_loss = library, scene, None, False
+        self.x_end = self.v_end = math.nan
 
-        self.plant = CompiledPlant(scene, SETTINGS, library)
-        self.contact_loss = False
-
-    def step(self, t: float, h: float) -> float:
-        out = self.plant.do_step(t, h, 0.0)
-        if not out.in_contact:
+    def window(self, k: int, h: float, count: int) -> np.ndarray:
+        """The x after each of `count` steps of h from k h (settle_loop's window); raises the kernel's error."""
+        if self.simulation is None:  # the interval is the settling loop's: known at its first window
+            self.simulation = api.Simulation(self.scene, interval=h, settings=SETTINGS, library=self.library)
+        if self.simulation.k != k or self.simulation.interval != h:
+            raise RuntimeError(f"CoreRun: window from step {k} of {h!r}, the plant is at step "
+                               f"{self.simulation.k} of {self.simulation.interval!r}")
+        run = self.simulation.advance(count)
+        if not run.in_contact.all():
             self.contact_loss = True
-        return out.x
+        if len(run.x):
+            self.x_end, self.v_end = run.x[-1], run.v[-1]
+        if run.error is not None:
+            raise run.error
+        return run.x
+
+    step = None  # settle_loop takes the window
 
     def end_state(self) -> tuple[float, float]:
-        return self.plant.output(0), self.plant.output(1)
+        return self.x_end, self.v_end
 
     @staticmethod
     def reason(error) -> str:
@@ -120,7 +132,7 @@ class Engine:
         run, ok = None, False
         try:
             run = self.open(scene)
-            _finish(outcome, *settle_loop(run.step, scene, accept, rate))
+            _finish(outcome, *settle_loop(run.step, scene, accept, rate, getattr(run, "window", None)))
             outcome.x_end, outcome.v_end = run.end_state()
             ok = True
         except RunRefused as error:
@@ -136,7 +148,7 @@ class Engine:
 
 
 class CoreEngine(Engine):
-    """The compiled kernel (CompiledPlant) stepped directly."""
+    """The compiled kernel stepped directly (vibrofmu.api.Simulation)."""
 
     name = "core"
 

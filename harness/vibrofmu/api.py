@@ -1,0 +1,368 @@
+"""The plant from Python at the compiled kernel's speed, without FMI: `simulate` runs one scene, `simulate_many` many,
+and both return numpy arrays of the plant FMU's outputs (time, x, v, a, F_contact, F_electrostatic, in_contact).
+
+They run the kernel the plant FMU runs (fmu_src/core, compiled once per source version by vibrofmu.fmus.kernel) on
+the same settings, and check the scene and settings with the same rules and messages (vibromodel.parameters: a
+ParameterError naming the parameter and its value). A run takes the host's grid: the doStep from point k is at
+t = start_time + k * interval, as a host computes it, so the outputs are the bits of the plant FMU's (and of
+vibromodel.compiled.CompiledPlant's) under such a host. A run that stops early (pull-in, a failed step) keeps the
+points before the stop and says why (`Run.stopped`, `Run.error`), as the FMU's log would.
+
+`simulate_many` checks the scenes as columns with numpy (one comparison per rule for all scenes; a scene that breaks
+a rule is then checked alone, so its error is the one `simulate` raises), fills the kernel's state structures as
+one numpy array and runs every scene in one C call: its cost per scene beyond the kernel's own work is a few
+microseconds. `Simulation` keeps one plant to advance in pieces (the studies' core engine settles with it).
+"""
+from __future__ import annotations
+
+import ctypes
+import functools
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from vibromodel import compiled
+from vibromodel.compiled import take_pending
+from vibromodel.core_layouts import VkPlant
+from vibromodel.fidelities import CModel, entry
+from vibromodel.integrate import ATOL_PER_RTOL
+from vibromodel.models import DRIVE_STEP_TURN, ERROR_MEMORY_REFERENCE, TOLERANCE_FACTOR_FLOOR, solver_tolerance
+from vibromodel.parameters import MIN_RTOL, PULL_IN_GAP, RULES, ParameterError, Scene, scene_names, validate
+from vibromodel.settings import (MAX_STEPS_PER_DOSTEP, RK4_DEFAULT_STEP, TIME_TOLERANCE, Kernel, Settings,
+                                 check_step, checked_settings, rk4_drive_warnings)
+from vibromodel.solvers import solver_entry
+
+from vibrofmu.fmus.kernel import kernel_library
+
+OUTPUTS = ("time", "x", "v", "a", "F_contact", "F_electrostatic", "in_contact")
+CHUNK = 64  # scenes per C call in simulate_many: their state structures (6 kB each) stay in the caches
+
+_double_p, _int_p = ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_int64)
+_PLANT_DTYPE = np.dtype(VkPlant)
+
+
+@functools.cache
+def default_library():
+    """The compiled kernel (built on first use; vibrofmu.fmus.kernel.kernel_library), once per process."""
+    return kernel_library()
+
+
+@dataclass
+class Run:
+    """One scene's outputs at start_time and after each interval: arrays of one length (the points reached)."""
+
+    time: np.ndarray
+    x: np.ndarray
+    v: np.ndarray
+    a: np.ndarray
+    F_contact: np.ndarray
+    F_electrostatic: np.ndarray
+    in_contact: np.ndarray  # bool
+    stopped: str = ""  # why the run stopped before stop_time ("" if it did not): the FMU's log line
+    error: BaseException | None = None  # what CompiledPlant raises there (TerminalEvent at pull-in, ...)
+    warnings: list[str] = field(default_factory=list)  # what the FMU logs as warnings (settings)
+    notes: list[str] = field(default_factory=list)  # what the FMU logs at initialisation (the tolerance factor)
+
+
+@dataclass
+class Batch:
+    """Many scenes' outputs: arrays of shape (scenes, points); after a scene's stop its rows hold NaN."""
+
+    time: np.ndarray
+    x: np.ndarray
+    v: np.ndarray
+    a: np.ndarray
+    F_contact: np.ndarray
+    F_electrostatic: np.ndarray
+    in_contact: np.ndarray  # float: 1.0, 0.0, NaN after a stop
+    n_points: np.ndarray  # points reached per scene
+    stopped: list[str]
+    errors: list[BaseException | None]
+    warnings: list[list[str]]
+    notes: list[list[str]]
+
+    def __len__(self) -> int:
+        return len(self.n_points)
+
+    def run(self, i: int) -> Run:
+        """Scene i as a Run."""
+        n = int(self.n_points[i])
+        values = {name: getattr(self, name)[i, :n] for name in OUTPUTS}
+        values["in_contact"] = values["in_contact"] != 0.0
+        return Run(**values, stopped=self.stopped[i], error=self.errors[i], warnings=self.warnings[i],
+                   notes=self.notes[i])
+
+
+def _steps(start_time: float, stop_time: float, interval: float) -> int:
+    """The number of intervals from start_time to stop_time (a whole number, at least 1)."""
+    for name, value in (("start_time", start_time), ("stop_time", stop_time)):
+        if not math.isfinite(value):
+            raise ParameterError(name, value, "must be a finite number")
+    if not (math.isfinite(interval) and interval > 0.0):
+        raise ParameterError("interval", interval, "must be a finite number > 0")  # plant.check_step's rule
+    span = (stop_time - start_time) / interval
+    n = round(span)
+    if n < 1 or abs(span - n) > 1e-9 * max(1.0, span):
+        raise ParameterError("stop_time", stop_time, f"must be start_time = {start_time!r} plus a whole number (>= 1) "
+                             f"of intervals of {interval!r}")
+    return n
+
+
+def _settings(settings: Settings) -> tuple[Settings, list[str]]:
+    """The settings checked as CompiledPlant checks them (on the paper scene: the scenes' own rules come later)."""
+    if settings.kernel != Kernel.COMPILED:
+        raise ParameterError("kernel", settings.kernel, "vibrofmu.api runs the compiled kernel (0) only")
+    checked, warnings = checked_settings(Scene(), settings)  # validate(), rtol clamped; RK4 warnings are per scene
+    if not compiled.supports(checked):
+        raise ParameterError("fidelity", settings.fidelity, "vibrofmu.api runs the integrated fidelities with a "
+                             "compiled model (0, 1, 2)")
+    return checked, [w for w in warnings if w.startswith("parameter rtol")]
+
+
+def _columns(scenes) -> dict[str, np.ndarray]:
+    """The scenes as one float array per Scene field: a list of Scene, or a dict of arrays (and scalars) over the
+    paper scene's values (each named field must be a Scene field)."""
+    names = scene_names()
+    if isinstance(scenes, dict):
+        unknown = sorted(set(scenes) - set(names))
+        if unknown:
+            raise ParameterError(unknown[0], scenes[unknown[0]], f"unknown parameter; known: {', '.join(names)}")
+        arrays = {name: np.atleast_1d(np.asarray(value, dtype=float)) for name, value in scenes.items()}
+        m = max((len(a) for a in arrays.values()), default=1)
+        base = Scene()
+        return {name: np.broadcast_to(arrays.get(name, getattr(base, name)), (m,)).astype(float, copy=False)
+                for name in names}
+    scenes = list(scenes)
+    return {name: np.fromiter((getattr(s, name) for s in scenes), float, len(scenes)) for name in names}
+
+
+def _scene(columns: dict, i: int) -> Scene:
+    return Scene(**{name: float(column[i]) for name, column in columns.items()})
+
+
+def _broken(columns: dict, fidelity: int) -> np.ndarray:
+    """Mask of the scenes that break a rule of parameters.RULES (at this fidelity) or the electrodes' rule of
+    validate(), each rule compared for all scenes at once (Rule.refusal's test in numpy)."""
+    bad = np.zeros(len(columns["mu"]), dtype=bool)
+    for rule in RULES:
+        if rule.name not in columns or not rule.applies({"fidelity": fidelity}):
+            continue
+        value = columns[rule.name]
+        with np.errstate(invalid="ignore"):
+            ok = np.isfinite(value)
+            ok &= value >= rule.low if rule.low_inclusive else value > rule.low
+            ok &= value <= rule.high if rule.high_inclusive else value < rule.high
+            if rule.automatic is not None:
+                ok |= value == rule.automatic
+        bad |= ~ok
+    with np.errstate(all="ignore"):
+        u = 2.0 * columns["x_start"] / (3.0 * columns["R"])  # parameters.electrode_gaps
+        bad |= ~((1.0 - u > PULL_IN_GAP) & (1.0 + u > PULL_IN_GAP))
+    return bad
+
+
+def _check(columns: dict, settings: Settings) -> None:
+    """Raise the ParameterError of the first scene that breaks a rule (with a note naming the scene)."""
+    bad = np.flatnonzero(_broken(columns, int(settings.fidelity)))
+    if len(bad):
+        i = int(bad[0])
+        scene = _scene(columns, i)
+        try:
+            validate(scene)
+            checked_settings(scene, settings)
+        except ParameterError as error:
+            if len(columns["mu"]) > 1:
+                error.add_note(f"in scene {i}")
+            raise
+        raise RuntimeError(f"scene {i} breaks a rule in vibrofmu.api's check but not in validate (a bug): {scene}")
+
+
+def _fill(plants: np.ndarray, columns: dict, settings: Settings, start_time: float,
+          stop_time: float) -> tuple[np.ndarray, list, list]:
+    """`plants` (one kernel state structure per scene of `columns`) filled as CompiledPlant fills its plant (before
+    vk_init); the scenes' warnings and notes."""
+    m = len(columns["mu"])
+    level = entry(settings.fidelity)
+    plants[...] = 0
+    model = plants["model"]
+    for name in ("mu", "Delta", "omega", "alpha", "beta", "gamma", "Omega", "R"):
+        model[name] = columns[name]
+    delta, beta, gamma, omega, Omega = (columns[n] for n in ("Delta", "beta", "gamma", "omega", "Omega"))
+    ac = (beta != 0.0) | (gamma != 0.0)
+    model["pull_in_c"] = 2.0 / (3.0 * columns["R"])  # models.pull_in_slope
+    model["pull_in_gap"] = PULL_IN_GAP
+    model["load_forcing"] = delta != 0.0
+    model["ac"] = ac
+    if level.c_model == CModel.EXACT:
+        model["polynomial"] = 0
+        model["electrostatics"] = (columns["alpha"] != 0.0) | ac
+    else:  # Eq. 7's coefficients: per scene, as CompiledPlant (compiled._model_fields)
+        for i in range(m):
+            scene = _scene(columns, i)
+            values = compiled._model_fields(scene, level.model(scene), level.c_model)
+            for name in ("polynomial", "electrostatics", "g1", "g2", "g3"):
+                model[name][i] = values[name]
+            model["poly"][i] = values["poly"]
+    # the solver's tolerance (models.solver_tolerance) and the drive's step ceiling (models.drive_step_ceiling)
+    mu, span = columns["mu"], stop_time - start_time
+    with np.errstate(divide="ignore"):
+        memory = np.where(mu > 0.0, 2.0 / mu, math.inf)
+        if span > 0.0:
+            memory = np.where(span < memory, span, memory)
+        factor = np.clip(ERROR_MEMORY_REFERENCE / memory, TOLERANCE_FACTOR_FLOOR, 1.0)
+        rtol = np.where(factor == 1.0, settings.rtol, np.maximum(MIN_RTOL, settings.rtol * factor))
+        fastest = np.maximum.reduce([np.where(delta != 0.0, omega, 0.0), np.where(beta != 0.0, Omega, 0.0),
+                                     np.where(gamma != 0.0, 2.0 * Omega, 0.0)])
+        ceiling = np.where(fastest > 0.0, DRIVE_STEP_TURN / fastest, math.inf)
+    dop, rk4 = plants["dop"], plants["rk4"]
+    dop["rtol"], dop["atol"] = rtol, rtol * ATOL_PER_RTOL
+    dop["max_step"] = settings.max_step or ceiling
+    dop["step_budget"] = MAX_STEPS_PER_DOSTEP
+    rk4["max_step"] = settings.max_step or RK4_DEFAULT_STEP
+    plants["solver"] = int(settings.solver)
+    plants["time_tolerance"], plants["max_steps_per_dostep"] = TIME_TOLERANCE, MAX_STEPS_PER_DOSTEP
+    plants["plant_t"], plants["U_input"], plants["enabled"] = start_time, 0.0, 1
+    notes: list[list[str]] = [[] for _ in range(m)]
+    for i in np.flatnonzero(factor < 1.0):  # the note's text, scene by scene (few scenes are that lightly damped)
+        notes[i] = solver_tolerance(_scene(columns, i), settings, start_time, stop_time)[1]
+    warnings: list[list[str]] = [[] for _ in range(m)]
+    solver = solver_entry(settings.solver)
+    if solver.drive_gains is not None:
+        step = solver.step(settings.max_step)
+        for i in range(m):
+            warnings[i] = rk4_drive_warnings(_scene(columns, i), step)
+    ceilings = np.where(plants["solver"] == 0, dop["max_step"], rk4["max_step"])
+    return ceilings, warnings, notes
+
+
+def _check_interval(ceilings: np.ndarray, interval: float, first: int, many: bool) -> None:
+    """plant.check_step's rule of too many steps per doStep, for every scene (ceilings: their step ceilings)."""
+    bad = np.flatnonzero(interval / ceilings > MAX_STEPS_PER_DOSTEP)
+    if len(bad):
+        i = int(bad[0])
+        try:
+            check_step(0.0, 0.0, interval, 0.0, float(ceilings[i]))
+        except ParameterError as error:
+            if many:
+                error.add_note(f"in scene {first + i}")
+            raise
+
+
+def _stop(plant: VkPlant, code: int, t: float, interval: float) -> tuple[str, BaseException | None]:
+    """(the log line, the exception) of a scene that stopped with `code`."""
+    error = take_pending(plant)
+    if error is None and code != compiled.VK_OK:  # a pre-check refused the step (nothing pending)
+        try:
+            check_step(plant.plant_t, t, interval, plant.U_input, _ceiling(plant))
+        except ParameterError as refused:
+            error = refused
+        else:
+            error = RuntimeError(f"vibrokernel refused the step with code {code} (a kernel bug)")
+    if error is None:
+        return "", None
+    return f"{type(error).__name__}: {error}", error
+
+
+def _ceiling(plant: VkPlant) -> float:
+    slot = compiled.SOLVER_SLOTS[solver_entry(plant.solver).family]
+    return getattr(plant, slot).max_step
+
+
+def simulate_many(scenes, stop_time: float = 200.0, interval: float = 0.1, settings: Settings = Settings(),
+                  start_time: float = 0.0) -> Batch:
+    """Run every scene from start_time to stop_time on the compiled kernel, outputs every `interval`.
+
+    scenes: a list of Scene, or a dict of arrays (and scalars) of Scene fields over the paper scene's values (the
+    fast form: {"omega": np.linspace(0.9, 1.1, 1000)}). Raises ParameterError for the first scene that breaks a
+    parameter rule (as `simulate` would, with a note naming the scene) or bad settings, stop time or interval.
+    A scene that stops early (pull-in, a failed step) does not stop the others: see Batch.stopped."""
+    n = _steps(start_time, stop_time, interval)
+    settings, clamp = _settings(settings)
+    columns = _columns(scenes)
+    _check(columns, settings)
+    m = len(columns["mu"])
+    out = np.full((len(OUTPUTS), m, n + 1), np.nan)
+    n_done, codes = np.zeros(m, dtype=np.int64), np.zeros(m, dtype=np.int64)
+    warnings, notes, stopped, errors = [], [], [""] * m, [None] * m
+    plants = np.zeros(min(m, CHUNK), dtype=_PLANT_DTYPE)  # reused for every chunk of scenes
+    run_batch = default_library().vk_run_batch
+    for first in range(0, m, CHUNK):
+        last = min(first + CHUNK, m)
+        chunk = {name: np.ascontiguousarray(column[first:last]) for name, column in columns.items()}
+        part = plants[:last - first]
+        ceilings, chunk_warnings, chunk_notes = _fill(part, chunk, settings, start_time, stop_time)
+        _check_interval(ceilings, interval, first, m > 1)
+        warnings += [clamp + w for w in chunk_warnings]
+        notes += chunk_notes
+        run_batch(part.ctypes.data, last - first, start_time, chunk["x_start"].ctypes.data_as(_double_p),
+                  chunk["v_start"].ctypes.data_as(_double_p), interval, n,
+                  out[0, first:].ctypes.data_as(_double_p), m * (n + 1), n_done[first:].ctypes.data_as(_int_p),
+                  codes[first:].ctypes.data_as(_int_p))
+        for i in np.flatnonzero(n_done[first:last] < n + 1):
+            plant = VkPlant.from_buffer(part, int(i) * _PLANT_DTYPE.itemsize)
+            k = max(int(n_done[first + i]) - 1, 0)
+            stopped[first + i], errors[first + i] = _stop(plant, int(codes[first + i]), start_time + k * interval,
+                                                          interval)
+    return Batch(*out, n_points=n_done, stopped=stopped, errors=errors, warnings=warnings, notes=notes)
+
+
+def simulate(scene: Scene | None = None, stop_time: float = 200.0, interval: float = 0.1,
+             settings: Settings = Settings(), start_time: float = 0.0) -> Run:
+    """Run `scene` (default: the paper's) from start_time to stop_time on the compiled kernel, outputs every
+    `interval` (the plant FMU's outputs, and its bits under a host that steps from start_time + k * interval).
+    Raises ParameterError (naming the parameter and value, as the FMU logs it) for a bad scene, settings, stop time
+    or interval; a run that stops early keeps the points before the stop and says why (Run.stopped)."""
+    return simulate_many([Scene() if scene is None else scene], stop_time, interval, settings, start_time).run(0)
+
+
+class Simulation:
+    """One scene's plant on the compiled kernel, advanced in pieces: advance(n) runs n intervals and returns their
+    outputs (a Run of n points or fewer); the host's grid continues across pieces (t = start_time + k interval)."""
+
+    def __init__(self, scene: Scene | None = None, interval: float = 0.1, settings: Settings = Settings(),
+                 start_time: float = 0.0, stop_time: float | None = None, library=None):
+        """library: a loaded kernel (vibromodel.compiled.load_library; default: the one of this source tree)."""
+        _steps(start_time, start_time + interval, interval)  # the interval's own checks
+        settings, clamp = _settings(settings)
+        columns = _columns([Scene() if scene is None else scene])
+        _check(columns, settings)
+        self._plants = np.zeros(1, dtype=_PLANT_DTYPE)
+        ceilings, warnings, notes = _fill(self._plants, columns, settings, start_time,
+                                          math.nan if stop_time is None else stop_time)
+        _check_interval(ceilings, interval, 0, False)
+        self.warnings, self.notes = clamp + warnings[0], notes[0]
+        self.start_time, self.interval, self.k = start_time, interval, 0
+        self._plant = VkPlant.from_buffer(self._plants)
+        self._address = ctypes.addressof(self._plant)
+        self._library = library or default_library()
+        out, n_done, codes = np.zeros((len(OUTPUTS), 1)), np.zeros(1, dtype=np.int64), np.zeros(1, dtype=np.int64)
+        self._library.vk_run_batch(self._address, 1, start_time, columns["x_start"].ctypes.data_as(_double_p),
+                                   columns["v_start"].ctypes.data_as(_double_p), interval, 0,
+                                   out.ctypes.data_as(_double_p), 1, n_done.ctypes.data_as(_int_p),
+                                   codes.ctypes.data_as(_int_p))
+        self.stopped, self.error = "", None
+        self.start = self._run(out, int(n_done[0]), int(codes[0]))
+
+    def _run(self, out: np.ndarray, n: int, code: int) -> Run:
+        values = {name: out[j, :n] for j, name in enumerate(OUTPUTS)}
+        values["in_contact"] = values["in_contact"] != 0.0
+        if not self.stopped:
+            self.stopped, self.error = _stop(self._plant, code, self.start_time + self.k * self.interval,
+                                             self.interval)
+        return Run(**values, stopped=self.stopped, error=self.error)
+
+    def advance(self, n: int) -> Run:
+        """The outputs after each of the next n intervals (fewer if the plant stops: Run.stopped says why, and the
+        plant then stays stopped: later calls return no points)."""
+        out = np.empty((len(OUTPUTS), n))
+        if self.stopped:
+            return self._run(out, 0, compiled.VK_OK)
+        code = ctypes.c_int()
+        done = self._library.vk_run_from(self._address, self.start_time, self.k, self.interval, n,
+                                         out.ctypes.data_as(_double_p), n, ctypes.byref(code))
+        self.k += done
+        return self._run(out, done, code.value)
+
+
+__all__ = ["Batch", "OUTPUTS", "Run", "Simulation", "simulate", "simulate_many"]
