@@ -22,6 +22,8 @@ and `vibrofmu report` rewrites the text between them (the markers stay). Blocks:
 - speed:     ratios from the summaries of `bench`, `oafm` and `stability` found in the --from folders
              (bench.json, summary.json); timings and instruction counts, which depend on the machine (the block
              says so), so never compared by --check.
+- peers:     the plant beside other ODE solvers at equal accuracy, from a peers.json of `bench --peers` in the
+             --from folders (timings; not run by the report itself).
 
 Without --from, the oafm, stability and speed blocks come from fresh runs of `vibrofmu oafm`, `stability` and
 `bench` (quick: oafm study to order 3, `bench --quick`). `--check` regenerates the deterministic blocks
@@ -45,11 +47,12 @@ REPO_ROOT = Path(__file__).resolve().parents[2]  # the checkout (README.md, docs
 BLOCK = re.compile(r"<!-- report:(?P<name>[a-z_]+) -->\n(?P<body>.*?)<!-- /report:(?P=name) -->", re.S)
 OPEN = re.compile(r"<!-- report:([a-z_]+) -->")
 CLOSE = re.compile(r"<!-- /report:([a-z_]+) -->")
-NAMES = ("machine", "accuracy", "ssp", "ssp_orderings", "container", "oafm", "stability", "speed", "ranges")
-FROM_SUMMARIES = ("oafm", "stability", "speed")  # filled from the --from folders only
+NAMES = ("machine", "accuracy", "ssp", "ssp_orderings", "container", "oafm", "stability", "speed", "ranges", "peers")
+FROM_SUMMARIES = ("oafm", "stability", "speed", "peers")  # filled from the --from folders only
 DETERMINISTIC = ("accuracy", "ssp", "ssp_orderings", "container", "ranges")
-SOURCE_FILES = {"oafm": "an oafm summary.json", "stability": "a stability summary.json",
-                "speed": "a bench.json or an oafm/stability summary.json"}  # what a FROM_SUMMARIES block reads
+SOURCE_FILES = {"oafm": "an oafm summary.json", "stability": "a stability summary.json",  # what a FROM_SUMMARIES
+                "speed": "a bench.json or an oafm/stability summary.json",  # block reads
+                "peers": "a peers.json (bench --peers)"}
 ACCURACY_TAUS = (10.0, 25.0, 50.0, 100.0, 200.0)
 ACCURACY_RTOLS = (1e-4, 1e-6, 1e-8, 1e-10, 1e-12)
 ACCURACY_RK4_STEPS = (0.1, 0.05, 0.025)
@@ -330,11 +333,29 @@ def speed_block(sources: list[Path]) -> str | None:
     return "\n".join(lines) if lines else None
 
 
+def peers_block(sources: list[Path]) -> str | None:
+    """The comparison with other ODE solvers from the first peers.json (`vibrofmu bench --peers`) in the folders."""
+    from vibrofmu.speed import peers
+
+    for folder in sources:
+        file = folder / "peers.json"
+        if file.is_file():
+            data = json.loads(file.read_text())
+            machine, run = data.get("machine", {}), data["peers"]
+            load = machine.get("load_average_at_start")
+            head = (f"`{run['command']}` ({machine.get('started_utc', '?')}, {machine.get('cpu_count', '?')} CPUs"
+                    + (f", load average {load[0]:.1f} at its start" if load else "") + "):")
+            return "\n".join([head, ""] + [f"- {line}" if not line.startswith("  ") else f"  - {line.strip()}"
+                                            for line in peers.peers_lines(data)])
+    return None
+
+
 # ---------------------------------------------------------------------------------------------- the command
 
 def summary_block(name: str, sources: list[Path]) -> str | None:
     """The body of the FROM_SUMMARIES block `name` from the summaries in `sources` (None: none there)."""
-    return {"oafm": oafm_block, "stability": stability_block, "speed": speed_block}[name](sources)
+    return {"oafm": oafm_block, "stability": stability_block, "speed": speed_block,
+            "peers": peers_block}[name](sources)
 
 
 def generate(names, fmu_dir: Path, sources: list[Path], quick: bool, work_dir: Path, start=None) -> dict[str, str]:

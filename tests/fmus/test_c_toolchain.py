@@ -14,7 +14,7 @@ import pytest
 
 from vibrofmu import paths
 from vibrofmu.fmus import fmi_calls, native, toolchain
-from vibrofmu.speed import instructions, ladder, native_timing
+from vibrofmu.speed import instructions, ladder, native_timing, peers
 
 FMU_SRC = paths.FMU_SRC
 STRICT = ("-fsyntax-only", "-Werror")
@@ -37,7 +37,9 @@ def units():
              for path in (paths.C_HOST_DIR / "fmi2_host.c", paths.C_HOST_DIR / "instance_cycles.c",
                           ladder.TIMING_HOST_SOURCE, instructions.FLOOR_DRIVER_SOURCE,
                           native_timing.FMI_VERSIONS_HOST_SOURCE)]
-    return core + shim + hosts
+    # the CVODE peer's driver (bench --peers), on the core's model and the system's SUNDIALS headers (.ci/run)
+    cvode = [(peers.CVODE_SOURCE.name, toolchain.HOST, [f"-I{FMU_SRC / 'core'}"], peers.CVODE_SOURCE, ())]
+    return core + shim + hosts + cvode
 
 
 def test_every_c_file_is_compiled_here():

@@ -12,6 +12,10 @@ def options(p):
                    help="interleaved rounds of the speed-accuracy ladder (default: 3)")
     p.add_argument("--ladder-only", action="store_true",
                    help="only the speed-accuracy ladder (tau in [0, 200]; a few minutes): bench.json, ladder.png")
+    p.add_argument("--peers", action="store_true",
+                   help="only the comparison with other ODE solvers (numbalsoda, diffrax, CVODE, SciPy) at equal "
+                        "accuracy, interleaved rounds (--ladder-rounds, default 3): peers.json, peers.png; the "
+                        "peers are an optional extra: pip install -e '.[peers]'")
     p.add_argument("--no-instructions", action="store_true",
                    help="skip the ladder's instruction counts (valgrind's callgrind, a few minutes)")
     p.add_argument("--fmu", default=None, help=FMU_HELP)
@@ -29,6 +33,14 @@ def run(args) -> int:
     def say(line):
         print(line, file=sys.stderr, flush=True)
 
+    if args.peers:
+        from vibrofmu.speed import peers
+
+        record = peers.run_peers(fmu, out, quick=args.quick, rounds=args.ladder_rounds, say=say)
+        for line in peers.peers_lines(record):
+            print(line)
+        print(f"peers in {record['peers']['seconds']:.0f} s; wrote {out}/peers.json, {out}/peers.png")
+        return 0
     if args.ladder_only:
         summary = bench.run_ladder_only(fmu, out, quick=args.quick, progress=say, ladder_rounds=args.ladder_rounds,
                                         instructions=not args.no_instructions)
