@@ -6,7 +6,8 @@ v_start = -0.8, R = 2: the mass leaves the contact and comes back) -- over tau i
   (vibrofmu.api.simulate), each with the drive's step ceiling (the default) and without it (max_step = 1000);
 - numbalsoda's LSODA and DOP853 on a numba cfunc right-hand side; diffrax's Tsit5 and Dopri8 (JAX, jit, CPU, 64-bit);
   SUNDIALS CVODE, Adams (fixed-point) and BDF (Newton, dense), driven from C (speed/cvode_peer.c on the core's
-  vm_accel: the FMU's own right-hand side) against the system's SUNDIALS; SciPy's solve_ivp (LSODA, RK45, DOP853).
+  vm_accel: the FMU's own right-hand side) against the system's SUNDIALS; SciPy's solve_ivp (LSODA, RK45, DOP853);
+- the pythonfmu plant FMU from Python: fmpy.simulate_fmu, and the cheapest FMPy path (hosts.fmpy_loop.FmpyLoop).
 Each runs at rtol 1e-4 ... 1e-12 (atol = 1e-2 rtol, as everywhere here); the error is max |x - x_ref| on the output
 grid against a DOP853 rtol 1e-13 reference with the contact located (analyses.reference). Every (contender, rtol)
 runs once per round, the rounds interleaved (the contenders' order rotated each round); a setting's time is its
@@ -50,7 +51,8 @@ REFERENCE_RTOL = 1e-13
 ROUNDS = 3
 NO_CEILING = 1000.0  # max_step: in effect no step ceiling (bench.NO_CEILING)
 SHORT_SCENES, SHORT_STOP = 1000, 20.0
-OURS = ("native FMU, C host", "Python API")  # the contenders the acceptance is about (with the default ceiling)
+OURS = ("native FMU, C host", "Python API")
+OWN = ("native FMU", "Python API", "pythonfmu FMU")  # the project's lines (not peers)  # the contenders the acceptance is about (with the default ceiling)
 CVODE_SOURCE = Path(__file__).with_name("cvode_peer.c")
 CVODE_LIBS = ("-lsundials_cvode", "-lsundials_nvecserial", "-lsundials_sunlinsoldense", "-lsundials_sunmatrixdense",
               "-lsundials_sunnonlinsolfixedpoint", "-lm")
@@ -273,6 +275,34 @@ def native_contenders(plant_fmu: Path, work: Path) -> dict:
     return {"native FMU, C host": maker(0.0), "native FMU, C host, no drive ceiling": maker(NO_CEILING)}
 
 
+def fmpy_contenders(plant_fmu: Path) -> dict:
+    """The pythonfmu plant FMU from Python: FMPy's simulate_fmu, and the cheapest FMPy path (hosts.fmpy_loop: one
+    extracted copy, one instance reset between runs, the FMI functions called directly)."""
+    from fmpy import simulate_fmu
+
+    from vibrofmu.hosts.fmpy_loop import FmpyLoop
+
+    runner = FmpyLoop(plant_fmu)
+
+    def start(scene, rtol):
+        return {**scene.as_dict(), "rtol": rtol}
+
+    def make_loop(scene: Scene, stop: float = STOP):
+        def run(rtol):
+            return np.concatenate([[scene.x_start], runner.run(start(scene, rtol), stop, INTERVAL)])
+        return run
+
+    def make_simulate(scene: Scene, stop: float = STOP):
+        def run(rtol):
+            result = simulate_fmu(str(plant_fmu), stop_time=stop, output_interval=INTERVAL,
+                                  start_values=start(scene, rtol), output=["x"])
+            return result["x"]
+        return run
+
+    return {"pythonfmu FMU, FMPy loop (one instance, reset)": make_loop,
+            "pythonfmu FMU, fmpy.simulate_fmu": make_simulate}
+
+
 # ---- the measurement ------------------------------------------------------------------------------------------
 
 def timed(run, rtol):
@@ -293,10 +323,11 @@ def gather(plant_fmu: Path, work: Path, say) -> tuple[dict, dict, dict]:
               ("numbalsoda (numba cfunc compile, first calls)", numbalsoda_contenders),
               ("diffrax (import)", diffrax_contenders),
               ("CVODE (compile the C driver)", lambda: cvode_contenders(work)),
-              ("SciPy", scipy_contenders)]
+              ("SciPy", scipy_contenders),
+              ("pythonfmu FMU (extract, instantiate once)", lambda: fmpy_contenders(plant_fmu))]
     for name, factory in groups:
         peer = name.split(" ")[0]
-        if peer in missing:
+        if peer in missing:  # numbalsoda, diffrax, CVODE
             continue
         started = time.perf_counter()
         try:
@@ -354,7 +385,7 @@ def verdicts(results: dict) -> list[dict]:
     for scene_name, tables in results.items():
         for threshold in THRESHOLDS:
             best = {name: cheapest(table, threshold) for name, table in tables.items()}
-            peers = {n: b for n, b in best.items() if b is not None and not n.startswith(("native FMU", "Python API"))}
+            peers = {n: b for n, b in best.items() if b is not None and not n.startswith(OWN)}
             best_peer = min(peers, key=lambda n: peers[n][1]["seconds"]) if peers else None
             row = {"scene": scene_name, "threshold": threshold, "best_peer": best_peer,
                    "contenders": {n: None if b is None else {"rtol": b[0], "seconds": b[1]["seconds"],
@@ -483,7 +514,7 @@ def plot_peers(path: Path, results: dict) -> None:
         for name, table in tables.items():
             points = sorted((e["seconds"] * 1e3, e["error"]) for e in table.values() if e["error"] is not None)
             if points:
-                ours = name.startswith(("native FMU", "Python API"))
+                ours = name.startswith(OWN)
                 ax.loglog(*zip(*points), marker="o" if ours else ".", lw=2.0 if ours else 1.0, label=name)
         for threshold in THRESHOLDS:
             ax.axhline(threshold, color="grey", lw=0.5, ls=":")
