@@ -186,24 +186,21 @@ def _fill(plants: np.ndarray, columns: dict, settings: Settings, start_time: flo
     level = entry(settings.fidelity)
     plants[...] = 0
     model = plants["model"]
-    for name in ("mu", "Delta", "omega", "alpha", "beta", "gamma", "Omega", "R"):
-        model[name] = columns[name]
-    delta, beta, gamma, omega, Omega = (columns[n] for n in ("Delta", "beta", "gamma", "omega", "Omega"))
-    ac = (beta != 0.0) | (gamma != 0.0)
-    model["pull_in_c"] = 2.0 / (3.0 * columns["R"])  # models.pull_in_slope
-    model["pull_in_gap"] = PULL_IN_GAP
-    model["load_forcing"] = delta != 0.0
-    model["ac"] = ac
-    if level.c_model == CModel.EXACT:
+    if level.c_model == CModel.EXACT:  # models.scene_fields and ExactModel.compiled_fields, for all scenes at once
+        for name in ("mu", "Delta", "omega", "alpha", "beta", "gamma", "Omega", "R"):
+            model[name] = columns[name]
+        ac = (columns["beta"] != 0.0) | (columns["gamma"] != 0.0)
+        model["pull_in_c"] = 2.0 / (3.0 * columns["R"])  # models.pull_in_slope
+        model["pull_in_gap"] = PULL_IN_GAP
+        model["load_forcing"] = columns["Delta"] != 0.0
+        model["ac"] = ac
         model["polynomial"] = 0
         model["electrostatics"] = (columns["alpha"] != 0.0) | ac
-    else:  # Eq. 7's coefficients: per scene, as CompiledPlant (compiled._model_fields)
+    else:  # Eq. 7's coefficients: the level's model object fills each scene's, as in CompiledPlant
         for i in range(m):
             scene = _scene(columns, i)
-            values = compiled._model_fields(scene, level.model(scene), level.c_model)
-            for name in ("polynomial", "electrostatics", "g1", "g2", "g3"):
-                model[name][i] = values[name]
-            model["poly"][i] = values["poly"]
+            compiled.fill_model(VkPlant.from_buffer(plants, i * _PLANT_DTYPE.itemsize).model, level.model(scene))
+    delta, beta, gamma, omega, Omega = (columns[n] for n in ("Delta", "beta", "gamma", "omega", "Omega"))
     # the solver's tolerance (models.solver_tolerance) and the drive's step ceiling (models.drive_step_ceiling)
     mu, span = columns["mu"], stop_time - start_time
     with np.errstate(divide="ignore"):

@@ -85,6 +85,24 @@ def test_many_scenes_are_each_the_single_run(library):
         assert batch.notes[i] == CompiledPlant(scenes[i], Settings(), library, 0.0, 5.0).notes
 
 
+@pytest.mark.parametrize("fidelity", [0, 1, 2])
+def test_the_kernel_structures_are_compiled_plants(library, fidelity):
+    """The model fields simulate_many fills for all scenes at once (the exact model) or per scene (Eq. 7) are the
+    ones the level's model object gives CompiledPlant (models.*.compiled_fields), byte for byte."""
+    import ctypes
+
+    from vibromodel.core_layouts import VkModel
+
+    scenes = SCENES + [Scene(Delta=0.0, beta=0.01, gamma=0.0, alpha=0.0), Scene(beta=0.0, gamma=0.003)]
+    columns = api._columns(scenes)
+    plants = np.zeros(len(scenes), dtype=api._PLANT_DTYPE)
+    api._fill(plants, columns, Settings(fidelity=fidelity), 0.0, 10.0)
+    for i, scene in enumerate(scenes):
+        plant = CompiledPlant(scene, Settings(fidelity=fidelity), library, 0.0, 10.0)
+        expected = ctypes.string_at(plant.address, ctypes.sizeof(VkModel))
+        assert plants[i:i + 1].tobytes()[:ctypes.sizeof(VkModel)] == expected, scene
+
+
 def test_notes_and_warnings_are_compiled_plants(library):
     """The tolerance factor's note (light damping over a long span) and RK4's drive warning, per scene."""
     scenes = [Scene(mu=0.001), Scene(), Scene(Omega=40.0)]
