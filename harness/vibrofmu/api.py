@@ -109,15 +109,17 @@ def _steps(start_time: float, stop_time: float, interval: float) -> int:
     return n
 
 
-def _settings(settings: Settings) -> tuple[Settings, list[str]]:
-    """The settings checked as CompiledPlant checks them (on the paper scene: the scenes' own rules come later)."""
+@functools.lru_cache(maxsize=64)
+def _settings(settings: Settings) -> tuple[Settings, tuple[str, ...]]:
+    """The settings checked as CompiledPlant checks them (on the paper scene: the scenes' own rules come later);
+    kept per settings value (a frozen dataclass): a run's check of its settings costs a look-up."""
     if settings.kernel != Kernel.COMPILED:
         raise ParameterError("kernel", settings.kernel, "vibrofmu.api runs the compiled kernel (0) only")
     checked, warnings = checked_settings(Scene(), settings)  # validate(), rtol clamped; RK4 warnings are per scene
     if not compiled.supports(checked):
         raise ParameterError("fidelity", settings.fidelity, "vibrofmu.api runs the integrated fidelities with a "
                              "compiled model (0, 1, 2)")
-    return checked, [w for w in warnings if w.startswith("parameter rtol")]
+    return checked, tuple(w for w in warnings if w.startswith("parameter rtol"))
 
 
 def _columns(scenes) -> dict[str, np.ndarray]:
@@ -141,25 +143,30 @@ def _scene(columns: dict, i: int) -> Scene:
     return Scene(**{name: float(column[i]) for name, column in columns.items()})
 
 
+@functools.lru_cache(maxsize=8)
+def _rule_table(fidelity: int) -> tuple[np.ndarray, ...]:
+    """The scene rules of parameters.RULES that apply at this fidelity as columns: the row of each rule's field in
+    scene_names(), its low and high ends, whether each is inclusive, its automatic value (NaN: none)."""
+    names = scene_names()
+    rules = [r for r in RULES if r.name in names and r.applies({"fidelity": fidelity})]
+    column = np.array  # each a column vector, compared with a (rules, scenes) matrix
+    return (np.array([names.index(r.name) for r in rules]), column([[r.low] for r in rules]),
+            column([[r.high] for r in rules]), column([[r.low_inclusive] for r in rules]),
+            column([[r.high_inclusive] for r in rules]),
+            column([[math.nan if r.automatic is None else r.automatic] for r in rules]))
+
+
 def _broken(columns: dict, fidelity: int) -> np.ndarray:
     """Mask of the scenes that break a rule of parameters.RULES (at this fidelity) or the electrodes' rule of
-    validate(), each rule compared for all scenes at once (Rule.refusal's test in numpy)."""
-    bad = np.zeros(len(columns["mu"]), dtype=bool)
-    for rule in RULES:
-        if rule.name not in columns or not rule.applies({"fidelity": fidelity}):
-            continue
-        value = columns[rule.name]
-        with np.errstate(invalid="ignore"):
-            ok = np.isfinite(value)
-            ok &= value >= rule.low if rule.low_inclusive else value > rule.low
-            ok &= value <= rule.high if rule.high_inclusive else value < rule.high
-            if rule.automatic is not None:
-                ok |= value == rule.automatic
-        bad |= ~ok
+    validate(): Rule.refusal's test in numpy, every rule and scene at once."""
+    rows, low, high, low_inclusive, high_inclusive, automatic = _rule_table(fidelity)
+    values = np.stack([columns[name] for name in scene_names()])[rows]  # (rules, scenes)
     with np.errstate(all="ignore"):
+        ok = np.isfinite(values) & np.where(low_inclusive, values >= low, values > low)
+        ok &= np.where(high_inclusive, values <= high, values < high)
+        ok |= values == automatic
         u = 2.0 * columns["x_start"] / (3.0 * columns["R"])  # parameters.electrode_gaps
-        bad |= ~((1.0 - u > PULL_IN_GAP) & (1.0 + u > PULL_IN_GAP))
-    return bad
+        return ~ok.all(axis=0) | ~((1.0 - u > PULL_IN_GAP) & (1.0 + u > PULL_IN_GAP))
 
 
 def _check(columns: dict, settings: Settings) -> None:
@@ -184,17 +191,15 @@ def _fill(plants: np.ndarray, columns: dict, settings: Settings, start_time: flo
     vk_init); the scenes' warnings and notes."""
     m = len(columns["mu"])
     level = entry(settings.fidelity)
-    plants[...] = 0
+    plants.view(np.uint8).reshape(m, _PLANT_DTYPE.itemsize)[:] = _template(settings, start_time)
     model = plants["model"]
     if level.c_model == CModel.EXACT:  # models.scene_fields and ExactModel.compiled_fields, for all scenes at once
         for name in ("mu", "Delta", "omega", "alpha", "beta", "gamma", "Omega", "R"):
             model[name] = columns[name]
         ac = (columns["beta"] != 0.0) | (columns["gamma"] != 0.0)
         model["pull_in_c"] = 2.0 / (3.0 * columns["R"])  # models.pull_in_slope
-        model["pull_in_gap"] = PULL_IN_GAP
         model["load_forcing"] = columns["Delta"] != 0.0
         model["ac"] = ac
-        model["polynomial"] = 0
         model["electrostatics"] = (columns["alpha"] != 0.0) | ac
     else:  # Eq. 7's coefficients: the level's model object fills each scene's, as in CompiledPlant
         for i in range(m):
@@ -215,11 +220,6 @@ def _fill(plants: np.ndarray, columns: dict, settings: Settings, start_time: flo
     dop, rk4 = plants["dop"], plants["rk4"]
     dop["rtol"], dop["atol"] = rtol, rtol * ATOL_PER_RTOL
     dop["max_step"] = settings.max_step or ceiling
-    dop["step_budget"] = MAX_STEPS_PER_DOSTEP
-    rk4["max_step"] = settings.max_step or RK4_DEFAULT_STEP
-    plants["solver"] = int(settings.solver)
-    plants["time_tolerance"], plants["max_steps_per_dostep"] = TIME_TOLERANCE, MAX_STEPS_PER_DOSTEP
-    plants["plant_t"], plants["U_input"], plants["enabled"] = start_time, 0.0, 1
     notes: list[list[str]] = [[] for _ in range(m)]
     for i in np.flatnonzero(factor < 1.0):  # the note's text, scene by scene (few scenes are that lightly damped)
         notes[i] = solver_tolerance(_scene(columns, i), settings, start_time, stop_time)[1]
@@ -229,8 +229,23 @@ def _fill(plants: np.ndarray, columns: dict, settings: Settings, start_time: flo
         step = solver.step(settings.max_step)
         for i in range(m):
             warnings[i] = rk4_drive_warnings(_scene(columns, i), step)
-    ceilings = np.where(plants["solver"] == 0, dop["max_step"], rk4["max_step"])
+    ceilings = np.where(plants["solver"] == 0, dop["max_step"], rk4["max_step"])  # the solver's (plant.check_step)
     return ceilings, warnings, notes
+
+
+@functools.lru_cache(maxsize=64)
+def _template(settings: Settings, start_time: float) -> np.ndarray:
+    """The bytes of a kernel state structure with what the settings fix, as CompiledPlant sets it (the rest 0): each
+    scene's structure starts as a copy."""
+    plant = np.zeros(1, dtype=_PLANT_DTYPE)
+    plant["model"]["pull_in_gap"] = PULL_IN_GAP
+    plant["model"]["polynomial"] = 0  # Eq. 7's scenes: compiled.fill_model sets 1
+    plant["dop"]["step_budget"] = MAX_STEPS_PER_DOSTEP
+    plant["rk4"]["max_step"] = settings.max_step or RK4_DEFAULT_STEP
+    plant["solver"] = int(settings.solver)
+    plant["time_tolerance"], plant["max_steps_per_dostep"] = TIME_TOLERANCE, MAX_STEPS_PER_DOSTEP
+    plant["plant_t"], plant["U_input"], plant["enabled"] = start_time, 0.0, 1
+    return plant.view(np.uint8).copy()
 
 
 def _check_interval(ceilings: np.ndarray, interval: float, first: int, many: bool) -> None:
@@ -290,7 +305,7 @@ def simulate_many(scenes, stop_time: float = 200.0, interval: float = 0.1, setti
         part = plants[:last - first]
         ceilings, chunk_warnings, chunk_notes = _fill(part, chunk, settings, start_time, stop_time)
         _check_interval(ceilings, interval, first, m > 1)
-        warnings += [clamp + w for w in chunk_warnings]
+        warnings += [list(clamp) + w for w in chunk_warnings]
         notes += chunk_notes
         run_batch(part.ctypes.data, last - first, start_time, chunk["x_start"].ctypes.data_as(_double_p),
                   chunk["v_start"].ctypes.data_as(_double_p), interval, n,
@@ -328,7 +343,7 @@ class Simulation:
         ceilings, warnings, notes = _fill(self._plants, columns, settings, start_time,
                                           math.nan if stop_time is None else stop_time)
         _check_interval(ceilings, interval, 0, False)
-        self.warnings, self.notes = clamp + warnings[0], notes[0]
+        self.warnings, self.notes = list(clamp) + warnings[0], notes[0]
         self.start_time, self.interval, self.k = start_time, interval, 0
         self._plant = VkPlant.from_buffer(self._plants)
         self._address = ctypes.addressof(self._plant)
