@@ -345,8 +345,11 @@ def peers_block(sources: list[Path]) -> str | None:
             load = machine.get("load_average_at_start")
             head = (f"`{run['command']}` ({machine.get('started_utc', '?')}, {machine.get('cpu_count', '?')} CPUs"
                     + (f", load average {load[0]:.1f} at its start" if load else "") + "):")
-            return "\n".join([head, ""] + [f"- {line}" if not line.startswith("  ") else f"  - {line.strip()}"
-                                            for line in peers.peers_lines(data)])
+            lines = [f"- {line}" if not line.startswith("  ") else f"  - {line.strip()}"
+                     for line in peers.peers_lines(data)]
+            return "\n".join([head, "", *lines, "- Timings on a shared machine vary between runs (the load average "
+                               "above): compare the contenders within one run only; the plot of every line is the "
+                               "run's peers.png."])
     return None
 
 

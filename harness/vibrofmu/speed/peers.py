@@ -518,12 +518,16 @@ def plot_peers(path: Path, results: dict) -> None:
     import matplotlib.pyplot as plt
 
     fig, axes = plt.subplots(1, len(results), figsize=(6.5 * len(results), 5), squeeze=False)
+    colours = plt.get_cmap("tab20").colors
     for ax, (scene_name, tables) in zip(axes[0], results.items()):
-        for name, table in tables.items():
-            points = sorted((e["seconds"] * 1e3, e["error"]) for e in table.values() if e["error"] is not None)
+        for k, (name, table) in enumerate(tables.items()):
+            # in the order of the setting (rtol, loose to tight): a line per contender, as a work-precision diagram
+            points = [(e["seconds"] * 1e3, e["error"]) for _, e in sorted(table.items(), key=lambda item: -item[0])
+                      if e["error"] is not None]
             if points:
                 ours = name.startswith(OWN)
-                ax.loglog(*zip(*points), marker="o" if ours else ".", lw=2.0 if ours else 1.0, label=name)
+                ax.loglog(*zip(*points), marker="o" if ours else ".", lw=2.0 if ours else 1.0, label=name,
+                          color=colours[k % len(colours)])
         for threshold in THRESHOLDS:
             ax.axhline(threshold, color="grey", lw=0.5, ls=":")
         ax.set_xlabel("ms per run (minimum over the rounds)")
