@@ -189,6 +189,8 @@ IGNORED = [
     (["oafm", "--basis", "paper", "--fmu", "{other}", "--out", "o"], "with --basis paper there is no FMU check"),
     (["stability", "--no-fmu", "--sweep-points", "5", "--out", "o"], "--sweep-points 5: --no-fmu skips the FMU sweeps"),
     (["bench", "--ladder-only", "--repeats", "2", "--out", "o"], "--repeats 2: --ladder-only runs no work-precision"),
+    (["bench", "--peers", "--repeats", "2", "--out", "o"], "--repeats 2: --peers runs each setting once per round"),
+    (["bench", "--peers", "--ladder-only", "--out", "o"], "--ladder-only: --peers runs only the comparison"),
     (["continuation", "--bench", "--param", "mu", "--out", "o"], "--param mu: --bench continues its own branch"),
     (["continuation", "--bench", "--points", "5", "--out", "o"], "--points 5: --bench continues its own branch"),
     (["continuation", "--param", "omega", "--from", "1", "--to", "2", "--delta", "0.1", "--out", "o"],

@@ -59,6 +59,11 @@ def run(args) -> int:
 
 
 def unused(args) -> list[Unused]:
+    if args.peers:
+        return [Unused("repeats", "--peers runs each setting once per round (the rounds are --ladder-rounds); leave "
+                                  "it out"),
+                Unused("ladder_only", "--peers runs only the comparison with other solvers; give one of the two"),
+                Unused("no_instructions", "--peers counts no instructions; leave it out", harmless=True)]
     return [Unused("repeats", "--ladder-only runs no work-precision cases (the ladder's rounds are --ladder-rounds); "
                               "leave it out")] if args.ladder_only else []
 
