@@ -1,7 +1,7 @@
 """Hand a compiled model to the status shim's C fast path (fmu_src/fmi2_status_shim.c, "Fast path").
 
 The shim then runs fmi2DoStep on the model's C step function (the plant's vk_do_step, the controller's
-vc_do_step, the closed loop's vl_do_step) and answers fmi2GetReal/fmi2GetBoolean of the outputs from the
+vk_controller_do_step, the closed loop's vk_loop_do_step) and answers fmi2GetReal/fmi2GetBoolean of the outputs from the
 model's memory, without calling Python. Any model will do that gives a step function int step(void *model,
 double t, double h), its address, the address of its int64 "enabled" flag and those of its outputs (and, for
 inputs set in C, a function int inputs_set(void *model) and the inputs' addresses). The shim accepts a model only

@@ -1,7 +1,7 @@
 """Comparing the C twins' messages with the Python originals.
 
 The C code (fmu_src/core, fmu_src/native) does not imitate Python's text: it writes numbers with C's %g (exactly:
-the first of %.15g .. %.17g that reads back, core/pyfloat.c's py_repr) where Python writes repr(x), and a kernel
+the first of %.15g .. %.17g that reads back, core/pyfloat.c's exact_number_text) where Python writes repr(x), and a kernel
 exception as "Type: text" where Python writes repr(exception), "Type('text')". `canonical` maps a message to what
 both must share: the same words, the same numbers (parsed back and compared bit for bit), the same exception types
 and texts. An OverflowError's text is CPython's errno and strerror in Python, "(34, 'Numerical result out of

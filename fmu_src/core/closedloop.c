@@ -24,12 +24,12 @@ static const double *reference_at(const VlLoop *l, double t, double *ref, double
         const OePiece *P = &S->pieces[0];
         for (int64_t j = 0; j < P->n_freq_bases; j++) {
             if (P->freq_base[j] == l->controller.phi.w_delta) {
-                oe_state_cos(S, t, ref, j, cos_delta);
+                vk_oafm_state_cos(S, t, ref, j, cos_delta);
                 return cos_delta;
             }
         }
     }
-    oe_state(S, t, ref);
+    vk_oafm_state(S, t, ref);
     return NULL;
 }
 
@@ -41,7 +41,7 @@ static int loop_rhs(void *context, double t, const double *y, double *f)
     double ref[3], U, time[3], cos_delta;
     int fault = FAULT_NONE;
     const double *shared = reference_at(l, t, ref, &cos_delta);
-    if (vc_control_rates(&l->controller, t, y[0], y[1], ref, y + 2, &U, f + 2, time, shared))
+    if (vk_controller_control_rates(&l->controller, t, y[0], y[1], ref, y + 2, &U, f + 2, time, shared))
         return FAULT_MATH_DOMAIN;  /* math.cos/sin of an infinity */
     /* the model's drive terms have the same time functions as the control regressor (the same products of the
        same frequencies and t): evaluated once */
@@ -63,16 +63,16 @@ static inline VkSolverSlots slots_of(VlLoop *l)
 static const VkRhs LOOP_RHS = {loop_rhs, NULL, 0, NULL};
 static inline const VkSolverOps *ops_of(const VlLoop *l) { return vk_solvers[l->solver]; }
 
-int vl_rhs(const VlLoop *l, double t, const double *y, double *f) { return loop_rhs((void *)l, t, y, f); }
+int vk_loop_rhs(const VlLoop *l, double t, const double *y, double *f) { return loop_rhs((void *)l, t, y, f); }
 
-int vl_outputs_at(const VlLoop *l, double t, const double *y, double *out)
+int vk_loop_outputs_at(const VlLoop *l, double t, const double *y, double *out)
 {
     const VcController *c = &l->controller;
     double ref[3], U, e1, e2, rates[VC_N], time[3], cos_delta;
     int fault = FAULT_NONE;
     const double *shared = reference_at(l, t, ref, &cos_delta);
-    if (vc_control_rates(c, t, y[0], y[1], ref, y + 2, &U, rates, time, shared)) return FAULT_MATH_DOMAIN;
-    vc_errors(c, y[0], y[1], ref, &e1, &e2);
+    if (vk_controller_control_rates(c, t, y[0], y[1], ref, y + 2, &U, rates, time, shared)) return FAULT_MATH_DOMAIN;
+    vk_controller_errors(c, y[0], y[1], ref, &e1, &e2);
     VmDrive drive = {time[0], time[1], time[2]};  /* as in loop_rhs */
     double a = vm_accel_driven(&l->model, t, &drive, y[0], y[1], U, &fault);
     if (fault) return fault;
@@ -82,9 +82,9 @@ int vl_outputs_at(const VlLoop *l, double t, const double *y, double *out)
     out[3] = U;
     out[4] = e1;
     out[5] = e2;
-    out[6] = vc_lyapunov(c, e1, e2, y + 2);
-    out[7] = vc_lyapunov_rate(c, y[0], y[1], a, ref, y + 2, rates);
-    out[8] = vc_promised_rate(c, e1, e2);
+    out[6] = vk_controller_lyapunov(c, e1, e2, y + 2);
+    out[7] = vk_controller_lyapunov_rate(c, y[0], y[1], a, ref, y + 2, rates);
+    out[8] = vk_controller_promised_rate(c, e1, e2);
     memcpy(out + 9, y + 2, VC_N * sizeof(double));
     return FAULT_NONE;
 }
@@ -115,12 +115,12 @@ static int raise_fault(VlLoop *l, int fault, double t, const double *y)
     return set_error(l, VL_RAISED, t, y, text);
 }
 
-/* vl_publish's part after the solver: the outputs at l->t from the state y there, written when all are finite.  One
+/* vk_loop_publish's part after the solver: the outputs at l->t from the state y there, written when all are finite.  One
    function whatever the solver (each publish_with calls it): the outputs are inlined into it once. */
 static int publish_state(VlLoop *l, const double *y)
 {
     double out[VL_OUTPUTS];
-    int fault = vl_outputs_at(l, l->t, y, out);
+    int fault = vk_loop_outputs_at(l, l->t, y, out);
     if (fault) return raise_fault(l, fault, l->t, y);
     static const char *const names[VL_OUTPUTS] = {"x", "v", "x_ref", "U", "e1", "e2", "V", "V_rate",
         "V_rate_promised", "mu_hat", "a1_hat", "a2_hat", "a3_hat", "a4_hat", "a5_hat", "Delta_hat", "beta_hat",
@@ -136,7 +136,7 @@ static int publish_state(VlLoop *l, const double *y)
     return VL_OK;
 }
 
-/* vl_publish on the given ops (always_inline: written once, instantiated per solver below; solver.h) */
+/* vk_loop_publish on the given ops (always_inline: written once, instantiated per solver below; solver.h) */
 static inline __attribute__((always_inline)) int publish_with(VlLoop *l, const VkSolverOps *ops)
 {
     double y[DOP_MAX_DIM];
@@ -146,9 +146,9 @@ static inline __attribute__((always_inline)) int publish_with(VlLoop *l, const V
     return publish_state(l, y);
 }
 
-int vl_publish(VlLoop *l) { return publish_with(l, ops_of(l)); }
+int vk_loop_publish(VlLoop *l) { return publish_with(l, ops_of(l)); }
 
-int vl_init(VlLoop *l, double t0, const double *y0)
+int vk_loop_init(VlLoop *l, double t0, const double *y0)
 {
     DopReport r;
     l->dop.n = l->rk4.n = VL_DIM;
@@ -158,7 +158,7 @@ int vl_init(VlLoop *l, double t0, const double *y0)
     l->t = t0;
     int code = ops_of(l)->restart(slots_of(l), &LOOP_RHS, l, t0, y0, &r);
     if (code) return solver_error(l, code, &r);
-    return vl_publish(l);
+    return vk_loop_publish(l);
 }
 
 /* ClosedLoop.do_step on the given ops (always_inline), instantiated per solver of VK_SOLVER_LIST on its ops
@@ -181,9 +181,9 @@ static inline __attribute__((always_inline)) int do_step_with(VlLoop *l, const V
 #define VK_DO_STEP_GENERIC do_step_with
 VK_DO_STEP_TABLE(DO_STEP)
 
-int vl_do_step(VlLoop *l, double t, double h) { return DO_STEP[l->solver](l, t, h); }
+int vk_loop_do_step(VlLoop *l, double t, double h) { return DO_STEP[l->solver](l, t, h); }
 
-void vl_layout(size_t *sizes)
+void vk_loop_layout(size_t *sizes)
 {
     sizes[0] = sizeof(VlLoop);
     sizes[1] = offsetof(VlLoop, dop);

@@ -46,7 +46,7 @@ typedef struct {
     VcController controller;         /* the controller's constants (its own state fields unused) */
     int64_t solver;                  /* VL_DOP853 or VL_RK4 */
     double time_tolerance;
-    /* ---- the solver in use (configured by vl_init), the loop, the outputs: the FMU state's bytes ---- */
+    /* ---- the solver in use (configured by vk_loop_init), the loop, the outputs: the FMU state's bytes ---- */
     Dop853 dop;
     Rk4 rk4;
     double t;                        /* ClosedLoop.t */
@@ -61,21 +61,21 @@ typedef struct {
 
 /* sizeof(VlLoop), offsetof(VlLoop, dop), offsetof(VlLoop, t), offsetof(VlLoop, out), offsetof(VlLoop, enabled),
    offsetof(VlLoop, error), offsetof(VlLoop, message), offsetof(VlLoop, reference) into sizes[0..7]. */
-void vl_layout(size_t *sizes);
+void vk_loop_layout(size_t *sizes);
 /* Configure the solver of `solver` (n = 11, the model's events; the caller has set dop.rtol/atol/max_step/
    step_budget or rk4.max_step) and start at t0 from y0 = (x, v, theta^); outputs at t0. 0 or a pending code. */
-int vl_init(VlLoop *l, double t0, const double *y0);
+int vk_loop_init(VlLoop *l, double t0, const double *y0);
 /* ClosedLoop.do_step(t, h): pre-checks (VL_BAD_STEP, VL_BAD_TIME: nothing changed), the solver to t + h, t = t + h,
    the outputs at t (written only when all are finite). Integration errors and faults stay pending in `error`
-   (enabled = 0; the solver keeps the state it reached); while one is pending, vl_do_step returns it. */
-int vl_do_step(VlLoop *l, double t, double h);
+   (enabled = 0; the solver keeps the state it reached); while one is pending, vk_loop_do_step returns it. */
+int vk_loop_do_step(VlLoop *l, double t, double h);
 /* ClosedLoop.outputs: the state at t (dense output or RK4's state), its outputs into out[] when all are finite;
    0 or a pending code. */
-int vl_publish(VlLoop *l);
+int vk_loop_publish(VlLoop *l);
 /* The loop's right-hand side f = (v, x'', theta^') at (t, y) (what the solvers integrate; the native FMU's Model
    Exchange derivatives): 0 or the fault Python raises. */
-int vl_rhs(const VlLoop *l, double t, const double *y, double *f);
+int vk_loop_rhs(const VlLoop *l, double t, const double *y, double *f);
 /* ClosedLoop.outputs_at(t, x, v, theta^) into out[0..VL_OUTPUTS-1]: 0 or the fault Python raises (nothing pending). */
-int vl_outputs_at(const VlLoop *l, double t, const double *y, double *out);
+int vk_loop_outputs_at(const VlLoop *l, double t, const double *y, double *out);
 
 #endif

@@ -100,7 +100,7 @@ static int regressor_integral(const VcController *c, const VcRegressor *r, doubl
 }
 
 /* Controller.errors (Eq. 74) */
-void vc_errors(const VcController *c, double x, double v, const double *ref, double *e1, double *e2)
+void vk_controller_errors(const VcController *c, double x, double v, const double *ref, double *e1, double *e2)
 {
     *e1 = x - ref[0];
     *e2 = v - ref[1] + c->c * *e1;
@@ -123,23 +123,23 @@ static inline __attribute__((always_inline)) double control(const VcController *
 }
 
 /* Controller.control: U = -phi^T theta^ + x~'' - c e2 (- k e2 damped; true Delta in theta^ paper-literal) */
-int vc_control(const VcController *c, double t, double x, double v, const double *ref, const double *theta_hat,
+int vk_controller_control(const VcController *c, double t, double x, double v, const double *ref, const double *theta_hat,
                double *U)
 {
     double e1, e2, phi[VC_N];
-    vc_errors(c, x, v, ref, &e1, &e2);
+    vk_controller_errors(c, x, v, ref, &e1, &e2);
     if (regressor(c, &c->phi, t, x, v, phi, NULL, NULL)) return VC_RAISED;
     *U = control(c, phi, e2, ref, theta_hat);
     return VC_OK;
 }
 
-/* vc_control and vc_rates together: the same values, with the regressor evaluated once where both laws use the
+/* vk_controller_control and vk_controller_rates together: the same values, with the regressor evaluated once where both laws use the
    same one (all but paper-literal) */
-int vc_control_rates(const VcController *c, double t, double x, double v, const double *ref, const double *theta_hat,
+int vk_controller_control_rates(const VcController *c, double t, double x, double v, const double *ref, const double *theta_hat,
                      double *U, double *rates, double *time, const double *cos_delta)
 {
     double e1, e2, phi[VC_N], phi_update[VC_N];
-    vc_errors(c, x, v, ref, &e1, &e2);
+    vk_controller_errors(c, x, v, ref, &e1, &e2);
     if (regressor(c, &c->phi, t, x, v, phi, time, cos_delta)) return VC_RAISED;
     *U = control(c, phi, e2, ref, theta_hat);
     const double *update = phi;
@@ -152,27 +152,27 @@ int vc_control_rates(const VcController *c, double t, double x, double v, const 
 }
 
 /* Controller.rates: theta^' = lambda2 Lambda^-1 phi e2 */
-int vc_rates(const VcController *c, double t, double x, double v, const double *ref, double *rates)
+int vk_controller_rates(const VcController *c, double t, double x, double v, const double *ref, double *rates)
 {
     double e1, e2, phi[VC_N];
-    vc_errors(c, x, v, ref, &e1, &e2);
+    vk_controller_errors(c, x, v, ref, &e1, &e2);
     if (regressor(c, &c->phi_update, t, x, v, phi, NULL, NULL)) return VC_RAISED;
     for (int i = 0; i < VC_N; i++) rates[i] = c->adaptation[i] * phi[i] * e2;
     return VC_OK;
 }
 
 /* Controller.increment */
-int vc_increment(const VcController *c, double t, double h, double x, double v, const double *ref, double *inc)
+int vk_controller_increment(const VcController *c, double t, double h, double x, double v, const double *ref, double *inc)
 {
     double e1, e2, integral[VC_N];
-    vc_errors(c, x, v, ref, &e1, &e2);
+    vk_controller_errors(c, x, v, ref, &e1, &e2);
     if (regressor_integral(c, &c->phi_update, t, h, x, v, integral)) return VC_RAISED;
     for (int i = 0; i < VC_N; i++) inc[i] = c->adaptation[i] * integral[i] * e2;
     return VC_OK;
 }
 
 /* Controller.lyapunov (Eq. 76) */
-double vc_lyapunov(const VcController *c, double e1, double e2, const double *theta_hat)
+double vk_controller_lyapunov(const VcController *c, double e1, double e2, const double *theta_hat)
 {
     double square[VC_N];
     for (int i = 0; i < VC_N; i++) {
@@ -183,11 +183,11 @@ double vc_lyapunov(const VcController *c, double e1, double e2, const double *th
 }
 
 /* Controller.lyapunov_rate: chain rule, e1' = x2 - x~', e2' = x2' - x~'' + c e1' */
-double vc_lyapunov_rate(const VcController *c, double x, double v, double accel, const double *ref,
+double vk_controller_lyapunov_rate(const VcController *c, double x, double v, double accel, const double *ref,
                         const double *theta_hat, const double *theta_hat_rate)
 {
     double e1, e2, product[VC_N];
-    vc_errors(c, x, v, ref, &e1, &e2);
+    vk_controller_errors(c, x, v, ref, &e1, &e2);
     double de1 = v - ref[1];
     double de2 = accel - ref[2] + c->c * de1;
     for (int i = 0; i < VC_N; i++) product[i] = (theta_hat[i] - c->theta[i]) * theta_hat_rate[i];
@@ -195,47 +195,47 @@ double vc_lyapunov_rate(const VcController *c, double x, double v, double accel,
 }
 
 /* Controller.promised_rate: Eq. 85, or -lambda1 c e1^2 - lambda2 k e2^2 (damped) */
-double vc_promised_rate(const VcController *c, double e1, double e2)
+double vk_controller_promised_rate(const VcController *c, double e1, double e2)
 {
     if (c->law == 1) return -c->l1 * c->c * e1 * e1 - c->l2 * c->k_damping * e2 * e2;
     return c->promised_e1 * e1 * e1;
 }
 
 /* AdaptiveLyapunovController._publish at time t with estimates theta_hat, into out[] (all computed first) */
-int vc_outputs(const VcController *c, double t, const double *theta_hat, double *out)
+int vk_controller_outputs(const VcController *c, double t, const double *theta_hat, double *out)
 {
     const double *ref = c->in + 2;
     double e1, e2;
-    vc_errors(c, c->in[0], c->in[1], ref, &e1, &e2);
-    if (vc_control(c, t, c->in[0], c->in[1], ref, theta_hat, &out[0])) return VC_RAISED;
+    vk_controller_errors(c, c->in[0], c->in[1], ref, &e1, &e2);
+    if (vk_controller_control(c, t, c->in[0], c->in[1], ref, theta_hat, &out[0])) return VC_RAISED;
     out[1] = e1;
     out[2] = e2;
-    out[3] = vc_lyapunov(c, e1, e2, theta_hat);
+    out[3] = vk_controller_lyapunov(c, e1, e2, theta_hat);
     memcpy(out + 4, theta_hat, VC_N * sizeof(double));
     return VC_OK;
 }
 
 /* StatusSlave._set_finite: the first non-finite output's index, or -1 */
-int vc_non_finite(const double *out)
+int vk_controller_non_finite(const double *out)
 {
     for (int i = 0; i < VC_OUTPUTS; i++)
         if (!isfinite(out[i])) return i;
     return -1;
 }
 
-int vc_publish(VcController *c)
+int vk_controller_publish(VcController *c)
 {
     double out[VC_OUTPUTS];
-    if (vc_outputs(c, c->t, c->theta_hat, out)) return VC_RAISED;
-    if (vc_non_finite(out) >= 0) return VC_NON_FINITE;
+    if (vk_controller_outputs(c, c->t, c->theta_hat, out)) return VC_RAISED;
+    if (vk_controller_non_finite(out) >= 0) return VC_NON_FINITE;
     memcpy(c->out, out, sizeof c->out);
     return VC_OK;
 }
 
-int vc_advance(VcController *c, double t, double h, double x, double v, const double *ref)
+int vk_controller_advance(VcController *c, double t, double h, double x, double v, const double *ref)
 {
     double inc[VC_N];
-    if (vc_increment(c, t, h, x, v, ref, inc)) return VC_RAISED;
+    if (vk_controller_increment(c, t, h, x, v, ref, inc)) return VC_RAISED;
     for (int i = 0; i < VC_N; i++) c->theta_hat[i] = c->theta_hat[i] + inc[i];
     c->t = t + h;
     return VC_OK;
@@ -243,24 +243,24 @@ int vc_advance(VcController *c, double t, double h, double x, double v, const do
 
 /* AdaptiveLyapunovController._step: pre-checks, HeldInputEstimator.advance, _publish; nothing changes unless
    all of it succeeds (a failure is then reported by the Python path, which raises as Python does). */
-int vc_do_step(VcController *c, double t, double h)
+int vk_controller_do_step(VcController *c, double t, double h)
 {
     if (!(isfinite(h) && h > 0.0)) return VC_BAD_STEP;
     if (!(isfinite(t) && fabs(t - c->t) <= c->time_tolerance * fmax(1.0, fabs(t)))) return VC_BAD_TIME;
     for (int i = 0; i < VC_INPUTS; i++)
         if (!isfinite(c->in[i])) return VC_BAD_INPUT;
     double inc[VC_N], theta_hat[VC_N], out[VC_OUTPUTS];
-    if (vc_increment(c, t, h, c->in[0], c->in[1], c->in + 2, inc)) return VC_RAISED;
+    if (vk_controller_increment(c, t, h, c->in[0], c->in[1], c->in + 2, inc)) return VC_RAISED;
     for (int i = 0; i < VC_N; i++) theta_hat[i] = c->theta_hat[i] + inc[i];
-    if (vc_outputs(c, t + h, theta_hat, out)) return VC_RAISED;
-    if (vc_non_finite(out) >= 0) return VC_NON_FINITE;
+    if (vk_controller_outputs(c, t + h, theta_hat, out)) return VC_RAISED;
+    if (vk_controller_non_finite(out) >= 0) return VC_NON_FINITE;
     memcpy(c->theta_hat, theta_hat, sizeof theta_hat);
     c->t = t + h;
     memcpy(c->out, out, sizeof c->out);
     return VC_OK;
 }
 
-void vc_constants(VcController *c, double mu, double Delta, double omega, double Omega, double beta, double gamma,
+void vk_controller_constants(VcController *c, double mu, double Delta, double omega, double Omega, double beta, double gamma,
                   const double *poly, const double *g3, int64_t law, const double *lambdas, double k_damping,
                   double time_tolerance)
 {
@@ -290,7 +290,7 @@ void vc_constants(VcController *c, double mu, double Delta, double omega, double
 }
 
 #define FIELD(name) offsetof(VcController, name)
-size_t vc_layout(size_t *offsets, size_t n_fields)
+size_t vk_controller_layout(size_t *offsets, size_t n_fields)
 {
     const size_t fields[] = {FIELD(g3), FIELD(phi), FIELD(phi_update), FIELD(theta), FIELD(l1), FIELD(l2),
                              FIELD(Lambda), FIELD(adaptation), FIELD(c), FIELD(k_damping), FIELD(promised_e1),

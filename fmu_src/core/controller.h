@@ -11,7 +11,7 @@
  * The paper-literal law (Eqs 78, 81 as printed) uses the true Delta in U and its own update regressor.
  *
  * The same operations in the same order as control.py (sums left to right from 0), so that both give the same
- * bits. Every constant (true theta, gains, frequencies) is computed once, by vc_constants (below) from the
+ * bits. Every constant (true theta, gains, frequencies) is computed once, by vk_controller_constants (below) from the
  * parameters, a0..a5 and G3, and stored here. VcController holds no pointers: its bytes are the controller FMU's
  * model state.
  */
@@ -64,48 +64,48 @@ typedef struct {
    compiled models (vibromodel/compiled_loop.fill_controller). poly = a0..a5 (forces.coefficients, corrected),
    g3 = series G3 (forces.series_g3), law 0/1/2 (control.Law), lambdas = lambda1..lambda11 (control.Gains). The
    same operations as control.Controller, so the same bits (tests/core/test_controller_constants.py). */
-void vc_constants(VcController *c, double mu, double Delta, double omega, double Omega, double beta, double gamma,
+void vk_controller_constants(VcController *c, double mu, double Delta, double omega, double Omega, double beta, double gamma,
                   const double *poly, const double *g3, int64_t law, const double *lambdas, double k_damping,
                   double time_tolerance);
 
 /* sizeof(VcController) and its fields' offsets in declaration order (0 if n_fields is not their number). */
-size_t vc_layout(size_t *offsets, size_t n_fields);
+size_t vk_controller_layout(size_t *offsets, size_t n_fields);
 
 /* e1, e2 of Eq. 74; ref = (x~, x~', x~''). */
-void vc_errors(const VcController *c, double x, double v, const double *ref, double *e1, double *e2);
+void vk_controller_errors(const VcController *c, double x, double v, const double *ref, double *e1, double *e2);
 /* U (Controller.control); 0 or VC_RAISED. */
-int vc_control(const VcController *c, double t, double x, double v, const double *ref, const double *theta_hat,
+int vk_controller_control(const VcController *c, double t, double x, double v, const double *ref, const double *theta_hat,
                double *U);
 /* theta^' (Controller.rates); 0 or VC_RAISED. */
-int vc_rates(const VcController *c, double t, double x, double v, const double *ref, double *rates);
-/* vc_control and vc_rates in one call (the regressor evaluated once where the laws share it); time != NULL: the
+int vk_controller_rates(const VcController *c, double t, double x, double v, const double *ref, double *rates);
+/* vk_controller_control and vk_controller_rates in one call (the regressor evaluated once where the laws share it); time != NULL: the
    control regressor's time functions cos(omega t), sin(Omega t), cos(2 Omega t) into time[0..2]; cos_delta != NULL:
    the control regressor's cos(w_delta t), already computed by the caller from the same angle. 0 or VC_RAISED. */
-int vc_control_rates(const VcController *c, double t, double x, double v, const double *ref, const double *theta_hat,
+int vk_controller_control_rates(const VcController *c, double t, double x, double v, const double *ref, const double *theta_hat,
                      double *U, double *rates, double *time, const double *cos_delta);
 /* theta^(t + h) - theta^(t) with x, v, ref held (Controller.increment, exact integral); 0 or VC_RAISED. */
-int vc_increment(const VcController *c, double t, double h, double x, double v, const double *ref, double *inc);
+int vk_controller_increment(const VcController *c, double t, double h, double x, double v, const double *ref, double *inc);
 /* V of Eq. 76. */
-double vc_lyapunov(const VcController *c, double e1, double e2, const double *theta_hat);
+double vk_controller_lyapunov(const VcController *c, double e1, double e2, const double *theta_hat);
 /* dV/dt by the chain rule (Controller.lyapunov_rate). */
-double vc_lyapunov_rate(const VcController *c, double x, double v, double accel, const double *ref,
+double vk_controller_lyapunov_rate(const VcController *c, double x, double v, double accel, const double *ref,
                         const double *theta_hat, const double *theta_hat_rate);
 /* The V' the law promises (Controller.promised_rate). */
-double vc_promised_rate(const VcController *c, double e1, double e2);
+double vk_controller_promised_rate(const VcController *c, double e1, double e2);
 
 /* The controller FMU's outputs U, e1, e2, V, theta^ at t with estimates theta_hat and the inputs in[] into out[]
    (AdaptiveLyapunovController._publish); 0 or VC_RAISED. */
-int vc_outputs(const VcController *c, double t, const double *theta_hat, double *out);
+int vk_controller_outputs(const VcController *c, double t, const double *theta_hat, double *out);
 /* Index of the first non-finite of out[0..VC_OUTPUTS-1], or -1. */
-int vc_non_finite(const double *out);
+int vk_controller_non_finite(const double *out);
 /* The controller FMU: out[] from the inputs and estimates at t (AdaptiveLyapunovController._publish), written only
    when all are finite; 0, VC_RAISED or VC_NON_FINITE (nothing written). */
-int vc_publish(VcController *c);
+int vk_controller_publish(VcController *c);
 /* HeldInputEstimator.advance: theta^ += the exact increment with x, v, ref held, t = t + h; 0 or VC_RAISED
    (nothing changed). */
-int vc_advance(VcController *c, double t, double h, double x, double v, const double *ref);
+int vk_controller_advance(VcController *c, double t, double h, double x, double v, const double *ref);
 /* One doStep: pre-checks, theta^ += the exact increment with the inputs held, t += h, publish. 0 or a code
    (VC_NON_FINITE: an output would not be finite; nothing changed). */
-int vc_do_step(VcController *c, double t, double h);
+int vk_controller_do_step(VcController *c, double t, double h);
 
 #endif

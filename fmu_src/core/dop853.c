@@ -302,7 +302,7 @@ int dop_value_at(Dop853 *s, DopRhs rhs, void *ctx, double t, double *y, DopRepor
     if (!s->has_old || !(s->t_old <= t && t <= s->t)) {
         number_text t_text, old_text, end_text;
         return dop_report(r, s->n, DOP_RAISED, s->t, s->y, "ValueError: tau = %s is outside the last step [%s, %s]",
-                      py_repr(t_text, t), s->has_old ? py_repr(old_text, s->t_old) : "None", py_repr(end_text, s->t));
+                      exact_number_text(t_text, t), s->has_old ? exact_number_text(old_text, s->t_old) : "None", exact_number_text(end_text, s->t));
     }
     if (!s->dense_ready) {
         int fault = build_dense(s, rhs, ctx);
@@ -336,19 +336,19 @@ static int initial_step(Dop853 *s, DopRhs rhs, void *ctx, double *h)
     double root_n = sqrt((double)n);
     for (int i = 0; i < n; i++) scale[i] = s->atol + fabs(s->y[i]) * s->rtol;
     for (int i = 0; i < n; i++) w[i] = s->y[i] / scale[i];
-    double d0 = py_hypot(w, n) / root_n;
+    double d0 = vk_python_hypot(w, n) / root_n;
     for (int i = 0; i < n; i++) w[i] = s->f[i] / scale[i];
-    double d1 = py_hypot(w, n) / root_n;
+    double d1 = vk_python_hypot(w, n) / root_n;
     double h0 = d0 < 1e-5 || d1 < 1e-5 ? 1e-6 : 0.01 * d0 / d1;
     h0 = py_min(h0, s->max_step);
     for (int i = 0; i < n; i++) y1[i] = s->y[i] + h0 * s->f[i];
     fault = counted(s, rhs, ctx, t + h0, y1, f1);
     if (fault) return fault;
     for (int i = 0; i < n; i++) w[i] = (f1[i] - s->f[i]) / scale[i];
-    double d2 = py_div(py_hypot(w, n) / root_n, h0, &fault);
+    double d2 = py_div(vk_python_hypot(w, n) / root_n, h0, &fault);
     if (fault) return fault;
     double d_max = py_max(d1, d2);
-    double h1 = d_max <= 1e-15 ? py_max(1e-6, h0 * 1e-3) : py_pow(0.01 / d_max, 1.0 / 9.0, &fault);
+    double h1 = d_max <= 1e-15 ? py_max(1e-6, h0 * 1e-3) : vk_python_pow(0.01 / d_max, 1.0 / 9.0, &fault);
     if (fault) return fault;
     *h = py_min(py_min(100.0 * h0, h1), s->max_step);
     return FAULT_NONE;
@@ -366,7 +366,7 @@ static int root_function(Dop853 *s, DopRhs rhs, void *ctx, int event, double tt,
     if (isnan(*f)) {
         number_text text;
         return dop_report(r, s->n, DOP_RAISED, s->t, s->y,
-                      "ValueError: The function value at x=%s is NaN; solver cannot continue.", py_repr(text, tt));
+                      "ValueError: The function value at x=%s is NaN; solver cannot continue.", exact_number_text(text, tt));
     }
     return DOP_OK;
 }
@@ -508,7 +508,7 @@ static int shorten(Dop853 *s, DopRhs rhs, void *ctx, double t0, const double *y0
         if (!(h >= min_step)) {
             number_text h_text, t_text, x_text;
             return dop_report(r, s->n, DOP_FAILED, t0, y0, "step size collapsed to %s at tau = %s, x = %s (stiff or singular)",
-                          py_g(h_text, h, 3), py_g(t_text, t0, 10), py_g(x_text, y0[0], 10));
+                          g_number_text(h_text, h, 3), g_number_text(t_text, t0, 10), g_number_text(x_text, y0[0], 10));
         }
         int fault = trial(s, rhs, ctx, t0, y0, h, &k, y_new, &error);
         if (fault) return raise_fault(s, r, fault);
@@ -569,7 +569,7 @@ static int handle_events(Dop853 *s, DopRhs rhs, void *ctx, double t0, const doub
 static double step_factor(double error)
 {
     int fault = FAULT_NONE;
-    return SAFETY * py_pow(error, ERROR_EXPONENT, &fault);
+    return SAFETY * vk_python_pow(error, ERROR_EXPONENT, &fault);
 }
 
 /* Dop853._step: one accepted step (the step size adapted on the way), then its events */
@@ -590,7 +590,7 @@ static int step(Dop853 *s, DopRhs rhs, void *ctx, DopReport *r)
         if (!(h >= min_step)) {
             number_text h_text, t_text, x_text;
             return dop_report(r, s->n, DOP_FAILED, t, y, "step size collapsed to %s at tau = %s, x = %s (stiff or singular)",
-                          py_g(h_text, h, 3), py_g(t_text, t, 10), py_g(x_text, y[0], 10));
+                          g_number_text(h_text, h, 3), g_number_text(t_text, t, 10), g_number_text(x_text, y[0], 10));
         }
         fault = trial(s, rhs, ctx, t, y, h, &k, y_new, &error);
         if (fault) return raise_fault(s, r, fault);
@@ -629,7 +629,7 @@ inline __attribute__((always_inline)) int dop_advance(Dop853 *s, DopRhs rhs, voi
             number_text t_text, target_text;
             return dop_report(r, s->n, DOP_FAILED, s->t, s->y,
                           "%lld steps reached only tau = %s of %s: make smaller communication steps", steps,
-                          py_g(t_text, s->t, 10), py_g(target_text, t_target, 10));
+                          g_number_text(t_text, s->t, 10), g_number_text(target_text, t_target, 10));
         }
         int code = step(s, rhs, ctx, r);
         if (code) return code;

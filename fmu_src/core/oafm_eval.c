@@ -194,19 +194,19 @@ static int64_t piece_of(const OeSolution *S, double tau)
     return i;
 }
 
-void oe_state(const OeSolution *S, double tau, double *xva)
+void vk_oafm_state(const OeSolution *S, double tau, double *xva)
 {
     int64_t i = piece_of(S, tau);
     piece_state(&S->pieces[i], i, tau - S->pieces[i].start, NULL, xva, 0, NULL);
 }
 
-void oe_state_cos(const OeSolution *S, double tau, double *xva, int64_t base, double *base_cos)
+void vk_oafm_state_cos(const OeSolution *S, double tau, double *xva, int64_t base, double *base_cos)
 {
     int64_t i = piece_of(S, tau);
     piece_state(&S->pieces[i], i, tau - S->pieces[i].start, NULL, xva, base, base_cos);
 }
 
-void oe_step(OeSolution *S, double tau, double *xva)
+void vk_oafm_step(OeSolution *S, double tau, double *xva)
 {
     int64_t i = piece_of(S, tau);
     piece_state(&S->pieces[i], i, tau - S->pieces[i].start, &S->cache, xva, 0, NULL);

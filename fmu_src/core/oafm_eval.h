@@ -66,15 +66,15 @@ typedef struct {
 typedef struct {
     int64_t n_pieces;
     const OePiece *pieces;             /* by start, ascending; times before the first start use the first */
-    OeCache cache;                     /* oe_step's */
+    OeCache cache;                     /* vk_oafm_step's */
 } OeSolution;
 
 /* (x, x', x'') at tau into xva[0..2], every base evaluated directly (the cache is neither used nor changed). */
-void oe_state(const OeSolution *solution, double tau, double *xva);
-/* oe_state, and into *base_cos the cosine of frequency base `base` of the piece at tau, cos(b_base (tau - start)),
+void vk_oafm_state(const OeSolution *solution, double tau, double *xva);
+/* vk_oafm_state, and into *base_cos the cosine of frequency base `base` of the piece at tau, cos(b_base (tau - start)),
    as the evaluation computed it (sincos): for a caller that needs the same cosine (closedloop.c) */
-void oe_state_cos(const OeSolution *solution, double tau, double *xva, int64_t base, double *base_cos);
+void vk_oafm_state_cos(const OeSolution *solution, double tau, double *xva, int64_t base, double *base_cos);
 /* The same for the next output of a run: the items by recurrence in time where the cache allows it. */
-void oe_step(OeSolution *solution, double tau, double *xva);
+void vk_oafm_step(OeSolution *solution, double tau, double *xva);
 
 #endif

@@ -8,14 +8,14 @@
 /* the level's evaluator (fidelity.h, from the registry): the slow flow's table or the OAFM sums */
 static int slow_flow(const OlPlant *p) { return VK_FIDELITIES[p->fidelity].evaluator == VK_EVALUATOR_SLOWFLOW; }
 
-int ol_state(const OlPlant *p, double tau, double *xva)
+int vk_open_loop_state(const OlPlant *p, double tau, double *xva)
 {
-    if (slow_flow(p)) return sf_state(&p->slowflow, tau, xva) ? OL_BEYOND : 0;
-    oe_state(&p->oafm, tau, xva);
+    if (slow_flow(p)) return vk_slowflow_state(&p->slowflow, tau, xva) ? OL_BEYOND : 0;
+    vk_oafm_state(&p->oafm, tau, xva);
     return 0;
 }
 
-int ol_do_step(OlPlant *p, double t, double h)
+int vk_open_loop_do_step(OlPlant *p, double t, double h)
 {
     VkPlant *k = &p->plant;
     if (k->error) return (int)k->error;
@@ -24,9 +24,9 @@ int ol_do_step(OlPlant *p, double t, double h)
         return OL_REFUSED;
     double xva[3];
     if (slow_flow(p)) {
-        if (sf_state(&p->slowflow, t + h, xva)) return OL_BEYOND;
+        if (vk_slowflow_state(&p->slowflow, t + h, xva)) return OL_BEYOND;
     } else {
-        oe_step(&p->oafm, t + h, xva);
+        vk_oafm_step(&p->oafm, t + h, xva);
     }
     double saved[5];  /* a fault or a non-finite output leaves the plant as it was */
     int64_t saved_contact = k->in_contact, saved_enabled = k->enabled;
@@ -44,7 +44,7 @@ int ol_do_step(OlPlant *p, double t, double h)
     return 0;
 }
 
-void ol_layout(int64_t *sizes)
+void vk_open_loop_layout(int64_t *sizes)
 {
     sizes[0] = (int64_t)sizeof(OlPlant);
     sizes[1] = (int64_t)sizeof(OePiece);
@@ -52,10 +52,10 @@ void ol_layout(int64_t *sizes)
     sizes[3] = (int64_t)offsetof(OlPlant, oafm);
 }
 
-int ol_run(OlPlant *p, double dt, size_t n, double *x_out, size_t *done)
+int vk_open_loop_run(OlPlant *p, double dt, size_t n, double *x_out, size_t *done)
 {
     for (*done = 0; *done < n; ++*done) {
-        int code = ol_do_step(p, p->plant.plant_t, dt);
+        int code = vk_open_loop_do_step(p, p->plant.plant_t, dt);
         if (code) return code;
         x_out[*done] = p->plant.out[0];
     }

@@ -33,13 +33,13 @@ typedef struct {
 } OlPlant;
 
 /* (x, x', x'') at tau into xva: 0, or OL_BEYOND. */
-int ol_state(const OlPlant *p, double tau, double *xva);
+int vk_open_loop_state(const OlPlant *p, double tau, double *xva);
 /* Plant.do_step(t, h, U_input): 0 (outputs written, plant_t = t + h) or a nonzero code, nothing changed. */
-int ol_do_step(OlPlant *p, double t, double h);
+int vk_open_loop_do_step(OlPlant *p, double t, double h);
 /* The compiled floor of fidelities 3 and 4: n do_steps of dt from plant_t, x after each into x_out; stops at the
    first nonzero code and returns it; *done = the steps done. */
-int ol_run(OlPlant *p, double dt, size_t n, double *x_out, size_t *done);
+int vk_open_loop_run(OlPlant *p, double dt, size_t n, double *x_out, size_t *done);
 /* sizeof(OlPlant), sizeof(OePiece), offsetof(OlPlant, slowflow), offsetof(OlPlant, oafm) into sizes[0..3]. */
-void ol_layout(int64_t *sizes);
+void vk_open_loop_layout(int64_t *sizes);
 
 #endif

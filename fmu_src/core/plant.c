@@ -36,8 +36,8 @@ void vk_solver_message(const VkModel *m, int code, const DopReport *r, char *buf
         number_text t_text, x_text, gap_text;
         int upper = r->event == (m->polynomial ? POLY_UPPER_GAP : UPPER_GAP);  /* models.pull_in_events' names */
         snprintf(buf, size, "pull-in: %s gap 1 %s 2x/(3R) below %s at tau = %s, x = %s", upper ? "upper" : "lower",
-                 upper ? "-" : "+", py_g(gap_text, m->pull_in_gap, 6), py_g(t_text, r->t, 10),
-                 py_g(x_text, r->y[0], 10));
+                 upper ? "-" : "+", g_number_text(gap_text, m->pull_in_gap, 6), g_number_text(t_text, r->t, 10),
+                 g_number_text(x_text, r->y[0], 10));
         return;
     }
     snprintf(buf, size, "%s", r->message);

@@ -12,7 +12,7 @@
  * C's pow (the libm call CPython's float_pow makes for them), a NaN base returned as it is, and the faults where
  * Python raises: 0 ** negative (ZeroDivisionError) and an infinite result from a finite base (OverflowError;
  * found from the value, not from errno). */
-double py_pow(double iv, double iw, int *fault)
+double vk_python_pow(double iv, double iw, int *fault)
 {
     if (isnan(iv)) return iv;
     if (iv == 0.0 && iw < 0.0) {
@@ -24,11 +24,12 @@ double py_pow(double iv, double iw, int *fault)
     return ix;
 }
 
-/* math.hypot(*values): CPython's math_hypot and vector_norm (Modules/mathmodule.c, 3.11), n <= PY_HYPOT_MAX. */
-double py_hypot(const double *values, int n)
+/* math.hypot(*values): CPython's math_hypot and vector_norm (Modules/mathmodule.c, 3.11), n <= VK_PYTHON_HYPOT_MAX.
+ * Kept for bit identity: libm's hypot and a plain norm differ from it in the last bit (tests/core/test_pyfloat.py). */
+double vk_python_hypot(const double *values, int n)
 {
     const double T27 = 134217729.0;  /* ldexp(1.0, 27) + 1.0 */
-    double vec[PY_HYPOT_MAX];
+    double vec[VK_PYTHON_HYPOT_MAX];
     double max = 0.0, scale, csum = 1.0, oldcsum, frac1 = 0.0, frac2 = 0.0, frac3 = 0.0, t, hi, lo, h, x;
     int found_nan = 0, max_e, i;
     for (i = 0; i < n; i++) {
@@ -90,7 +91,7 @@ double py_hypot(const double *values, int n)
 
 
 /* f"{x:.{precision}g}": C's %.*g, but a NaN prints "nan" whatever its sign bit. */
-const char *py_g(number_text buf, double x, int precision)
+const char *g_number_text(number_text buf, double x, int precision)
 {
     if (isnan(x)) return "nan";
     snprintf(buf, sizeof(number_text), "%.*g", precision, x);
@@ -100,7 +101,7 @@ const char *py_g(number_text buf, double x, int precision)
 /* The text of x in messages: the first of %.15g, %.16g, %.17g that reads back as x (so the message holds x
  * exactly); "nan" for every NaN. Plain C formatting, not Python's repr: a message names the value, not its Python
  * spelling ("2" where Python writes 2.0). */
-const char *py_repr(number_text buf, double x)
+const char *exact_number_text(number_text buf, double x)
 {
     if (isnan(x)) return "nan";
     for (int precision = 15; precision <= 17; precision++) {

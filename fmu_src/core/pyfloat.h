@@ -10,7 +10,7 @@
 /* What a Python operation raised (nothing: FAULT_NONE). */
 enum { FAULT_NONE = 0, FAULT_ZERO_DIVISION, FAULT_MATH_DOMAIN, FAULT_OVERFLOW };
 
-#define PY_HYPOT_MAX 32
+#define VK_PYTHON_HYPOT_MAX 32
 
 /* The small ones are inline (they sit in the solvers' inner loops). */
 #include <math.h>
@@ -48,15 +48,17 @@ static inline double py_square(double q, int *fault)
     return square;
 }
 /* iv ** iw for iw = -1/8, 1/9 and iv >= 0 or NaN (Python's float **): FAULT_ZERO_DIVISION, FAULT_OVERFLOW */
-double py_pow(double iv, double iw, int *fault);
-/* math.hypot(*values[0..n-1]) */
-double py_hypot(const double *values, int n);
+double vk_python_pow(double iv, double iw, int *fault);
+/* math.hypot(*values[0..n-1]), bit for bit: a port of CPython's vector_norm, kept because neither libm's
+   hypot nor sqrt of the summed squares gives math.hypot's bits (tests/core/test_pyfloat.py), and DOP853's initial
+   step and RK4's stability check norm with it */
+double vk_python_hypot(const double *values, int n);
 
 /* Text of numbers in messages */
 typedef char number_text[40];
-const char *py_g(number_text buf, double x, int precision);  /* f"{x:.{precision}g}" */
-/* x exactly (the first of %.15g .. %.17g that reads back as x); named for Python's repr, which it replaced */
-const char *py_repr(number_text buf, double x);
+const char *g_number_text(number_text buf, double x, int precision);  /* f"{x:.{precision}g}" */
+/* x exactly (the first of %.15g .. %.17g that reads back as x), in C's spelling */
+const char *exact_number_text(number_text buf, double x);
 /* "<exception type>: <text>" of the exception a fault raises in Python (the type is Python's; the text says what
    happened in the C twin's words) */
 void py_fault_text(int fault, char *buf, unsigned long size);

@@ -22,7 +22,7 @@ static double growth(double zr, double zi)
     qr = 1.0 + (zr * pr - zi * pi);
     qi = zr * pi + zi * pr;
     double w[2] = {qr, qi};
-    return py_hypot(w, 2);
+    return vk_python_hypot(w, 2);
 }
 
 /* Rk4._check_stability: refuse h if RK4 is unstable on the local linearisation x'' = -k x - c x' */
@@ -60,14 +60,14 @@ static inline __attribute__((always_inline)) int check_stability(Rk4 *s, DopRhs 
     for (int j = 0; j < count; j++) {
         double re = eigen[j][0], im = eigen[j][1], zr = h * re, zi = h * im;
         if (re <= 0.0 && growth(zr, zi) > 1.0 + 1e-12) {
-            double size = py_hypot(eigen[j], 2);
+            double size = vk_python_hypot(eigen[j], 2);
             number_text h_text, t_text, zr_text, size_text, limit_text;
             char zi_text[48];
             snprintf(zi_text, sizeof zi_text, isnan(zi) ? "+nan" : "%+.3g", zi);
             return dop_report(r, s->n, DOP_FAILED, t, s->y, "RK4 unstable: step h = %s at tau = %s gives h*lambda = %s%sj "
-                          "outside the stability region (|lambda| = %s); reduce max_step below %s", py_g(h_text, h, 3),
-                          py_g(t_text, t, 10), py_g(zr_text, zr, 3), zi_text, py_g(size_text, size, 3),
-                          py_g(limit_text, 2.5 / size, 3));
+                          "outside the stability region (|lambda| = %s); reduce max_step below %s", g_number_text(h_text, h, 3),
+                          g_number_text(t_text, t, 10), g_number_text(zr_text, zr, 3), zi_text, g_number_text(size_text, size, 3),
+                          g_number_text(limit_text, 2.5 / size, 3));
         }
     }
     return DOP_OK;
@@ -156,7 +156,7 @@ static int hermite_event(int n, const double *y, Hermite *c, double t, int *foun
     number_text text;
     if (code == NAN_FOUND)
         return dop_report(r, n, DOP_RAISED, t, y, "ValueError: The function value at x=%s is NaN; solver "
-                      "cannot continue.", py_repr(text, c->nan_at));
+                      "cannot continue.", exact_number_text(text, c->nan_at));
     if (code == ROOT_SIGN_ERROR)
         return dop_report(r, n, DOP_RAISED, t, y, "ValueError: f(a) and f(b) must have different signs");
     if (code == ROOT_NO_CONVERGENCE)
@@ -278,14 +278,14 @@ static inline __attribute__((always_inline)) int step(Rk4 *s, DopRhs rhs, Phases
     if (fault) {
         number_text h_text, t_text, x_text;
         return dop_report(r, s->n, DOP_FAILED, t, y, "RK4 step h = %s from tau = %s left the model's domain (x = %s); "
-                      "reduce max_step", py_g(h_text, h, 3), py_g(t_text, t, 10), py_g(x_text, y[0], 10));
+                      "reduce max_step", g_number_text(h_text, h, 3), g_number_text(t_text, t, 10), g_number_text(x_text, y[0], 10));
     }
     s->nfev += 4;
     for (int i = 0; i < n; i++) y_new[i] = y[i] + h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
     if (!(isfinite(y_new[0]) && isfinite(y_new[1]))) {
         number_text t_text, h_text;
         return dop_report(r, s->n, DOP_FAILED, t, y, "RK4 unstable: the state became non-finite after tau = %s with h = %s; "
-                      "reduce max_step", py_g(t_text, t, 10), py_g(h_text, h, 3));
+                      "reduce max_step", g_number_text(t_text, t, 10), g_number_text(h_text, h, 3));
     }
     int code = step_events(n, (int)s->n_events, s->events, t, y, h, y_new, r);
     if (code) return code;
@@ -353,13 +353,13 @@ int rk4_value_at(const Rk4 *st, double t, double *y, DopReport *r)
     if (t != st->t) {  /* Rk4._require_current */
         number_text own, asked;
         return dop_report(r, (int)st->n, DOP_RAISED, st->t, st->y, "ValueError: RK4 holds only tau = %s, not %s",
-                          py_repr(own, st->t), py_repr(asked, t));
+                          exact_number_text(own, st->t), exact_number_text(asked, t));
     }
     for (int64_t i = 0; i < st->n; i++) y[i] = st->y[i];  /* a loop: n is 2 in the plant (no memcpy call) */
     return DOP_OK;
 }
 
-double rk4_drive_gain_x(double theta)
+double vk_rk4_drive_gain_x(double theta)
 {
     const double phi = 0.5 * theta, s = sin(phi);
     if (theta == 0.0) return 1.0;

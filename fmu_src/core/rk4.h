@@ -51,6 +51,6 @@ int rk4_step_events(int n, int n_events, const DopEvent *events, double t, const
 /* integrate.rk4_drive_gains(theta)[0]: G_x, RK4's ripple of x under a drive e^(i nu t) over the true one (theta =
    nu h), the same operations (the settings' drive warnings of the native FMUs read it; tests/core/test_plant_kernel.py
    compares the bits) */
-double rk4_drive_gain_x(double theta);
+double vk_rk4_drive_gain_x(double theta);
 
 #endif

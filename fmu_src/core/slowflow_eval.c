@@ -30,7 +30,7 @@ static void reconstruct(const SfTable *T, double t, double A, double B, double d
     xva[2] = a;
 }
 
-int sf_state(const SfTable *T, double t, double *xva)
+int vk_slowflow_state(const SfTable *T, double t, double *xva)
 {
     if (!(t <= T->t_end)) return 1;
     double u = (t - T->t0) / T->spacing;

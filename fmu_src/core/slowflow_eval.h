@@ -29,6 +29,6 @@ typedef struct {
 
 /* (x, x', x'') at t into xva[0..2]; returns 0, or 1 when t is beyond the table's end or before its first cell
    (nothing written). */
-int sf_state(const SfTable *table, double t, double *xva);
+int vk_slowflow_state(const SfTable *table, double t, double *xva);
 
 #endif

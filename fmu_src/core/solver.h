@@ -136,7 +136,7 @@ static inline const double *vk_rk4_state(VkSolverSlots s, double *t)
 static inline double vk_rk4_max_step(VkSolverSlots s) { return s.fixed->max_step; }
 
 #define VK_OPS_rk4 {"RK4", 0, vk_rk4_restart, 0, vk_rk4_advance, vk_rk4_value_at, vk_rk4_state, vk_rk4_max_step, \
-                    rk4_drive_gain_x}
+                    vk_rk4_drive_gain_x}
 
 /* Every solver, in the order of vibromodel/solvers.py's SOLVERS (position = the `solver` setting): X(name) for each,
    its ops VK_OPS_<name> above (vk_<name>_ops in solver.c).  Adding a solver: one entry here. */

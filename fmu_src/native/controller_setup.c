@@ -19,7 +19,7 @@ void native_controller_constants(VcController *c, const State *s)
     double poly[6], g1[6], g2[6], g3[6], lambdas[VC_GAINS];
     vibro_series(0, alpha, gamma, R, poly, g1, g2, g3);  /* forces.coefficients, series_g3 */
     for (int i = 0; i < VC_GAINS; i++) lambdas[i] = s->value[GAIN_VRS[i]];
-    vc_constants(c, s->value[VR_mu], s->value[VR_Delta], s->value[VR_omega], s->value[VR_Omega], s->value[VR_beta],
+    vk_controller_constants(c, s->value[VR_mu], s->value[VR_Delta], s->value[VR_omega], s->value[VR_Omega], s->value[VR_beta],
                  gamma, poly, g3, (int64_t)s->value[VR_law], lambdas, s->value[VR_k_damping], RULE_TIME_TOLERANCE);
     c->t = s->start_time;
     for (int i = 0; i < VC_N; i++) c->theta_hat[i] = s->value[ESTIMATE_START_VRS[i]];

@@ -1,5 +1,5 @@
 /* controller_setup.h -- control.Controller's constants from an FMU's parameters, by core/controller.c's
-   vc_constants (as compiled_loop.fill_controller does for the pythonfmu FMUs), shared by the native controller and
+   vk_controller_constants (as compiled_loop.fill_controller does for the pythonfmu FMUs), shared by the native controller and
    the native closed loop (both have the controller's parameters). */
 #ifndef CONTROLLER_SETUP_H
 #define CONTROLLER_SETUP_H

@@ -534,7 +534,7 @@ EXPORT fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], 
     INST(c); ALLOWED(fmi2SetString); ARRAYS(fmi2SetString, nvr, vr, value);
     for (size_t i = 0; i < nvr; i++) {
         char quoted[256];
-        py_str_repr(value[i] ? value[i] : "", quoted, sizeof quoted);
+        quoted_text(value[i] ? value[i] : "", quoted, sizeof quoted);
         if (vr[i] >= N_VARIABLES)
             native_error(I, "parameter with valueReference %u = %s: no such variable", vr[i], quoted);
         else

@@ -56,7 +56,7 @@ void native_plant_model(VkModel *m, const State *s, int fidelity)
 }
 
 /* plant.rk4_drive_warnings: the forcing terms RK4 steps of max_step do not resolve, logged as fmi2Warning; the gain
-   G_x is the solver's own (core/rk4.c rk4_drive_gain_x), the limits RULE_RK4_DRIVE_* generated from integrate.py. */
+   G_x is the solver's own (core/rk4.c vk_rk4_drive_gain_x), the limits RULE_RK4_DRIVE_* generated from integrate.py. */
 void native_drive_warnings(Instance *inst, const State *s, const VkSolverOps *solver, double max_step)
 {
     if (solver->drive_gain_x == NULL) return;

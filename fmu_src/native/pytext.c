@@ -10,15 +10,15 @@
 void native_repr(double x, char *out, size_t size)
 {
     number_text text;
-    snprintf(out, size, "%s", py_repr(text, x)); /* core/pyfloat.c: x exactly, in C's %g */
+    snprintf(out, size, "%s", exact_number_text(text, x)); /* core/pyfloat.c: x exactly, in C's %g */
 }
 
-void py_str_repr(const char *s, char *out, size_t size)
+void quoted_text(const char *s, char *out, size_t size)
 {
     snprintf(out, size, "'%s'", s);
 }
 
-void py_exception_repr(const char *message, char *out, size_t size)
+void kernel_message_text(const char *message, char *out, size_t size)
 {
     snprintf(out, size, "%s", message);
 }

@@ -1,18 +1,17 @@
 /*
  * pytext.h -- the text of numbers, strings and kernel exceptions in the native FMUs' messages. The values are
- * exact (a number reads back as itself); the spelling is C's, not Python's repr (the names are those of the
- * Python functions the messages once imitated: the call sites are unchanged).
+ * exact (a number reads back as itself); the spelling is C's, not Python's repr.
  */
 #ifndef PYTEXT_H
 #define PYTEXT_H
 
 #include <stddef.h>
 
-/* x exactly: core/pyfloat.c's py_repr ("1e-05", "0.0001", "2", "inf", "nan") into out. */
+/* x exactly: core/pyfloat.c's exact_number_text ("1e-05", "0.0001", "2", "inf", "nan") into out. */
 void native_repr(double x, char *out, size_t size);
 /* A kernel message "<Type>: <text>" as it is (the exception's type, then its text). */
-void py_exception_repr(const char *message, char *out, size_t size);
+void kernel_message_text(const char *message, char *out, size_t size);
 /* s in single quotes. */
-void py_str_repr(const char *s, char *out, size_t size);
+void quoted_text(const char *s, char *out, size_t size);
 
 #endif

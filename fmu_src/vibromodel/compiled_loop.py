@@ -51,12 +51,12 @@ def declare(library) -> str | None:
     address, d, status = ctypes.c_void_p, _double, ctypes.c_int
     doubles = ctypes.POINTER(_double)
     signatures = {
-        "vc_layout": (ctypes.c_size_t, [ctypes.POINTER(ctypes.c_size_t), ctypes.c_size_t]),
-        "vc_advance": (status, [address, d, d, d, d, doubles]),
-        "vc_publish": (status, [address]),
-        "vc_do_step": (status, [address, d, d]),
-        "vc_outputs": (status, [address, d, doubles, doubles]),
-        "vc_constants": (None, [address, d, d, d, d, d, d, doubles, doubles, ctypes.c_int64, doubles, d, d]),
+        "vk_controller_layout": (ctypes.c_size_t, [ctypes.POINTER(ctypes.c_size_t), ctypes.c_size_t]),
+        "vk_controller_advance": (status, [address, d, d, d, d, doubles]),
+        "vk_controller_publish": (status, [address]),
+        "vk_controller_do_step": (status, [address, d, d]),
+        "vk_controller_outputs": (status, [address, d, doubles, doubles]),
+        "vk_controller_constants": (None, [address, d, d, d, d, d, d, doubles, doubles, ctypes.c_int64, doubles, d, d]),
     }
     try:
         for name, (restype, argtypes) in signatures.items():
@@ -64,13 +64,13 @@ def declare(library) -> str | None:
             function.restype, function.argtypes = restype, argtypes
     except AttributeError as error:
         return f"the kernel has no controller: {error}"
-    return _check_layout(library, library.vc_layout, VcController)
+    return _check_layout(library, library.vk_controller_layout, VcController)
 
 
 def fill_controller(structure: VcController, controller: Controller, scene: Scene, library) -> None:
-    """The constants of a control.Controller into a VcController, by the kernel's vc_constants: the one C
+    """The constants of a control.Controller into a VcController, by the kernel's vk_controller_constants: the one C
     derivation of them, which the native FMUs use too (control.Controller derives the same bits in Python)."""
-    library.vc_constants(ctypes.addressof(structure), scene.mu, scene.Delta, scene.omega, scene.Omega, scene.beta,
+    library.vk_controller_constants(ctypes.addressof(structure), scene.mu, scene.Delta, scene.omega, scene.Omega, scene.beta,
                          scene.gamma, (_double * 6)(*forces.coefficients(scene.alpha, scene.gamma, scene.R)),
                          (_double * 6)(*controller.phi.g3), int(controller.law),
                          (_double * VC_GAINS)(*controller.gains.lambdas), controller.gains.k_damping, TIME_TOLERANCE)
@@ -112,7 +112,7 @@ class CompiledEstimator(_FastPath):
     """control.HeldInputEstimator on the kernel `library` (declared by `declare`), plus the controller FMU's
     inputs and outputs. Raises ParameterError for bad arguments."""
 
-    STEP_FUNCTION = "vc_do_step"  # vc_do_step(VcController *, t, h)
+    STEP_FUNCTION = "vk_controller_do_step"  # vk_controller_do_step(VcController *, t, h)
 
     def __init__(self, scene: Scene, gains: Gains, law: int, estimates: tuple[float, ...], library,
                  t0: float = 0.0):
@@ -140,15 +140,15 @@ class CompiledEstimator(_FastPath):
 
     def advance(self, t: float, h: float, x: float, v: float, ref) -> None:
         """HeldInputEstimator.advance."""
-        raise_from(self._library.vc_advance(self.address, t, h, x, v, (_double * 3)(*ref)))
+        raise_from(self._library.vk_controller_advance(self.address, t, h, x, v, (_double * 3)(*ref)))
 
     def publish(self) -> None:
         """The FMU's outputs U, e1, e2, V, estimates from the inputs at t (written only when all finite; else
         NonFiniteOutput naming the first that is not, as StatusSlave._set_finite)."""
-        code = self._library.vc_publish(self.address)
+        code = self._library.vk_controller_publish(self.address)
         if code == VC_NON_FINITE:
             out = (_double * len(CONTROLLER_OUTPUTS))()
-            raise_from(self._library.vc_outputs(self.address, self._c.t, self._c.theta_hat, out))
+            raise_from(self._library.vk_controller_outputs(self.address, self._c.t, self._c.theta_hat, out))
             check_finite(dict(zip(CONTROLLER_OUTPUTS, out)))
         raise_from(code)
 
@@ -173,8 +173,8 @@ class CompiledEstimator(_FastPath):
 
     @property
     def inputs_function(self) -> int:
-        """Address of vc_publish(VcController *): the outputs after the inputs changed (fmi2SetReal in C)."""
-        return ctypes.cast(self._library.vc_publish, ctypes.c_void_p).value
+        """Address of vk_controller_publish(VcController *): the outputs after the inputs changed (fmi2SetReal in C)."""
+        return ctypes.cast(self._library.vk_controller_publish, ctypes.c_void_p).value
 
     # -- snapshots -----------------------------------------------------------------------------------------
     def snapshot(self) -> dict:
@@ -223,19 +223,19 @@ def declare_loop(library) -> str | None:
         return problem
     address, d, status = ctypes.c_void_p, _double, ctypes.c_int
     try:
-        for name, restype, argtypes in (("vl_layout", None, [ctypes.POINTER(ctypes.c_size_t)]),
-                                        ("oe_state", None, [address, d, ctypes.POINTER(_double)]),
-                                        ("vl_init", status, [address, d, ctypes.POINTER(_double)]),
-                                        ("vl_do_step", status, [address, d, d]),
-                                        ("vl_publish", status, [address]),
-                                        ("vl_outputs_at", status, [address, d, ctypes.POINTER(_double),
+        for name, restype, argtypes in (("vk_loop_layout", None, [ctypes.POINTER(ctypes.c_size_t)]),
+                                        ("vk_oafm_state", None, [address, d, ctypes.POINTER(_double)]),
+                                        ("vk_loop_init", status, [address, d, ctypes.POINTER(_double)]),
+                                        ("vk_loop_do_step", status, [address, d, d]),
+                                        ("vk_loop_publish", status, [address]),
+                                        ("vk_loop_outputs_at", status, [address, d, ctypes.POINTER(_double),
                                                                    ctypes.POINTER(_double)])):
             function = getattr(library, name)
             function.restype, function.argtypes = restype, argtypes
     except AttributeError as error:
         return f"the kernel has no closed loop: {error}"
     sizes = (ctypes.c_size_t * 8)()
-    library.vl_layout(sizes)
+    library.vk_loop_layout(sizes)
     expected = (ctypes.sizeof(VlLoop), VlLoop.dop.offset, VlLoop.t.offset, VlLoop.out.offset, VlLoop.enabled.offset,
                 VlLoop.error.offset, VlLoop.message.offset, VlLoop.reference.offset)
     if tuple(sizes) != expected:
@@ -247,7 +247,7 @@ class CompiledClosedLoop(_FastPath):
     """closedloop.ClosedLoop on the kernel: built from a ClosedLoop that did the set-up (validation, warnings,
     model, controller, reference); `problem` says why it cannot run (then use the Python loop)."""
 
-    STEP_FUNCTION = "vl_do_step"  # vl_do_step(VlLoop *, t, h)
+    STEP_FUNCTION = "vk_loop_do_step"  # vk_loop_do_step(VlLoop *, t, h)
 
     def __init__(self, python, library):
         from .compiled import ATOL_PER_RTOL, fill_model
@@ -281,7 +281,7 @@ class CompiledClosedLoop(_FastPath):
         l.enabled = 1
         self._slot = SOLVER_SLOTS[solver_entry(settings.solver).family]
         y0 = (_double * 11)(python.scene.x_start, python.scene.v_start, *python.loop.estimates)
-        self._check(library.vl_init(self.address, python.t, y0))
+        self._check(library.vk_loop_init(self.address, python.t, y0))
 
     @property
     def t(self) -> float:
@@ -295,7 +295,7 @@ class CompiledClosedLoop(_FastPath):
     def do_step(self, t: float, h: float) -> dict:
         """ClosedLoop.do_step: raises ParameterError, IntegrationError (TerminalEvent) as it does."""
         self._raise_pending()
-        code = self._library.vl_do_step(self.address, t, h)
+        code = self._library.vk_loop_do_step(self.address, t, h)
         if code in (VL_BAD_STEP, VL_TOO_MANY_STEPS, VL_BAD_TIME):
             self.python.t = self._l.t
             self.python.check_step(t, h)
@@ -307,7 +307,7 @@ class CompiledClosedLoop(_FastPath):
     def outputs(self) -> dict:
         """ClosedLoop.outputs: computed at t into the kernel's out[] (there only when all are finite)."""
         self._raise_pending()
-        self._check(self._library.vl_publish(self.address))
+        self._check(self._library.vk_loop_publish(self.address))
         return self._outputs()
 
     def _outputs(self) -> dict:
@@ -319,7 +319,7 @@ class CompiledClosedLoop(_FastPath):
     def outputs_at(self, t: float, x: float, v: float, theta_hat) -> dict:
         y = (_double * 11)(x, v, *theta_hat)
         out = (_double * len(LOOP_OUTPUTS))()
-        fault = self._library.vl_outputs_at(self.address, t, y, out)
+        fault = self._library.vk_loop_outputs_at(self.address, t, y, out)
         if fault:
             raise {1: ZeroDivisionError, 2: ValueError, 3: OverflowError}.get(fault, RuntimeError)(
                 "raised by the compiled closed loop's outputs")

@@ -3,7 +3,7 @@ oafm_eval.c, openloop_plant.c), the set-up in Python.
 
 Set-up stays where it is: plant.Plant builds the slow-flow table (slowflow.py) or the OAFM fit (analytic.py).
 CompiledOpenLoopPlant wraps that Plant, hands its table or closed-form sums to C once, and from then on
-doStep is one C call (the FMU's fast path calls ol_do_step directly, without Python). What C does not do
+doStep is one C call (the FMU's fast path calls vk_open_loop_do_step directly, without Python). What C does not do
 itself -- a refused step, a time beyond the slow flow's table, a non-finite output -- it leaves unchanged and
 this class does in Python with the wrapped Plant, which raises the matching error or extends the table.
 
@@ -40,20 +40,20 @@ _dp, _ip = ctypes.POINTER(_d), ctypes.POINTER(_i)
 def declare(library) -> str | None:
     """Declare the open-loop functions of the kernel library; None, or why the library cannot run them."""
     try:
-        for name, restype, argtypes in (("ol_layout", None, [_ip]),
-                                        ("ol_state", ctypes.c_int, [ctypes.c_void_p, _d, _dp]),
-                                        ("ol_do_step", ctypes.c_int, [ctypes.c_void_p, _d, _d]),
-                                        ("sf_state", ctypes.c_int, [ctypes.c_void_p, _d, _dp]),
-                                        ("oe_state", None, [ctypes.c_void_p, _d, _dp]),
-                                        ("oe_step", None, [ctypes.c_void_p, _d, _dp]),
-                                        ("ol_run", ctypes.c_int, [ctypes.c_void_p, _d, ctypes.c_size_t, _dp,
+        for name, restype, argtypes in (("vk_open_loop_layout", None, [_ip]),
+                                        ("vk_open_loop_state", ctypes.c_int, [ctypes.c_void_p, _d, _dp]),
+                                        ("vk_open_loop_do_step", ctypes.c_int, [ctypes.c_void_p, _d, _d]),
+                                        ("vk_slowflow_state", ctypes.c_int, [ctypes.c_void_p, _d, _dp]),
+                                        ("vk_oafm_state", None, [ctypes.c_void_p, _d, _dp]),
+                                        ("vk_oafm_step", None, [ctypes.c_void_p, _d, _dp]),
+                                        ("vk_open_loop_run", ctypes.c_int, [ctypes.c_void_p, _d, ctypes.c_size_t, _dp,
                                                                    ctypes.POINTER(ctypes.c_size_t)])):
             function = getattr(library, name)
             function.restype, function.argtypes = restype, argtypes
     except AttributeError as error:
         return f"the kernel has no open-loop evaluators ({error})"
     sizes = (_i * 4)()
-    library.ol_layout(sizes)
+    library.vk_open_loop_layout(sizes)
     expected = (ctypes.sizeof(OlPlant), ctypes.sizeof(OePiece), OlPlant.slowflow.offset, OlPlant.oafm.offset)
     if tuple(sizes) != expected:
         return f"OlPlant/OePiece layout {tuple(sizes)} in the kernel, {expected} in vibromodel.compiled_open_loop"
@@ -249,8 +249,8 @@ class OafmProgram:
         return struct
 
     def error_bound(self, tau: float, stepped: bool = True) -> float:
-        """A bound on |C - Python| of x, x' or x'' at tau (recurrence_error_bound): of oe_step (stepped) or
-        oe_state."""
+        """A bound on |C - Python| of x, x' or x'' at tau (recurrence_error_bound): of vk_oafm_step (stepped) or
+        vk_oafm_state."""
         starts = [p.start for p in self.pieces]
         i = max(0, int(np.searchsorted(starts, tau, side="right")) - 1)
         return recurrence_error_bound(self.terms[i], tau - starts[i], stepped)
@@ -264,7 +264,7 @@ def recurrence_error_bound(terms: dict, s: float, stepped: bool = True) -> float
         |b_j s| + 1 per base;
       - a base's phase or relative error is multiplied by |n_j| in its power n_j, and each of the |n_j| products
         of the powers and the products combining the bases adds 3, plus 3 for the coefficient, the decay and s;
-      - C, the items stepped in time (oe_step, stepped=True): up to OE_RESYNC - 1 products with the term's items at
+      - C, the items stepped in time (vk_oafm_step, stepped=True): up to OE_RESYNC - 1 products with the term's items at
         the step h, W(h) and D(h), since the last direct evaluation, each adding 3 + 1 (the complex product W W(h),
         <= sqrt(5) eps: Brent, Percival & Zimmermann 2007, and the real product D D(h)) + the error of W(h) D(h)
         themselves, built like the items at s: 3 per power product (3 sum_j |n_j|) and, per base, |n_j| times
@@ -373,7 +373,7 @@ class CompiledOpenLoopPlant:
     def state_at(self, tau: float) -> tuple[float, float, float]:
         """(x, x', x'') at tau from the C evaluator (the table extended in Python when needed)."""
         xva = (_d * 3)()
-        if self._library.ol_state(self._address, tau, xva) == OL_BEYOND:  # outside the table: Python extends it
+        if self._library.vk_open_loop_state(self._address, tau, xva) == OL_BEYOND:  # outside the table: Python extends it
             state = self.python.solution.state(tau)  # (or raises for a time a bounded table has dropped)
             self._load_table()
             return state
@@ -386,7 +386,7 @@ class CompiledOpenLoopPlant:
         """Plant.do_step in C; what C leaves (a bad step or input, a time beyond the table, a non-finite output)
         is done by the wrapped Plant, which raises its error or extends the table."""
         previous, self._plant.plant.U_input = self._plant.plant.U_input, U
-        code = self._library.ol_do_step(self._address, t, h)
+        code = self._library.vk_open_loop_do_step(self._address, t, h)
         self._plant.plant.U_input = previous
         if code == 0:
             return self._outputs()
@@ -405,7 +405,7 @@ class CompiledOpenLoopPlant:
         x = np.empty(n)
         done, count = 0, ctypes.c_size_t()
         while done < n:
-            code = self._library.ol_run(self._address, dt, n - done, x[done:].ctypes.data_as(_dp), ctypes.byref(count))
+            code = self._library.vk_open_loop_run(self._address, dt, n - done, x[done:].ctypes.data_as(_dp), ctypes.byref(count))
             done += count.value
             if code == 0:
                 break
@@ -464,7 +464,7 @@ class CompiledOpenLoopPlant:
 
     @property
     def step_function(self) -> int:
-        return ctypes.cast(self._library.ol_do_step, ctypes.c_void_p).value
+        return ctypes.cast(self._library.vk_open_loop_do_step, ctypes.c_void_p).value
 
     def field_address(self, name: str, index: int = 0) -> int:
         return self._address + OlPlant.plant.offset + getattr(VkPlant, name).offset + index * ctypes.sizeof(_d)

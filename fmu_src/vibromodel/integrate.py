@@ -138,7 +138,7 @@ def _tableau_dot(coefficients, values):
 
 
 def _norm(values):
-    """math.hypot(*values): the same function as the C twin's py_hypot (CPython's vector_norm)."""
+    """math.hypot(*values): the same function as the C twin's vk_python_hypot (CPython's vector_norm)."""
     return math.hypot(*values)
 
 

@@ -5,8 +5,9 @@ front ends (which solver state the compiled core uses), the harness's --solver c
 the campaigns. Like SciPy's integrate/_ivp METHODS.
 
 The compiled core has the same table in C: fmu_src/core/solver.c's vk_solvers, indexed by the same `value`
-(core/solver.h: the solver interface). Adding a solver: its Python integrator (integrate.py), an entry here, its C
-ops (core/<file>.c) and one line in core/solver.c.
+(core/solver.h: the solver interface, VK_SOLVER_LIST the list). Adding a solver (docs/architecture.md, How to add):
+its Python integrator on integrate.Solver (integrate.py), an entry here, its step in C (core/<file>.c) and its ops
+with one X(<file>) in core/solver.h's VK_SOLVER_LIST.
 
 This module imports nothing of vibromodel at import time (parameters.py reads it): the integrator classes are
 resolved on first use.

@@ -106,7 +106,7 @@ def test_fast_path_with_state_round_trip(closed_loop_fmu, solver):
 
 
 def test_refused_step_and_pull_in_on_the_fast_path(closed_loop_fmu):
-    """A step at the wrong time: vl_do_step refuses without changing anything, the slave reports it. A pull-in
+    """A step at the wrong time: vk_loop_do_step refuses without changing anything, the slave reports it. A pull-in
     met on the fast path: the slave raises the pending TerminalEvent (fmi2Error with the pull-in message)."""
     with FmuInstance(closed_loop_fmu) as instance:
         fmu = instance.fmu

@@ -1,4 +1,4 @@
-"""The controller's constants have one C derivation, core/controller.c's vc_constants, used by the native FMUs
+"""The controller's constants have one C derivation, core/controller.c's vk_controller_constants, used by the native FMUs
 (native/controller_setup.c) and the pythonfmu FMUs' compiled models (compiled_loop.fill_controller); it gives
 the bits of control.Controller, the pure-Python twin."""
 import struct
@@ -32,7 +32,7 @@ GAINS = [Gains(), Gains(lambdas=(2.5, 0.3, 1e-5, 7.0, 3e-3, 0.2, 11.0, 0.9, 1.3e
 @pytest.mark.parametrize("gains", GAINS)
 @pytest.mark.parametrize("law", list(Law))
 def test_vc_constants_gives_the_bits_of_control_controller(library, scene, gains, law):
-    """Bit identity is free: vc_constants does control.Controller's operations in the same order (copies, one
+    """Bit identity is free: vk_controller_constants does control.Controller's operations in the same order (copies, one
     division per adaptation gain, sqrt(l1/l2), -(l1 ** 1.5)/sqrt(l2) with the same libm pow and sqrt)."""
     controller = Controller(scene, gains, law)
     c = core_layouts.VcController()
@@ -49,5 +49,5 @@ def test_vc_constants_gives_the_bits_of_control_controller(library, scene, gains
         bits([controller.l1, controller.l2, controller.c, gains.k_damping, controller.promised_e1, scene.Delta,
               TIME_TOLERANCE])
     assert c.law == int(law)
-    # the state, inputs and outputs are not constants: vc_constants leaves them as they were (zero here)
+    # the state, inputs and outputs are not constants: vk_controller_constants leaves them as they were (zero here)
     assert c.t == 0.0 and not any(c.theta_hat) and not any(c.out) and c.enabled == 0

@@ -111,13 +111,13 @@ def test_oafm_in_c_is_within_the_derived_bound_of_the_python_sum(library, scene,
 
 
 def test_oafm_direct_evaluation_at_any_time(library):
-    """oe_state (no cache) at times in any order, before the start, in both pieces and far beyond the fit."""
+    """vk_oafm_state (no cache) at times in any order, before the start, in both pieces and far beyond the fit."""
     scene, settings = Scene(), Settings(fidelity=4)
     plant = compiled(scene, settings, library)
     rng = np.random.default_rng(4)
     xva = (ctypes.c_double * 3)()
     for tau in np.concatenate([[-1.0, 0.0, plant.solution.pieces[1].start], rng.uniform(0.0, 600.0, 200)]):
-        library.ol_state(plant.address, tau, xva)
+        library.vk_open_loop_state(plant.address, tau, xva)
         expected = plant.solution.state(tau)
         bound = plant._program.error_bound(max(tau, 0.0), stepped=False)
         assert max(abs(a - b) for a, b in zip(xva, expected)) <= bound, tau

@@ -403,9 +403,9 @@ def test_the_kernel_compiles_without_warnings(tmp_path):
 
 @pytest.mark.parametrize("theta", [0.0, 1e-3, 0.3, 1.0, 1.696, 2.5, 4.0, 4 * math.pi / 3, 5.0, 2 * math.pi, 7.5])
 def test_the_solvers_drive_gain_is_integrates_bit_for_bit(library, theta):
-    """core/rk4.c rk4_drive_gain_x, which the native FMUs' drive warnings read through the solver table (solver.h:
+    """core/rk4.c vk_rk4_drive_gain_x, which the native FMUs' drive warnings read through the solver table (solver.h:
     drive_gain_x), is integrate.rk4_drive_gains(theta)[0]. Bit identity is free: the same IEEE operations in the same
     order (-ffp-contract=off), sin and cos from the same libm that CPython's math module calls."""
-    function = library.rk4_drive_gain_x
+    function = library.vk_rk4_drive_gain_x
     function.restype, function.argtypes = ctypes.c_double, [ctypes.c_double]
     assert bits(function(theta)) == bits(rk4_drive_gains(theta)[0])

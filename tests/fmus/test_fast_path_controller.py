@@ -90,7 +90,7 @@ def test_controller_fast_path_equals_the_python_fmu(controller_fmu):
 
 
 def test_refused_step_on_the_fast_path_is_reported_by_the_slave(controller_fmu):
-    """A non-finite input: vc_do_step refuses without changing anything, the shim forwards, the slave reports it
+    """A non-finite input: vk_controller_do_step refuses without changing anything, the shim forwards, the slave reports it
     (fmi2Error naming the input)."""
     with FmuInstance(controller_fmu) as instance:
         fmu = instance.fmu

@@ -41,12 +41,12 @@ static void fill(State *s)
     for (int i = 0; i < VC_OUTPUTS; i++) c->out[i] = s->value[OUTPUT_VRS[i]];
 }
 
-/* The Python exception of a vc_publish that failed with `code`: ValueError('math domain error') (VC_RAISED) or
+/* The Python exception of a vk_controller_publish that failed with `code`: ValueError('math domain error') (VC_RAISED) or
    StatusSlave._set_finite's NonFiniteOutput naming the first non-finite output (VC_NON_FINITE). */
 static void publish_failure(const VcController *c, int code, char *what, size_t size)
 {
     double out[VC_OUTPUTS];
-    int bad = code == VC_NON_FINITE && vc_outputs(c, c->t, c->theta_hat, out) == VC_OK ? vc_non_finite(out) : -1;
+    int bad = code == VC_NON_FINITE && vk_controller_outputs(c, c->t, c->theta_hat, out) == VC_OK ? vk_controller_non_finite(out) : -1;
     if (bad < 0) {
         snprintf(what, size, "ValueError('math domain error')");
         return;
@@ -55,7 +55,7 @@ static void publish_failure(const VcController *c, int code, char *what, size_t 
     native_repr(out[bad], value, sizeof value);
     snprintf(message, sizeof message, "NonFiniteOutput: output %s = %s is not finite; the parameters are beyond the "
              "model's numerical range", VARIABLES[OUTPUT_VRS[bad]].name, value);
-    py_exception_repr(message, what, size);
+    kernel_message_text(message, what, size);
 }
 
 void model_initialise(Instance *inst, State *s)
@@ -64,7 +64,7 @@ void model_initialise(Instance *inst, State *s)
        electrode check has x_start = 0 here, the controller having no initial state) */
     fill(s);
     s->model.built = 1;
-    int code = vc_publish(&s->model.c);
+    int code = vk_controller_publish(&s->model.c);
     if (code != VC_OK) {
         char what[400];
         publish_failure(&s->model.c, code, what, sizeof what);
@@ -80,7 +80,7 @@ void model_input_set(Instance *inst, State *s, fmi2ValueReference vr)
     if (!s->model.built) return;
     copy_inputs(s);
     if (s->halted) return;
-    int code = vc_publish(&s->model.c);
+    int code = vk_controller_publish(&s->model.c);
     if (code != VC_OK) {
         char value[64], what[400];
         native_repr(s->value[vr], value, sizeof value);
@@ -113,9 +113,9 @@ void model_do_step(Instance *inst, State *s, double t, double h)
             native_error(inst, "doStep refused: parameter %s = %s: %s", VARIABLES[INPUT_VRS[i]].name, a, RULE_INPUT);
             return;
         }
-    /* HeldInputEstimator.advance, then _publish (vc_do_step does both, the way the fast path runs it) */
-    int code = vc_advance(c, t, h, c->in[0], c->in[1], c->in + 2);
-    if (code == VC_OK) code = vc_publish(c);
+    /* HeldInputEstimator.advance, then _publish (vk_controller_do_step does both, the way the fast path runs it) */
+    int code = vk_controller_advance(c, t, h, c->in[0], c->in[1], c->in + 2);
+    if (code == VC_OK) code = vk_controller_publish(c);
     if (code != VC_OK) {
         char what[400];
         native_repr(t, a, sizeof a);

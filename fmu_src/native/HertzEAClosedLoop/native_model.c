@@ -115,7 +115,7 @@ static void state_of_outputs(const VlLoop *l, double *y)
 static void publish_derivatives(State *s, double t, const double *y)
 {
     double f[VL_DIM];
-    int fault = vl_rhs(&s->model.loop, t, y, f);
+    int fault = vk_loop_rhs(&s->model.loop, t, y, f);
     for (int i = 1; i < VL_DIM; i++) s->value[DERIVATIVE_VRS[i - 1]] = fault ? NAN : f[i];
 }
 
@@ -153,7 +153,7 @@ static void report_pending(Instance *inst, State *s, const char *what_failed, co
         native_halt(inst, "simulation stopped: %s", message);
         return;
     }
-    py_exception_repr(message, what, sizeof what);
+    kernel_message_text(message, what, sizeof what);
     if (t_failed != NULL && (strncmp(message, "ZeroDivisionError:", 18) == 0 ||
                              strncmp(message, "OverflowError:", 14) == 0 || strncmp(message, "NonFiniteOutput:", 16) == 0))
         /* StatusSlave._guarded_step: an ArithmeticError */
@@ -214,7 +214,7 @@ void model_initialise(Instance *inst, State *s)
     double y0[VL_DIM] = {s->value[VR_x_start], s->value[VR_v_start]};
     for (int i = 0; i < VC_N; i++) y0[2 + i] = s->value[ESTIMATE_START_VRS[i]];
     native_log(inst, fmi2OK, "%s; compiled closed loop on the native FMU (no Python)", PACKED_REFERENCES[reference].note);
-    if (vl_init(l, s->start_time, y0) != VL_OK) {
+    if (vk_loop_init(l, s->start_time, y0) != VL_OK) {
         report_pending(inst, s, "initialisation failed", NULL);
         return;
     }
@@ -234,7 +234,7 @@ void model_do_step(Instance *inst, State *s, double t, double h)
     VlLoop *l = &s->model.loop;
     point_reference(s);
     char a[64], b[64];
-    const int code = vl_do_step(l, t, h);
+    const int code = vk_loop_do_step(l, t, h);
     if (code == VL_OK) {
         for (int i = 0; i < VL_OUTPUTS; i++)
             if (!isfinite(l->out[i])) {
@@ -279,7 +279,7 @@ int model_initial_output(const State *s, fmi2ValueReference vr, double *value, c
     return 1;
 }
 
-/* ---- Model Exchange (me_model.h): states (x, v, theta^), derivatives vl_rhs, the solvers' events as indicators ---- */
+/* ---- Model Exchange (me_model.h): states (x, v, theta^), derivatives vk_loop_rhs, the solvers' events as indicators ---- */
 
 void model_me_start(Instance *inst, State *s)
 {
@@ -293,7 +293,7 @@ int model_me_derivatives(Instance *inst, State *s, double *dx)
 {
     const MeData *me = &s->model.me;
     point_reference(s);
-    int fault = vl_rhs(&s->model.loop, me->t, me->x, dx);
+    int fault = vk_loop_rhs(&s->model.loop, me->t, me->x, dx);
     for (int i = 0; !fault && i < VL_DIM; i++)
         if (!isfinite(dx[i])) fault = FAULT_OVERFLOW;
     if (!fault) return 0;
@@ -324,7 +324,7 @@ int model_me_outputs(Instance *inst, State *s)
     const MeData *me = &s->model.me;
     double out[VL_OUTPUTS];
     point_reference(s);
-    if (vl_outputs_at(l, me->t, me->x, out) != 0)
+    if (vk_loop_outputs_at(l, me->t, me->x, out) != 0)
         for (int i = 0; i < VL_OUTPUTS; i++) out[i] = NAN; /* a getter refuses them (fmi2Error naming one) */
     for (int i = 0; i < VL_OUTPUTS; i++) s->value[OUTPUT_VRS[i]] = out[i];
     s->model.me.locals_stale = 1; /* der(...) when read: model_lazy_locals */

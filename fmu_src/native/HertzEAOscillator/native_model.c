@@ -154,7 +154,7 @@ void model_initialise(Instance *inst, State *s)
         if (pending == VK_TERMINAL || pending == VK_FAILED) {
             native_halt(inst, "simulation stopped: %s", message);
         } else {
-            py_exception_repr(message, what, sizeof what);
+            kernel_message_text(message, what, sizeof what);
             native_halt(inst, "initialisation failed: %s", what);
         }
         return;
@@ -233,7 +233,7 @@ static void step_failed(Instance *inst, State *s, int code, double t, double h)
         return;
     }
     native_repr(t, a, sizeof a);
-    py_exception_repr(message, what, sizeof what);
+    kernel_message_text(message, what, sizeof what);
     if (is_arithmetic(message))
         native_halt(inst, "simulation stopped: floating-point failure after tau = %s (%s); the parameters are beyond "
                     "the model's numerical range", a, what);
@@ -272,7 +272,7 @@ int model_initial_output(const State *s, fmi2ValueReference vr, double *value, c
     if (fault) {
         char message[128];
         py_fault_text(fault, message, sizeof message);
-        py_exception_repr(message, why, size);
+        kernel_message_text(message, why, size);
         return 0;
     }
     if (vr == VR_in_contact) {

@@ -57,8 +57,12 @@ def compile_kernel(out_path: Path) -> Path:
     """Compile fmu_src/core/*.c into the shared library out_path; raises RuntimeError with gcc's output on failure."""
     out_path = Path(out_path)
     check_fidelity_header()
-    cmd = [*toolchain.c_compiler(), *GCC_COMMAND[1:], "-o", str(out_path), *map(str, kernel_sources()), "-lm"]  # $CC for gcc
-    proc = subprocess.run(cmd, capture_output=True, text=True)
+    with tempfile.TemporaryDirectory() as tmp:
+        exports = Path(tmp) / "exports.map"  # toolchain.KERNEL_VERSION_SCRIPT: only vk_* is global
+        exports.write_text(toolchain.KERNEL_VERSION_SCRIPT)
+        cmd = [*toolchain.c_compiler(), *GCC_COMMAND[1:], f"-Wl,--version-script={exports}", "-o", str(out_path),
+               *map(str, kernel_sources()), "-lm"]  # $CC for gcc
+        proc = subprocess.run(cmd, capture_output=True, text=True)
     if proc.returncode != 0:
         raise RuntimeError(f"compiling the kernel failed ({' '.join(cmd)}):\n{proc.stderr}")
     return out_path
@@ -76,7 +80,7 @@ def sources_digest() -> str:
         compiler = toolchain.c_compiler()
     except toolchain.NoCompiler:  # then nothing is cached under this key, and compile_kernel says why
         compiler = ["(no compiler)"]
-    digest = hashlib.sha256(" ".join([*compiler, *GCC_COMMAND[1:]]).encode())
+    digest = hashlib.sha256(" ".join([*compiler, *GCC_COMMAND[1:], toolchain.KERNEL_VERSION_SCRIPT]).encode())
     for path in (*kernel_sources(), *kernel_headers()):
         digest.update(path.name.encode())
         digest.update(path.read_bytes())

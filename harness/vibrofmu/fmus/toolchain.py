@@ -26,6 +26,11 @@ IEEE = ("-ffp-contract=off",)
 
 # The compiled core (fmu_src/core/*.c -> vibrokernel.so), one optimisation unit (-flto).
 KERNEL = ("-std=c11", "-O2", *IEEE, "-fPIC", "-shared", "-flto", "-fno-semantic-interposition", *WARNINGS)
+# What the kernel library exports: its API, the globals named KERNEL_PREFIX* (what the ctypes front ends, the FMU's
+# fast path and the C drivers look up); every other global (the solvers' steps, brentq, bernstein_*, the models'
+# functions) is local to the library, by this version script (kernel.compile_kernel passes it to the linker).
+KERNEL_PREFIX = "vk_"
+KERNEL_VERSION_SCRIPT = f"{{ global: {KERNEL_PREFIX}*; local: *; }};\n"
 # The status shim over pythonfmu's library (fmu_src/fmi2_status_shim.c with fmi/fmi2_layer.c and pyloader.c).
 SHIM = ("-shared", "-fPIC", "-O2", "-fvisibility=hidden", *WARNINGS)
 SHIM_LIBS = ("-ldl", "-pthread")
