@@ -257,6 +257,7 @@ def test_ladder_ticks_do_not_overlap_and_the_ratio_axis_fits_the_bars(tmp_path, 
     assert_tick_labels_do_not_overlap(fig)
     assert_legend_entries_are_drawn(fig)
     assert len(_drawn_tick_labels(ratio_ax, ratio_ax.yaxis)) >= 2  # a ratio can be read off the axis
+    assert r"$\tau$ in [0, " in fig._suptitle.get_text()  # the symbol as every other plot writes it
 
 
 # -- study plots ----------------------------------------------------------------------------------------

@@ -739,15 +739,15 @@ def plot_work_precision(path: Path, records: list[dict], plan: Plan) -> None:
                 ax.loglog([1e6 * p[0] for p in points], [p[1] for p in points], label=label,
                           **{"ms": 5, "lw": 1.2, **line_style(first)})
         ax.axhline(THRESHOLD, color="tab:red", lw=0.9, ls="-.", label=f"target L-inf = {THRESHOLD:g}")
-        ax.set_xlabel("wall time per 0.1 tau of simulated time [us] (min of repeats)")
-        ax.set_ylabel(f"max |x - x_ref| over the output grid, tau in [0, {plan.stop_time:g}]")
+        ax.set_xlabel(r"wall time per 0.1 $\tau$ of simulated time [$\mu$s] (min of repeats)")
+        ax.set_ylabel(rf"max $|x - x_\mathrm{{ref}}|$ over the output grid, $\tau$ in [0, {plan.stop_time:g}]")
         ax.set_title(f"output interval {interval:g}")
         ax.grid(True, which="both", alpha=0.3)
     legend = {}
     for ax in axes[0]:
         legend.update(zip(*reversed(ax.get_legend_handles_labels())))
     fig.legend(list(legend.values()), list(legend), loc="center left", bbox_to_anchor=(1.0, 0.5), fontsize=8)
-    fig.suptitle(f"Work-precision, paper example (Omega = 2){' (--quick)' if plan.quick else ''}: "
+    fig.suptitle(f"Work-precision, paper example ($\\Omega$ = 2){' (--quick)' if plan.quick else ''}: "
                  "FMU under FMPy vs solve_ivp and the compiled floor")
     fig.tight_layout()
     export.save_figure(fig, path, dpi=110, bbox_inches="tight")

@@ -569,7 +569,7 @@ def plot_ladder(path: Path, ladder: dict) -> None:
                     markerscale=0.5)  # the limit marker (s=900) would run into its text
     for ax in axes[1][len(intervals) + 1:]:
         ax.axis("off")
-    fig.suptitle(f"Speed-accuracy ladder, paper example, tau in [0, {ladder['stop_time']:g}], "
+    fig.suptitle(f"Speed-accuracy ladder, paper example, $\\tau$ in [0, {ladder['stop_time']:g}], "
                  f"{ladder.get('rounds', ladder.get('repeats'))} interleaved rounds: pick a rung")
     fig.tight_layout()
     export.save_figure(fig, path, dpi=100, bbox_inches="tight")
