@@ -277,6 +277,10 @@ def test_the_delta_branch_reaches_its_end_with_both_folds_and_the_grazing():
     (["--param", "Delta", "--from", "0.1", "--to", "0.2", "--chart", "0.01", "0.1", "3"], "needs --param omega"),
     (["--param", "omega", "--from", "0.9", "--to", "1", "--chart", "0.1", "0.01", "3"], "DELTA_LO < DELTA_HI"),
     (["--from", "0.9", "--to", "1"], "needs --param"),
+    (["--param", "omega", "--from", "0.9", "--to", "1", "--follow", "fold"], "--follow needs --param2"),
+    (["--param", "omega", "--from", "0.9", "--to", "1", "--follow", "fold", "--param2", "omega", "--to2", "2"],
+     "it is the branch's parameter"),
+    (["--param", "omega", "--from", "0.9", "--to", "1", "--param2", "Delta"], "serve --follow"),
     (["--param", "R", "--from", "0.9", "--to", "1"], "invalid choice"),
 ])
 def test_bad_input_is_one_line_and_exit_2(argv, fragment, tmp_path, capsys):

@@ -12,7 +12,8 @@ pseudo-arclength method:
 - multipliers: eig of the monodromy M = Phi(nT); stable when max |rho| < 1;
 - test functions, each evaluated at every point and located by Brent's method on the arclength where it
   changes sign between two accepted points:
-    fold             the p-component of the branch tangent (= det(M - I) up to normalisation),
+    fold             det(M - I) = (1 - rho1)(1 - rho2) (a real multiplier through +1), located by the bordered
+                     test function of M - I (shooting.bordered_test), independent of the branch tangent,
     period-doubling  det(M + I) = (1 + rho1)(1 + rho2) (a real multiplier through -1),
     neimark-sacker   det M - 1 while the pair is complex (|rho|^2 = det M = exp(-mu nT) < 1 for mu > 0:
                      it can only fire when mu itself is continued through 0; kept for that case),
@@ -90,7 +91,7 @@ class Point:
         """Test functions (module doc); a sign change between two points is an event."""
         M = self.monodromy
         complex_pair = abs(self.multipliers[0].imag) > 1e-12 * abs(self.multipliers[0])
-        return {"fold": float(self.tangent[2]) if self.tangent is not None else math.nan,
+        return {"fold": float(np.linalg.det(M - np.eye(2))),
                 "period-doubling": float(np.linalg.det(M + np.eye(2))),
                 "neimark-sacker": float(np.linalg.det(M) - 1.0) if complex_pair else math.nan,
                 "grazing": self.x_min - CONTACT_EDGE}
@@ -183,9 +184,16 @@ def _locate(cont: Continuation, u0: np.ndarray, t0: np.ndarray, h: float, name: 
             cache[hh] = cont.point_at(u0, t0, hh)
         return cache[hh]
 
-    def value(hh):
-        v = _test_value(point(hh), name)
-        return 0.0 if math.isnan(v) else v
+    if name == "fold":  # located by the bordered test function of M - I (b, c fixed at the bracket's start):
+        # its zero is where M - I is singular, whatever the branch tangent does there (a fold next to a grazing)
+        border = sh.border_of(point(0.0).monodromy - np.eye(2))
+
+        def value(hh):
+            return sh.bordered_test(point(hh).monodromy - np.eye(2), *border)[0]
+    else:
+        def value(hh):
+            v = _test_value(point(hh), name)
+            return 0.0 if math.isnan(v) else v
 
     h_event = brentq(value, 0.0, h, xtol=1e-12 * max(h, 1e-300), rtol=1e-12)
     located = replace(point(h_event), event=name)

@@ -14,6 +14,7 @@ from vibromodel import averaging as av
 from vibromodel.parameters import Scene
 
 from vibrofmu.analyses import continuation as cont
+from vibrofmu.analyses import curves as two
 from vibrofmu.output.export import _legend_below, _save, parameter_label, plt, write_json, write_parquet, wrapped
 
 EVENT_MARKERS = {"fold": ("s", "tab:red"), "period-doubling": ("D", "tab:purple"),
@@ -301,4 +302,77 @@ def agreement_table(data: dict) -> list[str]:
                      f"{fmt(r['fold_errors_in_mu'], '+.3f')} | "
                      f"{', '.join('yes' if c else 'no' for c in r['exact_fold_contact_lost']) or '—'} | "
                      f"{r['verdict']}: {r['why']} |")
+    return lines
+
+
+# ----- two-parameter curves (--follow) ------------------------------------------------------------------------
+
+CURVE_STYLE = {"fold": ("-", "tab:red"), "period-doubling": ("--", "tab:purple")}
+CODIM2_MARKERS = {"cusp": ("*", "k")}
+
+
+def write_curves(out: Path, curves: two.Curves, scene: Scene, title: str) -> None:
+    """curves.parquet (one row per point: curves.rows; the scene and the parameters in the metadata),
+    curves.png and curves.pdf."""
+    p1, p2 = curves.params
+    table = pa.Table.from_pylist(two.rows(curves)) if curves.curves else pa.table(
+        {name: pa.array([], type=pa.float64()) for name in ("curve", p1, p2, "x0", "v0", "period", "x_min", "x_max")})
+    fixed = {k: v for k, v in scene.as_dict().items() if k not in (p1, p2)}
+    meta = {"scene": fixed, "params": [p1, p2], "stop_reasons": [c.stop_reason for c in curves.curves],
+            "columns": "see docs/continuation.md, curves.parquet"}
+    write_parquet(table.replace_schema_metadata({b"vibrofmu": json.dumps(meta).encode()}), out / "curves.parquet")
+    plot_curves(out / "curves.png", curves, scene, title)
+
+
+def plot_curves(path: Path, curves: two.Curves, scene: Scene, title: str) -> None:
+    """The curves in the (p1, p2) plane, the codimension-two points marked; in (omega, Delta) the slow flow's
+    cusp beside the exact one. PNG and PDF."""
+    p1, p2 = curves.params
+    fig, ax = plt.subplots(figsize=(7.5, 6), layout="constrained")
+    seen = set()
+    for curve in curves.curves:
+        style, color = CURVE_STYLE[curve.kind]
+        label = f"{curve.kind} curve" if curve.kind not in seen else None
+        seen.add(curve.kind)
+        ax.plot([pt.p1 for pt in curve.points], [pt.p2 for pt in curve.points], style, color=color, lw=1.5,
+                label=label)
+        for pt in curve.points:
+            if pt.event:
+                marker, c = CODIM2_MARKERS.get(pt.event, ("o", "k"))
+                ax.plot(pt.p1, pt.p2, marker, color=c, ms=12, label=pt.event if pt.event not in seen else None)
+                seen.add(pt.event)
+        if curve.stop_reason and "stopped at" in curve.stop_reason:
+            last = curve.points[-1]
+            ax.plot(last.p1, last.p2, "X", color="tab:red", ms=9,
+                    label="curve stopped (point budget)" if "stop" not in seen else None)
+            seen.add("stop")
+    if (p1, p2) == ("omega", "Delta") and any(pt.event == "cusp" for c in curves.curves for pt in c.points):
+        values = [pt.p2 for c in curves.curves for pt in c.points]
+        slow = slow_flow_cusp(scene, max(min(values) / 4, 1e-6), max(values))
+        if slow is not None:
+            folds = slow_flow_folds(scene.with_values(Delta=slow * (1 + 1e-9)))
+            if folds:
+                ax.plot(folds[0].omega, slow, "^", color="tab:blue", ms=9, label="slow flow's cusp (averaging)")
+    ax.set_xlabel(parameter_label(p1))
+    ax.set_ylabel(parameter_label(p2))
+    ax.grid(True, alpha=0.3)
+    fig.suptitle(wrapped(title, fig.get_figwidth(), 11), fontsize=11)
+    _legend_below(fig, [ax], columns=2)
+    fig.savefig(path.with_suffix(".pdf"))  # vector, beside the PNG (_save closes the figure)
+    _save(fig, path)
+
+
+def curves_summary(curves: two.Curves) -> list[dict]:
+    p1, p2 = curves.params
+    return [{"kind": c.kind, "curve": c.index, "points": len(c.points), "stop_reason": c.stop_reason,
+             "events": [{"event": pt.event, p1: pt.p1, p2: pt.p2, "x0": float(pt.z0[0]), "v0": float(pt.z0[1])}
+                        for pt in c.points if pt.event]} for c in curves.curves]
+
+
+def curves_lines(curves: two.Curves) -> list[str]:
+    p1, p2 = curves.params
+    lines = []
+    for c in curves.curves:
+        lines.append(f"{c.kind} curve {c.index}: {len(c.points)} points ({c.stop_reason})")
+        lines += [f"  {pt.event} at {p1} = {pt.p1:.10g}, {p2} = {pt.p2:.10g}" for pt in c.points if pt.event]
     return lines

@@ -253,6 +253,30 @@ def multipliers(monodromy: np.ndarray) -> np.ndarray:
     return rho[np.argsort(np.abs(rho))]
 
 
+def border_of(A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(b, c): the left and right singular vectors of A's smallest singular value, the bordering that keeps
+    [[A, b], [c^T, 0]] best conditioned near a singular A."""
+    U, _, Vt = np.linalg.svd(A)
+    return U[:, -1].copy(), Vt[-1].copy()
+
+
+def bordered_test(A: np.ndarray, b: np.ndarray, c: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
+    """The bordered test function g of A and its vectors w, v (Govaerts 2000, ch. 3):
+    [[A, b], [c^T, 0]] [w; g] = [0; 1] and [v^T, h] [[A, b], [c^T, 0]] = [0, 1]. g = 0 exactly where A is
+    singular (for any b, c keeping the bordered matrix regular), with no reference to a branch tangent;
+    dg/dy = -v^T (dA/dy) w."""
+    n = A.shape[0]
+    K = np.zeros((n + 1, n + 1))
+    K[:n, :n] = A
+    K[:n, n] = b
+    K[n, :n] = c
+    rhs = np.zeros(n + 1)
+    rhs[n] = 1.0
+    wg = np.linalg.solve(K, rhs)
+    vh = np.linalg.solve(K.T, rhs)
+    return float(wg[n]), wg[:n], vh[:n]
+
+
 def newton_shoot(map_of: Callable[[np.ndarray], PeriodMap], z_guess, tol: float = NEWTON_TOL, max_iter: int = 25,
                  where: str = "") -> PeriodMap:
     """Newton on P(z) - z = 0 (Jacobian M - I) for the period map `map_of` at a fixed parameter: the period map

@@ -9,6 +9,7 @@ from vibrofmu.commands.common import (FMU_HELP, SET_HELP, Command, Unused, UserE
 PARAMETERS = ("omega", "Delta", "mu", "alpha", "gamma")  # analyses.continuation.PARAMETERS (checked by a test)
 BENCH_SCENE = {"mu": 0.05, "Delta": 0.1, "R": 3.0}  # the benchmark's branch: omega 0.6 -> 1.2, two folds, grazing
 BENCH_POINTS = 200
+FOLLOW = ("fold", "period-doubling", "all")  # analyses.curves.KINDS, and both
 BENCH_STEP_POINTS = 50  # step sized for 50 points on a straight branch: the 200 then reach past both folds and grazings
 
 
@@ -37,6 +38,13 @@ def options(p):
     p.add_argument("--bench", action="store_true",
                    help=f"the cost benchmark: a branch of {BENCH_POINTS} points on the scene "
                         f"{', '.join(f'{k}={v:g}' for k, v in BENCH_SCENE.items())}, omega 0.6 -> 1.2 (bench.json)")
+    p.add_argument("--follow", choices=FOLLOW,
+                   help="continue every point of this kind on the branch in two parameters (--param and --param2): "
+                        "curves.parquet, curves.png; 'all' follows folds and period doublings (default: none)")
+    p.add_argument("--param2", choices=PARAMETERS, help="the second parameter of --follow")
+    p.add_argument("--to2", type=float, metavar="VALUE", help="the curves run up to this value of --param2")
+    p.add_argument("--from2", type=float, metavar="VALUE",
+                   help="... and down to this one (default: the scene's value: the curves go one way only)")
     p.add_argument("--out", required=True, help="output folder (branch.parquet, branch.png, summary.json)")
 
 
@@ -72,6 +80,23 @@ def run(args) -> int:
         if not (lo < hi and n == int(n) and n >= 2):
             raise UserError(f"--chart {lo:g} {hi:g} {n:g}: need DELTA_LO < DELTA_HI and an integer N >= 2")
     scene = _scene(args)
+    if args.follow:
+        if args.param2 is None or args.to2 is None:
+            raise UserError("--follow needs --param2 NAME --to2 VALUE")
+        if args.param2 == args.param:
+            raise UserError(f"--param2 {args.param2}: it is the branch's parameter already; name another")
+        if args.param2 in parse_set(args.set):
+            raise UserError(f"--set {args.param2}=...: {args.param2} is --param2 (its start is the default "
+                            f"{getattr(scene, args.param2):g}; the curves start at the branch)")
+        from vibromodel.parameters import validate
+
+        for value in (args.to2, args.from2):
+            if value is not None:
+                if not math.isfinite(value):
+                    raise UserError(f"--param2 {args.param2}: --to2/--from2 must be finite, got {value:g}")
+                validate(scene.with_values(**{args.param2: value}))
+    elif args.param2 is not None or args.to2 is not None or args.from2 is not None:
+        raise UserError("--param2, --to2 and --from2 serve --follow: add --follow KIND or leave them out")
     fmu = plant_fmu(args.fmu) if args.confirm else None
     out = out_folder(args.out)
     fmu = fmu and built_plant(fmu)
@@ -149,8 +174,29 @@ def run(args) -> int:
         summary["chart"] = {"rows": data["rows"], "slow_flow_cusp_Delta": data["slow_flow_cusp_Delta"]}
         for line in output.agreement_table(data):
             print(line)
+    if args.follow:
+        from vibrofmu.analyses import curves as two
+
+        kinds = two.KINDS if args.follow == "all" else (args.follow,)
+        found = []
+        for kind in kinds:
+            if not any(pt.event == kind for pt in result.points):
+                print(f"no {kind} on the branch: no {kind} curve")
+                continue
+            try:
+                found.append(two.curves_from_branch(result, kind, args.param2, args.to2, args.from2,
+                                                    points=args.points, progress=say))
+            except ShootingError as error:
+                print(f"error: {kind} curves in ({args.param}, {args.param2}): {error}", file=sys.stderr)
+                status = 1
+        merged = two.merge(found, (args.param, args.param2))
+        output.write_curves(out, merged, scene, title)
+        summary["curves"] = output.curves_summary(merged)
+        for line in output.curves_lines(merged):
+            print(line)
     export.write_json(out / "summary.json", summary)
     print(f"wrote {out}/branch.parquet, branch.png, summary.json" + (", confirmations.json" if args.confirm else "")
+          + (", curves.parquet, curves.png, curves.pdf" if args.follow else "")
           + (", bench.json" if args.bench else "") + (", chart.png, chart.parquet, chart.json" if args.chart else ""))
     return status
 

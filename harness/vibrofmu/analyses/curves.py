@@ -1,0 +1,383 @@
+"""Two-parameter continuation of fold and period-doubling points of the periodic orbits (docs/continuation.md,
+Two-parameter curves), on the shooting formulation of shooting.py.
+
+A fold (a Floquet multiplier +1) or a period doubling (-1) of the orbit z = P(z; p1, p2) is one equation more
+than an orbit: the minimally augmented system (Govaerts, Numerical Methods for Bifurcations of Dynamical
+Equilibria, 2000, ch. 4)
+
+    P(z; p1, p2) - z = 0,    g(z; p1, p2) = 0,
+
+with g the bordered test function of A = M - I (fold) or M + I (period doubling), M = dP/dz:
+
+    [[A, b], [c^T, 0]] [w; g] = [0; 1]     and its transpose   [v^T, h] [[A, b], [c^T, 0]] = [0, 1],
+
+b, c the left and right singular vectors of A's smallest singular value at the last Jacobian (fixed during a
+correction). g = 0 exactly where A is singular, whatever b and c (as long as the bordered matrix is regular):
+the fold is located without the branch tangent. Three equations in u = (x0, v0, p1/s1, p2/s2): a curve,
+continued by Keller's pseudo-arclength method like a branch (shooting.arclength_correct's recipe, 4 unknowns).
+
+Derivatives: the period map gives M and dP/dp1 (variational equations) and dP/dp2 (a second map with the
+sensitivity to p2); g's gradient is g_y = -v^T (dA/dy) w (the bordered system's derivative), dA/dy = dM/dy by
+forward differences of M over a relative step FD_STEP (4 maps). The corrector is a chord method: the Jacobian
+is formed once per point at the predictor and reused; each iteration re-evaluates the exact residual (1 map).
+
+Codimension two on a fold curve: the cusp, where the fold's quadratic coefficient a = v^T P_zz(w, w) / 2
+changes sign. The Jacobian's row g_z gives it for free: g_z w = -v^T (dM/dz w) w = -2 a (v normalised by the
+bordered system), so a sign change of g_z w between two points is located by Brent on the arclength; at the
+cusp both parameters turn (the curve's tangent lies in the state), which is checked and reported.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+from scipy.optimize import brentq
+
+from vibromodel.parameters import Scene
+
+from vibrofmu.analyses import shooting as sh
+
+KINDS = ("fold", "period-doubling")  # what a curve follows: the sign of the multiplier that sits at 1
+SIGN = {"fold": -1.0, "period-doubling": 1.0}  # A = M + SIGN I
+# forward-difference step of M, relative to max(1, |y|): the period map's error ~ rtol 1e-11 |M| over the step
+# 1e-6 gives dM/dy to ~1e-5, and the truncation ~ 1e-6 |M''|: the chord Newton converges with ratio ~1e-5
+FD_STEP = 1e-6
+TOL = 1e-10  # |P(z) - z|_inf and |g|: shooting.NEWTON_TOL
+TURN = 0.2  # largest accepted turning of the tangent per step (rad), as for a branch
+
+
+@dataclass
+class CurvePoint:
+    """A point of a two-parameter curve: the orbit z (a fixed point of P^periods) at (p1, p2) with a multiplier
+    at +1 (fold) or -1 (period doubling)."""
+
+    kind: str
+    p1: float
+    p2: float
+    z0: np.ndarray
+    periods: int
+    period: float
+    multipliers: np.ndarray
+    x_min: float
+    x_max: float
+    residual: float  # |P(z) - z|_inf
+    g: float  # the bordered test function
+    quadratic: float  # g_z w (proportional to the fold's quadratic coefficient; its sign change is the cusp)
+    event: str = ""
+    tangent: np.ndarray | None = field(default=None, repr=False)
+
+
+@dataclass
+class Curve:
+    kind: str
+    index: int
+    points: list
+    stop_reason: str = ""
+
+
+class Augmented:
+    """The minimally augmented system of `kind` for the periodic orbits of `scene` in (param1, param2)."""
+
+    def __init__(self, scene: Scene, kind: str, param1: str, param2: str, scales: tuple[float, float],
+                 periods: int = 1, rtol: float = sh.RTOL):
+        if kind not in KINDS:
+            raise ValueError(f"curve kind {kind!r}: supported {', '.join(KINDS)}")
+        self.scene, self.kind, self.params, self.scales = scene, kind, (param1, param2), scales
+        self.periods, self.rtol, self.sign = periods, rtol, SIGN[kind]
+        self.border: tuple[np.ndarray, np.ndarray] | None = None
+
+    def at(self, p1: float, p2: float) -> Scene:
+        return self.scene.with_values(**{self.params[0]: float(p1), self.params[1]: float(p2)})
+
+    def map(self, z, p1: float, p2: float, param: str | None = None) -> sh.PeriodMap:
+        s = self.at(p1, p2)
+        return sh.period_map(sh.PeriodicModel(s), z, s.omega, self.rtol, param or self.params[0], self.periods)
+
+    def unscale(self, u: np.ndarray) -> tuple[np.ndarray, float, float]:
+        return u[:2], u[2] * self.scales[0], u[3] * self.scales[1]
+
+    def A(self, monodromy: np.ndarray) -> np.ndarray:
+        return monodromy + self.sign * np.eye(2)
+
+    def set_border(self, monodromy: np.ndarray) -> None:
+        """b, c: the singular vectors of A's smallest singular value (the bordered matrix is then best conditioned)."""
+        self.border = sh.border_of(self.A(monodromy))
+
+    def bordered(self, monodromy: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
+        """(g, w, v) of the bordered system (shooting.bordered_test)."""
+        return sh.bordered_test(self.A(monodromy), *self.border)
+
+    def residual(self, u: np.ndarray) -> tuple[np.ndarray, sh.PeriodMap]:
+        z, p1, p2 = self.unscale(u)
+        pmap = self.map(z, p1, p2)
+        g, _, _ = self.bordered(pmap.monodromy)
+        return np.append(pmap.end - z, g), pmap
+
+    def jacobian(self, u: np.ndarray) -> tuple[np.ndarray, float]:
+        """The 3 x 4 Jacobian of (P - z, g) in u (module doc) and g_z w (the cusp's test function)."""
+        z, p1, p2 = self.unscale(u)
+        base = self.map(z, p1, p2)
+        self.set_border(base.monodromy)
+        _, w, v = self.bordered(base.monodromy)
+        J = np.zeros((3, 4))
+        J[:2, :2] = base.monodromy - np.eye(2)
+        J[:2, 2] = base.d_param * self.scales[0]
+        y = np.array([z[0], z[1], p1, p2])
+        for k in range(4):
+            step = FD_STEP * max(1.0, abs(y[k]))
+            yk = y.copy()
+            yk[k] += step
+            shifted = self.map(yk[:2], yk[2], yk[3])
+            dM = (shifted.monodromy - base.monodromy) / step
+            J[2, k] = -float(v @ dM @ w) * (1.0 if k < 2 else self.scales[k - 2])
+            if k == 3:  # dP/dp2 by the same forward difference (a chord Jacobian and the tangent need ~1e-5)
+                J[:2, 3] = (shifted.end - base.end) / step * self.scales[1]
+        return J, float(J[2, :2] @ w)
+
+    def quadratic(self, u: np.ndarray, base: sh.PeriodMap) -> float:
+        """g_z w at u (the cusp's test function: module doc), dM/dz by forward differences (2 maps); the
+        bordering vectors are the point's own."""
+        z, p1, p2 = self.unscale(u)
+        self.set_border(base.monodromy)
+        _, w, v = self.bordered(base.monodromy)
+        total = 0.0
+        for k in range(2):
+            step = FD_STEP * max(1.0, abs(z[k]))
+            zk = np.array(z, dtype=float)
+            zk[k] += step
+            dM = (self.map(zk, p1, p2).monodromy - base.monodromy) / step
+            total += -float(v @ dM @ w) * w[k]
+        return total
+
+    def point(self, u: np.ndarray, pmap: sh.PeriodMap, g: float, quadratic: float) -> CurvePoint:
+        z, p1, p2 = self.unscale(u)
+        s = self.at(p1, p2)
+        return CurvePoint(kind=self.kind, p1=float(p1), p2=float(p2), z0=np.array(z, dtype=float),
+                          periods=self.periods, period=sh.TWO_PI * self.periods / s.omega,
+                          multipliers=sh.multipliers(pmap.monodromy), x_min=pmap.x_min, x_max=pmap.x_max,
+                          residual=float(np.max(np.abs(pmap.end - z))), g=g, quadratic=quadratic)
+
+
+def null_vector(J: np.ndarray, previous: np.ndarray | None) -> np.ndarray:
+    """The unit null vector of the 3 x 4 Jacobian (last right singular vector), oriented along `previous`."""
+    t = np.linalg.svd(J)[2][-1]
+    if previous is not None and np.dot(t, previous) < 0.0:
+        t = -t
+    return t
+
+
+def correct(system: Augmented, u_pred: np.ndarray, normal: np.ndarray, max_iter: int = 8,
+            tol: float = TOL) -> tuple[np.ndarray, sh.PeriodMap, np.ndarray, int]:
+    """Chord Newton on ((P - z, g), normal . (u - u_pred)) = 0 with the Jacobian at u_pred.
+    Returns (u, its period map, the Jacobian at u_pred, iterations); ShootingError if it does not converge."""
+    J, _ = system.jacobian(u_pred)
+    K = np.vstack([J, normal])
+    u = u_pred.copy()
+    for iteration in range(max_iter):
+        F, pmap = system.residual(u)
+        if np.max(np.abs(F)) <= tol:
+            return u, pmap, J, iteration
+        u = u - np.linalg.solve(K, np.append(F, np.dot(normal, u - u_pred)))
+        if not np.all(np.isfinite(u)):
+            break
+    raise sh.ShootingError(f"{system.kind} curve: corrector did not converge near {system.params[0]} = "
+                           f"{u[2] * system.scales[0]:.8g}, {system.params[1]} = {u[3] * system.scales[1]:.8g}")
+
+
+def solve(system: Augmented, u_pred: np.ndarray, normal: np.ndarray, previous: np.ndarray | None
+          ) -> tuple[np.ndarray, CurvePoint, np.ndarray, int]:
+    """A point of the curve on the hyperplane through u_pred with `normal`: (u, point, tangent, iterations).
+    The tangent is the null vector of the Jacobian at the predictor (O(h) off the point's own: a predictor
+    direction); the quadratic coefficient is the point's own (Augmented.quadratic), so the cusp is exact."""
+    u, pmap, J, iterations = correct(system, u_pred, normal)
+    g, _, _ = system.bordered(pmap.monodromy)
+    point = system.point(u, pmap, g, system.quadratic(u, pmap))
+    point.tangent = null_vector(J, previous if previous is not None else normal)
+    return u, point, point.tangent, iterations
+
+
+def locate_cusp(system: Augmented, u0: np.ndarray, t0: np.ndarray, h: float) -> CurvePoint:
+    """Brent on the arclength in (0, h) for the zero of g_z w (module doc)."""
+    cache: dict[float, CurvePoint] = {}
+
+    def point(hh):
+        if hh not in cache:
+            cache[hh] = solve(system, u0 + hh * t0, t0, t0)[1]
+        return cache[hh]
+
+    hh = brentq(lambda x: point(x).quadratic, 0.0, h, xtol=1e-12 * h, rtol=1e-12)
+    located = point(hh)
+    located.event = "cusp"
+    J, _ = system.jacobian(np.array([*located.z0, located.p1 / system.scales[0], located.p2 / system.scales[1]]))
+    located.tangent = null_vector(J, t0)  # its own: both parameter components vanish at a cusp
+    return located
+
+
+def follow(system: Augmented, start: CurvePoint, direction: float, p2_bounds: tuple[float, float], *,
+           max_step: float, max_points: int, stop_at: list | None = None, min_step: float = 1e-8,
+           progress: Callable[[CurvePoint], None] | None = None) -> tuple[list[CurvePoint], str, object]:
+    """Pseudo-arclength continuation of the curve from `start` with p2 first moving in `direction` (+-1), until p2
+    leaves p2_bounds, the curve comes back to a point of `stop_at` (another fold of the branch: the same curve),
+    or max_points; returns (points, stop reason, the point of stop_at reached or None). Step control as for a branch (continuation.continue_from): accepted with <= 5 corrector
+    iterations and a tangent turning < TURN, grown x1.5 after an easy step, halved on rejection. A sign change
+    of the quadratic coefficient is a cusp, located by Brent."""
+    u = np.array([start.z0[0], start.z0[1], start.p1 / system.scales[0], start.p2 / system.scales[1]])
+    J, quadratic = system.jacobian(u)
+    t = null_vector(J, np.array([0.0, 0.0, 0.0, direction]))
+    start.tangent, start.quadratic = t, quadratic
+    points, h = [start], max_step / 2
+    lo, hi = p2_bounds
+    reason, joined = f"stopped at {max_points} points", None
+    while len(points) < max_points:
+        last = points[-1]
+        try:
+            u_new, point, t_new, iterations = solve(system, u + h * t, t, t)
+            accepted = iterations <= 5 and np.dot(t, t_new) >= math.cos(TURN)
+        except (sh.ShootingError, np.linalg.LinAlgError):
+            accepted, iterations = False, None
+        if not accepted:
+            h *= 0.5
+            if h < min_step:
+                reason = f"step below {min_step:g} at {system.params[0]} = {last.p1:.8g}, {system.params[1]} = " \
+                         f"{last.p2:.8g}"
+                break
+            continue
+        if system.kind == "fold" and last.quadratic * point.quadratic < 0.0:
+            try:
+                points.append(locate_cusp(system, u, t, h))
+            except (sh.ShootingError, ValueError):
+                pass
+        points.append(point)
+        if progress is not None:
+            progress(point)
+        u, t = u_new, t_new
+        if not lo <= point.p2 <= hi:
+            reason = f"left the range of {system.params[1]}"
+            break
+        met = [q for q in (stop_at or []) if _between(last, point, q, system.scales)]
+        if met:
+            joined = met[0]
+            reason = f"reached the {system.kind} of the branch at {system.params[0]} = {joined.p1:.8g} (the same curve)"
+            break
+        h = min(max_step, 1.5 * h) if iterations <= 2 else min(max_step, h)
+    return points, reason, joined
+
+
+def _between(a: CurvePoint, b: CurvePoint, q: CurvePoint, scales) -> bool:
+    """q lies on the step from a to b: within the step's length of both ends, p2 of q between theirs."""
+    def u(pt):
+        return np.array([pt.z0[0], pt.z0[1], pt.p1 / scales[0], pt.p2 / scales[1]])
+    step = np.linalg.norm(u(b) - u(a))
+    return (min(a.p2, b.p2) <= q.p2 <= max(a.p2, b.p2) and np.linalg.norm(u(q) - u(a)) <= 1.01 * step
+            and np.linalg.norm(u(q) - u(b)) <= 1.01 * step)
+
+
+def start_point(system: Augmented, z0, p1: float, p2: float) -> CurvePoint:
+    """The located event of a one-parameter branch as a curve point: corrected onto g = 0 at fixed p2 (the
+    branch located it by its own test function; this removes the difference)."""
+    u = np.array([z0[0], z0[1], p1 / system.scales[0], p2 / system.scales[1]])
+    normal = np.array([0.0, 0.0, 0.0, 1.0])  # p2 fixed
+    u, pmap, _, _ = correct(system, u, normal)
+    J, quadratic = system.jacobian(u)
+    g, _, _ = system.bordered(pmap.monodromy)
+    return system.point(u, pmap, g, quadratic)
+
+
+@dataclass
+class Curves:
+    curves: list
+    params: tuple
+    seconds: float = 0.0
+    cpu_seconds: float = 0.0
+
+
+def curves_from_branch(branch, kind: str, param2: str, p2_to: float, p2_from: float | None = None, *,
+                       points: int = 200, max_points: int | None = None,
+                       progress: Callable[[str], None] | None = None) -> Curves:
+    """Every `kind` event of the one-parameter `branch` (continuation.Branch, its main branch) continued in
+    (branch param, param2) both ways, inside [p2_from, p2_to] (p2_from defaults to the branch's value of param2);
+    a curve that comes back to another event of the branch stops there (one curve through both). The step is
+    sized like a branch's: 1.5 / points of the scaled arclength (each parameter scaled by its range)."""
+    t0, c0 = time.perf_counter(), time.process_time()
+    problem = branch.problem
+    param1 = problem.param
+    p2_here = float(getattr(problem.scene, param2))
+    p2_from = p2_here if p2_from is None else p2_from
+    lo2, hi2 = min(p2_from, p2_to), max(p2_from, p2_to)
+    values = [pt.p for pt in branch.points]
+    scales = (max(values) - min(values) or 1.0, (hi2 - lo2) or abs(p2_here) or 1.0)
+    system = Augmented(problem.scene, kind, param1, param2, scales, problem.periods, problem.rtol)
+    events = [pt for pt in branch.points if pt.event == kind]
+    starts = []
+    for pt in events:
+        try:
+            starts.append(start_point(system, pt.z0, pt.p, p2_here))
+        except sh.ShootingError as error:
+            if progress:
+                progress(f"{kind} at {param1} = {pt.p:.8g}: not a start ({error})")
+    found, covered = [], {}  # (start index, direction in p2) a curve already took
+    done: set = set()
+    for index, start in enumerate(starts):
+        if index in done:
+            continue
+        pieces = []
+        queue = [(index, start, 1.0), (index, start, -1.0)]
+        while queue:
+            at, origin, direction = queue.pop(0)
+            if (direction > 0 and p2_here >= hi2) or (direction < 0 and p2_here <= lo2) \
+                    or (at, direction) in covered:
+                continue
+            covered[(at, direction)] = True
+            done.add(at)
+            first = system.point(np.array([*origin.z0, origin.p1 / scales[0], origin.p2 / scales[1]]),
+                                 system.map(origin.z0, origin.p1, origin.p2), origin.g, origin.quadratic)
+            others = [other for j, other in enumerate(starts) if j != at]
+            pts, why, joined = follow(system, first, direction, (lo2, hi2), max_step=1.5 / points,
+                                      max_points=max_points or 4 * points, stop_at=others)
+            pieces.append((at, direction, pts, why))
+            if progress:
+                progress(f"{kind} curve from {param1} = {origin.p1:.8g}, {param2} "
+                         f"{'up' if direction > 0 else 'down'}: {len(pts)} points ({why})")
+            if joined is not None:  # the same curve goes on from that event in the other direction
+                j = next(j for j, other in enumerate(starts) if other is joined)
+                arrival = 1.0 if pts[-1].p2 >= pts[-2].p2 else -1.0
+                covered[(j, -arrival)] = True
+                done.add(j)
+                queue.append((j, joined, arrival))
+        # one curve, in order: the first start's upward piece reversed, then each following piece
+        ordered = []
+        for number, (origin_index, _, pts, _) in enumerate(pieces):
+            if number == 0:
+                ordered = pts[::-1] if len(pieces) > 1 else list(pts)
+            elif number == 1 and origin_index == pieces[0][0]:
+                ordered += pts[1:]  # from the same start, which ends the reversed first piece
+            else:
+                ordered += pts
+        found.append(Curve(kind, len(found), ordered, "; ".join(why for *_, why in pieces)))
+    return Curves(found, (param1, param2), time.perf_counter() - t0, time.process_time() - c0)
+
+
+def merge(found: list, params: tuple) -> Curves:
+    """Curves of several kinds as one set, numbered in order."""
+    out = Curves([], params, sum(c.seconds for c in found), sum(c.cpu_seconds for c in found))
+    for group in found:
+        for curve in group.curves:
+            out.curves.append(Curve(curve.kind, len(out.curves), curve.points, curve.stop_reason))
+    return out
+
+
+def rows(curves: Curves) -> list[dict]:
+    """One dict per curve point: kind, curve, both parameters by name, x0, v0, period, x_min, x_max, event."""
+    p1, p2 = curves.params
+    out = []
+    for curve in curves.curves:
+        for pt in curve.points:
+            out.append({"kind": pt.kind, "curve": curve.index, p1: pt.p1, p2: pt.p2, "x0": float(pt.z0[0]),
+                        "v0": float(pt.z0[1]), "period": pt.period, "x_min": pt.x_min, "x_max": pt.x_max,
+                        "event": pt.event, "rho1_re": float(pt.multipliers[0].real),
+                        "rho2_re": float(pt.multipliers[1].real), "residual": pt.residual, "g": pt.g,
+                        "quadratic": pt.quadratic})
+    return out
