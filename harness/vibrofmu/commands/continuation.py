@@ -41,8 +41,8 @@ def options(p):
     p.add_argument("--follow", choices=FOLLOW,
                    help="continue every point of this kind on the branch in two parameters (--param and --param2): "
                         "curves.parquet, curves.png; 'all' follows folds and period doublings (default: none)")
-    p.add_argument("--param2", choices=PARAMETERS, help="the second parameter of --follow")
-    p.add_argument("--to2", type=float, metavar="VALUE", help="the curves run up to this value of --param2")
+    p.add_argument("--param2", choices=PARAMETERS, help="the second parameter of --follow (no default: required with --follow)")
+    p.add_argument("--to2", type=float, metavar="VALUE", help="the curves run up to this value of --param2 (no default: required with --follow)")
     p.add_argument("--from2", type=float, metavar="VALUE",
                    help="... and down to this one (default: the scene's value: the curves go one way only)")
     p.add_argument("--out", required=True, help="output folder (branch.parquet, branch.png, summary.json)")
