@@ -13,6 +13,7 @@
 #include <string.h>
 
 #include "me_model.h"
+#include "pytext.h"
 
 #ifdef ME_N_STATES
 #include "plant.h" /* vk_solver_message: the co-simulation's pull-in message (me_stop_at_pull_in) */
@@ -264,7 +265,20 @@ fmi2Status native_directional_derivative(Instance *I, const fmi2ValueReference v
                              call, vUnknown[i], vKnown[j], MODEL_PARTIALS);
                 return settled(I);
             }
+            if (!isfinite(partial)) { /* at an electrode (x = +-3R/2) the electrostatic slope is infinite */
+                char xt[64];
+                native_repr(S->value[VR_x], xt, sizeof xt);
+                native_error(I, "%s refused: the derivative of %s by %s is %g (not finite) at x = %s: the state is at "
+                             "an electrode, outside the model's domain", call, VARIABLES[vUnknown[i]].name,
+                             VARIABLES[vKnown[j]].name, partial, xt);
+                return settled(I);
+            }
             sum += partial * dvKnown[j];
+        }
+        if (!isfinite(sum)) {
+            native_error(I, "%s refused: the derivative of %s along the seed given is %g (not finite; a seed value "
+                         "not finite or too large)", call, VARIABLES[vUnknown[i]].name, sum);
+            return settled(I);
         }
         dvUnknown[i] = sum;
     }

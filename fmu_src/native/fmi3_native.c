@@ -202,7 +202,8 @@ EXPORT3 fmi3Instance fmi3InstantiateCoSimulation(fmi3String instanceName, fmi3St
     w->event_mode_used = eventModeUsed;
     w->early_return_allowed = earlyReturnAllowed;
 #ifdef HAS_EARLY_RETURN
-    native_set_early_return((Instance *)w->c, earlyReturnAllowed);
+    /* event mode without early return steps through the events too (fmi3DoStep), to report them */
+    native_set_early_return((Instance *)w->c, earlyReturnAllowed || eventModeUsed);
 #endif
     return w;
 }
@@ -831,10 +832,28 @@ EXPORT3 fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunic
     double reached = st <= fmi2Warning ? t_end : currentCommunicationPoint;
     int event = 0;
 #ifdef HAS_EARLY_RETURN
+    const MeData *me = &native_state((Instance *)w->c)->model.me;
     if (w->early_return_allowed && st <= fmi2Warning) {
-        const MeData *me = &native_state((Instance *)w->c)->model.me;
         reached = me->reached;
         event = st <= fmi2Warning && me->step_event;
+    } else if (w->event_mode_used && st <= fmi2Warning) {
+        /* event mode without early return: the step goes on through each event it meets (the same solver steps:
+           model_do_step_early without an event is model_do_step) and eventHandlingNeeded says one happened */
+        event = (int)me->step_event;
+        for (long n = 0; st <= fmi2Warning && me->reached < t_end && n < 100000000L; n++) {
+            const double from = me->reached;
+            st = fmi2DoStep(w->c, from, t_end - from, noSetFMUStatePriorToCurrentPoint);
+            event |= st <= fmi2Warning && me->step_event;
+        }
+        reached = st <= fmi2Warning ? t_end : me->reached;
+        if (st > fmi2Warning) {
+            w->time = reached; /* where the failed step left the instance: it is in the error state */
+            *earlyReturn = fmi3False;
+            *lastSuccessfulTime = reached;
+            *eventHandlingNeeded = fmi3False;
+            *terminateSimulation = fmi3False;
+            return to3(st);
+        }
     }
 #endif
     *earlyReturn = st <= fmi2Warning && reached < t_end;

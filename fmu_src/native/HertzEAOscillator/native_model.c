@@ -356,7 +356,8 @@ int model_me_outputs(Instance *inst, State *s)
 /* in_contact at an event.  Within CONTACT_BAND of the contact surface (where a located root lies, a rounding of
    the host's solver on either side) the direction of motion decides: moving in (x' > 0) closes the contact, moving
    out opens it, so a root located a rounding short still switches the flag; x' = 0 there is a graze (the indicator
-   touches 0 without changing sign: a contact of zero length), which leaves the flag as it was.  Elsewhere the sign
+   touches 0 without changing sign: a contact of zero length), which leaves the flag as it was -- unless the state
+   is at rest there (x' = 0 too): then the sign of x'' decides.  Elsewhere the sign
    of 1 + 2x/3.  The flag changes only here (a discrete variable), so it cannot chatter in continuous-time mode. */
 #define CONTACT_BAND 1e-8
 
@@ -369,6 +370,12 @@ int model_me_event(Instance *inst, State *s, int *terminate)
     int in_contact = s->value[VR_in_contact] != 0.0;
     if (fabs(z[CONTACT_EVENT]) > CONTACT_BAND) in_contact = z[CONTACT_EVENT] > 0.0;
     else if (me->x[1] != 0.0) in_contact = me->x[1] > 0.0;
+    else { /* at rest on the surface (a start at x = -3/2, v = 0): the acceleration says which side it moves to; the
+              indicator starts at 0 there, so no sign change would ever tell the host (0: a graze, as it was) */
+        int fault = 0;
+        const double a = vm_accel(&p->model, me->t, me->x[0], me->x[1], s->value[VR_U], &fault);
+        if (!fault && a != 0.0 && isfinite(a)) in_contact = a > 0.0;
+    }
     s->value[VR_in_contact] = in_contact;
     me_stop_at_pull_in(inst, &p->model, me, z, terminate);
     return 0;
