@@ -19,7 +19,8 @@ from .control import ERRATA_INITIAL_ESTIMATES, Controller, Gains, Law, validate_
 from .fidelities import closed_loop_refusal, entry, integrated
 from .models import drive_step_ceiling
 from .parameters import ParameterError, Scene, validate
-from .plant import INTEGRATOR_REBUILT, MAX_STEPS_PER_DOSTEP, TIME_TOLERANCE, Settings, checked_settings
+from .plant import INTEGRATOR_REBUILT, TIME_TOLERANCE, Settings, checked_settings
+from .settings import step_budget, too_many_steps
 from .snapshot import plain_attributes, restore_attributes
 from .solvers import solver_entry
 from .tracking import ReferenceSettings, make_reference
@@ -67,7 +68,7 @@ class ClosedLoop:
         self.drive_ceiling = drive_step_ceiling(scene, self.reference.fastest_frequency())
         self.integrator = solver_entry(settings.solver).make(self._accel, self.model.events, t0, scene.x_start,
                                                              scene.v_start, theta0, settings, rates=self._rates,
-                                                             step_budget=MAX_STEPS_PER_DOSTEP,
+                                                             step_budget=step_budget(settings.kernel),
                                                              drive_ceiling=self.drive_ceiling)
 
     # The integrators call rates(t, x, v, theta^) and then accel(t, x, v, theta^) at each stage: the control
@@ -96,10 +97,9 @@ class ClosedLoop:
         """ParameterError for a step the loop refuses (what the compiled loop's do_step checks too)."""
         if not (math.isfinite(h) and h > 0.0):
             raise ParameterError("communicationStepSize", h, "must be a finite number > 0")
-        ceiling = self.integrator.max_step
-        if h / ceiling > MAX_STEPS_PER_DOSTEP:  # the plant's guard (settings.check_step), same words
-            raise ParameterError("communicationStepSize", h, f"needs more than {MAX_STEPS_PER_DOSTEP} steps of "
-                                 f"{ceiling:g} (max_step); make smaller communication steps or raise max_step")
+        refusal = too_many_steps(h, self.integrator.max_step, self.settings.kernel)  # the plant's guard, same words
+        if refusal is not None:
+            raise ParameterError("communicationStepSize", h, refusal)
         if not (math.isfinite(t) and abs(t - self.t) <= TIME_TOLERANCE * max(1.0, abs(t))):
             raise ParameterError("currentCommunicationPoint", t, f"the closed loop is at tau = {self.t!r}")
 

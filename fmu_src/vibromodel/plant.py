@@ -16,7 +16,7 @@ from .integrate import IntegrationError
 from .models import drive_step_ceiling, solver_tolerance
 from .parameters import ParameterError, Scene, validate
 from .settings import (DEFAULT_EXPERIMENT, MAX_STEPS_PER_DOSTEP, RK4_DEFAULT_STEP, TIME_TOLERANCE, Kernel, Outputs,
-                       Settings, Solver, check_step, checked_settings, rk4_drive_warnings)
+                       Settings, Solver, check_step, checked_settings, rk4_drive_warnings, step_budget)
 from .snapshot import plain_attributes, restore_attributes
 from .solvers import solver_entry
 
@@ -57,7 +57,7 @@ class Plant:
             self.notes += notes
             self.integrator = solver_entry(settings.solver).make(
                 self.model.accel, self.model.events, t0, scene.x_start, scene.v_start, 0.0, replace(settings, rtol=rtol),
-                phased=(self.model.drive_frequencies, self.model.accel_phased), step_budget=MAX_STEPS_PER_DOSTEP,
+                phased=(self.model.drive_frequencies, self.model.accel_phased), step_budget=step_budget(settings.kernel),
                 drive_ceiling=drive_step_ceiling(scene))
 
     def do_step(self, t: float, h: float, U: float) -> Outputs:
@@ -67,7 +67,7 @@ class Plant:
         when the model cannot be advanced.
         """
         check_step(self.t, t, h, U, math.inf if self.integrator is None else self.integrator.max_step,
-                   None if self.solution is None else self.settings.fidelity)
+                   None if self.solution is None else self.settings.fidelity, self.settings.kernel)
         x, v, a = self.advance(t + h, U)  # t + h: the host's clock, no drift from sums
         return self.outputs_at(self.t, x, v, a)  # every output at the new communication point t + h
 
