@@ -328,8 +328,39 @@ size_t vk_run_from(VkPlant *p, double t0, size_t k0, double dt, size_t n, double
     return n;
 }
 
+/* Plant.do_step's steps (check_step_with, plant_advance_with) up to the state at t + h, without x'' and the
+   outputs */
+static inline __attribute__((always_inline)) int step_xv_with(VkPlant *p, const VkSolverOps *ops, double t, double h,
+                                                              double *x, double *v)
+{
+    if (p->error) return (int)p->error;
+    int code = check_step_with(p, ops, t, h);
+    if (code) return code;
+    code = set_input_with(p, ops, p->plant_t, p->U_input);  /* at the old time: U changes there */
+    if (!code) code = advance_with(p, ops, t + h);
+    if (code) return code;
+    p->plant_t = t + h;
+    return value_at_with(p, ops, p->plant_t, x, v);
+}
+
+size_t vk_run_xv(VkPlant *p, double t0, size_t k0, double dt, size_t n, double *out, size_t output_stride,
+                 int *code)
+{
+    const VkSolverOps *ops = ops_of(p);
+    *code = VK_OK;
+    for (size_t k = 0; k < n; k++) {
+        double x, v;
+        *code = step_xv_with(p, ops, t0 + (double)(k0 + k) * dt, dt, &x, &v);
+        if (*code) return k;
+        out[k] = p->plant_t;
+        out[output_stride + k] = x;
+        out[2 * output_stride + k] = v;
+    }
+    return n;
+}
+
 void vk_run_batch(VkPlant *plants, size_t m, double t0, const double *x0, const double *v0, double dt, size_t n,
-                  double *out, size_t output_stride, int64_t *n_done, int64_t *codes)
+                  double *out, size_t output_stride, int64_t *n_done, int64_t *codes, int64_t all_outputs)
 {
     for (size_t i = 0; i < m; i++) {
         VkPlant *p = &plants[i];
@@ -338,9 +369,14 @@ void vk_run_batch(VkPlant *plants, size_t m, double t0, const double *x0, const 
         if (!code) code = vk_plant_state(p, xva);
         if (!code) code = vk_outputs_at(p, p->plant_t, xva[0], xva[1], &xva[2]);
         n_done[i] = 0;
-        if (!code) {
+        if (!code && all_outputs) {
             put_outputs(p, rows, output_stride, 0);
             n_done[i] = 1 + (int64_t)vk_run_from(p, t0, 0, dt, n, rows + 1, output_stride, &code);
+        } else if (!code) {
+            rows[0] = p->plant_t;
+            rows[output_stride] = xva[0];
+            rows[2 * output_stride] = xva[1];
+            n_done[i] = 1 + (int64_t)vk_run_xv(p, t0, 0, dt, n, rows + 1, output_stride, &code);
         }
         codes[i] = code;
     }

@@ -105,11 +105,16 @@ int vk_run(VkPlant *p, double dt, size_t n, double *x_out);
    pending in p, or a pre-check's code is in *code). */
 size_t vk_run_from(VkPlant *p, double t0, size_t k0, double dt, size_t n, double *out, size_t output_stride,
                    int *code);
+/* vk_run_from with the time, x and v only (outputs 0..2; a, the forces, in_contact and out[] are not computed): the
+   same steps and the same bits of x and v, without the model's x'' and forces at each point. */
+size_t vk_run_xv(VkPlant *p, double t0, size_t k0, double dt, size_t n, double *out, size_t output_stride,
+                 int *code);
 /* m scenes one after another: plants[i] set as vibromodel.compiled sets a plant, vk_init at (t0, x0[i], v0[i]), its
    outputs there as point 0, then vk_run_from(t0, 0, dt, n) into points 1..n; scene i's rows start at
    out + i * (n + 1).  n_done[i]: the points written (n + 1 unless scene i stopped: its error is then pending in
-   plants[i], or a pre-check's code in codes[i]); a scene's error does not stop the others. */
+   plants[i], or a pre-check's code in codes[i]); a scene's error does not stop the others.  all_outputs = 0: the
+   time, x and v only (vk_run_xv; out holds 3 outputs). */
 void vk_run_batch(VkPlant *plants, size_t m, double t0, const double *x0, const double *v0, double dt, size_t n,
-                  double *out, size_t output_stride, int64_t *n_done, int64_t *codes);
+                  double *out, size_t output_stride, int64_t *n_done, int64_t *codes, int64_t all_outputs);
 
 #endif

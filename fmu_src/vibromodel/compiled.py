@@ -119,8 +119,10 @@ def _declare(library) -> None:
         "vk_run": (status, [address, d, ctypes.c_size_t, doubles]),
         "vk_run_from": (ctypes.c_size_t, [address, d, ctypes.c_size_t, d, ctypes.c_size_t, doubles, ctypes.c_size_t,
                                           ctypes.POINTER(ctypes.c_int)]),
+        "vk_run_xv": (ctypes.c_size_t, [address, d, ctypes.c_size_t, d, ctypes.c_size_t, doubles, ctypes.c_size_t,
+                                        ctypes.POINTER(ctypes.c_int)]),
         "vk_run_batch": (None, [address, ctypes.c_size_t, d, doubles, doubles, d, ctypes.c_size_t, doubles,
-                                ctypes.c_size_t, ctypes.POINTER(_int), ctypes.POINTER(_int)]),
+                                ctypes.c_size_t, ctypes.POINTER(_int), ctypes.POINTER(_int), _int]),
     }
     for name, (restype, argtypes) in signatures.items():
         function = getattr(library, name)

@@ -36,6 +36,7 @@ from vibromodel.solvers import solver_entry
 from vibrofmu.fmus.kernel import kernel_library
 
 OUTPUTS = ("time", "x", "v", "a", "F_contact", "F_electrostatic", "in_contact")
+STATE = OUTPUTS[:3]  # what a run computes when asked for no more (outputs=STATE): the steps without x'' and forces
 CHUNK = 64  # scenes per C call in simulate_many: their state structures (6 kB each) stay in the caches
 
 _double_p, _int_p = ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_int64)
@@ -58,7 +59,7 @@ class Run:
     a: np.ndarray
     F_contact: np.ndarray
     F_electrostatic: np.ndarray
-    in_contact: np.ndarray  # bool
+    in_contact: np.ndarray | None  # bool; None (and a, F_contact, F_electrostatic): not asked for (outputs)
     stopped: str = ""  # why the run stopped before stop_time ("" if it did not): the FMU's log line
     error: BaseException | None = None  # what CompiledPlant raises there (TerminalEvent at pull-in, ...)
     warnings: list[str] = field(default_factory=list)  # what the FMU logs as warnings (settings)
@@ -75,7 +76,7 @@ class Batch:
     a: np.ndarray
     F_contact: np.ndarray
     F_electrostatic: np.ndarray
-    in_contact: np.ndarray  # float: 1.0, 0.0, NaN after a stop
+    in_contact: np.ndarray | None  # float: 1.0, 0.0, NaN after a stop; None (and a, F_*): not asked for
     n_points: np.ndarray  # points reached per scene
     stopped: list[str]
     errors: list[BaseException | None]
@@ -88,8 +89,9 @@ class Batch:
     def run(self, i: int) -> Run:
         """Scene i as a Run."""
         n = int(self.n_points[i])
-        values = {name: getattr(self, name)[i, :n] for name in OUTPUTS}
-        values["in_contact"] = values["in_contact"] != 0.0
+        values = {name: None if getattr(self, name) is None else getattr(self, name)[i, :n] for name in OUTPUTS}
+        if values["in_contact"] is not None:
+            values["in_contact"] = values["in_contact"] != 0.0
         return Run(**values, stopped=self.stopped[i], error=self.errors[i], warnings=self.warnings[i],
                    notes=self.notes[i])
 
@@ -282,19 +284,25 @@ def _ceiling(plant: VkPlant) -> float:
 
 
 def simulate_many(scenes, stop_time: float = 200.0, interval: float = 0.1, settings: Settings = Settings(),
-                  start_time: float = 0.0) -> Batch:
+                  start_time: float = 0.0, outputs=OUTPUTS) -> Batch:
     """Run every scene from start_time to stop_time on the compiled kernel, outputs every `interval`.
 
     scenes: a list of Scene, or a dict of arrays (and scalars) of Scene fields over the paper scene's values (the
     fast form: {"omega": np.linspace(0.9, 1.1, 1000)}). Raises ParameterError for the first scene that breaks a
     parameter rule (as `simulate` would, with a note naming the scene) or bad settings, stop time or interval.
-    A scene that stops early (pull-in, a failed step) does not stop the others: see Batch.stopped."""
+    A scene that stops early (pull-in, a failed step) does not stop the others: see Batch.stopped.
+    outputs: the outputs wanted; asked for no more than STATE (time, x, v), a run skips the model's x'' and forces
+    at each point (the same x and v, cheaper), and a, F_contact, F_electrostatic, in_contact are None."""
     n = _steps(start_time, stop_time, interval)
     settings, clamp = _settings(settings)
     columns = _columns(scenes)
     _check(columns, settings)
     m = len(columns["mu"])
-    out = np.full((len(OUTPUTS), m, n + 1), np.nan)
+    unknown = sorted(set(outputs) - set(OUTPUTS))
+    if unknown:
+        raise ParameterError("outputs", unknown[0], f"unknown output; known: {', '.join(OUTPUTS)}")
+    every = not set(outputs) <= set(STATE)  # else the lean steps (core/plant.c vk_run_xv)
+    out = np.full((len(OUTPUTS) if every else len(STATE), m, n + 1), np.nan)
     n_done, codes = np.zeros(m, dtype=np.int64), np.zeros(m, dtype=np.int64)
     warnings, notes, stopped, errors = [], [], [""] * m, [None] * m
     plants = np.zeros(min(m, CHUNK), dtype=_PLANT_DTYPE)  # reused for every chunk of scenes
@@ -310,22 +318,25 @@ def simulate_many(scenes, stop_time: float = 200.0, interval: float = 0.1, setti
         run_batch(part.ctypes.data, last - first, start_time, chunk["x_start"].ctypes.data_as(_double_p),
                   chunk["v_start"].ctypes.data_as(_double_p), interval, n,
                   out[0, first:].ctypes.data_as(_double_p), m * (n + 1), n_done[first:].ctypes.data_as(_int_p),
-                  codes[first:].ctypes.data_as(_int_p))
+                  codes[first:].ctypes.data_as(_int_p), int(every))
         for i in np.flatnonzero(n_done[first:last] < n + 1):
             plant = VkPlant.from_buffer(part, int(i) * _PLANT_DTYPE.itemsize)
             k = max(int(n_done[first + i]) - 1, 0)
             stopped[first + i], errors[first + i] = _stop(plant, int(codes[first + i]), start_time + k * interval,
                                                           interval)
-    return Batch(*out, n_points=n_done, stopped=stopped, errors=errors, warnings=warnings, notes=notes)
+    columns_out = list(out) + [None] * (len(OUTPUTS) - len(out))
+    return Batch(*columns_out, n_points=n_done, stopped=stopped, errors=errors, warnings=warnings, notes=notes)
 
 
 def simulate(scene: Scene | None = None, stop_time: float = 200.0, interval: float = 0.1,
-             settings: Settings = Settings(), start_time: float = 0.0) -> Run:
+             settings: Settings = Settings(), start_time: float = 0.0, outputs=OUTPUTS) -> Run:
     """Run `scene` (default: the paper's) from start_time to stop_time on the compiled kernel, outputs every
     `interval` (the plant FMU's outputs, and its bits under a host that steps from start_time + k * interval).
     Raises ParameterError (naming the parameter and value, as the FMU logs it) for a bad scene, settings, stop time
-    or interval; a run that stops early keeps the points before the stop and says why (Run.stopped)."""
-    return simulate_many([Scene() if scene is None else scene], stop_time, interval, settings, start_time).run(0)
+    or interval; a run that stops early keeps the points before the stop and says why (Run.stopped). outputs: as
+    simulate_many's."""
+    return simulate_many([Scene() if scene is None else scene], stop_time, interval, settings, start_time,
+                         outputs).run(0)
 
 
 class Simulation:
@@ -352,7 +363,7 @@ class Simulation:
         self._library.vk_run_batch(self._address, 1, start_time, columns["x_start"].ctypes.data_as(_double_p),
                                    columns["v_start"].ctypes.data_as(_double_p), interval, 0,
                                    out.ctypes.data_as(_double_p), 1, n_done.ctypes.data_as(_int_p),
-                                   codes.ctypes.data_as(_int_p))
+                                   codes.ctypes.data_as(_int_p), 1)
         self.stopped, self.error = "", None
         self.start = self._run(out, int(n_done[0]), int(codes[0]))
 
@@ -377,4 +388,4 @@ class Simulation:
         return self._run(out, done, code.value)
 
 
-__all__ = ["Batch", "OUTPUTS", "Run", "Simulation", "simulate", "simulate_many"]
+__all__ = ["Batch", "OUTPUTS", "Run", "STATE", "Simulation", "simulate", "simulate_many"]

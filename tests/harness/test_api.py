@@ -192,3 +192,22 @@ def test_simulation_stays_stopped(library):
     assert isinstance(first.error, TerminalEvent) and 0 < len(first.x) < 50
     again = simulation.advance(5)
     assert len(again.x) == 0 and again.error is first.error
+
+
+@pytest.mark.parametrize("settings", [Settings(), Settings(rtol=1e-10, max_step=1000.0),
+                                      Settings(solver=Solver.RK4, max_step=0.05)], ids=str)
+def test_the_state_only_run_gives_the_same_x_and_v(settings):
+    """outputs=STATE (core/plant.c vk_run_xv: no x'' or forces per point) steps as the full run: the same time, x
+    and v to the bit, the same stop (pull-in in the last scene), the other outputs left out."""
+    scenes = SCENES + [Scene(alpha=0.5, x_start=1.2)]
+    full = api.simulate_many(scenes, 30.0, 0.1, settings)
+    lean = api.simulate_many(scenes, 30.0, 0.1, settings, outputs=("x",))
+    for name in api.STATE:
+        assert np.array_equal(getattr(lean, name), getattr(full, name), equal_nan=True), name
+    assert lean.a is None and lean.in_contact is None and lean.F_contact is None
+    assert list(lean.n_points) == list(full.n_points) and lean.stopped == full.stopped and lean.stopped[-1]
+    run = api.simulate(SCENES[1], 30.0, 0.1, settings, outputs=api.STATE)
+    assert np.array_equal(run.x, full.run(1).x) and run.in_contact is None
+    with pytest.raises(ParameterError) as got:
+        api.simulate(Scene(), 1.0, 0.1, outputs=("x", "y"))
+    assert got.value.name == "outputs" and "unknown output" in str(got.value)

@@ -3,7 +3,8 @@
 Contenders, each on the exact model (Eq. 3) of two scenes -- the paper's and a contact-loss scene (x_start = -1.3,
 v_start = -0.8, R = 2: the mass leaves the contact and comes back) -- over tau in [0, 200] with 2,000 outputs:
 - the native plant FMU in a plain C host (speed/timing_host.c; the doStep + getReal loop), and the Python API
-  (vibrofmu.api.simulate), each with the drive's step ceiling (the default) and without it (max_step = 1000);
+  (vibrofmu.api.simulate asked for time, x and v, as the peers compute them: outputs=api.STATE), each with the
+  drive's step ceiling (the default) and without it (max_step = 1000);
 - numbalsoda's LSODA and DOP853 on a numba cfunc right-hand side; diffrax's Tsit5 and Dopri8 (JAX, jit, CPU, 64-bit);
   SUNDIALS CVODE, Adams (fixed-point) and BDF (Newton, dense), driven from C (speed/cvode_peer.c on the core's
   vm_accel: the FMU's own right-hand side) against the system's SUNDIALS; SciPy's solve_ivp (LSODA, RK45, DOP853);
@@ -241,7 +242,8 @@ def api_contenders() -> dict:
     def maker(max_step):
         def make(scene: Scene, stop: float = STOP):
             def run(rtol):
-                result = api.simulate(scene, stop, INTERVAL, Settings(rtol=rtol, max_step=max_step))
+                result = api.simulate(scene, stop, INTERVAL, Settings(rtol=rtol, max_step=max_step),
+                                      outputs=api.STATE)  # x and v, as the peers compute them
                 return result.x if not result.stopped else None
             return run
         return make
@@ -423,7 +425,7 @@ def short_scenes(makers: dict, results: dict, rounds: int) -> dict | None:
     lsoda_make = makers["numbalsoda LSODA"]
 
     def batch():
-        return api.simulate_many({"omega": omegas}, SHORT_STOP, INTERVAL, api_settings).x
+        return api.simulate_many({"omega": omegas}, SHORT_STOP, INTERVAL, api_settings, outputs=api.STATE).x
 
     def loop():
         return [lsoda_make(scene, SHORT_STOP)(settings["numbalsoda LSODA"]) for scene in scenes]
