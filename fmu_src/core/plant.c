@@ -349,7 +349,7 @@ size_t vk_run_xv(VkPlant *p, double t0, size_t k0, double dt, size_t n, double *
     const VkSolverOps *ops = ops_of(p);
     *code = VK_OK;
     for (size_t k = 0; k < n; k++) {
-        double x, v;
+        double x = 0.0, v = 0.0;  /* written by step_xv_with when it returns VK_OK */
         *code = step_xv_with(p, ops, t0 + (double)(k0 + k) * dt, dt, &x, &v);
         if (*code) return k;
         out[k] = p->plant_t;
