@@ -452,6 +452,86 @@ static int before_stop(const Shim *s, fmi2Real t, fmi2Real h)
 #error "compile with -DFMU_GUID=<the guid of modelDescription.xml, as a C string>"
 #endif
 
+/* 1 when text is valid UTF-8 (pythonfmu makes a Python str of the path: invalid bytes crashed the host). */
+static int valid_utf8(const unsigned char *p)
+{
+    while (*p) {
+        int n = *p < 0x80 ? 0 : (*p & 0xE0) == 0xC0 ? 1 : (*p & 0xF0) == 0xE0 ? 2 : (*p & 0xF8) == 0xF0 ? 3 : -1;
+        if (n < 0 || (n == 1 && *p < 0xC2) || (n == 3 && *p > 0xF4)) return 0;
+        p++;
+        for (int k = 0; k < n; k++, p++)
+            if ((*p & 0xC0) != 0x80) return 0;
+    }
+    return 1;
+}
+
+static int is_file(const char *path)
+{
+    FILE *f = fopen(path, "rb");
+    if (f == NULL) return 0;
+    fclose(f);
+    return 1;
+}
+
+/* The slave pythonfmu will import, checked before it does (a failure inside its import crashed the host): the folder
+   named in valid UTF-8, slavemodule.txt (open: f) naming a module (a Python name, alone on its line) whose file is
+   there, and resources/vibrofmu_identity.txt (harness/vibrofmu/fmus/shim.py) giving this binary's GUID (resources of
+   another FMU are refused) and the Python files that must be there (a partial extraction is refused).  1 when all
+   hold, else 0 and why. */
+static int slave_files(const char *path, FILE *f, char *why, size_t size)
+{
+    if (!valid_utf8((const unsigned char *)path)) {
+        snprintf(why, size, "its path is not valid UTF-8 (the Python slave cannot be imported from it)");
+        return 0;
+    }
+    char module[256] = "", line[4096 + 64], file[4096 + 320];
+    if (fgets(module, sizeof module, f) != NULL) module[strcspn(module, "\r\n")] = '\0';
+    int name = module[0] != '\0' && !(module[0] >= '0' && module[0] <= '9');
+    for (const char *p = module; *p && name; p++)
+        name = (*p >= 'a' && *p <= 'z') || (*p >= 'A' && *p <= 'Z') || (*p >= '0' && *p <= '9') || *p == '_';
+    if (!name) {
+        snprintf(why, size, "slavemodule.txt names no module ('%.100s'): the FMU's resources are damaged", module);
+        return 0;
+    }
+    snprintf(file, sizeof file, "%s/%s.py", path, module);
+    if (!is_file(file)) {
+        snprintf(why, size, "slavemodule.txt names the module %s, whose file %s.py is missing (a partial "
+                 "extraction?)", module, module);
+        return 0;
+    }
+    snprintf(file, sizeof file, "%s/vibrofmu_identity.txt", path);
+    FILE *id = fopen(file, "r");
+    if (id == NULL) {
+        snprintf(why, size, "vibrofmu_identity.txt is missing: these are not the resources of this FMU (GUID %s)",
+                 FMU_GUID);
+        return 0;
+    }
+    int ok = 1;
+    line[0] = '\0';
+    if (fgets(line, sizeof line, id) == NULL || (line[strcspn(line, "\r\n")] = '\0', strcmp(line, FMU_GUID) != 0)) {
+        snprintf(why, size, "these resources are another model's (GUID %.100s, this FMU's is %s): the binary runs "
+                 "only its own model", line, FMU_GUID);
+        ok = 0;
+    }
+    line[0] = '\0';
+    if (ok && fgets(line, sizeof line, id) != NULL) line[strcspn(line, "\r\n")] = '\0';
+    if (ok && strcmp(line, module) != 0) {
+        snprintf(why, size, "slavemodule.txt names the module %s, but this FMU's slave is %.100s", module, line);
+        ok = 0;
+    }
+    while (ok && fgets(line, sizeof line, id) != NULL) {
+        line[strcspn(line, "\r\n")] = '\0';
+        if (line[0] == '\0') continue;
+        snprintf(file, sizeof file, "%s/%s", path, line);
+        if (!is_file(file)) {
+            snprintf(why, size, "the slave's file %.300s is missing (a partial extraction?)", line);
+            ok = 0;
+        }
+    }
+    fclose(id);
+    return ok;
+}
+
 static int resource_location(Shim *s, fmi2String instanceName, fmi2Type fmuType, fmi2String fmuGUID,
                              fmi2String fmuResourceLocation, char *location, size_t size)
 {
@@ -474,7 +554,14 @@ static int resource_location(Shim *s, fmi2String instanceName, fmi2Type fmuType,
                        fmuResourceLocation, path);
         return 0;
     }
+    char why[1200];
+    int ok = slave_files(path, f, why, sizeof why);
     fclose(f);
+    if (!ok) {
+        fmi2_layer_log(&s->fmi, fmi2Error, "fmi2Instantiate refused: fmuResourceLocation = '%.900s': %s",
+                       fmuResourceLocation, why);
+        return 0;
+    }
     snprintf(location, size, "%s%s", scheme, path);
     return 1;
 }

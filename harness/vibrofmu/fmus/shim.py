@@ -74,6 +74,19 @@ def _compile_shim(status_vr: int, out: Path, guid: str = "") -> None:
         raise RuntimeError(f"compiling the status shim failed ({' '.join(cmd)}):\n{proc.stderr}")
 
 
+IDENTITY = "resources/vibrofmu_identity.txt"
+
+
+def identity(guid: str, module: str, names: list[str]) -> str:
+    """The model's identity the shim checks in fmi2Instantiate (fmi2_status_shim.c, slave_files): its GUID (the
+    binary's own: resources of another FMU are refused), its slave module (slavemodule.txt must name it), then every
+    Python file of its resources, relative to the folder (a partial extraction that lost one is refused, instead of
+    failing inside pythonfmu's import)."""
+    files = sorted(name[len("resources/"):] for name in names
+                   if name.startswith("resources/") and name.endswith(".py") and "/pythonfmu/" not in name)
+    return "\n".join([guid, module, *files]) + "\n"
+
+
 def install_status_shim(fmu_path: Path, status_vr: int) -> None:
     """Rewrite ``fmu_path`` in place so that linux64 uses the status shim.
 
@@ -96,14 +109,18 @@ def install_status_shim(fmu_path: Path, status_vr: int) -> None:
         with tempfile.TemporaryDirectory() as tmp:
             shim_so = Path(tmp) / "shim.so"
             _compile_shim(status_vr, shim_so, _guid(zin.read("modelDescription.xml")))
+            # read before the copy: writestr(info) rewrites zin's own entries (their offsets) for the output
+            model_identity = identity(_guid(zin.read("modelDescription.xml")),
+                                      zin.read("resources/slavemodule.txt").decode().strip(), names)
             fd, tmp_fmu = tempfile.mkstemp(suffix=".fmu", dir=fmu_path.parent)
             os.close(fd)
             try:
                 with zipfile.ZipFile(tmp_fmu, "w", zipfile.ZIP_DEFLATED) as zout:
                     for info in zin.infolist():
-                        if info.filename.startswith("binaries/"):
+                        if info.filename.startswith("binaries/") or info.filename == IDENTITY:
                             continue
                         zout.writestr(info, zin.read(info.filename))
+                    zout.writestr(IDENTITY, model_identity)
                     zout.writestr(inner_name, zin.read(original))
                     zout.write(shim_so, shim_name)
                 os.replace(tmp_fmu, fmu_path)

@@ -497,3 +497,50 @@ def scenario_foreign_states3(probe: Probe3, other: Probe3) -> None:
     g.fmi3FreeFMUState(b, ctypes.byref(theirs))
     f.fmi3FreeInstance(a)
     g.fmi3FreeInstance(b)
+
+
+# ---- the pythonfmu loader: resources a partial or foreign extraction leaves ----
+
+def scenario_loader(probe, other_unzipped) -> None:
+    """fmi2Instantiate of a pythonfmu FMU on damaged copies of its resources folder (each a fresh copy): a folder
+    name that is not UTF-8, slavemodule.txt naming a missing module, empty, or naming another module, a slave file
+    missing (a partial extraction), another FMU's resources; then the intact copy. {"case", "accepted", "expected",
+    "log"}."""
+    import os
+    import shutil
+    import tempfile
+    import urllib.parse
+    from pathlib import Path
+
+    resources = probe.unzipped / "resources"
+    module = (resources / "slavemodule.txt").read_text().strip()
+    root = Path(tempfile.mkdtemp(prefix="vibrofmu_loader_"))
+
+    def copy(name: bytes, change=None) -> str:
+        folder = os.path.join(os.fsencode(root), name)
+        shutil.copytree(os.fsencode(resources), folder, symlinks=True)
+        if change is not None:
+            change(Path(os.fsdecode(folder)))
+        return "file://" + urllib.parse.quote_from_bytes(folder)
+
+    def rm(name):
+        return lambda folder: (folder / name).unlink()
+
+    def write(text):
+        return lambda folder: (folder / "slavemodule.txt").write_text(text)
+
+    cases = [("folder name not UTF-8", copy(b"res\xff\xfe"), False),
+             ("slavemodule.txt names a missing module", copy(b"missing", write("NoSuchModule\n")), False),
+             ("slavemodule.txt empty", copy(b"empty", write("")), False),
+             ("slavemodule.txt names another module", copy(b"other", write("slave_support\n")), False),
+             ("the slave's module file missing", copy(b"partial", rm(f"_slave_{module}.py")), False),
+             ("a package file missing", copy(b"partial2", rm("vibromodel/plant.py")), False),
+             ("the identity file missing", copy(b"noid", rm("vibrofmu_identity.txt")), False),
+             ("another FMU's resources", (Path(other_unzipped) / "resources").resolve().as_uri(), False),
+             ("intact copy", copy(b"intact"), True)]
+    for label, uri, accept in cases:
+        c = probe.instantiate(uri)
+        if c:
+            probe.lib.fmi2FreeInstance(c)
+        emit(case=label, uri=uri, accepted=bool(c), expected=accept, log=probe.take_log())
+    shutil.rmtree(root, ignore_errors=True)

@@ -11,6 +11,7 @@ last case that finished (`run_probe` reads it).  Scenarios:
                 arguments to the other state calls: {"case", "status", "log", ...}
   pointers      NULL arrays and result pointers in every FMI 2.0 function, freed and foreign instance pointers
                 (vibrofmu.hosts.pointers); pointers3: the same in FMI 3.0
+  loader OTHER  a pythonfmu FMU's fmi2Instantiate on damaged copies of its resources and on OTHER's resources
   me_block      the Model Exchange block of a native state forged field by field, restored in ME and CS instances
   foreign_states OTHER (foreign_states3: FMI 3.0)  states of FMU OTHER (loaded in the same process) and freed states given to FMU's state calls
   forged N SEED [sweep]  N forged serialized states (see `forge`; sweep: native states, every word in turn):
@@ -34,8 +35,8 @@ from fmpy.fmi2 import (fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYP
                        fmi2CallbackLoggerTYPE, fmi2StepFinishedTYPE)
 
 from vibrofmu.hosts.forge import emit, scenario_forged
-from vibrofmu.hosts.pointers import (Probe3, scenario_foreign_states, scenario_foreign_states3, scenario_me_block,
-                                     scenario_pointers, scenario_pointers3)
+from vibrofmu.hosts.pointers import (Probe3, scenario_foreign_states, scenario_foreign_states3, scenario_loader,
+                                     scenario_me_block, scenario_pointers, scenario_pointers3)
 
 OK, WARNING, DISCARD, ERROR, FATAL = 0, 1, 2, 3, 4
 MODEL_EXCHANGE, CO_SIMULATION = 0, 1
@@ -254,6 +255,9 @@ def main(argv: list[str]) -> int:
             scenario_states(probe)
         elif scenario == "pointers":
             scenario_pointers(probe)
+        elif scenario == "loader":
+            other = Path(rest[0]) if Path(rest[0]).is_dir() else Path(extract(rest[0], os.path.join(tmp, "other")))
+            scenario_loader(probe, other)
         elif scenario == "me_block":
             scenario_me_block(probe)
         elif scenario == "foreign_states":
