@@ -273,3 +273,13 @@ def test_ctrl_c_stops_a_serial_diagram(tmp_path):
 def test_ctrl_c_stops_a_diagram_on_dask(tmp_path):
     code, err = _interrupt(tmp_path, "2")
     assert code == 130 and "error: interrupted" in err and "Traceback" not in err, err
+
+
+def test_an_exponent_still_moving_over_its_second_half_is_not_converged():
+    # drift = |lambda_1(n) - lambda_1(n/2)|: settled when below half of |lambda_1| (the sign cannot flip)
+    from vibrofmu.analyses.diagram import SETTLED, PointExponent
+
+    assert PointExponent(1.0, "up", largest=0.019, drift=0.0105).converged is False  # > 0.5 * 0.019
+    assert PointExponent(1.0, "up", largest=-0.025, drift=0.002).converged is True
+    assert PointExponent(1.0, "up").converged is False  # no exponent (pull-in): nothing settled
+    assert PointExponent(1.0, "up", largest=0.03, drift=SETTLED * 0.03).converged is True

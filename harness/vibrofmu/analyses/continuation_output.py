@@ -50,10 +50,12 @@ def _segments(values, flags):
 
 
 def plot_branch(path: Path, result: cont.Branch, title: str) -> None:
-    """Amplitude (x_max - x_min)/2 and x_min against the parameter: stable solid, unstable dashed, events
-    marked, doubled branches in their own colour, the contact edge x = -3/2 drawn on the x_min panel."""
-    fig, axes = plt.subplots(2, 1, figsize=(8, 7.5), sharex=True, layout="constrained",
-                             gridspec_kw={"height_ratios": [3, 2]})
+    """Amplitude (x_max - x_min)/2, x_min and the Floquet multipliers' moduli against the parameter: stable
+    solid, unstable dashed, events marked (one marker per kind, in the legend), doubled branches in their own
+    colour, the contact edge x = -3/2 drawn on the x_min panel, the unit circle |rho| = 1 on the multiplier
+    panel, a branch stopped short marked by a red cross. PNG, and PDF beside it."""
+    fig, axes = plt.subplots(3, 1, figsize=(8, 9.5), sharex=True, layout="constrained",
+                             gridspec_kw={"height_ratios": [3, 2, 2]})
     seen = set()
     for index, (br, color) in enumerate(zip([result, *result.doubled], ["k", "tab:blue", "tab:green", "tab:cyan"] * 9)):
         pts = [pt for pt in br.points]
@@ -62,6 +64,7 @@ def plot_branch(path: Path, result: cont.Branch, title: str) -> None:
         p = np.array([pt.p for pt in pts])
         amp = np.array([(pt.x_max - pt.x_min) / 2 for pt in pts])
         x_min = np.array([pt.x_min for pt in pts])
+        rho = np.array([np.abs(pt.multipliers) for pt in pts])
         stable = [pt.stable for pt in pts]
         name = "period-T branch" if index == 0 else f"doubled branch {index} (period 2T)"
         for start, stop, flag in _segments(p, stable):
@@ -71,6 +74,8 @@ def plot_branch(path: Path, result: cont.Branch, title: str) -> None:
             seen.add(label)
             axes[0].plot(p[start:stop], amp[start:stop], style, color=color, lw=1.4, label=label if show else None)
             axes[1].plot(p[start:stop], x_min[start:stop], style, color=color, lw=1.4)
+            for k in range(2):
+                axes[2].plot(p[start:stop], rho[start:stop, k], style, color=color, lw=1.0 if k else 1.4)
         for pt in pts:
             if pt.event:
                 marker, c = EVENT_MARKERS[pt.event]
@@ -79,6 +84,7 @@ def plot_branch(path: Path, result: cont.Branch, title: str) -> None:
                 axes[0].plot(pt.p, (pt.x_max - pt.x_min) / 2, marker, color=c, ms=7, mfc="none", mew=1.6,
                              label=pt.event if show else None)
                 axes[1].plot(pt.p, pt.x_min, marker, color=c, ms=7, mfc="none", mew=1.6)
+                axes[2].plot(pt.p, np.max(np.abs(pt.multipliers)), marker, color=c, ms=7, mfc="none", mew=1.6)
         if br.stop_reason and not br.stop_reason.startswith(("reached", "left")):
             last = pts[-1]
             label = "branch stopped short (point budget or step)"
@@ -92,11 +98,15 @@ def plot_branch(path: Path, result: cont.Branch, title: str) -> None:
                      fontsize=8, color="tab:orange", xytext=(0, 3), textcoords="offset points")
     axes[0].set_ylabel(r"amplitude $(x_{max} - x_{min})/2$")
     axes[1].set_ylabel(r"$x_{min}$ over the orbit")
-    axes[1].set_xlabel(parameter_label(result.problem.param))
+    axes[2].axhline(1.0, color="0.4", lw=0.8, ls=":")
+    axes[2].set_yscale("log")
+    axes[2].set_ylabel(r"multipliers $|\rho_1|$, $|\rho_2|$")
+    axes[2].set_xlabel(parameter_label(result.problem.param))
     for ax in axes:
         ax.grid(True, alpha=0.3)
     fig.suptitle(wrapped(title, fig.get_figwidth(), 11), fontsize=11)
     _legend_below(fig, [axes[0]], columns=2)
+    fig.savefig(path.with_suffix(".pdf"))  # vector, beside the PNG (_save closes the figure)
     _save(fig, path)
 
 

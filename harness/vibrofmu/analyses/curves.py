@@ -254,13 +254,13 @@ def follow(system: Augmented, start: CurvePoint, direction: float, p2_bounds: tu
         if progress is not None:
             progress(point)
         u, t = u_new, t_new
-        if not lo <= point.p2 <= hi:
-            reason = f"left the range of {system.params[1]}"
-            break
         met = [q for q in (stop_at or []) if _between(last, point, q, system.scales)]
-        if met:
+        if met:  # before the range: the branch's other fold may sit on the range's end
             joined = met[0]
             reason = f"reached the {system.kind} of the branch at {system.params[0]} = {joined.p1:.8g} (the same curve)"
+            break
+        if not lo <= point.p2 <= hi:
+            reason = f"left the range of {system.params[1]}"
             break
         h = min(max_step, 1.5 * h) if iterations <= 2 else min(max_step, h)
     return points, reason, joined

@@ -199,6 +199,10 @@ def _events(R: float):
     return contact, upper_gap, lower_gap
 
 
+# lambda_1(n) and lambda_1(n/2) within half of |lambda_1(n)| of each other: both have the same sign
+SETTLED = 0.5
+
+
 class PullIn(RuntimeError):
     """An electrode gap fell below PULL_IN_GAP during the Lyapunov integration."""
 
@@ -267,6 +271,13 @@ class PointExponent:
     message: str = ""
     cost_s: float = 0.0
     cpu_s: float = 0.0
+
+    @property
+    def converged(self) -> bool:
+        """The estimate moved by less than SETTLED |lambda_1| over the second half of the run: its sign is settled
+        (an exponent still moving by more, e.g. an unsettled transient near a doubling, is not read as chaos)."""
+        return bool(math.isfinite(self.largest) and math.isfinite(self.drift)
+                    and self.drift <= SETTLED * abs(self.largest))
 
 
 def point_exponent(base: Scene, name: str, value: float, direction: str, end, periods: int) -> PointExponent:
@@ -449,7 +460,7 @@ def lyapunov_table(d: Diagram, tol: float = 1e-6):
     the estimate's drift over the second half, periods, the number of distinct x samples (clusters at `tol`)."""
     import pyarrow as pa
 
-    cols = {k: [] for k in ("parameter", "direction", "largest", "second", "sum", "drift", "periods",
+    cols = {k: [] for k in ("parameter", "direction", "largest", "second", "sum", "drift", "converged", "periods",
                             "distinct_x", "message")}
     for direction, points in d.sweeps.items():
         by_value = {e.value: e for e in d.exponents.get(direction, [])}
@@ -461,6 +472,7 @@ def lyapunov_table(d: Diagram, tol: float = 1e-6):
             cols["second"].append(e.second)
             cols["sum"].append(e.largest + e.second)
             cols["drift"].append(e.drift)
+            cols["converged"].append(e.converged)
             cols["periods"].append(e.periods)
             cols["distinct_x"].append(distinct(p.x, tol))
             cols["message"].append(p.message or e.message)
@@ -511,8 +523,14 @@ def plot(d: Diagram, path, title: str = "") -> None:
     if with_exponents:
         ax2 = axes[1, 0]
         for direction, exps in d.exponents.items():
-            ax2.plot([e.value for e in exps], [e.largest for e in exps], ".-", ms=3, lw=0.8, color=COLOURS[direction],
-                     label=f"largest Lyapunov exponent, {direction}")
+            settled = [e for e in exps if e.converged]
+            ax2.plot([e.value for e in settled], [e.largest for e in settled], ".-", ms=3, lw=0.8,
+                     color=COLOURS[direction], label=rf"largest Lyapunov exponent $\lambda_1$, {direction}")
+            moving = [e for e in exps if not e.converged and math.isfinite(e.largest)]
+            if moving:  # hollow, unjoined: not evidence of chaos nor of order
+                ax2.plot([e.value for e in moving], [e.largest for e in moving], "o", ms=4, mfc="none", mew=0.8,
+                         color=COLOURS[direction],
+                         label=rf"not converged ({direction}: drift > {SETTLED:g} $|\lambda_1|$)")
         ax2.axhline(0.0, color="black", lw=0.8)
         ax2.set_ylabel(r"$\lambda_1$ (per unit $\tau$)")
         ax2.legend(loc="best", fontsize=8)

@@ -195,7 +195,7 @@ def run(args) -> int:
         for line in output.curves_lines(merged):
             print(line)
     export.write_json(out / "summary.json", summary)
-    print(f"wrote {out}/branch.parquet, branch.png, summary.json" + (", confirmations.json" if args.confirm else "")
+    print(f"wrote {out}/branch.parquet, branch.png, branch.pdf, summary.json" + (", confirmations.json" if args.confirm else "")
           + (", curves.parquet, curves.png, curves.pdf" if args.follow else "")
           + (", bench.json" if args.bench else "") + (", chart.png, chart.parquet, chart.json" if args.chart else ""))
     return status
