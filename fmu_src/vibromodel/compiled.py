@@ -54,7 +54,7 @@ INT_FIELD_RANGES = {
 HOST_VALUE_FIELDS = {"U_input", "in"}
 
 
-def _leaves(structure, base: int = 0, prefix: str = ""):
+def structure_leaves(structure, base: int = 0, prefix: str = ""):
     """(path, field name, ctypes type, offset) of every scalar of a ctypes structure, nested ones and arrays
     unrolled (a char array is one leaf)."""
     for name, kind in structure._fields_:
@@ -63,7 +63,7 @@ def _leaves(structure, base: int = 0, prefix: str = ""):
 
 def _unroll(kind, offset: int, path: str, name: str):
     if issubclass(kind, ctypes.Structure):
-        yield from _leaves(kind, offset, path + ".")
+        yield from structure_leaves(kind, offset, path + ".")
     elif issubclass(kind, ctypes.Array) and kind._type_ is not ctypes.c_char:
         for i in range(kind._length_):
             yield from _unroll(kind._type_, offset + i * ctypes.sizeof(kind._type_), f"{path}[{i}]", name)
@@ -77,7 +77,7 @@ def check_structure(structure, data: bytes, constant_ranges=()) -> None:
     (HOST_VALUE_FIELDS), every text NUL-terminated. Bytes in constant_ranges (parameters and settings, compared
     with the current model's by the caller) are skipped. Goes by the ctypes field lists, so fields added to the
     structures are covered without offsets written here."""
-    for path, name, kind, offset in _leaves(structure):
+    for path, name, kind, offset in structure_leaves(structure):
         size = ctypes.sizeof(kind)
         if offset + size > len(data) or any(low <= offset < high for low, high in constant_ranges):
             continue
@@ -97,7 +97,7 @@ def check_structure(structure, data: bytes, constant_ranges=()) -> None:
 
 def check_state(data: bytes) -> None:
     """check_structure for a VkPlant (the compiled plant's snapshot)."""
-    check_structure(VkPlant, data, _constant_ranges())
+    check_structure(VkPlant, data, constant_ranges())
 
 
 def _declare(library) -> None:
@@ -183,7 +183,7 @@ def fill_model(structure: VkModel, model) -> None:
         setattr(structure, name, value if isinstance(value, (int, float)) else (_double * 6)(*value))
 
 
-def _constant_ranges():
+def constant_ranges():
     """Byte ranges of VkPlant that parameters and settings fix: model and settings, each solver's configuration."""
     return ((0, VkPlant.dop.offset + Dop853State.t.offset),
             (VkPlant.rk4.offset, VkPlant.rk4.offset + Rk4State.t.offset))
@@ -357,7 +357,7 @@ class CompiledPlant:
         if len(data) != ctypes.sizeof(VkPlant):
             raise ValueError("not a snapshot of a CompiledPlant")
         current = ctypes.string_at(self._address, len(data))
-        if any(data[start:end] != current[start:end] for start, end in _constant_ranges()):
+        if any(data[start:end] != current[start:end] for start, end in constant_ranges()):
             raise ValueError("the snapshot is of a compiled plant with other parameters or settings")
         check_state(data)
         ctypes.memmove(self._address, data, len(data))

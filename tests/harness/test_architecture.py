@@ -34,3 +34,41 @@ def test_the_slaves_import_only_the_model_and_their_run_time(slave):
             imported.add(node.module.split(".")[0])
     assert SLAVES and imported, slave
     assert imported <= SLAVE_IMPORTS, f"{slave.name} imports {sorted(imported - SLAVE_IMPORTS)}"
+
+
+# the project's own packages and modules: a private name (one leading underscore) of these stays in its module
+PROJECT_MODULES = {"vibromodel", "vibrofmu", "slave_support", "fast_path", "message_text", "conftest",
+                   *(path.stem for path in SLAVES)}
+
+
+def private(name: str) -> bool:
+    """One leading underscore (not a dunder, not a sunder like ctypes' _fields_)."""
+    return name.startswith("_") and not name.endswith("_")
+
+
+def private_uses(path: Path) -> list[str]:
+    """`from <project module> import _name` and `<imported project module>._name` in the file."""
+    tree, uses, modules = ast.parse(path.read_text()), [], set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom) and (node.level > 0 or node.module.split(".")[0] in PROJECT_MODULES):
+            for alias in node.names:
+                if private(alias.name):
+                    uses.append(f"{path.relative_to(ROOT)}:{node.lineno}: from {node.module} import {alias.name}")
+                modules.add(alias.asname or alias.name)  # a module imported from a package, or a name: harmless
+        elif isinstance(node, ast.Import):
+            modules.update(alias.asname or alias.name.split(".")[0] for alias in node.names
+                           if alias.name.split(".")[0] in PROJECT_MODULES)
+    for node in ast.walk(tree):
+        if (isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name) and node.value.id in modules
+                and private(node.attr)):
+            uses.append(f"{path.relative_to(ROOT)}:{node.lineno}: {node.value.id}.{node.attr}")
+    return uses
+
+
+def test_no_private_name_is_used_across_modules():
+    """A name with a leading underscore is its module's own: another module (the tests included) that needs it
+    needs a public name."""
+    files = [path for folder in ("fmu_src", "harness", "tests") for path in sorted((ROOT / folder).rglob("*.py"))]
+    assert len(files) > 100
+    uses = [use for path in files for use in private_uses(path)]
+    assert uses == []

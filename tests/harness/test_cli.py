@@ -31,7 +31,7 @@ def stand_in_fmu(path: Path) -> Path:
 def test_simulate_with_compare_writes_all_results(tmp_path, plant_fmu, capsys):
     from vibrofmu.analyses import simulate
 
-    simulate._NOTED.clear()  # the note is printed once per process: forget earlier tests' runs
+    simulate.NOTED.clear()  # the note is printed once per process: forget earlier tests' runs
     out = tmp_path / "run"
     code = main(["simulate", "--fmu", str(plant_fmu), "--fidelity", "polynomial", "--solver", "rk4",
                  "--max-step", "0.05", "--set", "Delta=0.001", "--stop-time", "20", "--output-interval", "0.1",
@@ -83,7 +83,7 @@ def test_simulate_reports_an_early_stop(tmp_path, plant_fmu, capsys):
 def test_the_beta_note_is_printed_once_per_process(tmp_path, plant_fmu, capsys):
     from vibrofmu.analyses import simulate
 
-    simulate._NOTED.clear()
+    simulate.NOTED.clear()
     for run in ("a", "b"):
         assert main(["simulate", "--fmu", str(plant_fmu), "--stop-time", "1", "--out", str(tmp_path / run)]) == 0
     assert capsys.readouterr().err.count("note: beta^2") == 1
@@ -297,7 +297,7 @@ def test_the_note_on_the_scene_is_not_printed_before_an_error(argv, tmp_path, mo
     line of a refused command line."""
     from vibrofmu.analyses import simulate
 
-    simulate._NOTED.clear()
+    simulate.NOTED.clear()
     monkeypatch.chdir(tmp_path)
     code = main(["simulate", *argv, "--out", "o"])
     _assert_one_line(code, capsys.readouterr().err, "--stop-time", tmp_path)

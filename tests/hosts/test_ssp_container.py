@@ -105,7 +105,7 @@ def test_container_validates_and_runs_its_default_experiment(container_fmu):
 
 def test_container_equals_the_master_with_its_call_sequence(fmu_dir, container_fmu):
     H = 0.1
-    ours = container_check.run_master_like_container(container_check._with_rtol(container_check.master_scene(fmu_dir, H, STOP)))
+    ours = container_check.run_master_like_container(container_check.with_rtol(container_check.master_scene(fmu_dir, H, STOP)))
     theirs = container.run_container(container_fmu, H, STOP)
     n = len(ours["x"])
     assert len(theirs["x"]) == n

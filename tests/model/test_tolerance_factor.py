@@ -13,7 +13,7 @@ import math
 import numpy as np
 import pytest
 
-from vibrofmu.analyses.domains import _fastest, _steps, graze_scene
+from vibrofmu.analyses.domains import fastest_drive, run_steps, graze_scene
 from vibrofmu.fmus import kernel
 from vibromodel import models
 from vibromodel.models import (ERROR_MEMORY_REFERENCE, TOLERANCE_FACTOR_FLOOR, error_memory, solver_tolerance,
@@ -100,11 +100,11 @@ def test_the_factor_brings_the_campaigns_worst_long_runs_within_100_rtol_max_x(i
     scene, stop, rtol = campaign_scenes[index]
 
     def error(settings):
-        x, stopped = _steps(make_plant(scene, settings, 0.0, stop, library=library), stop, 1.0)
+        x, stopped = run_steps(make_plant(scene, settings, 0.0, stop, library=library), stop, 1.0)
         assert stopped is None
         return x
 
-    reference = error(Settings(rtol=1e-12, max_step=0.3 / _fastest(scene)))
+    reference = error(Settings(rtol=1e-12, max_step=0.3 / fastest_drive(scene)))
     bound = 100.0 * rtol * np.max(np.abs(reference))
     assert np.max(np.abs(error(Settings(rtol=rtol)) - reference)) <= bound
     monkeypatch.setattr(models, "ERROR_MEMORY_REFERENCE", math.inf)

@@ -96,9 +96,9 @@ def test_resume_recomputes_nothing_written(tmp_path, capsys, cluster):
     kept = [row for case, row in first.items() if case not in (3, 4, 7)]
     import pyarrow as pa
 
-    from vibrofmu.study.storage import _write_atomic
+    from vibrofmu.study.storage import write_atomic
     digest = json.loads((out / "spec.json").read_text())["digest"]  # a file without it would be set aside (issue 26)
-    _write_atomic(pa.Table.from_pylist(kept), out / "results.parquet", digest)
+    write_atomic(pa.Table.from_pylist(kept), out / "results.parquet", digest)
     code, _ = study(tmp_path, "--scheduler", address, "--set", "samples=10", "--resume")
     assert code == 0
     summary = json.loads((out / "summary.json").read_text())

@@ -26,7 +26,7 @@ def master_scene(fmu_dir: Path, step: float, stop_time: float = STOP_TIME):
     return replace(scene, fmus=fmus, step=step, stop_time=stop_time, ordering="jacobi", tolerance=TOLERANCE)
 
 
-def _with_rtol(scene):
+def with_rtol(scene):
     """The scene with rtol as a parameter of the plant and the reference instead of setupExperiment's tolerance
     (as in the container)."""
     fmus = tuple(replace(spec, parameters={**spec.parameters, "rtol": TOLERANCE}) if spec.name != "controller"
@@ -97,7 +97,7 @@ def compare(fmu_dir: Path, steps=(0.1, 0.05, 0.01), stop_time: float = STOP_TIME
         master = run_cosim(scene)
         mono = closed_loop.monolithic(fmu_dir / "HertzEAClosedLoop.fmu", closed_loop.monolithic_equivalent(scene),
                                       stop_time, H)
-        twin = run_master_like_container(_with_rtol(scene))
+        twin = run_master_like_container(with_rtol(scene))
         n = min(len(container["x"]), len(master.time), len(mono["time"]), len(twin["x"]))
         x = container["x"][:n]
         rows.append({

@@ -15,7 +15,7 @@ from vibromodel.parameters import Scene
 
 from vibrofmu.analyses import continuation as cont
 from vibrofmu.analyses import curves as two
-from vibrofmu.output.export import _legend_below, _save, parameter_label, plt, write_json, write_parquet, wrapped
+from vibrofmu.output.export import legend_below, save_plot, parameter_label, plt, write_json, write_parquet, wrapped
 
 EVENT_MARKERS = {"fold": ("s", "tab:red"), "period-doubling": ("D", "tab:purple"),
                  "neimark-sacker": ("*", "tab:olive"), "grazing": ("o", "tab:orange")}
@@ -105,9 +105,9 @@ def plot_branch(path: Path, result: cont.Branch, title: str) -> None:
     for ax in axes:
         ax.grid(True, alpha=0.3)
     fig.suptitle(wrapped(title, fig.get_figwidth(), 11), fontsize=11)
-    _legend_below(fig, [axes[0]], columns=2)
-    fig.savefig(path.with_suffix(".pdf"))  # vector, beside the PNG (_save closes the figure)
-    _save(fig, path)
+    legend_below(fig, [axes[0]], columns=2)
+    fig.savefig(path.with_suffix(".pdf"))  # vector, beside the PNG (save_plot closes the figure)
+    save_plot(fig, path)
 
 
 # ----- the two-parameter chart in (omega, Delta) -------------------------------------------------------------
@@ -296,8 +296,8 @@ def plot_chart(path: Path, data: dict) -> None:
     fig.suptitle(wrapped(f"where the averaged (slow-flow) predictions hold: exact folds, grazing and period "
                          f"doubling beside the slow flow's folds (mu = {s['mu']:g}, R = {s['R']:g})",
                          fig.get_figwidth(), 11), fontsize=11)
-    _legend_below(fig, [ax], columns=3)
-    _save(fig, path)
+    legend_below(fig, [ax], columns=3)
+    save_plot(fig, path)
 
 
 def agreement_table(data: dict) -> list[str]:
@@ -367,9 +367,9 @@ def plot_curves(path: Path, curves: two.Curves, scene: Scene, title: str) -> Non
     ax.set_ylabel(parameter_label(p2))
     ax.grid(True, alpha=0.3)
     fig.suptitle(wrapped(title, fig.get_figwidth(), 11), fontsize=11)
-    _legend_below(fig, [ax], columns=2)
-    fig.savefig(path.with_suffix(".pdf"))  # vector, beside the PNG (_save closes the figure)
-    _save(fig, path)
+    legend_below(fig, [ax], columns=2)
+    fig.savefig(path.with_suffix(".pdf"))  # vector, beside the PNG (save_plot closes the figure)
+    save_plot(fig, path)
 
 
 def curves_summary(curves: two.Curves) -> list[dict]:

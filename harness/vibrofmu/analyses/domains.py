@@ -48,7 +48,7 @@ def _kernel():
     return kernel_library(), "the campaign's kernel"
 
 
-def _steps(plant, stop: float, h: float) -> tuple[np.ndarray, str | None]:
+def run_steps(plant, stop: float, h: float) -> tuple[np.ndarray, str | None]:
     """x at every communication point until stop or the first error (its message)."""
     xs = []
     for i in range(int(round(stop / h))):
@@ -64,7 +64,7 @@ def rung_grid(stop: float = 50.0, h: float = 0.1) -> dict:
     library, rows = _kernel(), []
     for values in GRID:
         scene = Scene(**values)
-        exact, exact_stop = _steps(make_plant(scene, Settings(), 0.0, stop, library=library), stop, h)
+        exact, exact_stop = run_steps(make_plant(scene, Settings(), 0.0, stop, library=library), stop, h)
         for fidelity in (3, 4):
             row = {"values": values, "fidelity": fidelity, "fidelity_0_stop": exact_stop}
             started = time.perf_counter()
@@ -75,7 +75,7 @@ def rung_grid(stop: float = 50.0, h: float = 0.1) -> dict:
                              "message": str(error)})
                 continue
             setup = time.perf_counter() - started
-            x, stopped = _steps(plant, stop, h)
+            x, stopped = run_steps(plant, stop, h)
             n = min(len(x), len(exact))
             error = float(np.max(np.abs(x[:n] - exact[:n]))) if n else math.nan
             rows.append({**row, "outcome": "warned" if plant.warnings else "accepted", "setup_seconds": setup,
@@ -178,7 +178,7 @@ def graze_scene(rng: np.random.Generator) -> tuple[Scene, float, float]:
     return scene, float(rng.uniform(500.0, 5000.0)), float(10.0 ** -rng.integers(3, 9))
 
 
-def _fastest(scene: Scene) -> float:
+def fastest_drive(scene: Scene) -> float:
     return max(scene.omega, scene.Omega if scene.beta else 0.0, 2.0 * scene.Omega if scene.gamma else 0.0)
 
 
@@ -187,14 +187,14 @@ def graze_campaign(n: int = 100, seed: int = 0, h: float = 1.0) -> dict:
     library, rng, rows = _kernel(), np.random.default_rng(seed), []
     for _ in range(n):
         scene, stop, rtol = graze_scene(rng)
-        reference, ref_stop = _steps(make_plant(scene, Settings(rtol=1e-12, max_step=0.3 / _fastest(scene)), 0.0,
+        reference, ref_stop = run_steps(make_plant(scene, Settings(rtol=1e-12, max_step=0.3 / fastest_drive(scene)), 0.0,
                                                 stop, library=library), stop, h)
         row = {"scene": scene.as_dict(), "stop": stop, "rtol": rtol, "reference_stop": ref_stop}
         scale = 100.0 * rtol * float(np.max(np.abs(reference))) if len(reference) else math.nan
         for label, max_step, factor in (("ceiling", 0.0, True), ("none", 1000.0, True), ("as_asked", 0.0, False)):
             with contextlib.nullcontext() if factor else _tolerance_factor_off():
                 plant = make_plant(scene, Settings(rtol=rtol, max_step=max_step), 0.0, stop, library=library)
-            x, stopped = _steps(plant, stop, h)
+            x, stopped = run_steps(plant, stop, h)
             k = min(len(x), len(reference))
             error = float(np.max(np.abs(x[:k] - reference[:k]))) if k else math.nan
             row[label] = {"error_over_bound": error / scale, "stopped": stopped, "rhs_calls": plant.nfev,

@@ -76,7 +76,7 @@ def run_title(settings: Settings, output_interval: float) -> str:
     return "HertzEAOscillator: " + ", ".join(words)
 
 
-_NOTED: set[str] = set()  # notes already printed in this process
+NOTED: set[str] = set()  # notes already printed in this process
 
 # What a run keeps per output point: time and the plant's 6 outputs (x, v, a, F_contact, F_electrostatic,
 # in_contact), 8 bytes each in memory (hosts.run preallocates them) and at most 25 characters each in result.csv
@@ -129,8 +129,8 @@ def print_note(scene: Scene) -> None:
     """A parameter set no voltages can produce (beta^2 != 8 alpha gamma): an explanation, not a problem, printed
     once per process as a note when the run starts (never before an error)."""
     note = consistency_warning(scene)
-    if note and note not in _NOTED:
-        _NOTED.add(note)
+    if note and note not in NOTED:
+        NOTED.add(note)
         print(f"note: {note}", file=sys.stderr)
 
 

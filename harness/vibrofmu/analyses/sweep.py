@@ -22,7 +22,7 @@ from fmpy.fmi1 import FMICallException
 from vibromodel.parameters import Scene
 from vibromodel.plant import Settings
 
-from vibrofmu.hosts.run import FmuInstance, _reason
+from vibrofmu.hosts.run import FmuInstance, call_failure_reason
 from vibrofmu.analyses.harmonics import first_harmonic
 from vibrofmu.analyses.simulate import start_values
 
@@ -143,7 +143,7 @@ def settle(fmu_path, unzip_dir: str, scene: Scene, settings: Settings) -> SweepP
         c, mean, settled, periods = settle_loop(step, scene)
         return SweepPoint(scene.omega, abs(c), mean, settled, periods, tuple(fmu.getReal(refs)))
     except FMICallException as error:
-        raise SweepStopped(_reason(error, instance.log)) from None
+        raise SweepStopped(call_failure_reason(error, instance.log)) from None
     finally:
         instance.close()
 

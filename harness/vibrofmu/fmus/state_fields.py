@@ -15,7 +15,7 @@ from __future__ import annotations
 import ctypes
 
 from vibromodel import core_layouts
-from vibromodel.compiled import HOST_VALUE_FIELDS, INT_FIELD_RANGES, VkPlant, _constant_ranges, _leaves
+from vibromodel.compiled import HOST_VALUE_FIELDS, INT_FIELD_RANGES, VkPlant, constant_ranges, structure_leaves
 
 
 def _loop_constants():
@@ -28,7 +28,7 @@ def _loop_constants():
 # model -> (the compiled structure, its member in config.h's ModelData, the bytes a state carries that are checked
 # (the closed loop's reference is re-pointed from ModelData.reference before every use), the constant ranges)
 MODELS = {
-    "HertzEAOscillator": (VkPlant, "plant", ctypes.sizeof(VkPlant), _constant_ranges()),
+    "HertzEAOscillator": (VkPlant, "plant", ctypes.sizeof(VkPlant), constant_ranges()),
     "AdaptiveLyapunovController": (core_layouts.VcController, "c", ctypes.sizeof(core_layouts.VcController),
                                    ((0, core_layouts.VcController.t.offset),)),
     "HertzEAClosedLoop": (core_layouts.VlLoop, "loop", core_layouts.VlLoop.reference.offset, _loop_constants()),
@@ -40,7 +40,7 @@ KIND_FINITE, KIND_RANGE, KIND_TEXT = 0, 1, 2
 def state_fields_header(model_id: str) -> str:
     structure, member, checked, constants = MODELS[model_id]
     rows = []
-    for path, name, kind, offset in _leaves(structure):
+    for path, name, kind, offset in structure_leaves(structure):
         size = ctypes.sizeof(kind)
         if offset + size > checked or any(low <= offset < high for low, high in constants):
             continue

@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 from fmpy.fmi1 import FMICallException
 
-from vibrofmu.hosts.run import FmuInstance, FmuLog, _reason
+from vibrofmu.hosts.run import FmuInstance, FmuLog, call_failure_reason
 from vibrofmu.hosts.scene import (ORDERINGS, Connection, CosimScene, FmuSpec, SceneError, read_scene,  # noqa: F401
                                   scene_fmu)
 from vibrofmu.hosts.ssp import load_ssp
@@ -101,7 +101,7 @@ class Master:
         try:
             function()
         except FMICallException as error:
-            raise StepFailure(f"{name}: {_reason(error, self.log, name)}") from None
+            raise StepFailure(f"{name}: {call_failure_reason(error, self.log, name)}") from None
 
     def take_inputs(self, name: str) -> None:
         """Set an FMU's inputs from its sources' current outputs."""

@@ -212,7 +212,7 @@ def run_fmu(fmu_path: Path | str, start_values: dict, stop_time: float, output_i
             instance.set(start_values)
             fmu.exitInitializationMode()
         except FMICallException as error:
-            stop_reason, status = _reason(error, instance.log), error.status
+            stop_reason, status = call_failure_reason(error, instance.log), error.status
         instantiate_time = time.perf_counter() - t0
 
         t_loop = time.perf_counter()
@@ -248,7 +248,7 @@ def _steps(instance, times, data, n_steps, output_interval, stop_time, progress,
             fmu.doStep(currentCommunicationPoint=t, communicationStepSize=h)
             row = read_outputs()
         except FMICallException as error:
-            return filled, _reason(error, instance.log), error.status
+            return filled, call_failure_reason(error, instance.log), error.status
         times[filled], data[filled] = t + h, row  # the FMU's own clock: t + h
         filled += 1
         if progress is not None:
@@ -256,7 +256,7 @@ def _steps(instance, times, data, n_steps, output_interval, stop_time, progress,
     return filled, stop_reason, status
 
 
-def _reason(error: FMICallException, log: FmuLog, instance: str | None = None) -> str:
+def call_failure_reason(error: FMICallException, log: FmuLog, instance: str | None = None) -> str:
     """Why an FMI call failed; a call failed by the user's Ctrl-C raises KeyboardInterrupt instead (every host
     answers a failed call through here)."""
     interrupts.check()

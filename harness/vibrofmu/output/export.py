@@ -121,7 +121,7 @@ def _title(fig, ax, title: str, fontsize: float = 11) -> None:
     ax.set_title(wrapped(title, fig.get_figwidth() * ax.get_position().width, fontsize), fontsize=fontsize)
 
 
-def _legend_below(fig, axes, columns: int = 4) -> None:
+def legend_below(fig, axes, columns: int = 4) -> None:
     """One legend for the figure, outside and below the axes: the handles of every axes in `axes`."""
     handles, labels = [], []
     for ax in axes:
@@ -134,7 +134,7 @@ def _legend_below(fig, axes, columns: int = 4) -> None:
                    frameon=False)
 
 
-def _save(fig, path: Path) -> None:
+def save_plot(fig, path: Path) -> None:
     save_figure(fig, path, dpi=DPI)
 
 
@@ -191,7 +191,7 @@ def figure_x(time, x, title: str, reference_x=None, in_contact=None, stop=None):
     if len(time) > 1:  # a stopped run: room after its end, so that the line marking the stop is not the frame
         ax.set_xlim(time[0], end + (0.03 * (end - time[0]) if stop is not None else 0.0))
     _title(fig, ax, title)
-    _legend_below(fig, [ax])
+    legend_below(fig, [ax])
     return fig
 
 
@@ -208,7 +208,7 @@ def stop_point(end_time: float, reason: str | None) -> tuple[float | None, float
 
 
 def plot_x(path: Path, time, x, title: str, reference_x=None, in_contact=None, stop=None) -> None:
-    _save(figure_x(time, x, title, reference_x, in_contact, stop), path)
+    save_plot(figure_x(time, x, title, reference_x, in_contact, stop), path)
 
 
 def plot_analytic(path: Path, tau, x, x_ref, boundaries, title: str) -> None:
@@ -228,8 +228,8 @@ def plot_analytic(path: Path, tau, x, x_ref, boundaries, title: str) -> None:
         ax.grid(True, which="major", alpha=0.3)
     for boundary, name in zip(boundaries, (r"$\tau^*$", "fit ends")):
         top.annotate(name, (boundary, 1.0), xycoords=("data", "axes fraction"), fontsize=8, ha="left", va="top")
-    _legend_below(fig, [top])
-    _save(fig, path)
+    legend_below(fig, [top])
+    save_plot(fig, path)
 
 
 def plot_convergence(path: Path, rows: list[dict]) -> None:
@@ -248,8 +248,8 @@ def plot_convergence(path: Path, rows: list[dict]) -> None:
     ax.set_ylabel("error, residual")
     _title(fig, ax, "OAFM harmonic basis: convergence with the order")
     ax.grid(True, which="both", alpha=0.3)
-    _legend_below(fig, [ax], columns=2)
-    _save(fig, path)
+    legend_below(fig, [ax], columns=2)
+    save_plot(fig, path)
 
 
 def figure_frequency_response(curve, continuation, sweeps, folds, omega_range, title: str):
@@ -291,12 +291,12 @@ def figure_frequency_response(curve, continuation, sweeps, folds, omega_range, t
     if len(panels) > 1:
         axes[0][1].set_title("zoom: hysteresis interval", fontsize=10)
     fig.suptitle(wrapped(title, fig.get_figwidth(), 11), fontsize=11)
-    _legend_below(fig, axes[0], columns=2 * len(panels))  # the entries of every panel; two fit in 7 inches
+    legend_below(fig, axes[0], columns=2 * len(panels))  # the entries of every panel; two fit in 7 inches
     return fig
 
 
 def plot_frequency_response(path: Path, curve, continuation, sweeps, folds, omega_range, title: str) -> None:
-    _save(figure_frequency_response(curve, continuation, sweeps, folds, omega_range, title), path)
+    save_plot(figure_frequency_response(curve, continuation, sweeps, folds, omega_range, title), path)
 
 
 ESTIMATE_SYMBOLS = {"mu": r"\mu", "Delta": r"\Delta", "beta": r"\beta", "gamma": r"\gamma"}
@@ -361,7 +361,7 @@ def figures_closed_loop(time, series: dict, theta: dict, title: str) -> dict:
     for ax in axes[-1]:
         ax.set_xlabel(TAU)
     fig.suptitle(wrapped(f"{title}: parameter estimates", fig.get_figwidth(), 11), fontsize=11)
-    _legend_below(fig, axes.flat[:1])
+    legend_below(fig, axes.flat[:1])
     figures["estimates.png"] = fig
     return figures
 
@@ -369,7 +369,7 @@ def figures_closed_loop(time, series: dict, theta: dict, title: str) -> dict:
 def plot_closed_loop(out_dir: Path, time, series: dict, theta: dict, title: str) -> list[Path]:
     paths = []
     for name, fig in figures_closed_loop(time, series, theta, title).items():
-        _save(fig, out_dir / name)
+        save_plot(fig, out_dir / name)
         paths.append(out_dir / name)
     return paths
 
@@ -379,4 +379,4 @@ def _finish(fig, ax, title: str, ylabel: str) -> None:
     ax.set_ylabel(ylabel)
     _title(fig, ax, title)
     ax.grid(True, alpha=0.3)
-    _legend_below(fig, [ax])
+    legend_below(fig, [ax])

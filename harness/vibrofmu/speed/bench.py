@@ -40,7 +40,7 @@ from vibrofmu.output import export
 from vibrofmu.speed import ladder, native_timing
 from vibrofmu.fmus.kernel import kernel_library
 from vibrofmu.analyses.reference import reference_solution
-from vibrofmu.hosts.run import FmuInstance, FmuLog, _reason
+from vibrofmu.hosts.run import FmuInstance, FmuLog, call_failure_reason
 from vibrofmu.analyses.simulate import plant_run, start_values
 
 BENCH_RTOL = 1e-13  # the reference's rtol (atol = 1e-2 rtol, like everything here)
@@ -224,7 +224,7 @@ def fmu_run(ctx: Context, start: dict, interval: float) -> tuple[float, float, n
             instance.set(start)
             fmu.exitInitializationMode()
         except FMICallException as error:
-            raise RunFailed(_reason(error, log)) from None
+            raise RunFailed(call_failure_reason(error, log)) from None
         names = [n for n in instance.output_columns() if instance.variables[n].type == "Real"]
         refs, column = instance.value_references(names), names.index("x")
         n = ctx.steps(interval)
@@ -237,7 +237,7 @@ def fmu_run(ctx: Context, start: dict, interval: float) -> tuple[float, float, n
                 do_step(i * interval, interval)
                 xs[i + 1] = get_real(refs)[column]
         except FMICallException as error:
-            raise RunFailed(_reason(error, log)) from None
+            raise RunFailed(call_failure_reason(error, log)) from None
         finished = time.perf_counter()
         if start.get("kernel") == Kernel.COMPILED and instance.fast_path_steps() != n:
             raise RunFailed(f"the C fast path did {instance.fast_path_steps()} of {n} doSteps: the compiled kernel "

@@ -276,11 +276,11 @@ def test_points(spec, data: dict) -> list[dict]:
 def run_test_point(spec_dict: dict, fmu_digest: str | None, point: dict) -> dict:
     """A Dask task: the two-start test at one grid point on this worker's engine."""
     from vibrofmu.study.engines import engine_for
-    from vibrofmu.study.scheduling import _FMU_BYTES
+    from vibrofmu.study.scheduling import FMU_BYTES
     from vibrofmu.study.spec import Spec
 
     spec = Spec(**spec_dict)
-    engine = engine_for(spec.engine, _FMU_BYTES.get(fmu_digest) if fmu_digest else None)
+    engine = engine_for(spec.engine, FMU_BYTES.get(fmu_digest) if fmu_digest else None)
     scene = spec.base_scene().with_values(Delta=point["Delta"], omega=point["omega"])
     cap = int(spec.settings.get("cusp_test_periods", TEST_MAX_PERIODS))
     result = two_start(engine, scene, point["starts"], max_periods=cap)

@@ -217,9 +217,9 @@ class FmuRun:
         return x, v
 
     def reason(self, error) -> str:
-        from vibrofmu.hosts.run import _reason
+        from vibrofmu.hosts.run import call_failure_reason
 
-        return _reason(error, self.engine.log, self.instance.name)
+        return call_failure_reason(error, self.engine.log, self.instance.name)
 
     def release(self, ok: bool = True) -> None:
         self.engine.give_back(self.instance)
@@ -290,10 +290,10 @@ class FmuEngine(Engine):
         try:
             return FmuRun(self, instance, scene)
         except FmiError as error:  # the start values were refused: the FMU's log says why
-            from vibrofmu.hosts.run import _reason
+            from vibrofmu.hosts.run import call_failure_reason
 
             self.give_back(instance)
-            raise RunRefused(_reason(error, self.log, instance.name)) from None
+            raise RunRefused(call_failure_reason(error, self.log, instance.name)) from None
 
 
 

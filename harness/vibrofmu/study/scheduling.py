@@ -44,7 +44,7 @@ CHECKPOINT_S = 2.0
 STOP_GRACE_S = 1.5
 CLOSE_TIMEOUT_S = 2.0
 
-_FMU_BYTES: dict[str, bytes] = {}  # per worker process: digest -> FMU bytes (filled by FmuFile)
+FMU_BYTES: dict[str, bytes] = {}  # per worker process: digest -> FMU bytes (filled by FmuFile)
 
 
 class FmuFile(WorkerPlugin):
@@ -56,7 +56,7 @@ class FmuFile(WorkerPlugin):
         self.digest, self.data = digest, data
 
     def setup(self, worker):
-        _FMU_BYTES[self.digest] = self.data
+        FMU_BYTES[self.digest] = self.data
 
 
 STOP = threading.Event()
@@ -100,8 +100,8 @@ def run_batch(spec_dict: dict, fmu_digest: str | None, cases: list[dict]) -> lis
     from vibrofmu.study.cases import run_case
 
     spec = Spec(**spec_dict)
-    engine = engine_for(spec.engine, _FMU_BYTES.get(fmu_digest) if fmu_digest else None)
-    if spec.engine == "fmu" and fmu_digest not in _FMU_BYTES:
+    engine = engine_for(spec.engine, FMU_BYTES.get(fmu_digest) if fmu_digest else None)
+    if spec.engine == "fmu" and fmu_digest not in FMU_BYTES:
         raise RuntimeError("the FMU plugin is not installed on this worker")
     rows = []
     for case in cases:
@@ -118,8 +118,8 @@ def warm_up(spec_dict: dict, fmu_digest: str | None) -> float:
     from vibrofmu.study.engines import engine_for
 
     spec = Spec(**spec_dict)
-    if spec.engine == "core" or fmu_digest in _FMU_BYTES:
-        engine_for(spec.engine, _FMU_BYTES.get(fmu_digest) if fmu_digest else None)
+    if spec.engine == "core" or fmu_digest in FMU_BYTES:
+        engine_for(spec.engine, FMU_BYTES.get(fmu_digest) if fmu_digest else None)
     return time.perf_counter() - started
 
 

@@ -41,7 +41,7 @@ def rows_digest(table: pa.Table) -> str:
     return digest.hexdigest()
 
 
-def _write_atomic(table: pa.Table, path: Path, spec_digest: str) -> None:
+def write_atomic(table: pa.Table, path: Path, spec_digest: str) -> None:
     table = table.replace_schema_metadata({SPEC_KEY: spec_digest.encode(), ROWS_KEY: rows_digest(table).encode()})
     tmp = path.with_name(f".{path.name}.{uuid.uuid4().hex}.tmp")
     try:
@@ -183,7 +183,7 @@ class Store:
         if not rows:
             return 0
         cases = {row["case"] for row in rows}
-        _write_atomic(pa.Table.from_pylist(rows), self.parts / f"part-{min(cases):07d}-{uuid.uuid4().hex[:8]}.parquet",
+        write_atomic(pa.Table.from_pylist(rows), self.parts / f"part-{min(cases):07d}-{uuid.uuid4().hex[:8]}.parquet",
                       self.digest)
         self.written |= cases
         return len(cases)
@@ -194,7 +194,7 @@ class Store:
         table = self.load()
         if table is None or not parts:
             return table
-        _write_atomic(table, self.dir / RESULTS, self.digest)
+        write_atomic(table, self.dir / RESULTS, self.digest)
         for path in parts:
             if path.exists():  # (not one set aside meanwhile)
                 path.unlink()
