@@ -15,15 +15,19 @@ import ctypes
 import numpy as np
 
 from . import forces
-from .compiled import SOLVER_SLOTS, check_structure
+from .closedloop import ClosedLoop
+from .compiled import ATOL_PER_RTOL, RAISED_TYPES, SOLVER_SLOTS, check_structure, fill_model
+from .compiled_open_loop import OafmProgram, oafm_hints
 # controller.h's and closedloop.h's constants and structures, generated from the headers (core_layouts.py)
 from .core_layouts import (VC_GAINS, VC_N, VC_NON_FINITE, VC_OK, VC_RAISED, VL_BAD_STEP, VL_BAD_TIME, VL_FAILED,
                            VL_OK, VL_RAISED, VL_TERMINAL, VL_TOO_MANY_STEPS, VcController,
                            VlLoop)
-from .control import ESTIMATE_NAMES, Controller, Gains, validate_estimates, validate_law
+from .control import ESTIMATE_NAMES, Controller, Gains, HeldInputEstimator, validate_estimates, validate_law
 from .fidelities import entry
+from .integrate import IntegrationError, TerminalEvent
 from .parameters import NonFiniteOutput, ParameterError, Scene, check_finite, validate
-from .plant import MAX_STEPS_PER_DOSTEP, TIME_TOLERANCE
+from .plant import MAX_STEPS_PER_DOSTEP, RK4_DEFAULT_STEP, TIME_TOLERANCE, Kernel
+from .solvers import solver_entry
 
 N = VC_N
 CONTROLLER_INPUTS = ("x", "v", "x_ref", "v_ref", "a_ref")
@@ -201,8 +205,6 @@ def restore_bytes(address: int, structure, constants: int, snapshot: dict) -> No
 
 def make_estimator(scene: Scene, gains: Gains, law: int, estimates, t0: float, kernel: int, library):
     """CompiledEstimator when kernel == 0 and the library has the controller, else HeldInputEstimator."""
-    from .control import HeldInputEstimator
-
     if kernel not in (0, 1):
         raise ParameterError("kernel", kernel, "must be 0 (compiled) or 1 (pure Python)")
     if kernel == 0 and library is not None and declare(library) is None:
@@ -250,11 +252,6 @@ class CompiledClosedLoop(_FastPath):
     STEP_FUNCTION = "vk_loop_do_step"  # vk_loop_do_step(VlLoop *, t, h)
 
     def __init__(self, python, library):
-        from .compiled import ATOL_PER_RTOL, fill_model
-        from .compiled_open_loop import OafmProgram, oafm_hints
-        from .plant import RK4_DEFAULT_STEP
-        from .solvers import solver_entry
-
         self.python = python
         self.notes, self.warnings = list(python.notes), python.warnings
         self._library, self.problem = library, None
@@ -366,9 +363,6 @@ class CompiledClosedLoop(_FastPath):
             raise RuntimeError(f"the compiled closed loop returned code {code} without a pending error (a kernel bug)")
 
     def _raise_pending(self) -> None:
-        from .compiled import RAISED_TYPES
-        from .integrate import IntegrationError, TerminalEvent
-
         l = self._l
         code = l.error
         if code == VL_OK:
@@ -393,9 +387,6 @@ def make_closed_loop(scene: Scene, settings, loop, t0: float, stop_time, cache_d
     """The closed loop of `settings` (plant.Settings: fidelity, solver, rtol, max_step, kernel) and `loop`
     (closedloop.LoopSettings): on the compiled kernel where settings.kernel asks for it and library =
     (vibromodel.compiled.load_library's result) holds one, else closedloop.ClosedLoop. Raises ParameterError."""
-    from .closedloop import ClosedLoop
-    from .plant import Kernel
-
     python = ClosedLoop(scene, settings, loop, t0=t0, stop_time=stop_time, cache_dirs=cache_dirs)
     if settings.kernel != Kernel.COMPILED:
         return python

@@ -25,6 +25,8 @@ from .compiled import VkPlant, fill_model
 from .core_layouts import (OE_BASES, OE_ITEMS, OE_POWERS, OE_RESYNC, OE_STEP_SLACK, OL_BEYOND, OL_REFUSED, OeCache,
                            OePiece, OeSolution, OlPlant, SfTable)
 from .fidelities import Evaluator, entry
+from .forces import coefficients
+from .oafm_bases import eq11_operator
 from .settings import TIME_TOLERANCE, Outputs, check_step
 
 EPS = np.finfo(float).eps
@@ -300,9 +302,6 @@ def recurrence_error_bound(terms: dict, s: float, stepped: bool = True) -> float
 
 def oafm_hints(scene):
     """(decay hints, frequency hints) of a scene: mu/2, q, sqrt(a1), omega, Omega (oafm_bases)."""
-    from .forces import coefficients
-    from .oafm_bases import eq11_operator
-
     a1 = coefficients(scene.alpha, scene.gamma, scene.R)[1]
     try:
         q = eq11_operator(scene).q
