@@ -18,11 +18,14 @@ The plant's scalar path only pays one `is None` test per stage.
 """
 from __future__ import annotations
 
+import abc
 import errno
 import importlib.util
 import math
 import os
 import sys
+from fractions import Fraction
+from math import comb
 
 import numpy as np
 
@@ -99,9 +102,6 @@ EVENT_SCREEN = 2.0
 def _bernstein_matrix():
     """M[j][k]: Bernstein coefficient k (degree 7) of the j-th term s^a (1-s)^b of the dense output
     (scipy's Dop853DenseOutput: F0 s + F1 s(1-s) + F2 s^2(1-s) + F3 s^2(1-s)^2 + ... + F6 s^4(1-s)^3)."""
-    from fractions import Fraction
-    from math import comb
-
     powers = ((1, 0), (1, 1), (2, 1), (2, 2), (3, 2), (3, 3), (4, 3))
     rows = []
     for a, b in powers:
@@ -190,7 +190,56 @@ def _bernstein_search(b, positive, beyond):
     return None
 
 
-class Dop853:
+class Integrator(abc.ABC):
+    """The solvers' protocol (like SciPy's OdeSolver): what the plants, the closed loop and their snapshots use of
+    an integrator of x'' = accel(t, x, v, U) (with `rates`, U carries extra first-order states). Every solver of the
+    registry (solvers.SolverEntry.integrator) derives from it; a test checks that.
+
+    State: t, x, v, U (the last step's end), nfev and n_steps (counters), max_step (the ceiling or the step).
+    Stepping: advance(t_target) covers t_target; set_input(t, U) holds a new input from t on.
+    Dense output: value_at(t) -> (x, v) and U_at(t) within the last step (a fixed-step solver: at its end only).
+    Events (models.Event): a terminal event's zero raises terminal_event(...) (TerminalEvent, the run stops there);
+    a non-terminal one's (the contact kink) ends a step there. The root search is the shared one: _bernstein_search
+    on the dense output (Dop853), the Hermite cubic of a step (Rk4, _hermite_event)."""
+
+    events: tuple
+    t: float
+    x: float
+    v: float
+    nfev: int
+    n_steps: int
+    max_step: float
+
+    @classmethod
+    @abc.abstractmethod
+    def from_settings(cls, accel, events, t0, x0, v0, U, settings, max_step, *, rates=None, phased=None,
+                      step_budget=math.inf) -> "Integrator":
+        """The solver of `settings` (plant.Settings) with the step ceiling or step max_step (SolverEntry.make)."""
+
+    @abc.abstractmethod
+    def set_input(self, t, U) -> None:
+        """Input U holds from t on."""
+
+    @abc.abstractmethod
+    def advance(self, t_target) -> None:
+        """Step until t_target is covered; TerminalEvent at a terminal event up to t_target, IntegrationError when
+        the solver cannot go on."""
+
+    @abc.abstractmethod
+    def value_at(self, t) -> tuple[float, float]:
+        """(x, v) at t within the last step (dense output)."""
+
+    @abc.abstractmethod
+    def U_at(self, t):
+        """The input (or the extra states) at t within the last step."""
+
+    @staticmethod
+    def terminal_event(name: str, t: float, x: float, v: float) -> TerminalEvent:
+        """The TerminalEvent of event `name` at (t, x, v), as every solver words it."""
+        return TerminalEvent(f"{name} at tau = {t:.10g}, x = {x:.10g}", t, x, v)
+
+
+class Dop853(Integrator):
     """Adaptive DOP853 with dense output and event location; restartable between doSteps.
     With `rates`, the input slot U carries extra first-order states (see the module docstring).
 
@@ -249,16 +298,14 @@ class Dop853:
         steps = 0
         while self.t < t_target:
             if self.stop is not None:
-                name, t, x, v = self.stop
-                raise TerminalEvent(f"{name} at tau = {t:.10g}, x = {x:.10g}", t, x, v)
+                raise self.terminal_event(*self.stop)
             if steps >= self.step_budget:
                 raise IntegrationError(f"{steps} steps reached only tau = {self.t:.10g} of {t_target:.10g}: "
                                        "make smaller communication steps", self.t, self.x, self.v)
             self._step()
             steps += 1
         if self.stop is not None and self.stop[1] <= t_target:
-            name, t, x, v = self.stop
-            raise TerminalEvent(f"{name} at tau = {t:.10g}, x = {x:.10g}", t, x, v)
+            raise self.terminal_event(*self.stop)
 
     def _step(self):
         t, x, v = self.t, self.x, self.v
@@ -658,7 +705,7 @@ def _rotate(phases, rotation):
     return out
 
 
-class Rk4:
+class Rk4(Integrator):
     """Fixed-step classic Runge-Kutta 4; steps end exactly on the communication points.
     With `rates`, the input slot U carries extra first-order states (see the module docstring).
 
@@ -798,8 +845,7 @@ class Rk4:
             if event.terminal:
                 hit = _hermite_event(event, t, x, v, h, x_new, v_new)
                 if hit is not None:
-                    te, xe, ve = hit
-                    raise TerminalEvent(f"{event.name} at tau = {te:.10g}, x = {xe:.10g}", te, xe, ve)
+                    raise self.terminal_event(event.name, *hit)
         self.x, self.v = x_new, v_new
         if U_new is not None:
             self.U = U_new

@@ -6,7 +6,7 @@ the campaigns. Like SciPy's integrate/_ivp METHODS.
 
 The compiled core has the same table in C: fmu_src/core/solver.c's vk_solvers, indexed by the same `value`
 (core/solver.h: the solver interface, VK_SOLVER_LIST the list). Adding a solver (docs/architecture.md, How to add):
-its Python integrator on integrate.Solver (integrate.py), an entry here, its step in C (core/<file>.c) and its ops
+its Python integrator on integrate.Integrator (integrate.py), an entry here, its step in C (core/<file>.c) and its ops
 with one X(<file>) in core/solver.h's VK_SOLVER_LIST.
 
 This module imports nothing of vibromodel at import time (parameters.py reads it): the integrator classes are

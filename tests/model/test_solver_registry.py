@@ -7,7 +7,7 @@ import pytest
 from vibrofmu.analyses.simulate import SOLVERS as CLI_SOLVERS
 from vibrofmu.fmus import kernel
 from vibromodel import solvers
-from vibromodel.integrate import Dop853, Rk4
+from vibromodel.integrate import Dop853, Integrator, Rk4
 from vibromodel.parameters import RULES, ParameterError, Scene
 from vibromodel.plant import Plant
 from vibromodel.settings import Settings, Solver
@@ -44,3 +44,12 @@ def test_a_plant_gets_the_integrator_of_its_entry(value, cls, scene, step):
     plant = Plant(scene, Settings(solver=value, kernel=1))
     assert type(plant.integrator) is cls and plant.integrator.max_step == step
     assert solvers.solver_entry(value).integrator_class is cls
+
+
+def test_every_solver_is_on_the_protocol():
+    """integrate.Integrator: each registry solver implements its stepping, dense output and input (an abstract method
+    left out would make the class uninstantiable), and a solver the plant builds is one."""
+    for entry in solvers.SOLVERS.values():
+        assert issubclass(entry.integrator_class, Integrator) and not entry.integrator_class.__abstractmethods__
+        plant = Plant(Scene(), Settings(solver=entry.value, kernel=1))
+        assert isinstance(plant.integrator, Integrator)
