@@ -12,6 +12,7 @@ from enum import IntEnum
 from typing import Callable
 
 from . import forces
+from .messages import text
 from .parameters import MIN_RTOL, PULL_IN_GAP, ParameterError, Scene
 from .solvers import solver_entry
 
@@ -153,9 +154,8 @@ def solver_tolerance(s: Scene, settings, t0: float = 0.0, stop_time: float | Non
     solver_rtol = max(MIN_RTOL, settings.rtol * factor)
     if solver_entry(settings.solver).fixed_step:
         return solver_rtol, []
-    return solver_rtol, [f"the solver runs at rtol = {solver_rtol:.3g} (rtol {settings.rtol:.3g} x {factor:.3g}): the "
-                         f"lightly damped response remembers its errors over tau = {error_memory(s, span):.4g} (2/mu "
-                         f"or the run's span), rtol is kept per {ERROR_MEMORY_REFERENCE:g} of it"]
+    return solver_rtol, [text("TOLERANCE_FACTOR", solver_rtol=solver_rtol, rtol=settings.rtol, factor=factor,
+                              memory=error_memory(s, span), reference=ERROR_MEMORY_REFERENCE)]
 
 
 def scene_fields(s: Scene) -> dict:

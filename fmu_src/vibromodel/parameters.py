@@ -9,6 +9,7 @@ import sys
 from dataclasses import asdict, dataclass, fields, replace
 
 from . import forces, solvers
+from .messages import text
 
 # Paper example (PAPER §4, docs/model.md, The paper's example reproduced): delta*epsilon is the detuning of omega from sqrt(a1).
 PAPER_DETUNING = 0.02 * 0.01
@@ -250,13 +251,9 @@ def validate(scene: Scene) -> None:
     check_parameters(scene.as_dict())
     upper, lower = electrode_gaps(scene.x_start, scene.R)
     if upper <= PULL_IN_GAP:
-        raise ParameterError(
-            "x_start", scene.x_start,
-            f"at or beyond pull-in x = 3R/2 = {1.5 * scene.R:g} (gap 1-2x/(3R) = {upper:.3g})")
+        raise ParameterError("x_start", scene.x_start, text("PULL_IN_START", bound=1.5 * scene.R, gap=upper))
     if lower <= PULL_IN_GAP:
-        raise ParameterError(
-            "x_start", scene.x_start,
-            f"at or beyond the lower electrode x = -3R/2 = {-1.5 * scene.R:g} (gap 1+2x/(3R) = {lower:.3g})")
+        raise ParameterError("x_start", scene.x_start, text("LOWER_START", bound=-1.5 * scene.R, gap=lower))
 
 
 
@@ -276,8 +273,7 @@ def clamp_tolerance(rtol: float) -> tuple[float, str | None]:
     """
     validate_tolerance(rtol)
     if rtol < MIN_RTOL:
-        return MIN_RTOL, (f"parameter rtol = {rtol!r} is below {MIN_RTOL:.3g} (100 machine epsilons: the error "
-                          f"control would see only rounding): using rtol = {MIN_RTOL:.3g}")
+        return MIN_RTOL, text("RTOL_CLAMPED", requested=repr(rtol), floor=MIN_RTOL)
     return rtol, None
 
 

@@ -112,7 +112,7 @@ void model_initialise(Instance *inst, State *s)
     if (clamped) rtol = RULE_MIN_RTOL;
     VkPlant *p = &s->model.plant;
     memset(p, 0, sizeof *p);
-    native_plant_model(&p->model, s, fidelity); /* compiled._model_fields */
+    native_plant_model(&p->model, s, fidelity); /* the level's model from the parameters (fidelity.h vouches) */
     const double max_step = s->value[VR_max_step];
     const double factor = native_tolerance_factor(s); /* models.solver_tolerance */
     double solver_rtol = rtol * factor;
@@ -135,14 +135,12 @@ void model_initialise(Instance *inst, State *s)
     if (code == VK_OK) { /* the slave's _start: notes (fmi2OK), warnings, the first outputs */
         native_log(inst, fmi2OK, "%s on the native FMU's compiled kernel (no Python)", vk_solvers[solver]->name);
         if (factor != 1.0 && vk_solvers[solver]->reads_tolerance)
-            native_log(inst, fmi2OK, "the solver runs at rtol = %.3g (rtol %.3g x %.3g): the lightly damped response "
-                       "remembers its errors over tau = %.4g (2/mu or the run's span), rtol is kept per %g of it",
-                       solver_rtol, rtol, factor, native_error_memory(s), RULE_ERROR_MEMORY_REFERENCE);
+            native_log(inst, fmi2OK, RULE_TEXT_TOLERANCE_FACTOR, solver_rtol, rtol, factor, native_error_memory(s),
+                       RULE_ERROR_MEMORY_REFERENCE);
         if (clamped) {
             char requested[64];
             native_repr(rtol_requested, requested, sizeof requested);
-            native_log(inst, fmi2Warning, "parameter rtol = %s is below %.3g (100 machine epsilons: the error "
-                       "control would see only rounding): using rtol = %.3g", requested, RULE_MIN_RTOL, RULE_MIN_RTOL);
+            native_log(inst, fmi2Warning, RULE_TEXT_RTOL_CLAMPED, requested, RULE_MIN_RTOL, RULE_MIN_RTOL);
         }
         native_drive_warnings(inst, s, vk_solvers[solver], p->rk4.max_step);
         code = vk_plant_state(p, xva);

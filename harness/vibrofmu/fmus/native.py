@@ -21,10 +21,13 @@ from __future__ import annotations
 import math
 import re
 import shutil
+import string
 import subprocess
 import xml.etree.ElementTree as ET
 import zipfile
 from pathlib import Path
+
+from vibromodel.messages import TEXTS
 
 from vibrofmu import paths
 from vibrofmu.fmus import toolchain
@@ -161,6 +164,20 @@ def variables_header(model_description: bytes) -> str:
     return "\n".join(lines)
 
 
+def printf_format(template: str) -> str:
+    """A vibromodel.messages template as a printf format: its text with % doubled, {field:spec} as %spec for the
+    specs g, .Ng, .Nf, {field} as %s; ValueError for another spec or a conversion (!r)."""
+    parts = []
+    for literal, field, spec, conversion in string.Formatter().parse(template):
+        parts.append(literal.replace("%", "%%"))
+        if field is None:
+            continue
+        if conversion is not None or not re.fullmatch(r"(\.\d+)?[gf]|", spec):
+            raise ValueError(f"{template!r}: the field {{{field}}} has no printf form (specs g, .Ng, .Nf or none)")
+        parts.append(f"%{spec}" if spec else "%s")
+    return "".join(parts)
+
+
 def rules_header() -> str:
     """rules.h: vibromodel.parameters' table of valid ranges (rules_as_records, in checking order, each with the
     refusal text Rule.refusal gives), the constants the models' own checks use, and the scene's names and
@@ -195,6 +212,7 @@ def rules_header() -> str:
              " * are the Python slaves'. */", "#ifndef RULES_H", "#define RULES_H", "", "#include <stddef.h>", ""]
     lines += [f"#define RULE_{name} {_c_double(value)}" for name, value in constants.items()]
     lines += [f"#define RULE_{name} {_c_string(text)}" for name, text in texts.items()]
+    lines += [f"#define RULE_TEXT_{name} {_c_string(printf_format(template))}" for name, template in TEXTS.items()]
     lines += ["", "/* vibromodel.parameters.Rule: a finite number (whole for `integer`) in [low, high] (ends open where",
               " * not inclusive), or exactly `automatic`; only when parameter `when` has one of `when_values`. */",
               "typedef struct {", "    const char *name;", "    double low, high;",

@@ -1,0 +1,23 @@
+"""The messages both languages word: each a str.format template whose fields carry a format spec. Python formats
+them with format(); harness/vibrofmu/fmus/native.py writes each into the native FMUs' rules.h as a printf format
+(RULE_TEXT_<NAME>, printf_format: {name:.3g} -> %.3g, {name} -> %s), so the C passes only the values, in the
+template's field order, and the words exist once. tests/fmus/test_native.py compares the logs of both."""
+from __future__ import annotations
+
+TEXTS = {
+    # parameters.validate: x_start against the electrodes (native/scene_checks.c); fields: bound, gap
+    "PULL_IN_START": "at or beyond pull-in x = 3R/2 = {bound:g} (gap 1-2x/(3R) = {gap:.3g})",
+    "LOWER_START": "at or beyond the lower electrode x = -3R/2 = {bound:g} (gap 1+2x/(3R) = {gap:.3g})",
+    # models.solver_tolerance's note (the native plant's model_initialise)
+    "TOLERANCE_FACTOR": ("the solver runs at rtol = {solver_rtol:.3g} (rtol {rtol:.3g} x {factor:.3g}): the lightly "
+                         "damped response remembers its errors over tau = {memory:.4g} (2/mu or the run's span), "
+                         "rtol is kept per {reference:g} of it"),
+    # parameters.clamp_tolerance's warning; requested: the value's exact text
+    "RTOL_CLAMPED": ("parameter rtol = {requested} is below {floor:.3g} (100 machine epsilons: the error control "
+                     "would see only rounding): using rtol = {floor:.3g}"),
+}
+
+
+def text(name: str, **values) -> str:
+    """TEXTS[name] with `values`."""
+    return TEXTS[name].format(**values)
