@@ -1,4 +1,4 @@
-/* plant_setup.h -- the plant model's constants (compiled._model_fields) and plant.rk4_drive_warnings from an FMU's
+/* plant_setup.h -- the plant model's constants (what compiled.fill_model takes from the scene's own model) and plant.rk4_drive_warnings from an FMU's
    parameters, shared by the native plant and the native closed loop (both have the scene's parameters). */
 #ifndef PLANT_SETUP_H
 #define PLANT_SETUP_H
