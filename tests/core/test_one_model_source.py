@@ -10,7 +10,7 @@ from dataclasses import replace
 
 import pytest
 
-from vibrofmu.fmus import kernel
+from vibrofmu.fmus import kernel, toolchain
 from vibromodel import fidelities
 from vibromodel.compiled import CompiledPlant
 from vibromodel.fidelities import Fidelity, c_header, native_mismatch
@@ -61,7 +61,7 @@ def test_the_native_build_refuses_a_rung_it_cannot_compute(monkeypatch):
     assert native_mismatch(fidelities.REGISTRY[Fidelity.EXACT]) is None
     monkeypatch.setitem(fidelities.REGISTRY, Fidelity.EXACT, doubled_entry())
     assert "mu is 0.2 on the paper scene" in native_mismatch(fidelities.REGISTRY[Fidelity.EXACT])
-    with pytest.raises(RuntimeError) as refused:
+    with pytest.raises(toolchain.RegistryNotBuildable) as refused:
         kernel.check_fidelity_header()
     assert "fidelity 0 (exact): its model's mu is 0.2" in str(refused.value)
     assert "give its registry entry a native_refusal" in str(refused.value)
@@ -73,7 +73,7 @@ def test_a_rung_with_a_native_refusal_builds_and_the_native_fmus_refuse_it(monke
     why = "the native FMU cannot double the damping"
     monkeypatch.setitem(fidelities.REGISTRY, Fidelity.EXACT, doubled_entry(native_refusal=why))
     assert f'"{why} (fidelity 0 needs Python)"}},  /* 0 exact */' in c_header()
-    with pytest.raises(RuntimeError, match="regenerate it with `python3 -m vibrofmu.fmus.kernel`"):
+    with pytest.raises(toolchain.RegistryNotBuildable, match="regenerate it with `python3 -m vibrofmu.fmus.kernel`"):
         kernel.check_fidelity_header()
 
 

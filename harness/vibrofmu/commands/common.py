@@ -23,7 +23,7 @@ from xml.etree import ElementTree
 from vibromodel.parameters import ParameterError
 
 from vibrofmu import paths
-from vibrofmu.fmus.toolchain import NoCompiler
+from vibrofmu.fmus.toolchain import NoCompiler, RegistryNotBuildable
 from vibrofmu.paths import CLOSED_LOOP_NAME, CONTROLLER_NAME, PLANT_MODEL, PLANT_NAME  # noqa: F401 (re-exported)
 
 
@@ -165,6 +165,9 @@ def run(command: Callable[[argparse.Namespace], int], args: argparse.Namespace) 
         return 2
     except NoCompiler as error:
         print(f"error: {error} (set $CC or install gcc)", file=sys.stderr)
+        return 2
+    except RegistryNotBuildable as error:  # the tree's fidelity registry and core/fidelity.h: what is missing
+        print(f"error: {error}", file=sys.stderr)
         return 2
     finally:
         if code != 0:

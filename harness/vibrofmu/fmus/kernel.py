@@ -41,15 +41,15 @@ GCC_COMMAND = ("gcc", *toolchain.KERNEL)
 
 
 def check_fidelity_header() -> None:
-    """Raise RuntimeError unless the committed core/fidelity.h is the registry's c_header(): a level added to the
+    """Raise RegistryNotBuildable unless the committed core/fidelity.h is the registry's c_header(): a level added to the
     registry without it, or one the native FMUs cannot compute (c_header's ValueError names what is missing), stops
     the build of the kernel and of the native FMUs here instead of running another model in C."""
     try:
         current = c_header()
     except ValueError as error:
-        raise RuntimeError(f"the fidelity registry cannot be built into C: {error}") from None
+        raise toolchain.RegistryNotBuildable(f"the fidelity registry cannot be built into C: {error}") from None
     if FIDELITY_HEADER.read_text() != current:
-        raise RuntimeError(f"{FIDELITY_HEADER} is not the fidelity registry's: regenerate it with "
+        raise toolchain.RegistryNotBuildable(f"{FIDELITY_HEADER} is not the fidelity registry's: regenerate it with "
                            "`python3 -m vibrofmu.fmus.kernel`")
 
 

@@ -49,6 +49,11 @@ HOST_LIBS = ("-ldl", "-lm")
 HOST_WIN64 = ("-O2", *WARNINGS, "-D__USE_MINGW_ANSI_STDIO=1")
 
 
+class RegistryNotBuildable(RuntimeError):
+    """The fidelity registry cannot be built into C (kernel.check_fidelity_header): what is missing, in one line.
+    Here, beside NoCompiler, so that the command line words both without importing the kernel's module."""
+
+
 class NoCompiler(RuntimeError):
     """No C compiler: $CC is unset and neither cc nor gcc is on PATH, or $CC names no program."""
 
