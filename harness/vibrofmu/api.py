@@ -40,7 +40,7 @@ STATE = OUTPUTS[:3]  # what a run computes when asked for no more (outputs=STATE
 CHUNK = 64  # scenes per C call in simulate_many: their state structures (6 kB each) stay in the caches
 
 _double_p, _int_p = ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_int64)
-_PLANT_DTYPE = np.dtype(VkPlant)
+PLANT_DTYPE = np.dtype(VkPlant)
 
 
 @functools.cache
@@ -124,7 +124,7 @@ def _settings(settings: Settings) -> tuple[Settings, tuple[str, ...]]:
     return checked, tuple(w for w in warnings if w.startswith("parameter rtol"))
 
 
-def _columns(scenes) -> dict[str, np.ndarray]:
+def scene_columns(scenes) -> dict[str, np.ndarray]:
     """The scenes as one float array per Scene field: a list of Scene, or a dict of arrays (and scalars) over the
     paper scene's values (each named field must be a Scene field)."""
     names = scene_names()
@@ -187,13 +187,13 @@ def _check(columns: dict, settings: Settings) -> None:
         raise RuntimeError(f"scene {i} breaks a rule in vibrofmu.api's check but not in validate (a bug): {scene}")
 
 
-def _fill(plants: np.ndarray, columns: dict, settings: Settings, start_time: float,
+def fill_plants(plants: np.ndarray, columns: dict, settings: Settings, start_time: float,
           stop_time: float) -> tuple[np.ndarray, list, list]:
     """`plants` (one kernel state structure per scene of `columns`) filled as CompiledPlant fills its plant (before
     vk_init); the scenes' warnings and notes."""
     m = len(columns["mu"])
     level = entry(settings.fidelity)
-    plants.view(np.uint8).reshape(m, _PLANT_DTYPE.itemsize)[:] = _template(settings, start_time)
+    plants.view(np.uint8).reshape(m, PLANT_DTYPE.itemsize)[:] = _template(settings, start_time)
     model = plants["model"]
     if level.c_model == CModel.EXACT:  # models.scene_fields and ExactModel.compiled_fields, for all scenes at once
         for name in ("mu", "Delta", "omega", "alpha", "beta", "gamma", "Omega", "R"):
@@ -206,7 +206,7 @@ def _fill(plants: np.ndarray, columns: dict, settings: Settings, start_time: flo
     else:  # Eq. 7's coefficients: the level's model object fills each scene's, as in CompiledPlant
         for i in range(m):
             scene = _scene(columns, i)
-            compiled.fill_model(VkPlant.from_buffer(plants, i * _PLANT_DTYPE.itemsize).model, level.model(scene))
+            compiled.fill_model(VkPlant.from_buffer(plants, i * PLANT_DTYPE.itemsize).model, level.model(scene))
     delta, beta, gamma, omega, Omega = (columns[n] for n in ("Delta", "beta", "gamma", "omega", "Omega"))
     # the solver's tolerance (models.solver_tolerance) and the drive's step ceiling (models.drive_step_ceiling)
     mu, span = columns["mu"], stop_time - start_time
@@ -239,7 +239,7 @@ def _fill(plants: np.ndarray, columns: dict, settings: Settings, start_time: flo
 def _template(settings: Settings, start_time: float) -> np.ndarray:
     """The bytes of a kernel state structure with what the settings fix, as CompiledPlant sets it (the rest 0): each
     scene's structure starts as a copy."""
-    plant = np.zeros(1, dtype=_PLANT_DTYPE)
+    plant = np.zeros(1, dtype=PLANT_DTYPE)
     plant["model"]["pull_in_gap"] = PULL_IN_GAP
     plant["model"]["polynomial"] = 0  # Eq. 7's scenes: compiled.fill_model sets 1
     plant["dop"]["step_budget"] = MAX_STEPS_PER_DOSTEP
@@ -295,7 +295,7 @@ def simulate_many(scenes, stop_time: float = 200.0, interval: float = 0.1, setti
     at each point (the same x and v, cheaper), and a, F_contact, F_electrostatic, in_contact are None."""
     n = _steps(start_time, stop_time, interval)
     settings, clamp = _settings(settings)
-    columns = _columns(scenes)
+    columns = scene_columns(scenes)
     _check(columns, settings)
     m = len(columns["mu"])
     unknown = sorted(set(outputs) - set(OUTPUTS))
@@ -305,13 +305,13 @@ def simulate_many(scenes, stop_time: float = 200.0, interval: float = 0.1, setti
     out = np.full((len(OUTPUTS) if every else len(STATE), m, n + 1), np.nan)
     n_done, codes = np.zeros(m, dtype=np.int64), np.zeros(m, dtype=np.int64)
     warnings, notes, stopped, errors = [], [], [""] * m, [None] * m
-    plants = np.zeros(min(m, CHUNK), dtype=_PLANT_DTYPE)  # reused for every chunk of scenes
+    plants = np.zeros(min(m, CHUNK), dtype=PLANT_DTYPE)  # reused for every chunk of scenes
     run_batch = default_library().vk_run_batch
     for first in range(0, m, CHUNK):
         last = min(first + CHUNK, m)
         chunk = {name: np.ascontiguousarray(column[first:last]) for name, column in columns.items()}
         part = plants[:last - first]
-        ceilings, chunk_warnings, chunk_notes = _fill(part, chunk, settings, start_time, stop_time)
+        ceilings, chunk_warnings, chunk_notes = fill_plants(part, chunk, settings, start_time, stop_time)
         _check_interval(ceilings, interval, first, m > 1)
         warnings += [list(clamp) + w for w in chunk_warnings]
         notes += chunk_notes
@@ -320,7 +320,7 @@ def simulate_many(scenes, stop_time: float = 200.0, interval: float = 0.1, setti
                   out[0, first:].ctypes.data_as(_double_p), m * (n + 1), n_done[first:].ctypes.data_as(_int_p),
                   codes[first:].ctypes.data_as(_int_p), int(every))
         for i in np.flatnonzero(n_done[first:last] < n + 1):
-            plant = VkPlant.from_buffer(part, int(i) * _PLANT_DTYPE.itemsize)
+            plant = VkPlant.from_buffer(part, int(i) * PLANT_DTYPE.itemsize)
             k = max(int(n_done[first + i]) - 1, 0)
             stopped[first + i], errors[first + i] = _stop(plant, int(codes[first + i]), start_time + k * interval,
                                                           interval)
@@ -348,10 +348,10 @@ class Simulation:
         """library: a loaded kernel (vibromodel.compiled.load_library; default: the one of this source tree)."""
         _steps(start_time, start_time + interval, interval)  # the interval's own checks
         settings, clamp = _settings(settings)
-        columns = _columns([Scene() if scene is None else scene])
+        columns = scene_columns([Scene() if scene is None else scene])
         _check(columns, settings)
-        self._plants = np.zeros(1, dtype=_PLANT_DTYPE)
-        ceilings, warnings, notes = _fill(self._plants, columns, settings, start_time,
+        self._plants = np.zeros(1, dtype=PLANT_DTYPE)
+        ceilings, warnings, notes = fill_plants(self._plants, columns, settings, start_time,
                                           math.nan if stop_time is None else stop_time)
         _check_interval(ceilings, interval, 0, False)
         self.warnings, self.notes = list(clamp) + warnings[0], notes[0]

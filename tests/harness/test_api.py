@@ -94,9 +94,9 @@ def test_the_kernel_structures_are_compiled_plants(library, fidelity):
     from vibromodel.core_layouts import VkModel
 
     scenes = SCENES + [Scene(Delta=0.0, beta=0.01, gamma=0.0, alpha=0.0), Scene(beta=0.0, gamma=0.003)]
-    columns = api._columns(scenes)
-    plants = np.zeros(len(scenes), dtype=api._PLANT_DTYPE)
-    api._fill(plants, columns, Settings(fidelity=fidelity), 0.0, 10.0)
+    columns = api.scene_columns(scenes)
+    plants = np.zeros(len(scenes), dtype=api.PLANT_DTYPE)
+    api.fill_plants(plants, columns, Settings(fidelity=fidelity), 0.0, 10.0)
     for i, scene in enumerate(scenes):
         plant = CompiledPlant(scene, Settings(fidelity=fidelity), library, 0.0, 10.0)
         expected = ctypes.string_at(plant.address, ctypes.sizeof(VkModel))

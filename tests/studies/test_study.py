@@ -270,10 +270,10 @@ def test_end_children_ends_a_spawned_child(tmp_path):
     traceback once its parent was gone)."""
     import multiprocessing
 
-    from vibrofmu.study import _end_children
+    from vibrofmu.study import end_children
 
     child = multiprocessing.get_context("spawn").Process(target=time.sleep, args=(60,))
     child.start()
-    _end_children()
+    end_children()
     child.join(timeout=30)
     assert child.exitcode == -signal.SIGKILL

@@ -58,7 +58,7 @@ def _end_workers(cluster) -> None:
                 os.kill(pid, signal.SIGKILL)
 
 
-def _end_children() -> None:
+def end_children() -> None:
     """End every process this one started with multiprocessing (the local cluster's workers, also one still being
     spawned, which no nanny knows the pid of yet) before os._exit: a spawned child whose parent is gone while it reads
     its start-up data prints a multiprocessing traceback (EOFError) on the terminal after our last line."""
@@ -144,7 +144,7 @@ def run(args) -> int:
         if not args.scheduler:  # a local cluster half started: its workers end with this process (see the end)
             sys.stdout.flush()
             sys.stderr.flush()
-            _end_children()
+            end_children()
             _end_resource_tracker()
             os._exit(130)
         return 130
@@ -207,7 +207,7 @@ def run(args) -> int:
             # then Dask's exit handlers), so the process ends here, within the few seconds a Ctrl-C may take
             sys.stdout.flush()
             sys.stderr.flush()
-            _end_children()  # (a worker still being spawned would print a traceback)
+            end_children()  # (a worker still being spawned would print a traceback)
             _end_resource_tracker()  # (else it lists the workers' semaphores as "leaked", a dozen lines)
             os._exit(130)
         return 130
