@@ -46,18 +46,42 @@ def private(name: str) -> bool:
     return name.startswith("_") and not name.endswith("_")
 
 
+PACKAGE_ROOTS = {"vibromodel": ROOT / "fmu_src" / "vibromodel", "vibrofmu": ROOT / "harness" / "vibrofmu"}
+
+
+def is_module(dotted: str) -> bool:
+    """Whether a dotted name is one of the project's modules or packages (a file or folder in the tree)."""
+    head, *rest = dotted.split(".")
+    if head not in PACKAGE_ROOTS:
+        return head in PROJECT_MODULES
+    folder = PACKAGE_ROOTS[head].joinpath(*rest)
+    return folder.with_suffix(".py").is_file() or (folder / "__init__.py").is_file()
+
+
+def absolute(path: Path, node: ast.ImportFrom) -> str:
+    """The absolute module name of a (relative) `from ... import`."""
+    if node.level == 0:
+        return node.module
+    package = path.parent.relative_to(ROOT / ("fmu_src" if path.is_relative_to(ROOT / "fmu_src") else "harness"))
+    parts = list(package.parts)[:len(package.parts) - node.level + 1]
+    return ".".join(parts + ([node.module] if node.module else []))
+
+
 def private_uses(path: Path) -> list[str]:
     """`from <project module> import _name` and `<imported project module>._name` in the file."""
     tree, uses, modules = ast.parse(path.read_text()), [], set()
     for node in ast.walk(tree):
-        if isinstance(node, ast.ImportFrom) and (node.level > 0 or node.module.split(".")[0] in PROJECT_MODULES):
+        if isinstance(node, ast.ImportFrom):
+            source = absolute(path, node)
+            if not is_module(source):
+                continue
             for alias in node.names:
                 if private(alias.name):
-                    uses.append(f"{path.relative_to(ROOT)}:{node.lineno}: from {node.module} import {alias.name}")
-                modules.add(alias.asname or alias.name)  # a module imported from a package, or a name: harmless
+                    uses.append(f"{path.relative_to(ROOT)}:{node.lineno}: from {source} import {alias.name}")
+                elif is_module(f"{source}.{alias.name}"):
+                    modules.add(alias.asname or alias.name)
         elif isinstance(node, ast.Import):
-            modules.update(alias.asname or alias.name.split(".")[0] for alias in node.names
-                           if alias.name.split(".")[0] in PROJECT_MODULES)
+            modules.update(alias.asname or alias.name.split(".")[0] for alias in node.names if is_module(alias.name))
     for node in ast.walk(tree):
         if (isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name) and node.value.id in modules
                 and private(node.attr)):

@@ -341,8 +341,8 @@ def test_top_level_help_lists_every_command(tmp_path):
 def _options():
     parser = make_parser()
     sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
-    for name, command in sub.choices.items():
-        for action in command._actions:
+    for name, subparser in sub.choices.items():
+        for action in subparser._actions:
             if action.option_strings and action.dest != "help":
                 yield name, action
 
