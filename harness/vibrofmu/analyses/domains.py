@@ -43,7 +43,8 @@ GRID = ([{"Delta": d} for d in (0.001, 0.01, 0.03, 0.05, 0.1, 0.15, 0.2, 0.3, 1.
         + [{"R": r} for r in (0.1, 0.3, 3.0)])
 
 
-def _kernel():
+def campaign_kernel():
+    """(the kernel library, what it is) for a campaign's compiled plants."""
     from vibrofmu.fmus.kernel import kernel_library  # compiled once per source version
     return kernel_library(), "the campaign's kernel"
 
@@ -61,7 +62,7 @@ def run_steps(plant, stop: float, h: float) -> tuple[np.ndarray, str | None]:
 
 def rung_grid(stop: float = 50.0, h: float = 0.1) -> dict:
     """Fidelities 3 and 4 against fidelity 0 over GRID (module docstring)."""
-    library, rows = _kernel(), []
+    library, rows = campaign_kernel(), []
     for values in GRID:
         scene = Scene(**values)
         exact, exact_stop = run_steps(make_plant(scene, Settings(), 0.0, stop, library=library), stop, h)
@@ -184,7 +185,7 @@ def fastest_drive(scene: Scene) -> float:
 
 def graze_campaign(n: int = 100, seed: int = 0, h: float = 1.0) -> dict:
     """The grazing runs (module docstring), each with and without the drive's ceiling."""
-    library, rng, rows = _kernel(), np.random.default_rng(seed), []
+    library, rng, rows = campaign_kernel(), np.random.default_rng(seed), []
     for _ in range(n):
         scene, stop, rtol = graze_scene(rng)
         reference, ref_stop = run_steps(make_plant(scene, Settings(rtol=1e-12, max_step=0.3 / fastest_drive(scene)), 0.0,

@@ -21,6 +21,7 @@ import time
 
 import numpy as np
 
+from vibrofmu.analyses.domains import campaign_kernel, run_steps
 from vibrofmu.analyses.simulate import logged_estimate
 from vibromodel.integrate import IntegrationError
 from vibromodel.parameters import ParameterError, Scene
@@ -130,21 +131,6 @@ def random_scene(rng: np.random.Generator) -> tuple[Scene, float, dict]:
     return scene, stop, {"kind": str(kind)}
 
 
-def _xs(plant, stop: float, h: float) -> tuple[np.ndarray, str | None]:
-    xs = []
-    for i in range(int(round(stop / h))):
-        try:
-            xs.append(plant.do_step(i * h, h, 0.0).x)
-        except (IntegrationError, ParameterError) as error:
-            return np.array(xs), str(error)
-    return np.array(xs), None
-
-
-def _kernel():
-    from vibrofmu.fmus.kernel import kernel_library
-    return kernel_library(), "the campaign's kernel"
-
-
 def _settings(rung: str, rng: np.random.Generator) -> Settings:
     extras = dict(RUNGS[rung])
     if rung == "exact":
@@ -156,7 +142,7 @@ def _settings(rung: str, rng: np.random.Generator) -> Settings:
 
 def campaign(rung: str, n: int = 1000, seed: int = 0, h: float = 0.1, progress=None) -> dict:
     """The rung's estimate against its measured error over n random scenes (module docstring)."""
-    library, rows = _kernel(), []
+    library, rows = campaign_kernel(), []
     rng = np.random.default_rng(seed)
     started = time.perf_counter()
     while len(rows) < n:
@@ -164,12 +150,12 @@ def campaign(rung: str, n: int = 1000, seed: int = 0, h: float = 0.1, progress=N
         settings = _settings(rung, rng)
         try:
             reference = make_plant(scene, Settings(rtol=1e-12), 0.0, stop, library=library)
-            exact, exact_stop = _xs(reference, stop, h)
+            exact, exact_stop = run_steps(reference, stop, h)
             plant = make_plant(scene, settings, 0.0, stop, library=library)
         except (ParameterError, IntegrationError) as error:
             rows.append({**info, "outcome": "refused", "message": str(error)[:200]})
             continue
-        x, _ = _xs(plant, stop, h)
+        x, _ = run_steps(plant, stop, h)
         m = min(len(x), len(exact))
         if m == 0:
             rows.append({**info, "outcome": "refused", "message": "no step"})
