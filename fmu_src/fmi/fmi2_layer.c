@@ -364,7 +364,10 @@ int fmi2_instantiate_check(const Fmi2Layer *L, fmi2String instanceName, const ch
                        instanceName ? instanceName : "NULL", instanceName ? "'" : "");
         return 0;
     }
-    if (!(types & FMI2_TYPE_BIT(fmuType))) {
+    /* fmuType is the host's int: only 0 and 1 may be shifted (a shift by 32 or more, or by a negative, is undefined
+       behaviour in C -- found by tests/fuzz/fuzz_layer.c) */
+    int known = fmuType == fmi2ModelExchange || fmuType == fmi2CoSimulation;
+    if (!known || !(types & FMI2_TYPE_BIT(fmuType))) {
         const char *type = fmuType == fmi2ModelExchange ? "fmi2ModelExchange"
                            : fmuType == fmi2CoSimulation ? "fmi2CoSimulation" : "unknown";
         fmi2_layer_log(L, fmi2Error, "fmi2Instantiate refused: fmuType = %d (%s): %s offers only %s", (int)fmuType,
