@@ -1,0 +1,65 @@
+"""Write the seed corpus of the fuzz targets (tests/fuzz/corpus/<target>/): a few programs that reach deep into
+each interface (initialised, stepping, Model Exchange modes, state round trips), from which libFuzzer mutates.
+The byte layout is fuzz_native.c's / fuzz_layer.c's reading order (an exhausted input reads as zeros).
+
+    python3 tests/fuzz/seeds.py
+"""
+from __future__ import annotations
+
+import hashlib
+import struct
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+MODELS = ("HertzEAOscillator", "AdaptiveLyapunovController", "HertzEAClosedLoop")
+
+# fmi2_op / fmi3_op numbers (the `switch (op % N)` cases)
+SETUP = [0, 0, 0, 0, 0, 0]  # FMI 2 SetupExperiment / FMI 3 EnterInitializationMode, defaults
+STEP2 = [3, 0, 2, 0]        # fmi2DoStep at the current time, h = 0.1
+STEP3 = [4, 0, 2, 0, 0, 0]  # fmi3DoStep at the current time, h = 0.1, no NULL outputs
+ALL2, ALL3 = [39], [43]     # read every Real
+
+CALLS = {
+    "fmi2_cs_run": [0, 0, *SETUP, 1, 2, *STEP2 * 5, *ALL2],
+    "fmi2_cs_state": [0, 0, *SETUP, 1, 2, *STEP2, 17, 0, *STEP2, 20, 0, 0, 1, 18, 1, *STEP2, *ALL2],
+    "fmi2_cs_bad_step": [0, 0, *SETUP, 1, 2, 3, 0, 8, 0, 22, *SETUP, 1, 2, *STEP2, *ALL2],
+    "fmi2_me_run": [0, 1, *SETUP, 1, 2, 29, 1, 30, 32, 0, 2, 34, 0, 1, 35, 0, 1, 36, 0, 1, 31, 0, 0, 28, *ALL2],
+    "fmi3_cs_run": [1, 0, *SETUP, 1, *STEP3 * 5, *ALL3],
+    "fmi3_cs_events": [1, 0x12, *SETUP, 1, 25, 16, 3, *STEP3 * 5, 2, 25, 16, 3, *STEP3, *ALL3],
+    "fmi3_cs_state": [1, 0, *SETUP, 1, *STEP3, 18, 0, *STEP3, 21, 0, 0, 1, 19, 1, *STEP3, *ALL3],
+    "fmi3_me_run": [1, 1, *SETUP, 1, 25, 16, 28, 30, 0, 2, 32, 0, 1, 33, 0, 1, 34, 0, 1, 29, 0, 0, 2, *ALL3],
+}
+# state: how (bit 0 FMI 3, bit 1 ME), steps, number of patches - 1, then patches (kind, offset u16, argument)
+NAN_K, INF_K = 18, 19  # fuzz_input.h INTERESTING[]: NAN, INFINITY
+STATE = {
+    "fmi2_cs_nan": [0, 2, 0, 1, 88, 0, NAN_K, *ALL2],
+    "fmi2_me_x": [2, 2, 0, 1, 80, 0, 8, *ALL2],
+    "fmi2_cs_flip": [0, 3, 1, 3, 0x40, 1, 5, 2, 0x20, 1, 21, 1],
+    "fmi3_cs_mode": [1, 2, 0, 0, 0, 0, 7, 3, 0, 0, 0, 0, 0, 0, 0, *ALL3],
+    "fmi3_me_inf": [3, 2, 0, 1, 120, 0, INF_K],
+    "fmi2_fresh": [0, 0, 0, 0, 100, 0, 4, 255],
+}
+LAYER = {
+    "uri": [0, 200, 3, 5, *b"/tmp"],
+    "instantiate": [1, 4, *b"name", 1, 1, 4, *b"guid", 3, 4, *b"/tmp", 1, 0, 1, 100],
+    "logging": [2, 4, *b"name", 1, 0, 1, 3, 0, 5, *b"lo%gX", 1, 2, 0, 5, *b"%s%d", 4, *b"cat%", 3, 7],
+}
+
+
+def write(folder: Path, programs: dict[str, list[int]]) -> None:
+    folder.mkdir(parents=True, exist_ok=True)
+    for name, program in programs.items():
+        data = bytes(program)
+        (folder / f"{name}-{hashlib.sha1(data).hexdigest()[:8]}").write_bytes(data)
+
+
+def main() -> None:
+    for model in MODELS:
+        write(HERE / "corpus" / f"calls_{model}", CALLS)
+        write(HERE / "corpus" / f"state_{model}", STATE)
+    write(HERE / "corpus" / "layer", LAYER)
+    print(struct.calcsize("d"), "byte doubles; seeds written under", HERE / "corpus")
+
+
+if __name__ == "__main__":
+    main()
