@@ -41,6 +41,7 @@
 #endif /* array lengths of a call: 0 .. MAXN - 1 */
 
 static char resource_dir[256];
+static int trace; /* FUZZ_TRACE=1: each call on stderr (replaying a finding) */
 static char resource_uri[300];
 
 int LLVMFuzzerInitialize(int *argc, char ***argv)
@@ -49,6 +50,7 @@ int LLVMFuzzerInitialize(int *argc, char ***argv)
     snprintf(resource_dir, sizeof resource_dir, "/tmp/vibrofmu-fuzz-resources-XXXXXX");
     if (mkdtemp(resource_dir) == NULL) abort();
     snprintf(resource_uri, sizeof resource_uri, "file://%s", resource_dir);
+    trace = getenv("FUZZ_TRACE") != NULL;
     return 0;
 }
 
@@ -134,6 +136,7 @@ static void fmi2_op(F2 *f, In *in)
     int null_vr, null_values;
     fmi2Status st;
     uint8_t op = in_u8(in);
+    if (trace) fprintf(stderr, "fmi2 op %d (t %g)\n", op % 40, f->t);
     switch (op % 40) {
     case 0: {
         fmi2Boolean tol_defined = in_u8(in) & 1, stop_defined = in_u8(in) & 1;
@@ -371,6 +374,7 @@ static void fmi3_op(F3 *f, In *in)
     int null_vr, null_values;
     fmi3Status st;
     uint8_t op = in_u8(in);
+    if (trace) fprintf(stderr, "fmi3 op %d (t %g)\n", op % 44, f->t);
     switch (op % 44) {
     case 0: {
         fmi3Boolean tol_defined = in_u8(in) & 1, stop_defined = in_u8(in) & 1;
