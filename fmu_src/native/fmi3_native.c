@@ -238,6 +238,8 @@ EXPORT3 fmi3Status fmi3EnterInitializationMode(fmi3Instance instance, fmi3Boolea
                                                fmi3Boolean stopTimeDefined, fmi3Float64 stopTime)
 {
     W3_CALL(fmi3EnterInitializationMode, BIT(W_INSTANTIATED));
+    if (!isfinite(startTime)) /* it becomes the variable `time`, which must be finite when read with fmi3OK */
+        return refuse(w, "fmi3EnterInitializationMode refused: startTime = %g is not a finite number", startTime);
     fmi2Status st = fmi2SetupExperiment(w->c, toleranceDefined, tolerance, startTime, stopTimeDefined, stopTime);
     if (st <= fmi2Warning) st = fmi2EnterInitializationMode(w->c);
     if (st <= fmi2Warning) {
@@ -333,7 +335,13 @@ EXPORT3 fmi3Status fmi3GetFloat64(fmi3Instance instance, const fmi3ValueReferenc
     if (plain) return to3(fmi2GetReal(w->c, valueReferences, nValueReferences, values));
     fmi3Status worst = fmi3OK;
     for (size_t i = 0; i < nValueReferences; i++) {
-        if (extra_float64(w, valueReferences[i], &values[i])) continue;
+        if (extra_float64(w, valueReferences[i], &values[i])) {
+            if (!isfinite(values[i])) /* e.g. an event indicator of a model not yet initialised */
+                return refuse(w, "fmi3GetFloat64: variable with valueReference %u (%s) is %g (not finite): refused",
+                              valueReferences[i], valueReferences[i] == VR_TIME ? "time" : "an event indicator",
+                              values[i]);
+            continue;
+        }
         fmi3Status st = to3(fmi2GetReal(w->c, &valueReferences[i], 1, &values[i]));
         if (st > worst) worst = st;
     }
