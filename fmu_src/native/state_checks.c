@@ -222,10 +222,14 @@ int native_state_refusal(const State *s, const State *current, char *why, size_t
         return 1;
     }
     if (model_fields_refusal((const unsigned char *)&s->model.STATE_MODEL_MEMBER, why, size)) return 1;
+    /* current's own build (valid): the rebuild would give the same */
+    const int own_build = current != NULL && current->model.built && !(current->halted && !s->halted) &&
+                          same_build(s, current);
+    if (!own_build && constants_refusal(s, why, size)) return 1;
 #ifdef ME_N_STATES
+    /* after the constants: the indicators read the model through them (the solver's dimension indexes its arrays;
+       a state with dop.n = 258 read past them here -- found by tests/fuzz's state target) */
     if (domain_refusal(s, why, size)) return 1;
 #endif
-    if (current != NULL && current->model.built && !(current->halted && !s->halted) && same_build(s, current))
-        return 0; /* current's own build (valid): the rebuild would give the same */
-    return constants_refusal(s, why, size);
+    return 0;
 }
