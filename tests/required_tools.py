@@ -16,6 +16,7 @@ PACKAGES = {
     "valgrind": "valgrind",
     "cmake": "cmake",
     "cvode/cvode.h": "libsundials-dev",  # a header, found by the C compiler's preprocessor
+    "clang-14": "clang-14 libclang-rt-14-dev libfuzzer-14-dev",  # tests/fuzz: libFuzzer with ASan + UBSan
 }
 WIN64 = ("x86_64-w64-mingw32-gcc", "wine")
 

@@ -7,7 +7,6 @@ The byte layout is fuzz_native.c's / fuzz_layer.c's reading order (an exhausted 
 from __future__ import annotations
 
 import hashlib
-import struct
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
@@ -53,12 +52,17 @@ def write(folder: Path, programs: dict[str, list[int]]) -> None:
         (folder / f"{name}-{hashlib.sha1(data).hexdigest()[:8]}").write_bytes(data)
 
 
-def main() -> None:
+def write_all(root: Path) -> None:
+    """The seed corpus under root/<target>/."""
     for model in MODELS:
-        write(HERE / "corpus" / f"calls_{model}", CALLS)
-        write(HERE / "corpus" / f"state_{model}", STATE)
-    write(HERE / "corpus" / "layer", LAYER)
-    print(struct.calcsize("d"), "byte doubles; seeds written under", HERE / "corpus")
+        write(root / f"calls_{model}", CALLS)
+        write(root / f"state_{model}", STATE)
+    write(root / "layer", LAYER)
+
+
+def main() -> None:
+    write_all(HERE / "corpus")
+    print("seeds written under", HERE / "corpus")
 
 
 if __name__ == "__main__":
