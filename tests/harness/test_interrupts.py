@@ -74,10 +74,14 @@ RUN = textwrap.dedent("""
     import sys, time
     from vibrofmu import interrupts
     from vibrofmu.hosts.run import run_fmu
+    def progress(done, total):
+        if done == 10:  # inside the doStep loop (instantiation took seconds on a loaded machine)
+            print("stepping", flush=True)
+
     with interrupts.install():
         print("started", flush=True)
         try:
-            run = run_fmu(sys.argv[1], {"kernel": 1}, 1e5, 0.1)  # pure Python doSteps: minutes
+            run = run_fmu(sys.argv[1], {"kernel": 1}, 1e5, 0.1, progress=progress)  # pure Python doSteps: minutes
         except KeyboardInterrupt:
             sys.exit(130)
     print("not interrupted:", run.stop_reason)
@@ -95,7 +99,8 @@ def test_ctrl_c_during_pure_python_do_steps_stops_the_host_within_a_second(plant
                                stderr=subprocess.PIPE, text=True,  # SIGINT's default (not an inherited SIG_IGN)
                                preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     assert process.stdout.readline().strip() == "started"
-    time.sleep(1.5)  # past instantiation (about 0.5 s): inside the doStep loop
+    assert process.stdout.readline().strip() == "stepping"  # past instantiation, whatever the machine's load
+    time.sleep(0.2)  # into the later doSteps
     process.send_signal(signal.SIGINT)
     # what happened, not how fast: the run left alone takes hours on a loaded machine (1e6 pure-Python doSteps), so
     # exit 130 means the SIGINT stopped it; the timeout only ends a run that ignored it (the 1 s latency is measured
