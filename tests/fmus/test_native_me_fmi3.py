@@ -159,6 +159,17 @@ def _logger():
     return messages, log
 
 
+def _restart(fmu, continuous_time: bool = False) -> None:
+    """Reset and initialise `fmu` again (an Error of the instance ends it): event mode, or continuous-time mode."""
+    fmu.reset()
+    fmu.setupExperiment(startTime=0.0)
+    fmu.enterInitializationMode()
+    fmu.exitInitializationMode()
+    if continuous_time:
+        fmu.newDiscreteStates()
+        fmu.enterContinuousTimeMode()
+
+
 def test_model_exchange_bad_calls_are_errors(native_plant_fmu, tmp_path):
     # FMPy's FMI 2 logger is a process-wide proxy: without a live logger of its own, an instance that logs after
     # another test's logger was collected calls freed memory (hosts.run.FmuLog keeps its callback alive)
@@ -172,33 +183,15 @@ def test_model_exchange_bad_calls_are_errors(native_plant_fmu, tmp_path):
     fmu.instantiate(callbacks=log.callbacks)
     with pytest.raises(FMICallException):  # before initialisation
         fmu.getDerivatives((ctypes.c_double * 2)(), 2)
-    fmu.reset()
-    fmu.setupExperiment(startTime=0.0)
-    fmu.enterInitializationMode()
-    fmu.exitInitializationMode()
+    _restart(fmu)
     with pytest.raises(FMICallException):  # event mode: continuous states are set in continuous-time mode
         fmu.setContinuousStates((ctypes.c_double * 2)(0.0, 0.0), 2)
-    fmu.reset()
-    fmu.setupExperiment(startTime=0.0)
-    fmu.enterInitializationMode()
-    fmu.exitInitializationMode()
-    fmu.newDiscreteStates()
-    fmu.enterContinuousTimeMode()
+    _restart(fmu, continuous_time=True)
     assert fmu.dll.fmi2GetDerivatives(ctypes.c_void_p(fmu.component), None, 2) > 0           # NULL array
-    fmu.reset()
-    fmu.setupExperiment(startTime=0.0)
-    fmu.enterInitializationMode()
-    fmu.exitInitializationMode()
-    fmu.newDiscreteStates()
-    fmu.enterContinuousTimeMode()
+    _restart(fmu, continuous_time=True)
     assert fmu.dll.fmi2GetDerivatives(ctypes.c_void_p(fmu.component), (ctypes.c_double * 5)(), 5) > 0  # wrong size
     assert fmu.dll.fmi2GetEventIndicators(None, (ctypes.c_double * 3)(), 3) > 0     # NULL instance
-    fmu.reset()
-    fmu.setupExperiment(startTime=0.0)
-    fmu.enterInitializationMode()
-    fmu.exitInitializationMode()
-    fmu.newDiscreteStates()
-    fmu.enterContinuousTimeMode()
+    _restart(fmu, continuous_time=True)
     x, z = (ctypes.c_double * 2)(), (ctypes.c_double * 3)()
     fmu.getContinuousStates(x, 2)
     fmu.getEventIndicators(z, 3)

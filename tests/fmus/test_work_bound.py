@@ -23,6 +23,12 @@ SCRIPT = """
     fmu, h_long, h_short = {fmu!r}, {h_long!r}, {h_short!r}
     md = read_model_description(fmu)
     vr = {{v.name: v.valueReference for v in md.modelVariables}}
+    def initialise():
+        s.setupExperiment(startTime=0.0, stopTime=20.0)
+        s.enterInitializationMode()
+        s.setInteger([vr["kernel"], vr["solver"]], [1, 1])
+        s.setReal([vr["max_step"]], [1e-5])
+        s.exitInitializationMode()
     def step(h):
         try:
             s.doStep(currentCommunicationPoint=0.0, communicationStepSize=h)
@@ -32,18 +38,10 @@ SCRIPT = """
     s = FMU2Slave(guid=md.guid, unzipDirectory=extract(fmu), modelIdentifier=md.coSimulation.modelIdentifier,
                   instanceName="bound")
     s.instantiate(loggingOn=False)  # FMPy's default logger prints the FMU's messages (read below)
-    s.setupExperiment(startTime=0.0, stopTime=20.0)
-    s.enterInitializationMode()
-    s.setInteger([vr["kernel"], vr["solver"]], [1, 1])
-    s.setReal([vr["max_step"]], [1e-5])
-    s.exitInitializationMode()
+    initialise()
     status = step(h_long)
     s.reset()
-    s.setupExperiment(startTime=0.0, stopTime=20.0)
-    s.enterInitializationMode()
-    s.setInteger([vr["kernel"], vr["solver"]], [1, 1])
-    s.setReal([vr["max_step"]], [1e-5])
-    s.exitInitializationMode()
+    initialise()
     short = step(h_short)
     print(json.dumps(dict(long=status, short=short)))
 """

@@ -10,23 +10,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from fmpy import extract, simulate_fmu
+from fmpy import simulate_fmu
 
 from vibrofmu.cli import main
-from vibrofmu.hosts.doctor import compile_host, host_environment, run_host
+from vibrofmu.hosts.doctor import host_environment, run_host
 
 VALGRIND_SUPPRESSIONS = Path(__file__).resolve().parents[1] / "c_host" / "valgrind.supp"
 FMI2_ERROR = 3
-
-
-@pytest.fixture(scope="module")
-def c_host(tmp_path_factory):
-    return compile_host(tmp_path_factory.mktemp("c_host"))
-
-
-@pytest.fixture(scope="module")
-def unpacked(plant_fmu, tmp_path_factory):
-    return Path(extract(str(plant_fmu), unzipdir=str(tmp_path_factory.mktemp("unpacked"))))
 
 
 @pytest.fixture(scope="module")

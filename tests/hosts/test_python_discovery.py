@@ -14,20 +14,10 @@ import pytest
 from fmpy import extract, read_model_description, simulate_fmu
 
 from vibrofmu.cli import main
-from vibrofmu.hosts.doctor import compile_host, recorded_environment, run_host
+from vibrofmu.hosts.doctor import recorded_environment, run_host
 from vibrofmu.fmus.pythonenv import ENV_VARIABLE, env_text, parse_env
 
 ROOT_CAUSE_HINT = "vibrofmu doctor"
-
-
-@pytest.fixture(scope="module")
-def c_host(tmp_path_factory):
-    return compile_host(tmp_path_factory.mktemp("c_host"))
-
-
-@pytest.fixture(scope="module")
-def unpacked(plant_fmu, tmp_path_factory):
-    return Path(extract(str(plant_fmu), unzipdir=str(tmp_path_factory.mktemp("unpacked"))))
 
 
 def fmu_lines(stderr: str) -> list[str]:

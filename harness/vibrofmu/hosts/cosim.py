@@ -132,6 +132,17 @@ class StepFailure(RuntimeError):
     """An FMU call failed; the message names the FMU and carries its log message."""
 
 
+def _finish(master: Master, times: list, rows: list, stop_reason: str | None, t0: float) -> CosimResult:
+    """Close `master` and gather its rows and logs into a CosimResult (timed from perf_counter `t0`)."""
+    wall_time = time.perf_counter() - t0
+    log = {name: master.log.of(name) for name in master.instances}
+    columns = master.columns
+    master.close()
+    data = np.array(rows, dtype=float).reshape(len(rows), len(columns))
+    return CosimResult(time=np.array(times), outputs={c: data[:, j] for j, c in enumerate(columns)},
+                       completed=stop_reason is None, stop_reason=stop_reason, log=log, wall_time=wall_time)
+
+
 def run_cosim(scene: CosimScene, progress=None) -> CosimResult:
     """Simulate the scene from 0 to stop_time with communication step scene.step."""
     if scene.ordering == "fmpy":
@@ -154,13 +165,7 @@ def run_cosim(scene: CosimScene, progress=None) -> CosimResult:
                 progress(i + 1, n_steps)
     except StepFailure as failure:
         stop_reason = f"stopped at tau = {times[-1] if times else 0.0:g}: {failure}"
-    wall_time = time.perf_counter() - t0
-    log = {name: master.log.of(name) for name in master.instances}
-    columns = master.columns
-    master.close()
-    data = np.array(rows, dtype=float).reshape(len(rows), len(columns))
-    return CosimResult(time=np.array(times), outputs={c: data[:, j] for j, c in enumerate(columns)},
-                       completed=stop_reason is None, stop_reason=stop_reason, log=log, wall_time=wall_time)
+    return _finish(master, times, rows, stop_reason, t0)
 
 
 def _run_fmpy_ordering(scene: CosimScene, progress=None) -> CosimResult:
@@ -193,10 +198,4 @@ def _run_fmpy_ordering(scene: CosimScene, progress=None) -> CosimResult:
                 progress(len(times), n_steps)
     except StepFailure as failure:
         stop_reason = f"stopped at tau = {t:g}: {failure}"
-    wall_time = time.perf_counter() - t0
-    log = {name: master.log.of(name) for name in master.instances}
-    columns = master.columns
-    master.close()
-    data = np.array(rows, dtype=float).reshape(len(rows), len(columns))
-    return CosimResult(time=np.array(times), outputs={c: data[:, j] for j, c in enumerate(columns)},
-                       completed=stop_reason is None, stop_reason=stop_reason, log=log, wall_time=wall_time)
+    return _finish(master, times, rows, stop_reason, t0)
