@@ -281,6 +281,26 @@ def test_forged_bit_flip_sample_never_crashes(subject):
     assert sum(counts.values()) == 40
 
 
+def campaigns(request, subjects, *runs):
+    """For each of `runs` (flip_campaign's keyword arguments), {subject: its counts}, every run on one instance of
+    each subject."""
+    results = [{} for _ in runs]
+    for which in subjects:
+        made = Subject(request, which)
+        try:
+            for result, run in zip(results, runs):
+                result[which] = flip_campaign(made, **run)
+        finally:
+            made.close()
+    return results
+
+
+def assert_none_accepted(totals):
+    """At least 10,000 flips in all (the campaign's size), none accepted with the same or a different result."""
+    assert sum(sum(c.values()) for c in totals.values()) >= 10_000
+    assert all(c["different"] == 0 and c["same"] == 0 for c in totals.values())
+
+
 @pytest.mark.parametrize("which", NATIVE_SUBJECTS)
 def test_native_bit_flip_sample_is_always_refused(request, which):
     """The native FMUs' states: 60 flips each anywhere in the bytes, all refused (the checksum; before it, a flip
@@ -296,32 +316,18 @@ def test_native_bit_flip_sample_is_always_refused(request, which):
 @pytest.mark.slow
 def test_native_bit_flip_campaign(request, capsys):
     """>= 10,000 single-bit flips over the native FMUs' serialized states: 0 accepted, 0 crashes."""
-    totals = {}
-    for which in NATIVE_SUBJECTS:
-        made = Subject(request, which)
-        try:
-            totals[which] = flip_campaign(made, 3400, seed=1502)
-        finally:
-            made.close()
+    totals, = campaigns(request, NATIVE_SUBJECTS, dict(flips=3400, seed=1502))
     with capsys.disabled():
         print(f"\nnative bit flips: {totals}")
-    assert sum(sum(c.values()) for c in totals.values()) >= 10_000
-    assert all(c["different"] == 0 and c["same"] == 0 for c in totals.values())
+    assert_none_accepted(totals)
 
 
 @pytest.mark.slow
 def test_bit_flip_campaign(request, capsys):
     """The issue's campaign: >= 10,000 single-bit flips over serialized states of the three FMUs (the plant on both
     kernels): 0 accepted with a different result, 0 crashes. Plus forged (re-signed) flips: 0 crashes."""
-    totals, forged = {}, {}
-    for which in SUBJECTS:
-        made = Subject(request, which)
-        try:
-            totals[which] = flip_campaign(made, 2600, seed=1500)
-            forged[which] = flip_campaign(made, 500, seed=1501, resigned=True)
-        finally:
-            made.close()
+    totals, forged = campaigns(request, SUBJECTS, dict(flips=2600, seed=1500),
+                               dict(flips=500, seed=1501, resigned=True))
     with capsys.disabled():
         print(f"\nbit flips: {totals}\nforged (re-signed) flips: {forged}")
-    assert sum(sum(c.values()) for c in totals.values()) >= 10_000
-    assert all(c["different"] == 0 and c["same"] == 0 for c in totals.values())
+    assert_none_accepted(totals)

@@ -134,18 +134,24 @@ def _problems(result):
     return [m for m in result.log if m.startswith(("[error]", "[warning]", "[fatal]"))]
 
 
-@pytest.mark.parametrize("values,stop", PARITY_CASES, ids=[str(v) for v, _ in PARITY_CASES])
-def test_parity_with_the_pythonfmu_fmu(values, stop, plant_fmu, native_plant_fmu):
-    values = dict(values)
-    interval = values.pop("interval", 0.1)  # the communication step (also RK4's longest step)
-    python = run_fmu(plant_fmu, values, stop, interval)
-    native = run_fmu(native_plant_fmu, values, stop, interval)
+def assert_same_run(native, python):
+    """The native FMU's run is the Python FMU's bit for bit: completion, status, problems logged, times, every
+    output, and what it answers after a failure."""
     assert (native.completed, native.status) == (python.completed, python.status)
     assert canonical_tree(_problems(native)) == canonical_tree(_problems(python))
     np.testing.assert_array_equal(native.time, python.time)
     for name in python.outputs:
         np.testing.assert_array_equal(native.outputs[name], python.outputs[name], err_msg=name)
     assert canonical_tree(native.after_failure) == canonical_tree(python.after_failure)
+
+
+@pytest.mark.parametrize("values,stop", PARITY_CASES, ids=[str(v) for v, _ in PARITY_CASES])
+def test_parity_with_the_pythonfmu_fmu(values, stop, plant_fmu, native_plant_fmu):
+    values = dict(values)
+    interval = values.pop("interval", 0.1)  # the communication step (also RK4's longest step)
+    python = run_fmu(plant_fmu, values, stop, interval)
+    native = run_fmu(native_plant_fmu, values, stop, interval)
+    assert_same_run(native, python)
 
 
 def test_both_fmus_log_the_tolerance_factor_of_a_long_lightly_damped_run(plant_fmu, native_plant_fmu):
@@ -533,12 +539,7 @@ def test_controller_parity(values, controller_fmu, native_controller_fmu):
     start = {**CONTROLLER_INPUTS, **values}
     python = run_fmu(controller_fmu, start, 20.0, 0.1)
     native = run_fmu(native_controller_fmu, start, 20.0, 0.1)
-    assert (native.completed, native.status) == (python.completed, python.status)
-    assert canonical_tree(_problems(native)) == canonical_tree(_problems(python))
-    np.testing.assert_array_equal(native.time, python.time)
-    for name in python.outputs:
-        np.testing.assert_array_equal(native.outputs[name], python.outputs[name], err_msg=name)
-    assert canonical_tree(native.after_failure) == canonical_tree(python.after_failure)
+    assert_same_run(native, python)
 
 
 def _input_bounds():
@@ -740,12 +741,7 @@ CLOSED_LOOP_CASES = [
 def test_closed_loop_parity(values, closed_loop_fmu, native_closed_loop_fmu):
     python = run_fmu(closed_loop_fmu, values, 10.0, 0.1)
     native = run_fmu(native_closed_loop_fmu, values, 10.0, 0.1)
-    assert (native.completed, native.status) == (python.completed, python.status)
-    assert canonical_tree(_problems(native)) == canonical_tree(_problems(python))
-    np.testing.assert_array_equal(native.time, python.time)
-    for name in python.outputs:
-        np.testing.assert_array_equal(native.outputs[name], python.outputs[name], err_msg=name)
-    assert canonical_tree(native.after_failure) == canonical_tree(python.after_failure)
+    assert_same_run(native, python)
 
 
 @pytest.mark.parametrize("values,name", [

@@ -28,6 +28,27 @@ def stand_in_fmu(path: Path) -> Path:
     return normalize_entries(path)
 
 
+def stand_in_fmus(folder: Path) -> Path:
+    """`folder`, made, with a stand-in (stand_in_fmu) for each of the three FMUs."""
+    from vibrofmu.paths import CLOSED_LOOP_NAME, CONTROLLER_NAME, PLANT_NAME
+
+    folder.mkdir()
+    for name in (PLANT_NAME, CONTROLLER_NAME, CLOSED_LOOP_NAME):
+        stand_in_fmu(folder / name)
+    return folder
+
+
+def stand_in_checkout(tmp_path: Path) -> tuple[Path, Path]:
+    """(tmp_path/root: a copy of this checkout's docs and README.md, tmp_path/fmus: stand_in_fmus)."""
+    import shutil
+
+    checkout = Path(__file__).resolve().parents[2]
+    root = tmp_path / "root"
+    shutil.copytree(checkout / "docs", root / "docs")
+    shutil.copy(checkout / "README.md", root / "README.md")
+    return root, stand_in_fmus(tmp_path / "fmus")
+
+
 def test_simulate_with_compare_writes_all_results(tmp_path, plant_fmu, capsys):
     from vibrofmu.analyses import simulate
 
@@ -479,7 +500,6 @@ def test_report_keeps_an_edit_made_while_it_ran(tmp_path, monkeypatch, capsys):
     import shutil
 
     import vibrofmu.report as report
-    from vibrofmu.paths import CLOSED_LOOP_NAME, CONTROLLER_NAME, PLANT_NAME
 
     root = tmp_path / "root"
     (root / "docs").mkdir(parents=True)
@@ -487,10 +507,7 @@ def test_report_keeps_an_edit_made_while_it_ran(tmp_path, monkeypatch, capsys):
     shutil.copy(checkout / "README.md", root / "README.md")
     for doc in (checkout / "docs").glob("*.md"):
         shutil.copy(doc, root / "docs" / doc.name)
-    fmus = tmp_path / "fmus"
-    fmus.mkdir()
-    for name in (PLANT_NAME, CONTROLLER_NAME, CLOSED_LOOP_NAME):
-        stand_in_fmu(fmus / name)
+    fmus = stand_in_fmus(tmp_path / "fmus")
     edit = "\nA line the user wrote while the report ran.\n"
 
     def generate(names, *args):
@@ -510,21 +527,12 @@ def test_report_leaves_the_blocks_of_a_failed_study_alone(monkeypatch, tmp_path,
     """A study that fails (here the bench) leaves every block that reads its summary as it is -- the speed block
     gathers oafm, stability and bench, and from the first two alone it lost the bench's lines -- and the report
     exits 1. The studies are stand-ins; the FMUs are stand-in files (no FMU runs)."""
-    import shutil
     from dataclasses import replace
 
     import vibrofmu.report as report
     from vibrofmu.commands import bench, oafm, stability
-    from vibrofmu.paths import CLOSED_LOOP_NAME, CONTROLLER_NAME, PLANT_NAME
 
-    checkout = Path(__file__).resolve().parents[2]
-    root = tmp_path / "root"
-    shutil.copytree(checkout / "docs", root / "docs")
-    shutil.copy(checkout / "README.md", root / "README.md")
-    fmus = tmp_path / "fmus"
-    fmus.mkdir()
-    for name in (PLANT_NAME, CONTROLLER_NAME, CLOSED_LOOP_NAME):
-        stand_in_fmu(fmus / name)
+    root, fmus = stand_in_checkout(tmp_path)
     monkeypatch.setattr(oafm, "COMMAND", replace(oafm.COMMAND, run=lambda args: 0))
     monkeypatch.setattr(stability, "COMMAND", replace(stability.COMMAND, run=lambda args: 0))
     monkeypatch.setattr(bench, "COMMAND", replace(bench.COMMAND, run=lambda args: 1))

@@ -5,16 +5,13 @@ FMUs stand-in archives: no FMU runs here."""
 from __future__ import annotations
 
 import hashlib
-import shutil
 from pathlib import Path
 
 import pytest
-from test_cli import stand_in_fmu
+from test_cli import stand_in_checkout
 
 from vibrofmu.cli import main
-from vibrofmu.paths import CLOSED_LOOP_NAME, CONTROLLER_NAME, PLANT_NAME
 
-CHECKOUT = Path(__file__).resolve().parents[2]
 BLOCK = "<!-- report:ranges -->\ngenerated ranges table\n<!-- /report:ranges -->"
 
 
@@ -28,13 +25,7 @@ def stand_ins(tmp_path, monkeypatch):
     """(a copy of the documents, a folder of stand-in FMUs); report.generate gives the ranges block only."""
     import vibrofmu.report as report
 
-    root = tmp_path / "root"
-    shutil.copytree(CHECKOUT / "docs", root / "docs")
-    shutil.copy(CHECKOUT / "README.md", root / "README.md")
-    fmus = tmp_path / "fmus"
-    fmus.mkdir()
-    for name in (PLANT_NAME, CONTROLLER_NAME, CLOSED_LOOP_NAME):
-        stand_in_fmu(fmus / name)
+    root, fmus = stand_in_checkout(tmp_path)
     monkeypatch.setattr(report, "generate", lambda names, *args: {"ranges": "generated ranges table\n"})
     monkeypatch.chdir(tmp_path)
     return root, fmus

@@ -79,20 +79,26 @@ def test_fidelity_3_refuses_a_vibration_that_leaves_the_contact_where_fidelity_0
     assert stop is not None  # the independent evidence: the exact model does not survive this scene either
 
 
+def assert_refused_before_work(monkeypatch, module, function, what, make, name):
+    """make() raises ParameterError naming `name` (and pointing to fidelity 0) before module.function (the slow
+    work) is called: the function is replaced by one that fails the test, saying `what` happened."""
+    def forbidden(*args, **kwargs):
+        raise AssertionError(f"{what} before the refusal")
+
+    monkeypatch.setattr(module, function, forbidden)
+    with pytest.raises(ParameterError) as refusal:
+        make()
+    assert refusal.value.name == name and "use fidelity 0" in refusal.value.reason
+
+
 @pytest.mark.parametrize("values, name", [({"omega": 1000.0}, "omega"), ({"omega": 2.0}, "omega"),
                                           ({"beta": 0.3}, "beta")])
 def test_fidelity_3_refuses_outside_its_small_parameters_before_any_integration(monkeypatch, values, name):
     """omega = 1000 took 47 s to initialise; omega = 2 erred by 117 % of the amplitude; beta = 0.3 pumps the
     resonance (Mathieu growth > 0) to pull-in. Refused before the slow flow is integrated (solve_ivp must not run)."""
     import scipy.integrate
-
-    def no_work(*args, **kwargs):
-        raise AssertionError("the slow flow was integrated before the refusal")
-
-    monkeypatch.setattr(scipy.integrate, "solve_ivp", no_work)
-    with pytest.raises(ParameterError) as refusal:
-        averaged_plant(**values)
-    assert refusal.value.name == name and "use fidelity 0" in refusal.value.reason
+    assert_refused_before_work(monkeypatch, scipy.integrate, "solve_ivp", "the slow flow was integrated",
+                               lambda: averaged_plant(**values), name)
 
 
 def test_mathieu_growth_separates_the_scenes_fidelity_0_survives_from_those_it_pulls_in(library):
@@ -142,14 +148,8 @@ def test_fidelity_4_refuses_before_the_fit(monkeypatch, values, name):
     """Delta = 0.3, 1, 3 and beta = 3 took 258-301 s and returned x = 1.379 (fidelity 0: 0.347) or |x| = 4.38 beyond
     the electrode; mu = 0.01 fitted tau = 1031 for 6-8 s. Refused before least_squares runs."""
     import scipy.optimize
-
-    def no_fit(*args, **kwargs):
-        raise AssertionError("the OAFM fit ran before the refusal")
-
-    monkeypatch.setattr(scipy.optimize, "least_squares", no_fit)
-    with pytest.raises(ParameterError) as refusal:
-        analytic_plant(**values)
-    assert refusal.value.name == name and "use fidelity 0" in refusal.value.reason
+    assert_refused_before_work(monkeypatch, scipy.optimize, "least_squares", "the OAFM fit ran",
+                               lambda: analytic_plant(**values), name)
 
 
 def test_fidelity_4_linear_prediction_is_what_fidelity_0_does_at_small_amplitude(library):
