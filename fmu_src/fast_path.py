@@ -36,36 +36,32 @@ _vr_array = ctypes.c_uint * FAST_MAX
 _address_array = ctypes.c_void_p * FAST_MAX
 
 
-def _shim_function(resources: str | None, model_identifier: str, name: str):
-    """The shim's C function `name`, or None (no resources, no shim, or a shim without that function)."""
+def _shim_function(resources: str | None, model_identifier: str, name: str, argtypes: list):
+    """The shim's C function `name` (returning int, taking `argtypes`), or None (no resources, no shim, or a shim
+    without that function)."""
     if not resources:
         return None
     path = Path(resources).parent / "binaries" / "linux64" / f"{model_identifier}.so"
     try:
-        return getattr(ctypes.CDLL(str(path)), name)
+        function = getattr(ctypes.CDLL(str(path)), name)
     except (OSError, AttributeError):
         return None
+    function.restype = ctypes.c_int
+    function.argtypes = argtypes
+    return function
 
 
 def shim_attach(resources: str | None, model_identifier: str):
     """The shim's vibro_fast_path_attach, or None (no resources, no shim, or a shim without a fast path)."""
-    attach = _shim_function(resources, model_identifier, "vibro_fast_path_attach")
-    if attach is None:
-        return None
-    attach.restype = ctypes.c_int
-    attach.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p,
-                       ctypes.c_size_t, _vr_array, _address_array, ctypes.c_size_t, _vr_array, _address_array]
-    return attach
+    return _shim_function(resources, model_identifier, "vibro_fast_path_attach",
+                          [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p,
+                           ctypes.c_size_t, _vr_array, _address_array, ctypes.c_size_t, _vr_array, _address_array])
 
 
 def shim_inputs(resources: str | None, model_identifier: str):
     """The shim's vibro_fast_path_inputs, or None."""
-    function = _shim_function(resources, model_identifier, "vibro_fast_path_inputs")
-    if function is None:
-        return None
-    function.restype = ctypes.c_int
-    function.argtypes = [ctypes.c_void_p, ctypes.c_size_t, _vr_array, _address_array]
-    return function
+    return _shim_function(resources, model_identifier, "vibro_fast_path_inputs",
+                          [ctypes.c_void_p, ctypes.c_size_t, _vr_array, _address_array])
 
 
 def attach(shim, plant, real_outputs: dict[int, int], boolean_outputs: dict[int, int]) -> bool:

@@ -50,8 +50,8 @@ def default_library():
 
 
 @dataclass
-class Run:
-    """One scene's outputs at start_time and after each interval: arrays of one length (the points reached)."""
+class _Outputs:
+    """The plant's outputs over time (Run: one scene's, Batch: many scenes')."""
 
     time: np.ndarray
     x: np.ndarray
@@ -59,6 +59,12 @@ class Run:
     a: np.ndarray
     F_contact: np.ndarray
     F_electrostatic: np.ndarray
+
+
+@dataclass
+class Run(_Outputs):
+    """One scene's outputs at start_time and after each interval: arrays of one length (the points reached)."""
+
     in_contact: np.ndarray | None  # bool; None (and a, F_contact, F_electrostatic): not asked for (outputs)
     stopped: str = ""  # why the run stopped before stop_time ("" if it did not): the FMU's log line
     error: BaseException | None = None  # what CompiledPlant raises there (TerminalEvent at pull-in, ...)
@@ -67,15 +73,9 @@ class Run:
 
 
 @dataclass
-class Batch:
+class Batch(_Outputs):
     """Many scenes' outputs: arrays of shape (scenes, points); after a scene's stop its rows hold NaN."""
 
-    time: np.ndarray
-    x: np.ndarray
-    v: np.ndarray
-    a: np.ndarray
-    F_contact: np.ndarray
-    F_electrostatic: np.ndarray
     in_contact: np.ndarray | None  # float: 1.0, 0.0, NaN after a stop; None (and a, F_*): not asked for
     n_points: np.ndarray  # points reached per scene
     stopped: list[str]

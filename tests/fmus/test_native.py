@@ -277,6 +277,18 @@ def _protocol(fmu, unzipped, input_name, start_a, start_b, fixed):
         instance.fmu.enterInitializationMode()
         instance.set(values)
         instance.fmu.exitInitializationMode()
+
+    def ten_steps():
+        """The outputs before and after each of ten steps of `a` from t, with a new input before each."""
+        outputs = []
+        for i in range(10):
+            if input_name is not None:  # (the closed loop has no input)
+                a.fmu.setReal([vr[input_name]], [0.01 * i])
+            outputs.append(a.read_outputs())
+            a.fmu.doStep(t + 0.1 * i, 0.1)
+            outputs.append(a.read_outputs())
+        return outputs
+
     t = 0.0
     for _ in range(20):  # interleaved instances
         a.fmu.doStep(t, 0.1)
@@ -285,21 +297,9 @@ def _protocol(fmu, unzipped, input_name, start_a, start_b, fixed):
         trace.append((a.read_outputs(), b.read_outputs()))
     state = a.fmu.getFMUstate()
     blob = a.fmu.serializeFMUstate(state)
-    ahead = []
-    for i in range(10):
-        if input_name is not None:  # (the closed loop has no input)
-            a.fmu.setReal([vr[input_name]], [0.01 * i])
-        ahead.append(a.read_outputs())
-        a.fmu.doStep(t + 0.1 * i, 0.1)
-        ahead.append(a.read_outputs())
+    ahead = ten_steps()
     a.fmu.setFMUstate(state)  # back in time: the same steps give the same outputs
-    again = []
-    for i in range(10):
-        if input_name is not None:  # (the closed loop has no input)
-            a.fmu.setReal([vr[input_name]], [0.01 * i])
-        again.append(a.read_outputs())
-        a.fmu.doStep(t + 0.1 * i, 0.1)
-        again.append(a.read_outputs())
+    again = ten_steps()
     restored = a.fmu.deSerializeFMUstate(blob)
     a.fmu.setFMUstate(restored)
     a.fmu.doStep(t, 0.1)

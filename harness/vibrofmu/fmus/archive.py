@@ -57,6 +57,26 @@ def normalize_entries(path: Path) -> Path:
     return path
 
 
+def rewrite_members(path: Path, transform, added: tuple = ()) -> None:
+    """Rewrite the zip `path` in place, deflated: each member's data through transform(filename, data) (None drops
+    the member), then the (filename, data) pairs `added`. A failure leaves `path` as it was."""
+    path = Path(path)
+    fd, tmp = tempfile.mkstemp(suffix=path.suffix, dir=path.parent)
+    os.close(fd)
+    try:
+        with zipfile.ZipFile(path) as zin, zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as zout:
+            for info in zin.infolist():
+                data = transform(info.filename, zin.read(info.filename))
+                if data is not None:
+                    zout.writestr(info, data)
+            for filename, data in added:
+                zout.writestr(filename, data)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
 @contextlib.contextmanager
 def staging(destination: Path):
     """Yield a fresh hidden folder inside `destination` (created if missing) to assemble archives in; `publish`

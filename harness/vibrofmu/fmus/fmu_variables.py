@@ -10,10 +10,7 @@ the slave gives is kept (it is the more specific one). Integer and Boolean varia
 from __future__ import annotations
 
 import io
-import os
-import tempfile
 import xml.etree.ElementTree as ET
-import zipfile
 from pathlib import Path
 
 DIMENSIONLESS = "1"
@@ -85,17 +82,7 @@ def annotated_model_description(xml: bytes) -> bytes:
 
 def annotate(fmu: Path) -> None:
     """Rewrite `fmu` in place with annotated_model_description; the other members are copied unchanged."""
-    fmu = Path(fmu)
-    fd, tmp = tempfile.mkstemp(suffix=".fmu", dir=fmu.parent)
-    os.close(fd)
-    try:
-        with zipfile.ZipFile(fmu) as zin, zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as zout:
-            for info in zin.infolist():
-                data = zin.read(info.filename)
-                if info.filename == "modelDescription.xml":
-                    data = annotated_model_description(data)
-                zout.writestr(info, data)
-        os.replace(tmp, fmu)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    from vibrofmu.fmus.archive import rewrite_members
+
+    rewrite_members(fmu, lambda name, data: annotated_model_description(data) if name == "modelDescription.xml"
+                    else data)

@@ -132,16 +132,8 @@ def pack_python_env(fmu_path: Path) -> dict:
     if missing(record):
         raise RuntimeError(f"this Python lacks {', '.join(missing(record))}, which {fmu_path.name} imports")
     text = env_text(record)
-    fd, tmp_fmu = tempfile.mkstemp(suffix=".fmu", dir=fmu_path.parent)
-    os.close(fd)
-    try:
-        with zipfile.ZipFile(fmu_path) as zin, zipfile.ZipFile(tmp_fmu, "w", zipfile.ZIP_DEFLATED) as zout:
-            for info in zin.infolist():
-                if info.filename != f"resources/{ENV_FILE}":
-                    zout.writestr(info, zin.read(info.filename))
-            zout.writestr(f"resources/{ENV_FILE}", text)
-        os.replace(tmp_fmu, fmu_path)
-    except BaseException:
-        Path(tmp_fmu).unlink(missing_ok=True)
-        raise
+    from vibrofmu.fmus.archive import rewrite_members
+
+    name = f"resources/{ENV_FILE}"
+    rewrite_members(fmu_path, lambda filename, data: None if filename == name else data, added=((name, text),))
     return record

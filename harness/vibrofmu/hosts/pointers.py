@@ -425,6 +425,22 @@ def scenario_me_block(probe) -> None:
     f.fmi2FreeInstance(me)
 
 
+def _foreign_state_calls(lib, version: str, state: str, size, buffer) -> list:
+    """(case, function name, call(instance, state pointer)) for each state function of `lib` handed a state:
+    version "fmi2" or "fmi3", state the standard's spelling ("FMUstate", "FMUState")."""
+    get, set_, size_of, serialize, free = (getattr(lib, f"{version}{name}") for name in (
+        f"Get{state}", f"Set{state}", f"Serialized{state}Size", f"Serialize{state}", f"Free{state}"))
+    return [(f"{version}Get{state} into another FMU's state", f"{version}Get{state}",
+             lambda i, s: get(i, ctypes.byref(s))),
+            (f"{version}Set{state} of another FMU's state", f"{version}Set{state}", lambda i, s: set_(i, s)),
+            (f"{version}Serialized{state}Size of another FMU's state", f"{version}Serialized{state}Size",
+             lambda i, s: size_of(i, s, ctypes.byref(size))),
+            (f"{version}Serialize{state} of another FMU's state", f"{version}Serialize{state}",
+             lambda i, s: serialize(i, s, buffer, len(buffer))),
+            (f"{version}Free{state} of another FMU's state", f"{version}Free{state}",
+             lambda i, s: free(i, ctypes.byref(s)))]
+
+
 def scenario_foreign_states(probe, other) -> None:
     """Two FMUs' binaries in one process: a state of the other FMU (and a freed state of this one) given to every
     state call of this one; {"case", "status", "expected", "log"}; the other FMU's state must survive intact."""
@@ -438,18 +454,9 @@ def scenario_foreign_states(probe, other) -> None:
     before = _serialize(other, b, theirs)
     size = ctypes.c_size_t()
     buffer = ctypes.create_string_buffer(1 << 16)
-    cases = [("fmi2GetFMUstate into another FMU's state", "fmi2GetFMUstate",
-              lambda s: f.fmi2GetFMUstate(a, ctypes.byref(s))),
-             ("fmi2SetFMUstate of another FMU's state", "fmi2SetFMUstate", lambda s: f.fmi2SetFMUstate(a, s)),
-             ("fmi2SerializedFMUstateSize of another FMU's state", "fmi2SerializedFMUstateSize",
-              lambda s: f.fmi2SerializedFMUstateSize(a, s, ctypes.byref(size))),
-             ("fmi2SerializeFMUstate of another FMU's state", "fmi2SerializeFMUstate",
-              lambda s: f.fmi2SerializeFMUstate(a, s, buffer, len(buffer))),
-             ("fmi2FreeFMUstate of another FMU's state", "fmi2FreeFMUstate",
-              lambda s: f.fmi2FreeFMUstate(a, ctypes.byref(s)))]
-    for case, call, make_call in cases:
+    for case, call, make_call in _foreign_state_calls(f, "fmi2", "FMUstate", size, buffer):
         pointer = ctypes.c_void_p(theirs.value)
-        _case(probe, case, call, "FMUstate", make_call(pointer))
+        _case(probe, case, call, "FMUstate", make_call(a, pointer))
     emit(case="the other FMU's state intact", ok=_serialize(other, b, theirs) == before,
          status=g.fmi2SetFMUstate(b, theirs), expected=OK, log=other.take_log())
     f.fmi2GetFMUstate(a, ctypes.byref(ours))
@@ -474,17 +481,8 @@ def scenario_foreign_states3(probe: Probe3, other: Probe3) -> None:
     theirs, ours, size = ctypes.c_void_p(), ctypes.c_void_p(), ctypes.c_size_t()
     g.fmi3GetFMUState(b, ctypes.byref(theirs))
     buffer = ctypes.create_string_buffer(1 << 16)
-    cases = [("fmi3GetFMUState into another FMU's state", "fmi3GetFMUState",
-              lambda s: f.fmi3GetFMUState(a, ctypes.byref(s))),
-             ("fmi3SetFMUState of another FMU's state", "fmi3SetFMUState", lambda s: f.fmi3SetFMUState(a, s)),
-             ("fmi3SerializedFMUStateSize of another FMU's state", "fmi3SerializedFMUStateSize",
-              lambda s: f.fmi3SerializedFMUStateSize(a, s, ctypes.byref(size))),
-             ("fmi3SerializeFMUState of another FMU's state", "fmi3SerializeFMUState",
-              lambda s: f.fmi3SerializeFMUState(a, s, buffer, len(buffer))),
-             ("fmi3FreeFMUState of another FMU's state", "fmi3FreeFMUState",
-              lambda s: f.fmi3FreeFMUState(a, ctypes.byref(s)))]
-    for case, call, make_call in cases:
-        _case(probe, case, call, "FMUState", make_call(ctypes.c_void_p(theirs.value)))
+    for case, call, make_call in _foreign_state_calls(f, "fmi3", "FMUState", size, buffer):
+        _case(probe, case, call, "FMUState", make_call(a, ctypes.c_void_p(theirs.value)))
         f.fmi3FreeInstance(a)  # a refusal is an error of the instance: a fresh one for the next
         a = probe.start()
     emit(case="the other FMU's state intact", ok=True, status=g.fmi3SetFMUState(b, theirs), expected=OK,
