@@ -229,6 +229,15 @@ SIMULATE_SET_HELP = (SET_HELP[:-len(" (default: the paper's example)")] + "; or 
 
 
 # -- checks of user-given paths --------------------------------------------------------------------------
+def study_fmu_options(p: argparse.ArgumentParser, fmu_use: str, no_fmu_help: str, out_help: str) -> None:
+    """The options a study that checks itself on the plant FMU ends with: --fmu (FMU_HELP + fmu_use), --no-fmu,
+    --set (SET_HELP), --out (required)."""
+    p.add_argument("--fmu", default=None, help=FMU_HELP + fmu_use)
+    p.add_argument("--no-fmu", action="store_true", help=no_fmu_help)
+    p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", help=SET_HELP)
+    p.add_argument("--out", required=True, help=out_help)
+
+
 def checked_fmu(path: Path, model: str | None = None) -> Path:
     """`path` if it is an FMU file (a zip archive with modelDescription.xml) of `model` (its modelName; None:
     any); UserError otherwise."""

@@ -1,6 +1,7 @@
 """`vibrofmu oafm`: the OAFM analytic solution fitted, against the reference, and the FMU's fidelity 4."""
-from vibrofmu.commands.common import (FMU_HELP, SET_HELP, Command, Unused, built_plant, count, failed,
-                                      non_negative, non_negative_int, out_folder, parse_set, plant_fmu, positive)
+from vibrofmu.commands.common import (Command, Unused, built_plant, count, failed,
+                                      non_negative, non_negative_int, out_folder, parse_set, plant_fmu, positive,
+                                      study_fmu_options)
 
 
 def options(p):
@@ -17,10 +18,8 @@ def options(p):
     p.add_argument("--nodes", type=count, default=Grid.nodes, help="Gauss-Legendre nodes per panel")
     p.add_argument("--study-max-order", type=non_negative_int, default=6,
                    help="convergence study up to this order; 0 = none")
-    p.add_argument("--fmu", default=None, help=FMU_HELP + ", checked at fidelity 4")
-    p.add_argument("--no-fmu", action="store_true", help="skip the FMU check")
-    p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", help=SET_HELP)
-    p.add_argument("--out", required=True, help="output folder (summary.json, oafm.csv, plots)")
+    study_fmu_options(p, ", checked at fidelity 4", "skip the FMU check",
+                      "output folder (summary.json, oafm.csv, plots)")
 
 
 def run(args) -> int:

@@ -2,18 +2,16 @@
 import math
 import sys
 
-from vibrofmu.commands.common import (FMU_HELP, SET_HELP, Command, Unused, UserError, built_plant, count, failed,
-                                      out_folder, parse_set, plant_fmu, positive)
+from vibrofmu.commands.common import (Command, Unused, UserError, built_plant, count, failed,
+                                      out_folder, parse_set, plant_fmu, positive, study_fmu_options)
 
 
 def options(p):
     p.add_argument("--omega-range", nargs=3, type=positive, metavar=("LO", "HI", "N"),
                    help="frequency grid (default: omega_e -+ max(3 mu, 3 |kappa(r_peak)|), 201 points)")
     p.add_argument("--sweep-points", type=count, default=25, help="frequencies per FMU sweep direction")
-    p.add_argument("--fmu", default=None, help=FMU_HELP + ", for the sweeps")
-    p.add_argument("--no-fmu", action="store_true", help="skip the FMU sweeps and the fidelity-3 check")
-    p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", help=SET_HELP)
-    p.add_argument("--out", required=True, help="output folder (summary.json, frequency_response.png)")
+    study_fmu_options(p, ", for the sweeps", "skip the FMU sweeps and the fidelity-3 check",
+                      "output folder (summary.json, frequency_response.png)")
 
 
 def run(args) -> int:
