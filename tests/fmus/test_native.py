@@ -348,13 +348,20 @@ def test_bad_serialized_state_is_an_error(native_unpacked, native_plant_fmu):
     instance.close()
 
 
-def test_c_host_in_an_empty_environment_without_python(c_host, native_unpacked, plant_fmu, tmp_path):
-    outputs = ["x", "v", "a", "F_contact", "F_electrostatic"]
-    native = run_host(c_host, native_unpacked, outputs, 0.0, 200.0, 0.1, env={"FMI2_HOST_LIST_LIBRARIES": "1"})
+def run_host_without_python(c_host, unzipped, outputs, library):
+    """The C host's run (0..200, step 0.1) of the unpacked native FMU, listing the libraries it maps: it succeeds,
+    maps `library` and nothing of Python."""
+    native = run_host(c_host, unzipped, outputs, 0.0, 200.0, 0.1, env={"FMI2_HOST_LIST_LIBRARIES": "1"})
     assert native.returncode == 0, native.stderr
     mapped = [line for line in native.stderr.splitlines() if line.startswith("fmi2_host: mapped ")]
-    assert any("HertzEAOscillator.so" in line for line in mapped)
+    assert any(library in line for line in mapped)
     assert not [line for line in mapped if "python" in line.lower()], mapped
+    return native
+
+
+def test_c_host_in_an_empty_environment_without_python(c_host, native_unpacked, plant_fmu, tmp_path):
+    outputs = ["x", "v", "a", "F_contact", "F_electrostatic"]
+    native = run_host_without_python(c_host, native_unpacked, outputs, "HertzEAOscillator.so")
     # the control: the pythonfmu FMU in the same host does map libpython (so the check above can fail)
     unpacked = Path(extract(str(plant_fmu), unzipdir=str(tmp_path / "py")))
     python = run_host(c_host, unpacked, outputs, 0.0, 200.0, 0.1, env={"FMI2_HOST_LIST_LIBRARIES": "1"})
@@ -777,11 +784,7 @@ def test_closed_loop_state_reset_and_instances(closed_loop_fmu, closed_loop_unzi
 def test_closed_loop_c_host_without_python(c_host, native_closed_loop_fmu, closed_loop_fmu, tmp_path):
     unzipped = Path(extract(str(native_closed_loop_fmu), unzipdir=str(tmp_path / "n")))
     outputs = ["x", "x_ref", "U", "V", "mu_hat", "gamma_hat"]
-    native = run_host(c_host, unzipped, outputs, 0.0, 200.0, 0.1, env={"FMI2_HOST_LIST_LIBRARIES": "1"})
-    assert native.returncode == 0, native.stderr
-    mapped = [line for line in native.stderr.splitlines() if line.startswith("fmi2_host: mapped ")]
-    assert any("HertzEAClosedLoop.so" in line for line in mapped)
-    assert not [line for line in mapped if "python" in line.lower()], mapped
+    native = run_host_without_python(c_host, unzipped, outputs, "HertzEAClosedLoop.so")
     python_dir = Path(extract(str(closed_loop_fmu), unzipdir=str(tmp_path / "p")))
     python = run_host(c_host, python_dir, outputs, 0.0, 200.0, 0.1)
     assert python.returncode == 0, python.stderr
