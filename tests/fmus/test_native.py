@@ -461,19 +461,26 @@ def test_series_equal_vibromodel_forces_bit_for_bit(tmp_path):
             assert list(out) == expected, (printed, alpha, gamma, R)
 
 
+def rebuilt_by_fmpy(fmu, model_identifier, tmp_path):
+    """`fmu` unpacked in tmp_path/fmu with its packed binary deleted and rebuilt from sources/ by
+    fmpy.build.build_platform_binary."""
+    from fmpy.build import build_platform_binary
+
+    unzipped = Path(extract(str(fmu), unzipdir=str(tmp_path / "fmu")))
+    packed = unzipped / "binaries" / "linux64" / f"{model_identifier}.so"
+    packed.unlink()
+    (tmp_path / "build").mkdir()
+    build_platform_binary(str(unzipped), build_dir=str(tmp_path / "build"))
+    assert packed.is_file()
+    return unzipped
+
+
 @pytest.mark.tools("cmake")  # FMPy's build_platform_binary runs it
 def test_fmpy_builds_the_sources(native_plant_fmu, tmp_path):
     """fmpy.build.build_platform_binary compiles sources/ (its own CMake project, Release flags) into a
     binary that gives the same x as the packed one: no FMA on x86-64 without -march, no fast-math, so the
     same arithmetic."""
-    from fmpy.build import build_platform_binary
-
-    unzipped = Path(extract(str(native_plant_fmu), unzipdir=str(tmp_path / "fmu")))
-    packed = unzipped / "binaries" / "linux64" / "HertzEAOscillator.so"
-    packed.unlink()
-    (tmp_path / "build").mkdir()
-    build_platform_binary(str(unzipped), build_dir=str(tmp_path / "build"))
-    assert packed.is_file()
+    unzipped = rebuilt_by_fmpy(native_plant_fmu, "HertzEAOscillator", tmp_path)
     rebuilt = simulate_fmu(str(unzipped), output=["x"])
     original = simulate_fmu(str(native_plant_fmu), output=["x"])
     np.testing.assert_array_equal(rebuilt["x"], original["x"])
@@ -821,14 +828,7 @@ def test_closed_loop_no_invalid_memory_access(c_host, native_closed_loop_fmu, tm
 @pytest.mark.tools("cmake")  # FMPy's build_platform_binary runs it
 def test_closed_loop_fmpy_builds_the_sources(native_closed_loop_fmu, tmp_path):
     """As the plant's: FMPy's CMake build of sources/ (reference.h included) gives the packed binary's bits."""
-    from fmpy.build import build_platform_binary
-
-    unzipped = Path(extract(str(native_closed_loop_fmu), unzipdir=str(tmp_path / "fmu")))
-    packed = unzipped / "binaries" / "linux64" / "HertzEAClosedLoop.so"
-    packed.unlink()
-    (tmp_path / "build").mkdir()
-    build_platform_binary(str(unzipped), build_dir=str(tmp_path / "build"))
-    assert packed.is_file()
+    unzipped = rebuilt_by_fmpy(native_closed_loop_fmu, "HertzEAClosedLoop", tmp_path)
     outputs = ["x", "x_ref", "U", "V", "mu_hat"]
     rebuilt = simulate_fmu(str(unzipped), output=outputs)
     original = simulate_fmu(str(native_closed_loop_fmu), output=outputs)
