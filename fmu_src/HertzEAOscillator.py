@@ -8,6 +8,7 @@ On the compiled kernel (vibromodel.compiled, parameter kernel = 0) the plant's o
 the kernel's memory: the status shim's fast path (fast_path.py) steps it and reads the outputs there without
 Python, so the output and input variables below are properties on that memory.
 """
+import math
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -26,6 +27,7 @@ from vibromodel.parameters import Scene, check_finite, check_parameters, scene_n
 from vibromodel.plant import DEFAULT_EXPERIMENT, Plant, Settings, make_plant
 
 OUTPUTS = ("x", "v", "a", "F_contact", "F_electrostatic")
+NO_ESTIMATE = -1.0  # error_estimate before initialisation, or when the rung cannot estimate (it then warns)
 
 
 def _output(index: int):
@@ -81,6 +83,11 @@ class HertzEAOscillator(fast_path.FastPathSwitch, StatusSlave):
         self.U = 0.0
         self.register_variable(Real("U", causality=Fmi2Causality.input, description="control force"))
         self._outputs(OUTPUTS, (scene.x_start, scene.v_start, 0.0, 0.0, 0.0))
+        self.error_estimate = NO_ESTIMATE
+        self.register_variable(Real("error_estimate", causality=Fmi2Causality.output,
+                                    variability=Fmi2Variability.discrete, initial=Fmi2Initial.exact,
+                                    description="estimate of max|x - x_exact| over the run (x's units), set at "
+                                                "initialisation (docs/rungs.md, Error estimates); -1: none"))
         self.in_contact = True
         self.register_variable(Boolean("in_contact", causality=Fmi2Causality.output,
                                        variability=Fmi2Variability.discrete, initial=Fmi2Initial.exact))
@@ -119,6 +126,9 @@ class HertzEAOscillator(fast_path.FastPathSwitch, StatusSlave):
     def model(self, model):
         """A new model: a compiled one takes over the outputs and input and is handed to the shim."""
         self._model = model
+        estimate = getattr(model, "error_estimate", None)
+        value = NO_ESTIMATE if estimate is None else estimate["estimate"]
+        self.error_estimate = value if math.isfinite(value) else NO_ESTIMATE
         self._kernel = model if isinstance(model, (CompiledPlant, CompiledOpenLoopPlant)) else None
         if self._kernel is not None:
             for name in (*OUTPUTS, "in_contact", "U"):

@@ -1,6 +1,8 @@
 /* plant_setup.c -- see plant_setup.h. */
 #include <math.h>
 #include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
 
 #include "fidelity.h"
 #include "plant_setup.h"
@@ -91,3 +93,80 @@ void native_drive_warnings(Instance *inst, const State *s, const VkSolverOps *so
     }
 }
 
+
+/* |H(s)| = 1/|k1 - s^2 + i mu s| (error_estimates.linear_gain) */
+static double gain(double k1, double mu, double s) { return 1.0 / hypot(k1 - s * s, mu * s); }
+
+/* error_estimates.round_estimate: to 3 significant digits, as the Python FMU publishes it */
+static double round3(double value)
+{
+    char text[40];
+    snprintf(text, sizeof text, "%.3g", value);
+    return strtod(text, NULL);
+}
+
+double native_error_estimate(const State *s, int fidelity, double rtol, int fixed_step)
+{
+    const double mu = s->value[VR_mu], Delta = s->value[VR_Delta], omega = s->value[VR_omega],
+                 Omega = s->value[VR_Omega], alpha = s->value[VR_alpha], beta = s->value[VR_beta],
+                 gamma = s->value[VR_gamma], R = s->value[VR_R];
+    /* linear_amplitude */
+    const double a1 = 1.0 - 8.0 * alpha / (3.0 * R) - 4.0 * gamma / (3.0 * R);
+    double pp = a1 - 0.25 * mu * mu;
+    const double p = sqrt(pp > 1e-300 ? pp : 1e-300);
+    const double x_s = gamma / a1;
+    const double free_part = fabs(s->value[VR_x_start] - x_s) + fabs(s->value[VR_v_start]) / p;
+    const double forced = fabs(Delta) * gain(a1, mu, omega) + fabs(beta) * gain(a1, mu, Omega)
+                          + fabs(gamma) * gain(a1, mu, 2.0 * Omega);
+    const double amplitude = free_part + 2.0 * forced;
+    /* the estimate's span: the experiment's, else error_estimates.DEFAULT_SPAN */
+    const double stop_span = s->stop_time - s->start_time;
+    const double span = s->has_stop && isfinite(stop_span) ? stop_span : 1000.0;
+    const double memory = mu <= 0.0 ? span : (span < 2.0 / mu ? span : 2.0 / mu);
+    double estimate;
+    if (!fixed_step) { /* solver_terms, adaptive: the solver's rtol at this span (models.solver_tolerance) */
+        double remembered = mu > 0.0 ? 2.0 / mu : INFINITY;
+        if (span > 0.0 && span < remembered) remembered = span;
+        double factor = RULE_ERROR_MEMORY_REFERENCE / remembered;
+        if (factor < RULE_TOLERANCE_FACTOR_FLOOR) factor = RULE_TOLERANCE_FACTOR_FLOOR;
+        if (factor > 1.0) factor = 1.0;
+        double solver_rtol = rtol * factor;
+        if (solver_rtol < RULE_MIN_RTOL) solver_rtol = RULE_MIN_RTOL;
+        estimate = solver_rtol * (fabs(x_s) + amplitude) * (1.0 + memory * p / (2.0 * 3.141592653589793));
+    } else { /* solver_terms, fixed step: RK4's phase error of each part of the response over the memory */
+        const double h = s->value[VR_max_step] != 0.0 ? s->value[VR_max_step] : RULE_RK4_DEFAULT_STEP;
+        const double parts[3][2] = {{amplitude, p},
+                                    {fabs(beta) * gain(a1, mu, Omega) + fabs(beta) / (Omega * Omega), Omega},
+                                    {fabs(gamma) / (4.0 * Omega * Omega), 2.0 * Omega}};
+        estimate = 0.0;
+        for (int i = 0; i < 3; i++) {
+            if (parts[i][0] == 0.0) continue;
+            const double sv = parts[i][1], drift = pow(sv, 5) * pow(h, 4) / 120.0 * memory;
+            estimate += parts[i][0] * (drift < 2.0 ? drift : 2.0);
+        }
+    }
+    if (VK_FIDELITIES[fidelity].model != VK_MODEL_EXACT) { /* truncation_terms: the polynomial's force error */
+        VkModel exact, poly;
+        memset(&exact, 0, sizeof exact);
+        memset(&poly, 0, sizeof poly);
+        native_plant_model(&exact, s, VK_FID_EXACT);
+        native_plant_model(&poly, s, fidelity);
+        double lo = x_s - amplitude, hi = x_s + amplitude;
+        if (lo < -1.5 + 1e-9) lo = -1.5 + 1e-9;
+        if (hi > 1.5 * R * (1.0 - 1e-3)) hi = 1.5 * R * (1.0 - 1e-3);
+        const int nx = hi > lo ? 41 : 1;
+        const double period = Omega > 0.0 ? 2.0 * 3.141592653589793 / (2.0 * Omega) : 1.0;
+        double difference = 0.0;
+        for (int i = 0; i < 9; i++) {
+            const double t = 2.0 * period * i / 8.0;
+            for (int j = 0; j < nx; j++) {
+                const double x = nx == 1 ? x_s : lo + (hi - lo) * j / 40.0;
+                int f1 = 0, f2 = 0;
+                const double d = fabs(vm_accel(&exact, t, x, 0.0, 0.0, &f1) - vm_accel(&poly, t, x, 0.0, 0.0, &f2));
+                if (!f1 && !f2 && d > difference) difference = d;
+            }
+        }
+        estimate += difference / a1;
+    }
+    return round3(estimate);
+}

@@ -24,5 +24,9 @@ double native_tolerance_factor(const State *s);
 /* settings.checked_settings's drive warnings for a solver that has them (solver->drive_gain_x: RK4): the forcing
    terms its steps of max_step do not resolve (plant.rk4_drive_warnings), logged as fmi2Warning; none for another. */
 void native_drive_warnings(Instance *inst, const State *s, const VkSolverOps *solver, double max_step);
+/* error_estimates.exact_estimate / polynomial_estimate of the scene in s->value (the level's, fidelity.h), to 3
+   significant digits as the Python FMU publishes it (error_estimates.round_estimate): the solver's error at rtol (the
+   rtol asked, clamped) or RK4's step, and for a polynomial level the truncation of its forces. */
+double native_error_estimate(const State *s, int fidelity, double rtol, int fixed_step);
 
 #endif

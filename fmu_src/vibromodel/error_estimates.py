@@ -237,6 +237,12 @@ def analytic_plant_estimate(scene, settings, model, solution, span: float) -> di
 DEFAULT_SPAN = 1000.0  # the run estimated without a stop time (fidelity 3's set-up window, slowflow.WINDOW)
 
 
+def round_estimate(value: float) -> float:
+    """An estimate to 3 significant digits (more would be noise), as both plant FMUs publish it (the native one's C
+    computes the same terms in another order: native/plant_setup.c native_error_estimate)."""
+    return float(f"{value:.3g}")
+
+
 def attach(plant, level, t0: float, stop_time: float | None) -> None:
     """Give a plant (plant.Plant, compiled.CompiledPlant, compiled_open_loop.CompiledOpenLoopPlant) its
     `error_estimate` (its level's estimator's dict; level: the registry's entry, fidelities.FidelityEntry) and add
@@ -252,6 +258,7 @@ def attach(plant, level, t0: float, stop_time: float | None) -> None:
                                       getattr(inner, "solution", None), span)
     except (ArithmeticError, ValueError) as error:  # ZeroDivisionError and OverflowError are ArithmeticErrors
         result = {"estimate": math.nan, "amplitude": math.nan, "terms": {}, "error": str(error)}
+    result["estimate"] = round_estimate(result["estimate"])
     plant.error_estimate = result
     terms = ", ".join(f"{k} {v:.3g}" for k, v in result["terms"].items())
     plant.notes.append(f"error estimate: max|x - x_exact| ~ {result['estimate']:.3g} over the run ({terms})")

@@ -1,5 +1,7 @@
 """The rungs' error estimates (vibromodel.error_estimates): right or warned by the estimate, through the plant FMU."""
+import numpy as np
 import pytest
+from fmpy import simulate_fmu
 
 from vibrofmu.analyses.error_calibration import BETAS, OMEGAS, SHARE, slow_ac_grid
 
@@ -23,3 +25,27 @@ def test_slow_ac_grid_is_within_five_percent_or_warned_or_refused(plant_fmu):
     # the slow drives (Omega <= 1.5) of fidelity 3 are off by 18-975 %: each must be warned by its estimate
     slow = [r for r in rows if r["fidelity"] == 3 and r["Omega"] <= 1.5]
     assert all(r["outcome"] == "warned" and any("error estimate" in w for w in r["warnings"]) for r in slow), slow
+
+
+@pytest.mark.parametrize("values", [{}, {"fidelity": 1}, {"fidelity": 2, "solver": 1}, {"solver": 1, "max_step": 0.05},
+                                    {"rtol": 1e-4}, {"mu": 0.002}])
+def test_both_plant_fmus_publish_the_same_error_estimate_that_bounds_the_error(values, plant_fmu, native_plant_fmu):
+    """error_estimate (calculated output, set at initialisation): the native FMU computes the integrated rungs' terms
+    in C (native/plant_setup.c), the pythonfmu FMU in Python; both round to 3 significant digits, so they agree
+    exactly. Against the exact model at rtol 1e-12 the estimate bounds the measured error of x."""
+    run = dict(stop_time=20.0, output_interval=0.1, output=["x", "error_estimate"])
+    python = simulate_fmu(str(plant_fmu), start_values=values, **run)
+    native = simulate_fmu(str(native_plant_fmu), start_values=values, **run)
+    scene = {k: v for k, v in values.items() if k not in ("fidelity", "solver", "max_step", "rtol")}
+    reference = simulate_fmu(str(native_plant_fmu), start_values={**scene, "rtol": 1e-12}, **run)
+    estimate = python["error_estimate"][-1]
+    assert estimate > 0.0 and np.all(python["error_estimate"] == estimate)  # fixed after initialisation
+    assert np.array_equal(native["error_estimate"], python["error_estimate"])
+    assert np.max(np.abs(python["x"] - reference["x"])) <= estimate
+
+
+@pytest.mark.parametrize("fidelity", [3, 4])
+def test_the_open_loop_rungs_publish_their_estimate(fidelity, plant_fmu):
+    result = simulate_fmu(str(plant_fmu), start_values={"fidelity": fidelity}, stop_time=20.0, output_interval=0.1,
+                          output=["error_estimate"])
+    assert 0.0 < result["error_estimate"][-1] < 0.1  # the paper scene: 4e-3 (fidelity 3), 7e-8 (fidelity 4)

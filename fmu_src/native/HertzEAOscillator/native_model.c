@@ -134,6 +134,10 @@ void model_initialise(Instance *inst, State *s)
     int code = vk_init(p, s->start_time, s->value[VR_x_start], s->value[VR_v_start]);
     if (code == VK_OK) { /* the slave's _start: notes (fmi2OK), warnings, the first outputs */
         native_log(inst, fmi2OK, "%s on the native FMU's compiled kernel (no Python)", vk_solvers[solver]->name);
+        /* error_estimates.attach: the level's estimate, -1 (HertzEAOscillator.NO_ESTIMATE) when not finite */
+        const double estimate = native_error_estimate(s, fidelity, rtol, !vk_solvers[solver]->reads_tolerance);
+        s->value[VR_error_estimate] = isfinite(estimate) ? estimate : -1.0;
+        native_log(inst, fmi2OK, "error estimate: max|x - x_exact| ~ %.3g over the run", estimate);
         if (factor != 1.0 && vk_solvers[solver]->reads_tolerance)
             native_log(inst, fmi2OK, RULE_TEXT_TOLERANCE_FACTOR, solver_rtol, rtol, factor, native_error_memory(s),
                        RULE_ERROR_MEMORY_REFERENCE);
