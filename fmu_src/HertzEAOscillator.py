@@ -152,6 +152,8 @@ class HertzEAOscillator(fast_path.FastPathSwitch, StatusSlave):
         v = v_start, a and the forces of the fidelity's model at the start time with U = 0, as exitInitializationMode
         will publish them (fidelities 3 and 4: Eq. 3 at the start state; their solution replaces them at exit).
         ParameterError when the scene breaks a rule (the parameter named)."""
+        if name == "error_estimate":  # set at exitInitializationMode, with the plant
+            return NO_ESTIMATE
         values = self._parameter_values()
         check_parameters({key: values[key] for key in ("fidelity", *scene_names())})
         scene = Scene(**{key: float(values[key]) for key in scene_names()})
