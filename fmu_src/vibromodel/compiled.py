@@ -20,12 +20,12 @@ from . import settings as plant
 # core/plant.h's return codes, core/dop853.h's array sizes and the structures: generated from the headers
 # (core_layouts.py by harness/vibrofmu/fmus/layouts.py); Dop853State and Rk4State are dop853.h's Dop853, rk4.h's Rk4
 from .core_layouts import (DOP_MAX_EVENTS, DOP_STAGES, VK_BAD_INPUT, VK_BAD_STEP, VK_BAD_TIME, VK_FAILED,
-                           VK_MESSAGE, VK_OK, VK_RAISED, VK_TERMINAL, VK_TOO_MANY_STEPS, Dop853 as Dop853State,
+                           VK_OK, VK_RAISED, VK_TERMINAL, VK_TOO_MANY_STEPS, Dop853 as Dop853State,
                            Rk4 as Rk4State, VkModel, VkPlant)
 from .fidelities import REGISTRY, entry
 from .integrate import ATOL_PER_RTOL, IntegrationError, TerminalEvent
 from .models import drive_step_ceiling, solver_tolerance
-from .parameters import validate
+from .parameters import NonFiniteOutput, validate
 from .settings import Outputs, Settings, check_step, checked_settings
 from .solvers import BY_VALUE as SOLVERS_BY_VALUE, solver_entry
 
@@ -381,14 +381,17 @@ class CompiledPlant:
             raise error
 
 
-def take_pending(p: VkPlant) -> BaseException | None:
-    """The exception Plant raises for the kernel's pending error in `p` (None: none), which is cleared."""
+def take_pending(p, who: str = "vibrokernel") -> BaseException | None:
+    """The exception the Python twin raises for the kernel's pending error in `p` (None: none), which is cleared.
+    `p` is a VkPlant or a VlLoop: both carry error, error_t/x/v and message, with the same codes (core_layouts: the
+    VK_ and VL_ codes are the DOP_ ones). NonFiniteOutput is written by the closed loop alone (closedloop.c)."""
     code = p.error
     if code == VK_OK:
         return None
     message, t, x, v = p.message.decode(), p.error_t, p.error_x, p.error_v
     p.error, p.error_t, p.error_x, p.error_v = 0, 0.0, 0.0, 0.0
-    ctypes.memset(ctypes.addressof(p) + VkPlant.message.offset, 0, VK_MESSAGE)
+    field = type(p).message
+    ctypes.memset(ctypes.addressof(p) + field.offset, 0, field.size)
     if code == VK_TERMINAL:
         return TerminalEvent(message, t, x, v)
     if code == VK_FAILED:
@@ -396,4 +399,7 @@ def take_pending(p: VkPlant) -> BaseException | None:
     kind, _, text = message.partition(": ")
     if code == VK_RAISED and kind in RAISED_TYPES:
         return RAISED_TYPES[kind](text)
-    return RuntimeError(f"vibrokernel left error code {code}: {message}")
+    if code == VK_RAISED and kind == "NonFiniteOutput":  # "output <name> = <value> is not finite; ..."
+        name, _, rest = text.removeprefix("output ").partition(" = ")
+        return NonFiniteOutput(name, float(rest.partition(" ")[0]))
+    return RuntimeError(f"{who} left error code {code}: {message}")

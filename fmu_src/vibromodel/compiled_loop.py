@@ -16,16 +16,14 @@ import numpy as np
 
 from . import forces
 from .closedloop import ClosedLoop
-from .compiled import ATOL_PER_RTOL, RAISED_TYPES, SOLVER_SLOTS, check_structure, fill_model
+from .compiled import ATOL_PER_RTOL, SOLVER_SLOTS, check_structure, fill_model, take_pending
 from .compiled_open_loop import OafmProgram, oafm_hints
 # controller.h's and closedloop.h's constants and structures, generated from the headers (core_layouts.py)
-from .core_layouts import (VC_GAINS, VC_N, VC_NON_FINITE, VC_OK, VC_RAISED, VL_BAD_STEP, VL_BAD_TIME, VL_FAILED,
-                           VL_OK, VL_RAISED, VL_TERMINAL, VL_TOO_MANY_STEPS, VcController,
+from .core_layouts import (VC_GAINS, VC_N, VC_NON_FINITE, VC_OK, VC_RAISED, VL_BAD_STEP, VL_BAD_TIME, VL_OK, VL_TOO_MANY_STEPS, VcController,
                            VlLoop)
 from .control import ESTIMATE_NAMES, Controller, Gains, HeldInputEstimator, validate_estimates, validate_law
 from .fidelities import entry
-from .integrate import IntegrationError, TerminalEvent
-from .parameters import NonFiniteOutput, ParameterError, Scene, check_finite, validate
+from .parameters import ParameterError, Scene, check_finite, validate
 from .plant import MAX_STEPS_PER_DOSTEP, RK4_DEFAULT_STEP, TIME_TOLERANCE, Kernel
 from .solvers import solver_entry
 
@@ -363,24 +361,10 @@ class CompiledClosedLoop(_FastPath):
             raise RuntimeError(f"the compiled closed loop returned code {code} without a pending error (a kernel bug)")
 
     def _raise_pending(self) -> None:
-        l = self._l
-        code = l.error
-        if code == VL_OK:
-            return
-        message, t, x, v = l.message.decode(), l.error_t, l.error_x, l.error_v
-        l.error, l.error_t, l.error_x, l.error_v = 0, 0.0, 0.0, 0.0
-        ctypes.memset(self.address + self._structure.message.offset, 0, len(l.message))
-        if code == VL_TERMINAL:
-            raise TerminalEvent(message, t, x, v)
-        if code == VL_FAILED:
-            raise IntegrationError(message, t, x, v)
-        kind, _, text = message.partition(": ")
-        if code == VL_RAISED and kind in RAISED_TYPES:
-            raise RAISED_TYPES[kind](text)
-        if code == VL_RAISED and kind == "NonFiniteOutput":  # "output <name> = <value> is not finite; ..."
-            name, _, rest = text.removeprefix("output ").partition(" = ")
-            raise NonFiniteOutput(name, float(rest.partition(" ")[0]))
-        raise RuntimeError(f"the compiled closed loop left error code {code}: {message}")
+        """Raise the kernel's pending error, if any, and clear it."""
+        error = take_pending(self._l, "the compiled closed loop")
+        if error is not None:
+            raise error
 
 
 def make_closed_loop(scene: Scene, settings, loop, t0: float, stop_time, cache_dirs, library):
