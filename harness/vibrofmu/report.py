@@ -26,10 +26,11 @@ and `vibrofmu report` rewrites the text between them (the markers stay). Blocks:
              --from folders (timings; not run by the report itself).
 
 Without --from, the oafm, stability and speed blocks come from fresh runs of `vibrofmu oafm`, `stability` and
-`bench` (quick: oafm study to order 3, `bench --quick`). `--check` regenerates the deterministic blocks
-(accuracy, ssp, ssp_orderings, container, ranges; with --from also oafm and stability from the given summaries) and
-compares them with the documents' text: exit 1 naming the block that differs; it prints the blocks it does not
-compare and why. `--quick` also skips the container's H = 0.01. `--quick` and `--from` never rewrite the
+`bench` (quick: oafm study to order 3, `bench --quick`). `--check` regenerates every block whose numbers do not
+depend on the machine (accuracy, ssp, ssp_orderings, container, ranges, and oafm and stability from the --from
+summaries or else from fresh full runs of `vibrofmu oafm` and `stability`) and compares them with the documents' text:
+exit 1 naming the block that differs; it prints the blocks it does not compare (machine, speed, peers) and why, and
+those blocks say themselves which of their numbers depend on the machine. `--quick` also skips the container's H = 0.01. `--quick` and `--from` never rewrite the
 documents: they write the documents with their blocks to a folder (--out, default out/report); only a full run
 rewrites them in place.
 """
@@ -329,7 +330,10 @@ def speed_block(sources: list[Path]) -> str | None:
                              f"{f3['integration_speedup']:.1f}×, model with output evaluation "
                              f"{f3['model_speedup']:.1f}×, end to end under FMPy {f3['end_to_end_speedup']:.1f}×")
     if lines:
-        lines.append("- Timings were taken on a shared machine; compare ratios measured in the same run only.")
+        lines.append("- Depend on the machine (so `vibrofmu report --check` does not compare this block): every time "
+                     "and ratio of times (CPU and load) and every instruction count (compiler, libm, CPU). The "
+                     "errors (Linf, x error) do not. Timings were taken on a shared machine; compare ratios measured "
+                     "in the same run only.")
     return "\n".join(lines) if lines else None
 
 
@@ -347,9 +351,10 @@ def peers_block(sources: list[Path]) -> str | None:
                     + (f", load average {load[0]:.1f} at its start" if load else "") + "):")
             lines = [f"- {line}" if not line.startswith("  ") else f"  - {line.strip()}"
                      for line in peers.peers_lines(data)]
-            return "\n".join([head, "", *lines, "- Timings on a shared machine vary between runs (the load average "
-                               "above): compare the contenders within one run only; the plot of every line is the "
-                               "run's peers.png."])
+            return "\n".join([head, "", *lines, "- Depend on the machine (so `vibrofmu report --check` does not "
+                               "compare this block): every time and ratio of times. Timings on a shared machine vary "
+                               "between runs (the load average above): compare the contenders within one run only; "
+                               "the plot of every line is the run's peers.png."])
     return None
 
 

@@ -89,22 +89,27 @@ def test_parse_blocks_rejects_malformed_markers():
     assert report.replace_blocks(body, {"ssp": "new"}) == "<!-- report:ssp -->\nnew\n<!-- /report:ssp -->"
 
 
-# checked by the slow test below: the container (~26 s of FMU runs, three H down to 0.01) and the SSP orderings
-# (a minute of runs: three orderings at three H)
-SLOW_CHECKS = ("container", "ssp_orderings")
+# checked by the slow test below: the container (~26 s of FMU runs, three H down to 0.01), the SSP orderings
+# (a minute of runs: three orderings at three H) and the oafm block (a full `vibrofmu oafm`: ~50 s of CPU)
+SLOW_CHECKS = ("container", "ssp_orderings", "oafm")
 
 
 def test_report_check_matches_a_fresh_run(plant_fmu, controller_fmu, closed_loop_fmu, capsys, monkeypatch):
-    """The accuracy, SSP and ranges blocks are deterministic on one machine: a fresh run must print the same text."""
+    """The accuracy, SSP, ranges and stability blocks are deterministic on one machine: a fresh run (a full
+    `vibrofmu stability` for the last) must print the same text."""
+    import vibrofmu.commands.report as command
+
     monkeypatch.setattr(report, "DETERMINISTIC", tuple(n for n in report.DETERMINISTIC if n not in SLOW_CHECKS))
+    monkeypatch.setattr(command, "FROM_CHECKED", tuple(n for n in command.FROM_CHECKED if n not in SLOW_CHECKS))
     assert main(["report", "--check", "--fmu-dir", str(plant_fmu.parent), "--root", str(ROOT)]) == 0, \
         capsys.readouterr().err
-    assert "accuracy, ranges, ssp" in capsys.readouterr().out
+    assert "accuracy, ranges, ssp, stability match" in capsys.readouterr().out
 
 
 @pytest.mark.slow
 def test_report_check_of_every_deterministic_block(plant_fmu, controller_fmu, closed_loop_fmu, capsys):
-    """`vibrofmu report --check` as a user runs it: every deterministic block, the container's table too."""
+    """`vibrofmu report --check` as a user runs it: every block that does not depend on the machine, the
+    container's table and the oafm and stability studies' blocks too."""
     assert main(["report", "--check", "--fmu-dir", str(plant_fmu.parent), "--root", str(ROOT)]) == 0, \
         capsys.readouterr().err
-    assert "accuracy, container, ranges, ssp, ssp_orderings match" in capsys.readouterr().out
+    assert "accuracy, container, oafm, ranges, ssp, ssp_orderings, stability match" in capsys.readouterr().out

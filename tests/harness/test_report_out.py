@@ -62,6 +62,7 @@ def test_a_full_run_still_rewrites_the_documents(stand_ins, capsys):
 
 
 def test_check_names_the_blocks_it_does_not_compare(stand_ins, monkeypatch, capsys):
+    import vibrofmu.commands.report as command
     import vibrofmu.report as report
 
     root, fmus = stand_ins
@@ -71,9 +72,43 @@ def test_check_names_the_blocks_it_does_not_compare(stand_ins, monkeypatch, caps
     robustness.write_text(text[:start] + BLOCK + text[end + len("<!-- /report:ranges -->"):])
     before = digests(root)
     monkeypatch.setattr(report, "DETERMINISTIC", ("ranges",))
+    published = {name: report.parse_blocks((root / "docs" / doc).read_text())[name]
+                 for name, doc in (("oafm", "model.md"), ("stability", "numerics.md"))}
+    monkeypatch.setattr(report, "generate", lambda names, *args: {"ranges": "generated ranges table\n", **published})
+    studies = []  # the studies --check runs for the oafm and stability blocks (stand-ins: no study runs)
+    monkeypatch.setattr(command, "run_studies", lambda *args: studies.append(args[-1]) or [])
     assert main(["report", "--check", "--root", str(root), "--fmu-dir", str(fmus)]) == 0
     out = capsys.readouterr().out
-    assert "blocks ranges match a fresh run" in out
+    assert "blocks oafm, ranges, stability match a fresh run" in out
     assert "not compared: machine (" in out and "speed (timings and instruction counts" in out
-    assert "oafm (needs the summary of a full `vibrofmu oafm` run" in out
+    assert "peers (timings of other ODE solvers" in out
+    assert studies == [("oafm", "stability")]  # without --from: fresh full runs of both, never the bench
     assert digests(root) == before
+
+
+def test_check_compares_the_oafm_and_stability_blocks(stand_ins, monkeypatch, capsys):
+    """Plain --check (no --from) regenerates the oafm and stability blocks too: a differing one fails, named."""
+    import vibrofmu.commands.report as command
+    import vibrofmu.report as report
+
+    root, fmus = stand_ins
+    published = {name: report.parse_blocks((root / "docs" / doc).read_text())[name]
+                 for name, doc in (("oafm", "model.md"), ("stability", "numerics.md"))}
+    monkeypatch.setattr(report, "DETERMINISTIC", ())
+    monkeypatch.setattr(command, "run_studies", lambda *args: [])
+    for body, code in ((published["oafm"], 0), (published["oafm"].replace("|", "¦", 1), 1)):
+        monkeypatch.setattr(report, "generate", lambda names, *args, body=body: {"oafm": body,
+                                                                                  "stability": published["stability"]})
+        assert main(["report", "--check", "--root", str(root), "--fmu-dir", str(fmus)]) == code
+        captured = capsys.readouterr()
+        if code:
+            assert "docs/model.md: oafm" in captured.err and captured.err.startswith("error:")
+        else:
+            assert "blocks oafm, stability match a fresh run" in captured.out
+
+
+def test_check_refuses_quick(stand_ins, capsys):
+    root, fmus = stand_ins
+    assert main(["report", "--check", "--quick", "--root", str(root), "--fmu-dir", str(fmus)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: --quick") and len(err.splitlines()) == 1
