@@ -60,7 +60,9 @@ class SlowFlowSolution:
         self.bounded, self.first = bounded, 0  # first: cells dropped from the front (bounded only)
         span = max(CHUNK, t_end - t0) if t_end is not None else CHUNK
         if span / max_step > MAX_STEPS:  # endless (1e-300) or a failure inside SciPy naming nothing (5e-324)
-            raise ParameterError("max_step", max_step, f"the averaged slow flow over tau = {span:g} would need "
+            over = (f"tau = {span:g}" if t_end is not None and span == t_end - t0 else
+                    f"its first table of tau = {span:g} (it is tabulated {CHUNK:g} at a time at least)")
+            raise ParameterError("max_step", max_step, f"the averaged slow flow over {over} would need "
                                  f"more than {MAX_STEPS} steps of it; raise it or use 0 (automatic)")
         s = model.scene
         self.x_start, self.Delta = x0, s.Delta  # named by check_domain

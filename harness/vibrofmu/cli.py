@@ -12,8 +12,8 @@ import argparse
 import importlib
 import sys
 
-from vibrofmu import interrupts
-from vibrofmu.commands.common import Parser, run
+# The standard library only at the top: the model and the commands' modules are imported inside main's try, so a
+# Ctrl-C during start-up (those imports take ~0.5 s) ends with `error: interrupted` and 130, not a traceback.
 
 COMMANDS = ("build", "simulate", "closed_loop", "oafm", "stability", "bench", "demo", "doctor", "ssp", "container",
             "report", "study", "continuation", "diagram")  # modules of vibrofmu.commands, in `vibrofmu --help`'s order
@@ -27,6 +27,8 @@ def commands():
 def make_parser(selected=None) -> argparse.ArgumentParser:
     """The parser; `selected` names the sub-commands whose options are defined (None: all). The options import
     the model (choices, defaults), so `vibrofmu --help` defines none."""
+    from vibrofmu.commands.common import Parser
+
     parser = Parser(prog="vibrofmu", description=__doc__.split("\n\n")[0])
     parser.add_argument("--version", action="version", version=f"vibrofmu {version()}",
                         help="print the version of vibrofmu and exit")
@@ -53,6 +55,9 @@ def main(argv=None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     command = next((arg for arg in argv if not arg.startswith("-")), None)
     try:
+        from vibrofmu import interrupts
+        from vibrofmu.commands.common import run
+
         try:
             args = make_parser({command}).parse_args(argv)  # (imports the command's modules: Ctrl-C may land here)
         except SystemExit as stop:  # --help (0) or a bad command line (2, one line printed by Parser.error)

@@ -541,3 +541,24 @@ def test_report_leaves_the_blocks_of_a_failed_study_alone(monkeypatch, tmp_path,
     assert main(["report", "--only", "oafm", "speed", "--root", str(root), "--fmu-dir", str(fmus)]) == 1
     assert asked == ["oafm"]
     assert "the blocks that read its summary (speed) are not updated" in capsys.readouterr().err
+
+
+# A Ctrl-C while `vibrofmu` is still importing the model (about 0.5 s at start-up) is an interrupt like any other.
+# Deterministic: the SIGINT's KeyboardInterrupt is raised by the import of vibromodel.parameters itself (a real
+# signal would land there only by timing), in a fresh interpreter so that nothing is imported yet.
+START_UP_INTERRUPT = """
+import builtins, sys
+real_import = builtins.__import__
+def interrupted_import(name, *args, **kwargs):
+    if name == "vibromodel.parameters":
+        raise KeyboardInterrupt
+    return real_import(name, *args, **kwargs)
+builtins.__import__ = interrupted_import
+from vibrofmu.cli import main
+sys.exit(main(["simulate", "--stop-time", "1"]))
+"""
+
+
+def test_an_interrupt_while_importing_ends_in_one_line():
+    done = subprocess.run([sys.executable, "-c", START_UP_INTERRUPT], capture_output=True, text=True, timeout=120)
+    assert (done.returncode, done.stderr) == (130, "error: interrupted\n")
