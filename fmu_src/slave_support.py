@@ -75,15 +75,112 @@ CALLS = {
     "fmi2Terminate": (STEP_MODE,),
     "fmi2Reset": _ANYWHERE,
     **{f"fmi2Get{kind}": _ANYWHERE for kind in ("Real", "Integer", "Boolean", "String")},
-    **{f"fmi2Set{kind}": PHASES for kind in ("Real", "Integer", "Boolean", "String")},
+    # a terminated instance takes no values (FMI 2.0)
+    **{f"fmi2Set{kind}": (INSTANTIATED, INITIALIZATION_MODE, STEP_MODE) for kind in ("Real", "Integer", "Boolean",
+                                                                                      "String")},
     **{name: _ANYWHERE for name in ("fmi2GetFMUstate", "fmi2SetFMUstate", "fmi2FreeFMUstate",
-                                    "fmi2SerializedFMUstateSize", "fmi2SerializeFMUstate", "fmi2DeSerializeFMUstate",
-                                    "fmi2GetDirectionalDerivative", "fmi2GetRealOutputDerivatives")},
-    "fmi2SetRealInputDerivatives": PHASES,
+                                    "fmi2SerializedFMUstateSize", "fmi2SerializeFMUstate", "fmi2DeSerializeFMUstate")},
+    "fmi2GetRealOutputDerivatives": (STEP_MODE, TERMINATED, ERROR),
+    # the model's partial derivatives exist at its current point: after initialisation (and in the error state)
+    "fmi2GetDirectionalDerivative": (STEP_MODE, TERMINATED, ERROR),
+    "fmi2SetRealInputDerivatives": (INSTANTIATED, INITIALIZATION_MODE, STEP_MODE),
     "fmi2DoStep": (STEP_MODE,),
-    "fmi2CancelStep": PHASES,
+    "fmi2CancelStep": PHASES,  # answered in every phase with why it has nothing to cancel (doStep is synchronous)
     **{f"fmi2Get{kind}Status": _ANYWHERE for kind in ("", "Real", "Integer", "Boolean", "String")},
 }
+# The same state machine for the other interfaces of the native FMUs (fmu_src/native: fmi2_native.c, fmi2_me.c,
+# fmi3_native.c), in the same table: Model Exchange splits the running phase (co-simulation's step mode) into event
+# mode and continuous-time mode; FMI 3.0 has both interfaces. The C enum of fmi2_calls.h lists STATES in this order
+# (the first five are the co-simulation states, whose numbers are in the serialized FMU states). A call missing from
+# an interface's table is not part of that interface (refused in every state). tests/fmus/test_fmi_state_table.py
+# compares each table with the standard's state machine and checks that the C layers consult nothing else.
+EVENT_MODE, CONTINUOUS_TIME_MODE = "event mode", "continuous-time mode"
+STATES = (*PHASES, ERROR, EVENT_MODE, CONTINUOUS_TIME_MODE)
+_RUNNING_ME = (EVENT_MODE, CONTINUOUS_TIME_MODE)
+_AFTER_INITIALISATION_ME = (*_RUNNING_ME, TERMINATED)
+_CO_SIMULATION_ONLY = ("fmi2DoStep", "fmi2CancelStep", "fmi2SetRealInputDerivatives", "fmi2GetRealOutputDerivatives",
+                       *(f"fmi2Get{kind}Status" for kind in ("", "Real", "Integer", "Boolean", "String")))
+ME_CALLS = {  # FMI 2.0 Model Exchange: the common calls with step mode split in two, then Model Exchange's own
+    **{call: tuple(s for state in states for s in ((state,) if state != STEP_MODE else _RUNNING_ME))
+       for call, states in CALLS.items() if call not in _CO_SIMULATION_ONLY},
+    # in continuous-time mode only Reals are set (FMI 2.0, 3.2.3)
+    **{f"fmi2Set{kind}": (INSTANTIATED, INITIALIZATION_MODE, EVENT_MODE) for kind in ("Integer", "Boolean", "String")},
+    "fmi2EnterEventMode": _RUNNING_ME,
+    "fmi2NewDiscreteStates": (EVENT_MODE,),
+    "fmi2EnterContinuousTimeMode": (EVENT_MODE,),
+    "fmi2CompletedIntegratorStep": (CONTINUOUS_TIME_MODE,),
+    "fmi2SetTime": _RUNNING_ME,
+    "fmi2SetContinuousStates": (CONTINUOUS_TIME_MODE,),
+    **{name: (*_AFTER_INITIALISATION_ME, ERROR)
+       for name in ("fmi2GetDerivatives", "fmi2GetEventIndicators", "fmi2GetContinuousStates")},
+    "fmi2GetNominalsOfContinuousStates": (INSTANTIATED, *_AFTER_INITIALISATION_ME, ERROR),
+}
+# FMI 3.0 (fmi3_native.c, over the FMI 2.0 calls: the error state is the FMI 2.0 instance's, so no FMI 3.0 call
+# lists it). Co-Simulation's event mode exists only with eventModeUsed (an instance flag, not a state).
+_CS3 = (INSTANTIATED, INITIALIZATION_MODE, EVENT_MODE, STEP_MODE, TERMINATED)
+_ME3 = (INSTANTIATED, INITIALIZATION_MODE, EVENT_MODE, CONTINUOUS_TIME_MODE, TERMINATED)
+_TYPES3 = ("Float32", "Float64", "Int8", "UInt8", "Int16", "UInt16", "Int32", "UInt32", "Int64", "UInt64", "Boolean",
+           "String", "Binary")
+
+
+def _fmi3_common(every):
+    """The FMI 3.0 calls both interfaces have, for an interface with the states `every`."""
+    return {
+        "fmi3SetDebugLogging": every,
+        "fmi3EnterInitializationMode": (INSTANTIATED,),
+        "fmi3ExitInitializationMode": (INITIALIZATION_MODE,),
+        "fmi3Reset": every,
+        **{f"fmi3Get{kind}": every for kind in _TYPES3},
+        # in continuous-time mode only continuous (Float) variables may be set
+        **{f"fmi3Set{kind}": every if kind.startswith("Float") else
+           tuple(s for s in every if s != CONTINUOUS_TIME_MODE) for kind in _TYPES3},
+        **{f"fmi3{name}": every for name in (
+            "GetClock", "SetClock", "GetIntervalDecimal", "GetIntervalFraction", "GetShiftDecimal",
+            "GetShiftFraction", "SetIntervalDecimal", "SetIntervalFraction", "SetShiftDecimal", "SetShiftFraction",
+            "GetNumberOfVariableDependencies", "GetVariableDependencies", "GetFMUState", "SetFMUState",
+            "FreeFMUState", "SerializedFMUStateSize", "SerializeFMUState", "DeserializeFMUState",
+            "EvaluateDiscreteStates", "GetNumberOfEventIndicators", "GetNumberOfContinuousStates")},
+        "fmi3UpdateDiscreteStates": (EVENT_MODE,),
+        # the model's partial derivatives exist at its current point: after initialisation
+        **{f"fmi3Get{kind}Derivative": tuple(s for s in every if s not in (INSTANTIATED, INITIALIZATION_MODE))
+           for kind in ("Directional", "Adjoint")},
+        "fmi3EnterConfigurationMode": tuple(s for s in every if s in (INSTANTIATED, EVENT_MODE, STEP_MODE)),
+        # configuration and clock activation modes: these FMUs have neither (no structural parameter, no clock)
+        "fmi3ExitConfigurationMode": (),
+        "fmi3ActivateModelPartition": (),
+    }
+
+
+FMI3_CO_SIMULATION = {
+    **_fmi3_common(_CS3),
+    "fmi3GetOutputDerivatives": (STEP_MODE, TERMINATED),
+    "fmi3EnterEventMode": (STEP_MODE,),
+    "fmi3Terminate": (EVENT_MODE, STEP_MODE),
+    "fmi3EnterStepMode": (EVENT_MODE,),
+    "fmi3DoStep": (STEP_MODE,),
+}
+FMI3_MODEL_EXCHANGE = {
+    **_fmi3_common(_ME3),
+    "fmi3EnterEventMode": (CONTINUOUS_TIME_MODE,),
+    "fmi3Terminate": _RUNNING_ME,
+    "fmi3EnterContinuousTimeMode": (EVENT_MODE,),
+    "fmi3CompletedIntegratorStep": (CONTINUOUS_TIME_MODE,),
+    "fmi3SetTime": _RUNNING_ME,
+    "fmi3SetContinuousStates": (CONTINUOUS_TIME_MODE,),
+    **{f"fmi3{name}": _AFTER_INITIALISATION_ME
+       for name in ("GetContinuousStateDerivatives", "GetEventIndicators", "GetContinuousStates",
+                    "GetNominalsOfContinuousStates")},
+}
+# The tables by interface, in the order fmi2_calls.h defines their masks (prefix FMI2_MASK_, FMI2ME_MASK_, ...).
+# The states in which an FMI 2.0 getter reads any variable (the standard's getter states): the table lets the getters
+# run in every state only so that the status flag fmi_status is read (by the status shim) from fmi2Instantiate on.
+GET_ANY_VARIABLE = {"FMI2": (INITIALIZATION_MODE, STEP_MODE, TERMINATED, ERROR),
+                    "FMI2ME": (INITIALIZATION_MODE, *_AFTER_INITIALISATION_ME, ERROR)}
+# (name in the messages, interface, table)
+STATE_TABLES = {"FMI2": ("FMI 2.0", "Co-Simulation", CALLS),
+                "FMI2ME": ("FMI 2.0 Model Exchange", "Model Exchange", ME_CALLS),
+                "FMI3CS": ("FMI 3.0 Co-Simulation", "Co-Simulation", FMI3_CO_SIMULATION),
+                "FMI3ME": ("FMI 3.0 Model Exchange", "Model Exchange", FMI3_MODEL_EXCHANGE)}
 RUN_FIELDS = ("phase", "halted", "initialised", "start_time", "stop_time", "experiment_tolerance")  # in the FMU state
 # A doStep may end this far (relative) past the declared stop time: hosts compute the last communication point
 # as start + n*h, which can land an ulp or so beyond the stop time (the plant's time-matching tolerance).
@@ -458,7 +555,7 @@ class StatusSlave(Fmi2Slave):
                 refusal = f"{call}: no variable has valueReference {vr}"
             elif not isinstance(var, kind):
                 refusal = f"{call}: variable {var.name} (valueReference {vr}) is a {type(var).__name__}, not a {kind.__name__}"
-            elif self.phase == INSTANTIATED and var.name != "fmi_status":
+            elif self.phase not in GET_ANY_VARIABLE["FMI2"] and var.name != "fmi_status":
                 refusal = (f"{call} of {var.name} is not allowed in the {INSTANTIATED} state (FMI 2.0 allows it from "
                            f"fmi2EnterInitializationMode on)")
             elif self.phase == INITIALIZATION_MODE and var.causality == Fmi2Causality.output and not self._describing:

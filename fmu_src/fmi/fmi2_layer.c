@@ -127,19 +127,30 @@ fmi2Status fmi2_layer_mode_refusal(const Fmi2Layer *L, const char *call, unsigne
     return fmi2OK;
 }
 
-const char *fmi2_phase_refusal(const char *call, unsigned mask, int phase, char *buf, size_t size)
+const char *fmi_call_refusal(const char *label, const char *interface, const char *call, unsigned mask, int state,
+                             char *buf, size_t size)
 {
-    if (mask & FMI2_BIT(phase)) return NULL;
-    int n = snprintf(buf, size, "%s is not allowed in the %s state (FMI 2.0 allows it in: ", call,
-                     FMI2_STATE_NAMES[phase]);
+    if (state >= 0 && state < FMI2_N_STATES && (mask & FMI2_BIT(state))) return NULL;
+    const char *name = state >= 0 && state < FMI2_N_STATES ? FMI2_STATE_NAMES[state] : "unknown";
+    if ((mask & ~FMI2_BIT(FMI2_ERROR)) == 0) {
+        snprintf(buf, size, "%s is not allowed in the %s state: this instance was instantiated for %s, where %s allows "
+                 "it in no state of this FMU", call, name, interface, label);
+        return buf;
+    }
+    int n = snprintf(buf, size, "%s is not allowed in the %s state (%s allows it in: ", call, name, label);
     const char *separator = "";
-    for (int s = 0; s < FMI2_N_PHASES; s++) {
-        if (!(mask & FMI2_BIT(s))) continue;
+    for (int s = 0; s < FMI2_N_STATES; s++) {
+        if (s == FMI2_ERROR || !(mask & FMI2_BIT(s))) continue;
         if (n >= 0 && (size_t)n < size) n += snprintf(buf + n, size - (size_t)n, "%s%s", separator, FMI2_STATE_NAMES[s]);
         separator = ", ";
     }
     if (n >= 0 && (size_t)n < size) snprintf(buf + n, size - (size_t)n, ")");
     return buf;
+}
+
+const char *fmi2_phase_refusal(const char *call, unsigned mask, int phase, char *buf, size_t size)
+{
+    return fmi_call_refusal(FMI2_LABEL, FMI2_INTERFACE, call, mask, phase, buf, size);
 }
 
 fmi2Status fmi2_layer_refuse_nonfinite(Fmi2Layer *L, fmi2Status st, const fmi2ValueReference vr[], size_t nvr,

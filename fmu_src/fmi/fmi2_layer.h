@@ -8,9 +8,10 @@
  *     table allows in the error state (the others: fmi2Error and "call X not allowed after an error"); after an
  *     fmi2Fatal nothing is answered but fmi2Fatal;
  *   - the finite-value check of the Reals a getter returns (none leaves with fmi2OK non-finite);
- *   - the FMI 2.0 co-simulation state machine: ONE table of the states each call is allowed in (fmi2_calls.h, in
- *     the manner of the Modelica Reference-FMUs' ASSERT_STATE masks), generated from slave_support.CALLS, which
- *     the Python slaves read.
+ *   - the FMI state machines: ONE table of the states each call is allowed in, per interface (fmi2_calls.h, in
+ *     the manner of the Modelica Reference-FMUs' ASSERT_STATE masks: FMI 2.0 co-simulation and Model Exchange,
+ *     FMI 3.0 both), generated from slave_support.STATE_TABLES (CALLS: the co-simulation table the Python slaves
+ *     read), and fmi_call_refusal, the one check of a call against it.
  * The FMI types and function prototypes are the standard's own headers (fmi2Functions.h: from FMPy's package,
  * see harness/vibrofmu/fmus/toolchain.py).
  */
@@ -68,11 +69,18 @@ static inline fmi2Status fmi2_layer_mode_check(const Fmi2Layer *L, const char *c
 }
 #define FMI2_MODE_CHECK(L, F) fmi2_layer_mode_check((L), #F, FMI2_MASK_##F)
 
-/* The state machine's check of call `call` (allowed states: mask) in phase `phase` (FMI2_INSTANTIATED ...
-   FMI2_TERMINATED): NULL when allowed; else why, written into buf: "<call> is not allowed in the <phase> state
-   (FMI 2.0 allows it in: <phases>)" (slave_support.StatusSlave._allowed's text). */
+/* The state table's answer for call `call` (allowed states: mask, from the table named `label` of interface
+   `interface`, fmi2_calls.h) in state `state` (FMI2_INSTANTIATED ...): NULL when allowed; else why, written into
+   buf: "<call> is not allowed in the <state> state (<label> allows it in: <states>)" (co-simulation:
+   slave_support.StatusSlave._allowed's text), or, for a call the interface does not have (mask 0 but for the error
+   state), "<call>: this instance was instantiated for <interface> (<label> has no such call)".  The one function
+   every FMI layer asks (FMI_TABLE_REFUSAL); the state is the caller's, the rule the table's. */
+const char *fmi_call_refusal(const char *label, const char *interface, const char *call, unsigned mask, int state,
+                             char *buf, size_t size);
+#define FMI_TABLE_REFUSAL(P, F, state, buf, size)                                                                 \
+    fmi_call_refusal(P##_LABEL, P##_INTERFACE, #F, P##_MASK_##F, (state), (buf), (size))
+/* fmi_call_refusal of the FMI 2.0 co-simulation table (FMI2_MASK_<call>) in phase `phase` */
 const char *fmi2_phase_refusal(const char *call, unsigned mask, int phase, char *buf, size_t size);
-#define FMI2_PHASE_REFUSAL(F, phase, buf, size) fmi2_phase_refusal(#F, FMI2_MASK_##F, (phase), (buf), (size))
 
 /* After a getter of Reals answered st: every value finite, else fmi2Error naming the first that is not (logged:
    "fmi2GetReal: variable with valueReference VR is VALUE (not finite): refused") and the error mode. */

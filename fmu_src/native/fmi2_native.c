@@ -94,17 +94,31 @@ Fmi2Layer *native_layer(Instance *inst) { return &inst->fmi; }
 int native_model_exchange(const Instance *inst) { return inst->model_exchange; }
 void native_set_early_return(Instance *inst, int on) { inst->early_return = on != 0; }
 
-/* ---- the FMI 2.0 state machine: the state table (fmi2_calls.h) read by fmi2_layer.c ---- */
+/* ---- the FMI state machine: the state table (fmi2_calls.h), asked through fmi2_layer.c ---- */
 
-/* StatusSlave._allowed: 1 if call F is allowed in the current phase, else 0 and an error naming both (the check
-   inline: one test of a bit on every doStep; the message out of line). */
-static int phase_refused(Instance *inst, const char *call, unsigned mask)
+/* The instance's state in the table: its phase; a Model Exchange instance's running phase is its mode. */
+int native_table_state(const Instance *inst)
 {
-    char why[256];
-    native_error(inst, "%s", fmi2_phase_refusal(call, mask, (int)inst->s.phase, why, sizeof why));
-    return 0;
+#ifdef ME_N_STATES
+    if (inst->model_exchange && inst->s.phase == PHASE_STEP_MODE)
+        return inst->s.model.me.mode == ME_CONTINUOUS_TIME_MODE ? FMI2_CONTINUOUS_TIME_MODE : FMI2_EVENT_MODE;
+#endif
+    return (int)inst->s.phase;
 }
-#define PHASE_ALLOWS(I, F) ((FMI2_MASK_##F & FMI2_BIT((I)->s.phase)) != 0 || phase_refused((I), #F, FMI2_MASK_##F))
+
+/* Call `call` (co-simulation mask cs, Model Exchange mask me: the table of the instance's interface): fmi2OK when
+   the table allows it now; else its answer (the error mode's, or fmi2Error with the table's refusal logged). */
+fmi2Status native_allowed(Instance *inst, const char *call, unsigned cs, unsigned me)
+{
+    const unsigned mask = inst->model_exchange ? me : cs;
+    fmi2Status st = fmi2_layer_mode_check(&inst->fmi, call, mask);
+    if (st != fmi2OK || (mask & FMI2_BIT(native_table_state(inst)))) return st;
+    char why[256];
+    native_error(inst, "%s", inst->model_exchange
+                 ? fmi_call_refusal(FMI2ME_LABEL, FMI2ME_INTERFACE, call, mask, native_table_state(inst), why, sizeof why)
+                 : fmi_call_refusal(FMI2_LABEL, FMI2_INTERFACE, call, mask, native_table_state(inst), why, sizeof why));
+    return native_settle(inst);
+}
 
 /* The current value of variable vr as Python prints it (repr). */
 static void value_text(const State *s, fmi2ValueReference vr, char *out, size_t size)
@@ -205,18 +219,15 @@ static fmi2Status settle(Instance *inst, int may_clear_error)
     return fmi2OK;
 }
 
+fmi2Status native_settle(Instance *inst) { return settle(inst, 0); }
+
 /* A live instance of this binary (fmi2_live: never a freed, foreign or NULL pointer), else fmi2Error */
 #define INST(c) Instance *I = (Instance *)(c); if (!fmi2_live(I, FMI2_LIVE_INSTANCE)) return fmi2Error
 /* The pointer arguments of call F: an array of n values (or a result pointer) that is NULL is refused (logged). */
 #define ARRAYS(F, n, a, b) FMI2_ARRAYS(&I->fmi, #F, n, a, b)
 #define POINTER(F, p) do { if (FMI2_NULL_POINTER(&I->fmi, #F, p) != fmi2OK) return fmi2Error; } while (0)
-/* The error mode's guard of call F (the state table): in the error state fmi2Error and "call F not allowed after an
-   error" unless the table allows F there. */
-#define ALLOWED(F)                                                                           \
-    do {                                                                                     \
-        fmi2Status guard_ = fmi2_layer_mode_check(&I->fmi, #F, FMI2_MASK_##F);               \
-        if (guard_ != fmi2OK) return guard_;                                                 \
-    } while (0)
+/* The state table's guard of call F (native_allowed): returns the refusal unless the table allows F now. */
+#define ALLOWED(F) NATIVE_ALLOWED(I, F)
 
 static void reset_state(State *s)
 {
@@ -312,7 +323,6 @@ EXPORT fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean tolDef, fmi2R
                                       fmi2Boolean stopDef, fmi2Real tStop)
 {
     INST(c); ALLOWED(fmi2SetupExperiment);
-    if (!PHASE_ALLOWS(I, fmi2SetupExperiment)) return settle(I, 0);
     I->s.start_time = tStart;
     I->s.has_stop = stopDef != 0;
     I->s.stop_time = stopDef ? tStop : 0.0;
@@ -324,14 +334,13 @@ EXPORT fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean tolDef, fmi2R
 EXPORT fmi2Status fmi2EnterInitializationMode(fmi2Component c)
 {
     INST(c); ALLOWED(fmi2EnterInitializationMode);
-    if (PHASE_ALLOWS(I, fmi2EnterInitializationMode)) I->s.phase = PHASE_INITIALIZATION_MODE;
+    I->s.phase = PHASE_INITIALIZATION_MODE;
     return settle(I, 0);
 }
 
 EXPORT fmi2Status fmi2ExitInitializationMode(fmi2Component c)
 {
     INST(c); ALLOWED(fmi2ExitInitializationMode);
-    if (!PHASE_ALLOWS(I, fmi2ExitInitializationMode)) return settle(I, 0);
     I->s.phase = PHASE_STEP_MODE;
     I->s.initialised = 1;
     if (check_parameters(I)) { /* StatusSlave._initialise: the table, then the model */
@@ -352,12 +361,10 @@ EXPORT fmi2Status fmi2ExitInitializationMode(fmi2Component c)
 EXPORT fmi2Status fmi2Terminate(fmi2Component c)
 {
     INST(c); ALLOWED(fmi2Terminate);
-    if (PHASE_ALLOWS(I, fmi2Terminate)) {
-        I->s.phase = PHASE_TERMINATED;
-        I->s.halted = 1;
-        snprintf(I->s.halt_message, sizeof I->s.halt_message,
-                 "fmi2Terminate was called (FMI 2.0: only fmi2Reset or fmi2FreeInstance may follow)");
-    }
+    I->s.phase = PHASE_TERMINATED;
+    I->s.halted = 1;
+    snprintf(I->s.halt_message, sizeof I->s.halt_message,
+             "fmi2Terminate was called (FMI 2.0: only fmi2Reset or fmi2FreeInstance may follow)");
     return settle(I, 0);
 }
 
@@ -369,6 +376,8 @@ EXPORT fmi2Status fmi2Reset(fmi2Component c)
 }
 
 static const char *const TYPE_NAMES[] = {"Real", "Integer", "Boolean"};
+/* the states in which the getters read any variable (the table's; elsewhere only the status flag fmi_status) */
+#define GET_ANY_VARIABLE(I) ((I)->model_exchange ? FMI2ME_GET_ANY_VARIABLE : FMI2_GET_ANY_VARIABLE)
 
 /* StatusSlave._get_values: an unknown value reference, a wrong type, or any variable but fmi_status before
    fmi2EnterInitializationMode is an error (logged; that value reads as 0); then the call returns fmi2Error and
@@ -384,7 +393,7 @@ static fmi2Status get_values(Instance *I, const fmi2ValueReference vr[], size_t 
         } else if (type_index < 0 || (int)VARIABLES[vr[i]].type != type_index) {
             native_error(I, "%s: variable %s (valueReference %u) is a %s, not a %s", call, VARIABLES[vr[i]].name,
                          vr[i], TYPE_NAMES[VARIABLES[vr[i]].type], type);
-        } else if (I->s.phase == PHASE_INSTANTIATED && vr[i] != VR_fmi_status) {
+        } else if (!(GET_ANY_VARIABLE(I) & FMI2_BIT(native_table_state(I))) && vr[i] != VR_fmi_status) {
             native_error(I, "%s of %s is not allowed in the instantiated state (FMI 2.0 allows it from "
                          "fmi2EnterInitializationMode on)", call, VARIABLES[vr[i]].name);
         } else if (I->s.phase == PHASE_INITIALIZATION_MODE && VARIABLES[vr[i]].causality == C_OUTPUT) {
@@ -451,7 +460,6 @@ static const char *set_refusal(Instance *I, fmi2ValueReference vr, char *buf, si
 {
     const VariableInfo *v = &VARIABLES[vr];
     static const char *const CAUSALITY[] = {"parameter", "input", "output", "local"};
-    if (I->s.phase == PHASE_TERMINATED) return "no variable may be set in the terminated state (FMI 2.0)";
     if (v->causality == C_INPUT) return NULL;
     if (v->causality == C_PARAMETER && strcmp(v->variability, "tunable") == 0) return NULL;
     if (!v->settable_start) {
@@ -546,18 +554,16 @@ EXPORT fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], 
 
 EXPORT fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean noSetPrior)
 {
-    INST(c); ALLOWED(fmi2DoStep);
+    INST(c);
     (void)noSetPrior;
-    /* StatusSlave._step_allowed: step mode only, and not beyond the declared stop time */
-    if (I->s.phase == PHASE_TERMINATED) {
+    /* StatusSlave._step_allowed: step mode only (a terminated instance says why it halted), and not beyond the
+       declared stop time */
+    if (!I->model_exchange && native_table_state(I) == FMI2_TERMINATED &&
+        fmi2_layer_mode_check(&I->fmi, "fmi2DoStep", FMI2_MASK_fmi2DoStep) == fmi2OK) {
         native_error(I, "doStep refused: %s", I->s.halt_message);
         return settle(I, 0);
     }
-    if (!PHASE_ALLOWS(I, fmi2DoStep)) return settle(I, 0);
-    if (I->model_exchange) {
-        native_error(I, "fmi2DoStep: this instance was instantiated for Model Exchange (no doStep)");
-        return settle(I, 0);
-    }
+    ALLOWED(fmi2DoStep);
     if (I->s.has_stop) {
         const double stop = I->s.stop_time, end = stop + STOP_TIME_TOLERANCE * fmax(1.0, fabs(stop));
         if (isfinite(t) && isfinite(h) && t <= end && end < t + h) {

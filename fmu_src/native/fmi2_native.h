@@ -74,6 +74,18 @@ State *native_state(Instance *inst);
 Fmi2Layer *native_layer(Instance *inst);
 /* instantiated as fmi2ModelExchange */
 int native_model_exchange(const Instance *inst);
+/* The state table (fmi2_calls.h) for this instance: its state there (its phase; Model Exchange: event or
+   continuous-time mode when running), and the check of call F against the table of its interface (FMI2_MASK_F or
+   FMI2ME_MASK_F): fmi2OK, or the refusal (logged, the error mode). NATIVE_ALLOWED returns the refusal. */
+int native_table_state(const Instance *inst);
+fmi2Status native_allowed(Instance *inst, const char *call, unsigned cs, unsigned me);
+#define NATIVE_ALLOWED(I, F)                                                                                      \
+    do {                                                                                                          \
+        fmi2Status allowed_ = native_allowed((I), #F, FMI2_MASK_##F, FMI2ME_MASK_##F);                            \
+        if (allowed_ != fmi2OK) return allowed_;                                                                  \
+    } while (0)
+/* fmi2Error (the error mode) when the status flag says a call failed, else fmi2OK */
+fmi2Status native_settle(Instance *inst);
 /* FMI 3.0 co-simulation with early return: fmi2DoStep steps with model_do_step_early (me_model.h) */
 void native_set_early_return(Instance *inst, int on);
 

@@ -27,9 +27,8 @@
 
 #define EXPORT3 FMI3_Export
 
-enum { W_INSTANTIATED, W_INITIALIZATION, W_EVENT, W_STEP, W_CONTINUOUS, W_TERMINATED };
-static const char *const MODE_NAMES[] = {"instantiated", "initialization mode", "event mode", "step mode",
-                                         "continuous-time mode", "terminated"};
+/* The modes are the state table's states (fmi2_calls.h: FMI2_INSTANTIATED ...); which call is allowed in which is
+   the table's FMI3CS_MASK_<call> / FMI3ME_MASK_<call> (W3_CALL). */
 
 #define VR_TIME ((fmi3ValueReference)N_VARIABLES)
 #ifdef ME_N_STATES
@@ -44,14 +43,14 @@ typedef struct {
     fmi3InstanceEnvironment env;
     fmi3LogMessageCallback log;
     int model_exchange, event_mode_used, early_return_allowed;
-    int mode;                     /* W_* */
+    int mode;                     /* FMI2_<state> (the state table's) */
     double time;
 } W3;
 
 /* The FMU state: the FMI 2.0 instance's, with the FMI 3.0 mode and time */
 typedef struct {
     fmi2FMUstate inner;
-    int mode;
+    int mode; /* FMI2_<state> */
     double time;
 } W3State;
 
@@ -91,35 +90,32 @@ static fmi3Status refuse(W3 *w, const char *format, ...)
             return refuse(w, "%s refused: %s = NULL with %s = %zu", call, #array, #n, (size_t)(n));           \
     } while (0)
 
-/* Call F allowed in the modes of `modes` (bits 1 << W_*)? else fmi3Error naming the mode */
-static int in_mode(W3 *w, const char *call, unsigned modes, fmi3Status *st)
+/* Call `call` allowed in the instance's mode by the state table of its interface (cs, me: its masks)? else
+   fmi3Error with the table's refusal */
+static int in_mode(W3 *w, const char *call, unsigned cs, unsigned me, fmi3Status *st)
 {
-    if ((modes >> w->mode) & 1u) return 1;
-    char allowed[160] = "";
-    for (int m = W_INSTANTIATED; m <= W_TERMINATED; m++)
-        if ((modes >> m) & 1u)
-            snprintf(allowed + strlen(allowed), sizeof allowed - strlen(allowed), "%s%s", allowed[0] ? ", " : "",
-                     MODE_NAMES[m]);
-    *st = refuse(w, "%s is not allowed in %s (FMI 3.0 allows it in: %s)", call, MODE_NAMES[w->mode], allowed);
+    char why[256];
+    const char *refusal = w->model_exchange
+        ? fmi_call_refusal(FMI3ME_LABEL, FMI3ME_INTERFACE, call, me, w->mode, why, sizeof why)
+        : fmi_call_refusal(FMI3CS_LABEL, FMI3CS_INTERFACE, call, cs, w->mode, why, sizeof why);
+    if (refusal == NULL) return 1;
+    *st = refuse(w, "%s", refusal);
     return 0;
 }
 
-#define BIT(m) (1u << (m))
-#define W3_CALL(F, MODES)                                                                                  \
+/* A live FMI 3.0 instance of this binary whose state table allows call F in its mode, else fmi3Error */
+#define W3_CALL(F)                                                                                         \
     W3 *w = (W3 *)instance;                                                                                \
     fmi3Status st_ = fmi3OK;                                                                               \
-    if (!fmi2_live(w, FMI2_LIVE_FMI3)) return fmi3Error;                                              \
-    if (!in_mode(w, #F, (MODES), &st_)) return st_
-#define ANY_MODE (BIT(W_INSTANTIATED) | BIT(W_INITIALIZATION) | BIT(W_EVENT) | BIT(W_STEP) | BIT(W_CONTINUOUS) | \
-                  BIT(W_TERMINATED))
-#define RUNNING (BIT(W_EVENT) | BIT(W_STEP) | BIT(W_CONTINUOUS))
+    if (!fmi2_live(w, FMI2_LIVE_FMI3)) return fmi3Error;                                                   \
+    if (!in_mode(w, #F, FMI3CS_MASK_##F, FMI3ME_MASK_##F, &st_)) return st_
 
 EXPORT3 const char *fmi3GetVersion(void) { return fmi3Version; }
 
 EXPORT3 fmi3Status fmi3SetDebugLogging(fmi3Instance instance, fmi3Boolean loggingOn, size_t nCategories,
                                        const fmi3String categories[])
 {
-    W3_CALL(fmi3SetDebugLogging, ANY_MODE);
+    W3_CALL(fmi3SetDebugLogging);
     if (nCategories > 0 && categories == NULL)
         return refuse(w, "fmi3SetDebugLogging refused: categories = NULL with nCategories = %zu", nCategories);
     return to3(fmi2SetDebugLogging(w->c, loggingOn, nCategories, categories));
@@ -165,7 +161,7 @@ static W3 *instantiate(fmi3String name, fmi3String token, fmi3String resourcePat
         free(w);
         return NULL;
     }
-    w->mode = W_INSTANTIATED;
+    w->mode = FMI2_INSTANTIATED;
     if (!fmi2_live_add(w, FMI2_LIVE_FMI3)) {
         fmi2FreeInstance(w->c);
         free(w);
@@ -237,13 +233,13 @@ EXPORT3 fmi3Status fmi3EnterInitializationMode(fmi3Instance instance, fmi3Boolea
                                                fmi3Float64 tolerance, fmi3Float64 startTime,
                                                fmi3Boolean stopTimeDefined, fmi3Float64 stopTime)
 {
-    W3_CALL(fmi3EnterInitializationMode, BIT(W_INSTANTIATED));
+    W3_CALL(fmi3EnterInitializationMode);
     if (!isfinite(startTime)) /* it becomes the variable `time`, which must be finite when read with fmi3OK */
         return refuse(w, "fmi3EnterInitializationMode refused: startTime = %g is not a finite number", startTime);
     fmi2Status st = fmi2SetupExperiment(w->c, toleranceDefined, tolerance, startTime, stopTimeDefined, stopTime);
     if (st <= fmi2Warning) st = fmi2EnterInitializationMode(w->c);
     if (st <= fmi2Warning) {
-        w->mode = W_INITIALIZATION;
+        w->mode = FMI2_INITIALIZATION_MODE;
         w->time = startTime;
     }
     return to3(st);
@@ -251,39 +247,38 @@ EXPORT3 fmi3Status fmi3EnterInitializationMode(fmi3Instance instance, fmi3Boolea
 
 EXPORT3 fmi3Status fmi3ExitInitializationMode(fmi3Instance instance)
 {
-    W3_CALL(fmi3ExitInitializationMode, BIT(W_INITIALIZATION));
+    W3_CALL(fmi3ExitInitializationMode);
     fmi2Status st = fmi2ExitInitializationMode(w->c);
-    w->mode = w->model_exchange || w->event_mode_used ? W_EVENT : W_STEP;
+    w->mode = w->model_exchange || w->event_mode_used ? FMI2_EVENT_MODE : FMI2_STEP_MODE;
     return to3(st);
 }
 
 EXPORT3 fmi3Status fmi3EnterEventMode(fmi3Instance instance)
 {
-    W3_CALL(fmi3EnterEventMode, w->model_exchange ? BIT(W_EVENT) | BIT(W_CONTINUOUS) : BIT(W_STEP));
+    W3_CALL(fmi3EnterEventMode);
     if (!w->model_exchange && !w->event_mode_used)
         return refuse(w, "fmi3EnterEventMode: the instance was created with eventModeUsed = false");
     fmi2Status st = fmi2OK;
 #ifdef ME_N_STATES
     if (w->model_exchange) st = fmi2EnterEventMode(w->c);
 #endif
-    if (st <= fmi2Warning) w->mode = W_EVENT;
+    if (st <= fmi2Warning) w->mode = FMI2_EVENT_MODE;
     return to3(st);
 }
 
 EXPORT3 fmi3Status fmi3Terminate(fmi3Instance instance)
 {
-    W3_CALL(fmi3Terminate, RUNNING);
+    W3_CALL(fmi3Terminate);
     fmi2Status st = fmi2Terminate(w->c);
-    if (st <= fmi2Warning) w->mode = W_TERMINATED;
+    if (st <= fmi2Warning) w->mode = FMI2_TERMINATED;
     return to3(st);
 }
 
 EXPORT3 fmi3Status fmi3Reset(fmi3Instance instance)
 {
-    W3 *w = (W3 *)instance;
-    if (!fmi2_live(w, FMI2_LIVE_FMI3)) return fmi3Error;
+    W3_CALL(fmi3Reset);
     fmi2Status st = fmi2Reset(w->c);
-    w->mode = W_INSTANTIATED;
+    w->mode = FMI2_INSTANTIATED;
     w->time = 0.0;
     return to3(st);
 }
@@ -327,7 +322,7 @@ static int extra_float64(W3 *w, fmi3ValueReference vr, double *value)
 EXPORT3 fmi3Status fmi3GetFloat64(fmi3Instance instance, const fmi3ValueReference valueReferences[],
                                   size_t nValueReferences, fmi3Float64 values[], size_t nValues)
 {
-    W3_CALL(fmi3GetFloat64, ANY_MODE);
+    W3_CALL(fmi3GetFloat64);
     if (!sizes_match(w, "fmi3GetFloat64", nValueReferences, nValues, &st_)) return st_;
     if (!arrays_given(w, "fmi3GetFloat64", valueReferences, values, nValueReferences, &st_)) return st_;
     int plain = 1;
@@ -351,7 +346,7 @@ EXPORT3 fmi3Status fmi3GetFloat64(fmi3Instance instance, const fmi3ValueReferenc
 EXPORT3 fmi3Status fmi3SetFloat64(fmi3Instance instance, const fmi3ValueReference valueReferences[],
                                   size_t nValueReferences, const fmi3Float64 values[], size_t nValues)
 {
-    W3_CALL(fmi3SetFloat64, ANY_MODE);
+    W3_CALL(fmi3SetFloat64);
     if (!sizes_match(w, "fmi3SetFloat64", nValueReferences, nValues, &st_)) return st_;
     if (!arrays_given(w, "fmi3SetFloat64", valueReferences, values, nValueReferences, &st_)) return st_;
     for (size_t i = 0; i < nValueReferences; i++)
@@ -364,7 +359,7 @@ EXPORT3 fmi3Status fmi3SetFloat64(fmi3Instance instance, const fmi3ValueReferenc
 EXPORT3 fmi3Status fmi3GetInt32(fmi3Instance instance, const fmi3ValueReference valueReferences[],
                                 size_t nValueReferences, fmi3Int32 values[], size_t nValues)
 {
-    W3_CALL(fmi3GetInt32, ANY_MODE);
+    W3_CALL(fmi3GetInt32);
     if (!sizes_match(w, "fmi3GetInt32", nValueReferences, nValues, &st_)) return st_;
     if (!arrays_given(w, "fmi3GetInt32", valueReferences, values, nValueReferences, &st_)) return st_;
     return to3(fmi2GetInteger(w->c, valueReferences, nValueReferences, values));
@@ -373,7 +368,7 @@ EXPORT3 fmi3Status fmi3GetInt32(fmi3Instance instance, const fmi3ValueReference 
 EXPORT3 fmi3Status fmi3SetInt32(fmi3Instance instance, const fmi3ValueReference valueReferences[],
                                 size_t nValueReferences, const fmi3Int32 values[], size_t nValues)
 {
-    W3_CALL(fmi3SetInt32, ANY_MODE);
+    W3_CALL(fmi3SetInt32);
     if (!sizes_match(w, "fmi3SetInt32", nValueReferences, nValues, &st_)) return st_;
     if (!arrays_given(w, "fmi3SetInt32", valueReferences, values, nValueReferences, &st_)) return st_;
     return to3(fmi2SetInteger(w->c, valueReferences, nValueReferences, values));
@@ -383,7 +378,7 @@ EXPORT3 fmi3Status fmi3SetInt32(fmi3Instance instance, const fmi3ValueReference 
 EXPORT3 fmi3Status fmi3GetBoolean(fmi3Instance instance, const fmi3ValueReference valueReferences[],
                                   size_t nValueReferences, fmi3Boolean values[], size_t nValues)
 {
-    W3_CALL(fmi3GetBoolean, ANY_MODE);
+    W3_CALL(fmi3GetBoolean);
     if (!sizes_match(w, "fmi3GetBoolean", nValueReferences, nValues, &st_)) return st_;
     if (!arrays_given(w, "fmi3GetBoolean", valueReferences, values, nValueReferences, &st_)) return st_;
     fmi3Status worst = fmi3OK;
@@ -400,7 +395,7 @@ EXPORT3 fmi3Status fmi3GetBoolean(fmi3Instance instance, const fmi3ValueReferenc
 EXPORT3 fmi3Status fmi3SetBoolean(fmi3Instance instance, const fmi3ValueReference valueReferences[],
                                   size_t nValueReferences, const fmi3Boolean values[], size_t nValues)
 {
-    W3_CALL(fmi3SetBoolean, ANY_MODE);
+    W3_CALL(fmi3SetBoolean);
     if (!sizes_match(w, "fmi3SetBoolean", nValueReferences, nValues, &st_)) return st_;
     if (!arrays_given(w, "fmi3SetBoolean", valueReferences, values, nValueReferences, &st_)) return st_;
     fmi3Status worst = fmi3OK;
@@ -417,7 +412,7 @@ EXPORT3 fmi3Status fmi3SetBoolean(fmi3Instance instance, const fmi3ValueReferenc
 EXPORT3 fmi3Status fmi3GetString(fmi3Instance instance, const fmi3ValueReference valueReferences[],
                                  size_t nValueReferences, fmi3String values[], size_t nValues)
 {
-    W3_CALL(fmi3GetString, ANY_MODE);
+    W3_CALL(fmi3GetString);
     if (!sizes_match(w, "fmi3GetString", nValueReferences, nValues, &st_)) return st_;
     if (!arrays_given(w, "fmi3GetString", valueReferences, values, nValueReferences, &st_)) return st_;
     return to3(fmi2GetString(w->c, valueReferences, nValueReferences, values));
@@ -426,7 +421,7 @@ EXPORT3 fmi3Status fmi3GetString(fmi3Instance instance, const fmi3ValueReference
 EXPORT3 fmi3Status fmi3SetString(fmi3Instance instance, const fmi3ValueReference valueReferences[],
                                  size_t nValueReferences, const fmi3String values[], size_t nValues)
 {
-    W3_CALL(fmi3SetString, ANY_MODE);
+    W3_CALL(fmi3SetString);
     if (!sizes_match(w, "fmi3SetString", nValueReferences, nValues, &st_)) return st_;
     if (!arrays_given(w, "fmi3SetString", valueReferences, values, nValueReferences, &st_)) return st_;
     return to3(fmi2SetString(w->c, valueReferences, nValueReferences, values));
@@ -443,14 +438,14 @@ static fmi3Status no_such_type(W3 *w, const char *call, const char *type, size_t
     EXPORT3 fmi3Status fmi3Get##Name(fmi3Instance instance, const fmi3ValueReference valueReferences[],          \
                                      size_t nValueReferences, T values[], size_t nValues)                        \
     {                                                                                                           \
-        W3_CALL(fmi3Get##Name, ANY_MODE);                                                                       \
+        W3_CALL(fmi3Get##Name);                                                                       \
         (void)valueReferences; (void)values; (void)nValues;                                                     \
         return no_such_type(w, "fmi3Get" #Name, #Name, nValueReferences);                                       \
     }                                                                                                           \
     EXPORT3 fmi3Status fmi3Set##Name(fmi3Instance instance, const fmi3ValueReference valueReferences[],          \
                                      size_t nValueReferences, const T values[], size_t nValues)                  \
     {                                                                                                           \
-        W3_CALL(fmi3Set##Name, ANY_MODE);                                                                       \
+        W3_CALL(fmi3Set##Name);                                                                       \
         (void)valueReferences; (void)values; (void)nValues;                                                     \
         return no_such_type(w, "fmi3Set" #Name, #Name, nValueReferences);                                       \
     }
@@ -466,7 +461,7 @@ NO_TYPE(UInt64, fmi3UInt64)
 EXPORT3 fmi3Status fmi3GetBinary(fmi3Instance instance, const fmi3ValueReference valueReferences[],
                                  size_t nValueReferences, size_t valueSizes[], fmi3Binary values[], size_t nValues)
 {
-    W3_CALL(fmi3GetBinary, ANY_MODE);
+    W3_CALL(fmi3GetBinary);
     (void)valueReferences; (void)valueSizes; (void)values; (void)nValues;
     return no_such_type(w, "fmi3GetBinary", "Binary", nValueReferences);
 }
@@ -475,7 +470,7 @@ EXPORT3 fmi3Status fmi3SetBinary(fmi3Instance instance, const fmi3ValueReference
                                  size_t nValueReferences, const size_t valueSizes[], const fmi3Binary values[],
                                  size_t nValues)
 {
-    W3_CALL(fmi3SetBinary, ANY_MODE);
+    W3_CALL(fmi3SetBinary);
     (void)valueReferences; (void)valueSizes; (void)values; (void)nValues;
     return no_such_type(w, "fmi3SetBinary", "Binary", nValueReferences);
 }
@@ -483,7 +478,7 @@ EXPORT3 fmi3Status fmi3SetBinary(fmi3Instance instance, const fmi3ValueReference
 EXPORT3 fmi3Status fmi3GetClock(fmi3Instance instance, const fmi3ValueReference valueReferences[],
                                 size_t nValueReferences, fmi3Clock values[])
 {
-    W3_CALL(fmi3GetClock, ANY_MODE);
+    W3_CALL(fmi3GetClock);
     (void)valueReferences; (void)values;
     return no_such_type(w, "fmi3GetClock", "Clock", nValueReferences);
 }
@@ -491,7 +486,7 @@ EXPORT3 fmi3Status fmi3GetClock(fmi3Instance instance, const fmi3ValueReference 
 EXPORT3 fmi3Status fmi3SetClock(fmi3Instance instance, const fmi3ValueReference valueReferences[],
                                 size_t nValueReferences, const fmi3Clock values[])
 {
-    W3_CALL(fmi3SetClock, ANY_MODE);
+    W3_CALL(fmi3SetClock);
     (void)valueReferences; (void)values;
     return no_such_type(w, "fmi3SetClock", "Clock", nValueReferences);
 }
@@ -506,7 +501,7 @@ static fmi3Status not_provided(W3 *w, const char *call, const char *why)
 EXPORT3 fmi3Status fmi3GetNumberOfVariableDependencies(fmi3Instance instance, fmi3ValueReference valueReference,
                                                        size_t *nDependencies)
 {
-    W3_CALL(fmi3GetNumberOfVariableDependencies, ANY_MODE);
+    W3_CALL(fmi3GetNumberOfVariableDependencies);
     (void)valueReference; (void)nDependencies;
     return not_provided(w, "fmi3GetNumberOfVariableDependencies", "providesPerElementDependencies=false");
 }
@@ -516,7 +511,7 @@ EXPORT3 fmi3Status fmi3GetVariableDependencies(fmi3Instance instance, fmi3ValueR
                                                size_t elementIndicesOfIndependents[],
                                                fmi3DependencyKind dependencyKinds[], size_t nDependencies)
 {
-    W3_CALL(fmi3GetVariableDependencies, ANY_MODE);
+    W3_CALL(fmi3GetVariableDependencies);
     (void)dependent; (void)elementIndicesOfDependent; (void)independents; (void)elementIndicesOfIndependents;
     (void)dependencyKinds; (void)nDependencies;
     return not_provided(w, "fmi3GetVariableDependencies", "providesPerElementDependencies=false");
@@ -527,7 +522,7 @@ EXPORT3 fmi3Status fmi3GetDirectionalDerivative(fmi3Instance instance, const fmi
                                                 const fmi3Float64 seed[], size_t nSeed, fmi3Float64 sensitivity[],
                                                 size_t nSensitivity)
 {
-    W3_CALL(fmi3GetDirectionalDerivative, ANY_MODE);
+    W3_CALL(fmi3GetDirectionalDerivative);
 #ifdef HAS_DIRECTIONAL_DERIVATIVES
     if (nSeed != nKnowns || nSensitivity != nUnknowns)
         return refuse(w, "fmi3GetDirectionalDerivative: nSeed = %zu and nSensitivity = %zu must be nKnowns = %zu and "
@@ -545,7 +540,7 @@ EXPORT3 fmi3Status fmi3GetAdjointDerivative(fmi3Instance instance, const fmi3Val
                                             const fmi3Float64 seed[], size_t nSeed, fmi3Float64 sensitivity[],
                                             size_t nSensitivity)
 {
-    W3_CALL(fmi3GetAdjointDerivative, ANY_MODE);
+    W3_CALL(fmi3GetAdjointDerivative);
     (void)unknowns; (void)nUnknowns; (void)knowns; (void)nKnowns; (void)seed; (void)nSeed; (void)sensitivity;
     (void)nSensitivity;
     return not_provided(w, "fmi3GetAdjointDerivative", "providesAdjointDerivatives=false");
@@ -553,13 +548,13 @@ EXPORT3 fmi3Status fmi3GetAdjointDerivative(fmi3Instance instance, const fmi3Val
 
 EXPORT3 fmi3Status fmi3EnterConfigurationMode(fmi3Instance instance)
 {
-    W3_CALL(fmi3EnterConfigurationMode, ANY_MODE);
+    W3_CALL(fmi3EnterConfigurationMode);
     return not_provided(w, "fmi3EnterConfigurationMode", "this FMU has no structural parameters");
 }
 
 EXPORT3 fmi3Status fmi3ExitConfigurationMode(fmi3Instance instance)
 {
-    W3_CALL(fmi3ExitConfigurationMode, ANY_MODE);
+    W3_CALL(fmi3ExitConfigurationMode);
     return not_provided(w, "fmi3ExitConfigurationMode", "this FMU has no structural parameters");
 }
 
@@ -568,7 +563,7 @@ EXPORT3 fmi3Status fmi3GetIntervalDecimal(fmi3Instance instance, const fmi3Value
                                           size_t nValueReferences, fmi3Float64 intervals[],
                                           fmi3IntervalQualifier qualifiers[])
 {
-    W3_CALL(fmi3GetIntervalDecimal, ANY_MODE);
+    W3_CALL(fmi3GetIntervalDecimal);
     U(valueReferences); U(intervals); U(qualifiers);
     return no_such_type(w, "fmi3GetIntervalDecimal", "Clock", nValueReferences);
 }
@@ -577,7 +572,7 @@ EXPORT3 fmi3Status fmi3GetIntervalFraction(fmi3Instance instance, const fmi3Valu
                                            size_t nValueReferences, fmi3UInt64 counters[], fmi3UInt64 resolutions[],
                                            fmi3IntervalQualifier qualifiers[])
 {
-    W3_CALL(fmi3GetIntervalFraction, ANY_MODE);
+    W3_CALL(fmi3GetIntervalFraction);
     U(valueReferences); U(counters); U(resolutions); U(qualifiers);
     return no_such_type(w, "fmi3GetIntervalFraction", "Clock", nValueReferences);
 }
@@ -585,7 +580,7 @@ EXPORT3 fmi3Status fmi3GetIntervalFraction(fmi3Instance instance, const fmi3Valu
 EXPORT3 fmi3Status fmi3GetShiftDecimal(fmi3Instance instance, const fmi3ValueReference valueReferences[],
                                        size_t nValueReferences, fmi3Float64 shifts[])
 {
-    W3_CALL(fmi3GetShiftDecimal, ANY_MODE);
+    W3_CALL(fmi3GetShiftDecimal);
     U(valueReferences); U(shifts);
     return no_such_type(w, "fmi3GetShiftDecimal", "Clock", nValueReferences);
 }
@@ -593,7 +588,7 @@ EXPORT3 fmi3Status fmi3GetShiftDecimal(fmi3Instance instance, const fmi3ValueRef
 EXPORT3 fmi3Status fmi3GetShiftFraction(fmi3Instance instance, const fmi3ValueReference valueReferences[],
                                         size_t nValueReferences, fmi3UInt64 counters[], fmi3UInt64 resolutions[])
 {
-    W3_CALL(fmi3GetShiftFraction, ANY_MODE);
+    W3_CALL(fmi3GetShiftFraction);
     U(valueReferences); U(counters); U(resolutions);
     return no_such_type(w, "fmi3GetShiftFraction", "Clock", nValueReferences);
 }
@@ -601,7 +596,7 @@ EXPORT3 fmi3Status fmi3GetShiftFraction(fmi3Instance instance, const fmi3ValueRe
 EXPORT3 fmi3Status fmi3SetIntervalDecimal(fmi3Instance instance, const fmi3ValueReference valueReferences[],
                                           size_t nValueReferences, const fmi3Float64 intervals[])
 {
-    W3_CALL(fmi3SetIntervalDecimal, ANY_MODE);
+    W3_CALL(fmi3SetIntervalDecimal);
     U(valueReferences); U(intervals);
     return no_such_type(w, "fmi3SetIntervalDecimal", "Clock", nValueReferences);
 }
@@ -610,7 +605,7 @@ EXPORT3 fmi3Status fmi3SetIntervalFraction(fmi3Instance instance, const fmi3Valu
                                            size_t nValueReferences, const fmi3UInt64 counters[],
                                            const fmi3UInt64 resolutions[])
 {
-    W3_CALL(fmi3SetIntervalFraction, ANY_MODE);
+    W3_CALL(fmi3SetIntervalFraction);
     U(valueReferences); U(counters); U(resolutions);
     return no_such_type(w, "fmi3SetIntervalFraction", "Clock", nValueReferences);
 }
@@ -618,7 +613,7 @@ EXPORT3 fmi3Status fmi3SetIntervalFraction(fmi3Instance instance, const fmi3Valu
 EXPORT3 fmi3Status fmi3SetShiftDecimal(fmi3Instance instance, const fmi3ValueReference valueReferences[],
                                        size_t nValueReferences, const fmi3Float64 shifts[])
 {
-    W3_CALL(fmi3SetShiftDecimal, ANY_MODE);
+    W3_CALL(fmi3SetShiftDecimal);
     U(valueReferences); U(shifts);
     return no_such_type(w, "fmi3SetShiftDecimal", "Clock", nValueReferences);
 }
@@ -627,21 +622,21 @@ EXPORT3 fmi3Status fmi3SetShiftFraction(fmi3Instance instance, const fmi3ValueRe
                                         size_t nValueReferences, const fmi3UInt64 counters[],
                                         const fmi3UInt64 resolutions[])
 {
-    W3_CALL(fmi3SetShiftFraction, ANY_MODE);
+    W3_CALL(fmi3SetShiftFraction);
     U(valueReferences); U(counters); U(resolutions);
     return no_such_type(w, "fmi3SetShiftFraction", "Clock", nValueReferences);
 }
 
 EXPORT3 fmi3Status fmi3EvaluateDiscreteStates(fmi3Instance instance)
 {
-    W3_CALL(fmi3EvaluateDiscreteStates, ANY_MODE);
+    W3_CALL(fmi3EvaluateDiscreteStates);
     return not_provided(w, "fmi3EvaluateDiscreteStates", "providesEvaluateDiscreteStates=false");
 }
 
 EXPORT3 fmi3Status fmi3ActivateModelPartition(fmi3Instance instance, fmi3ValueReference clockReference,
                                               fmi3Float64 activationTime)
 {
-    W3_CALL(fmi3ActivateModelPartition, ANY_MODE);
+    W3_CALL(fmi3ActivateModelPartition);
     U(clockReference); U(activationTime);
     return not_provided(w, "fmi3ActivateModelPartition", "no Scheduled Execution interface");
 }
@@ -650,7 +645,7 @@ EXPORT3 fmi3Status fmi3GetOutputDerivatives(fmi3Instance instance, const fmi3Val
                                             size_t nValueReferences, const fmi3Int32 orders[], fmi3Float64 values[],
                                             size_t nValues)
 {
-    W3_CALL(fmi3GetOutputDerivatives, ANY_MODE);
+    W3_CALL(fmi3GetOutputDerivatives);
     U(valueReferences); U(nValueReferences); U(orders); U(values); U(nValues);
     return not_provided(w, "fmi3GetOutputDerivatives", "maxOutputDerivativeOrder=0");
 }
@@ -665,7 +660,7 @@ static fmi3Status foreign_state3(W3 *w, const char *call, const void *state)
 
 EXPORT3 fmi3Status fmi3GetFMUState(fmi3Instance instance, fmi3FMUState *FMUState)
 {
-    W3_CALL(fmi3GetFMUState, ANY_MODE);
+    W3_CALL(fmi3GetFMUState);
     if (FMUState == NULL) return refuse(w, "fmi3GetFMUState refused: FMUState = NULL (the pointer to store it in)");
     if (*FMUState != NULL && !fmi2_live(*FMUState, FMI2_LIVE_FMI3_STATE))
         return foreign_state3(w, "fmi3GetFMUState", *FMUState);
@@ -688,16 +683,17 @@ EXPORT3 fmi3Status fmi3GetFMUState(fmi3Instance instance, fmi3FMUState *FMUState
 
 EXPORT3 fmi3Status fmi3SetFMUState(fmi3Instance instance, fmi3FMUState FMUState)
 {
-    W3 *w = (W3 *)instance;
-    if (!fmi2_live(w, FMI2_LIVE_FMI3)) return fmi3Error;
+    W3_CALL(fmi3SetFMUState);
     if (FMUState == NULL) return refuse(w, "fmi3SetFMUState refused: FMUState = NULL (no state given)");
     if (!fmi2_live(FMUState, FMI2_LIVE_FMI3_STATE)) return foreign_state3(w, "fmi3SetFMUState", FMUState);
     const W3State *s = FMUState;
-    const int step_mode = s->mode == W_STEP, continuous = s->mode == W_CONTINUOUS;
-    if ((w->model_exchange && step_mode) || (!w->model_exchange && continuous) ||
-        (!w->model_exchange && !w->event_mode_used && s->mode == W_EVENT))
+    /* a state of a mode this instance's interface has (the table's states; event mode in co-simulation only with
+       eventModeUsed) */
+    const unsigned modes = w->model_exchange ? FMI3ME_STATES
+                         : FMI3CS_STATES & ~(w->event_mode_used ? 0u : FMI2_BIT(FMI2_EVENT_MODE));
+    if (!(modes & FMI2_BIT(s->mode)))
         return refuse(w, "fmi3SetFMUState refused: a state in %s, which this instance (%s%s) has not",
-                      MODE_NAMES[s->mode], w->model_exchange ? "Model Exchange" : "Co-Simulation",
+                      FMI2_STATE_NAMES[s->mode], w->model_exchange ? "Model Exchange" : "Co-Simulation",
                       !w->model_exchange && !w->event_mode_used ? " without event mode" : "");
     fmi2Status st = fmi2SetFMUstate(w->c, s->inner);
     if (st <= fmi2Warning) {
@@ -709,8 +705,7 @@ EXPORT3 fmi3Status fmi3SetFMUState(fmi3Instance instance, fmi3FMUState FMUState)
 
 EXPORT3 fmi3Status fmi3FreeFMUState(fmi3Instance instance, fmi3FMUState *FMUState)
 {
-    W3 *w = (W3 *)instance;
-    if (!fmi2_live(w, FMI2_LIVE_FMI3)) return fmi3Error;
+    W3_CALL(fmi3FreeFMUState);
     if (FMUState == NULL || *FMUState == NULL) return fmi3OK;
     if (!fmi2_live_remove(*FMUState, FMI2_LIVE_FMI3_STATE)) return foreign_state3(w, "fmi3FreeFMUState", *FMUState);
     W3State *s = *FMUState;
@@ -725,8 +720,7 @@ EXPORT3 fmi3Status fmi3FreeFMUState(fmi3Instance instance, fmi3FMUState *FMUStat
 
 EXPORT3 fmi3Status fmi3SerializedFMUStateSize(fmi3Instance instance, fmi3FMUState FMUState, size_t *size)
 {
-    W3 *w = (W3 *)instance;
-    if (!fmi2_live(w, FMI2_LIVE_FMI3)) return fmi3Error;
+    W3_CALL(fmi3SerializedFMUStateSize);
     if (FMUState == NULL || size == NULL)
         return refuse(w, "fmi3SerializedFMUStateSize refused: %s = NULL", FMUState == NULL ? "FMUState" : "size");
     if (!fmi2_live(FMUState, FMI2_LIVE_FMI3_STATE)) return foreign_state3(w, "fmi3SerializedFMUStateSize", FMUState);
@@ -739,8 +733,7 @@ EXPORT3 fmi3Status fmi3SerializedFMUStateSize(fmi3Instance instance, fmi3FMUStat
 EXPORT3 fmi3Status fmi3SerializeFMUState(fmi3Instance instance, fmi3FMUState FMUState, fmi3Byte serializedState[],
                                          size_t size)
 {
-    W3 *w = (W3 *)instance;
-    if (!fmi2_live(w, FMI2_LIVE_FMI3)) return fmi3Error;
+    W3_CALL(fmi3SerializeFMUState);
     if (FMUState == NULL || serializedState == NULL)
         return refuse(w, "fmi3SerializeFMUState refused: %s = NULL", FMUState == NULL ? "FMUState" : "serializedState");
     if (size < W3_HEADER) return refuse(w, "fmi3SerializeFMUState refused: size = %zu bytes are too few", size);
@@ -755,8 +748,7 @@ EXPORT3 fmi3Status fmi3SerializeFMUState(fmi3Instance instance, fmi3FMUState FMU
 EXPORT3 fmi3Status fmi3DeserializeFMUState(fmi3Instance instance, const fmi3Byte serializedState[], size_t size,
                                            fmi3FMUState *FMUState)
 {
-    W3 *w = (W3 *)instance;
-    if (!fmi2_live(w, FMI2_LIVE_FMI3)) return fmi3Error;
+    W3_CALL(fmi3DeserializeFMUState);
     if (serializedState == NULL || FMUState == NULL)
         return refuse(w, "fmi3DeserializeFMUState refused: %s = NULL", serializedState == NULL ? "serializedState"
                       : "FMUState (the pointer to store it in)");
@@ -765,7 +757,7 @@ EXPORT3 fmi3Status fmi3DeserializeFMUState(fmi3Instance instance, const fmi3Byte
     double time;
     memcpy(&mode, serializedState, sizeof mode);
     memcpy(&time, serializedState + sizeof mode, sizeof time);
-    if (mode < W_INSTANTIATED || mode > W_TERMINATED || !isfinite(time))
+    if (mode < 0 || mode >= FMI2_N_STATES || !((FMI3CS_STATES | FMI3ME_STATES) & FMI2_BIT(mode)) || !isfinite(time))
         return refuse(w, "fmi3DeserializeFMUState refused: not a state of this FMU (mode %lld, time %g)",
                       (long long)mode, time);
     if (*FMUState != NULL && !fmi2_live(*FMUState, FMI2_LIVE_FMI3_STATE))
@@ -796,7 +788,7 @@ EXPORT3 fmi3Status fmi3UpdateDiscreteStates(fmi3Instance instance, fmi3Boolean *
                                             fmi3Boolean *valuesOfContinuousStatesChanged,
                                             fmi3Boolean *nextEventTimeDefined, fmi3Float64 *nextEventTime)
 {
-    W3_CALL(fmi3UpdateDiscreteStates, BIT(W_EVENT));
+    W3_CALL(fmi3UpdateDiscreteStates);
     if (discreteStatesNeedUpdate == NULL || terminateSimulation == NULL || nominalsOfContinuousStatesChanged == NULL ||
         valuesOfContinuousStatesChanged == NULL || nextEventTimeDefined == NULL || nextEventTime == NULL)
         return refuse(w, "fmi3UpdateDiscreteStates: an output argument is NULL");
@@ -819,9 +811,8 @@ EXPORT3 fmi3Status fmi3UpdateDiscreteStates(fmi3Instance instance, fmi3Boolean *
 
 EXPORT3 fmi3Status fmi3EnterStepMode(fmi3Instance instance)
 {
-    W3_CALL(fmi3EnterStepMode, BIT(W_EVENT));
-    if (w->model_exchange) return refuse(w, "fmi3EnterStepMode: a Model Exchange instance has no step mode");
-    w->mode = W_STEP;
+    W3_CALL(fmi3EnterStepMode);
+    w->mode = FMI2_STEP_MODE;
     return fmi3OK;
 }
 
@@ -830,7 +821,7 @@ EXPORT3 fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunic
                               fmi3Boolean *eventHandlingNeeded, fmi3Boolean *terminateSimulation,
                               fmi3Boolean *earlyReturn, fmi3Float64 *lastSuccessfulTime)
 {
-    W3_CALL(fmi3DoStep, BIT(W_STEP));
+    W3_CALL(fmi3DoStep);
     if (eventHandlingNeeded == NULL || terminateSimulation == NULL || earlyReturn == NULL ||
         lastSuccessfulTime == NULL)
         return refuse(w, "fmi3DoStep: an output argument is NULL");
@@ -876,11 +867,9 @@ EXPORT3 fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunic
 
 /* Defined for every model (FMPy loads them all); a model without Model Exchange (no ME_N_STATES) answers
    fmi3Error: its instances are Co-Simulation ones. */
-#define ME_ONLY(call)                                                                                         \
-    if (!w->model_exchange) return refuse(w, "%s: this instance was created for Co-Simulation", call)
 #ifdef ME_N_STATES
 #define ME2_CALL(expr) (expr)
-#else /* never reached past ME_ONLY: fmi3InstantiateModelExchange fails for these models (sizeof: not evaluated) */
+#else /* never reached past W3_CALL (the table has these calls for Model Exchange only): fmi3InstantiateModelExchange fails for these models (sizeof: not evaluated) */
 #define ME2_CALL(expr) ((void)sizeof(expr), fmi2Error)
 #define ME_N_STATES 0
 #define ME_N_INDICATORS 0
@@ -888,18 +877,16 @@ EXPORT3 fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunic
 
 EXPORT3 fmi3Status fmi3EnterContinuousTimeMode(fmi3Instance instance)
 {
-    W3_CALL(fmi3EnterContinuousTimeMode, BIT(W_EVENT));
-    ME_ONLY("fmi3EnterContinuousTimeMode");
+    W3_CALL(fmi3EnterContinuousTimeMode);
     fmi2Status st = ME2_CALL(fmi2EnterContinuousTimeMode(w->c));
-    if (st <= fmi2Warning) w->mode = W_CONTINUOUS;
+    if (st <= fmi2Warning) w->mode = FMI2_CONTINUOUS_TIME_MODE;
     return to3(st);
 }
 
 EXPORT3 fmi3Status fmi3CompletedIntegratorStep(fmi3Instance instance, fmi3Boolean noSetFMUStatePriorToCurrentPoint,
                                                fmi3Boolean *enterEventMode, fmi3Boolean *terminateSimulation)
 {
-    W3_CALL(fmi3CompletedIntegratorStep, BIT(W_CONTINUOUS));
-    ME_ONLY("fmi3CompletedIntegratorStep");
+    W3_CALL(fmi3CompletedIntegratorStep);
     if (enterEventMode == NULL || terminateSimulation == NULL)
         return refuse(w, "fmi3CompletedIntegratorStep: enterEventMode or terminateSimulation is NULL");
     fmi2Boolean enter = fmi2False, terminate = fmi2False;
@@ -912,8 +899,7 @@ EXPORT3 fmi3Status fmi3CompletedIntegratorStep(fmi3Instance instance, fmi3Boolea
 
 EXPORT3 fmi3Status fmi3SetTime(fmi3Instance instance, fmi3Float64 time)
 {
-    W3_CALL(fmi3SetTime, BIT(W_EVENT) | BIT(W_CONTINUOUS));
-    ME_ONLY("fmi3SetTime");
+    W3_CALL(fmi3SetTime);
     fmi2Status st = ME2_CALL(fmi2SetTime(w->c, time));
     if (st <= fmi2Warning) w->time = time;
     return to3(st);
@@ -922,19 +908,15 @@ EXPORT3 fmi3Status fmi3SetTime(fmi3Instance instance, fmi3Float64 time)
 EXPORT3 fmi3Status fmi3SetContinuousStates(fmi3Instance instance, const fmi3Float64 continuousStates[],
                                            size_t nContinuousStates)
 {
-    W3_CALL(fmi3SetContinuousStates, BIT(W_CONTINUOUS));
-    ME_ONLY("fmi3SetContinuousStates");
+    W3_CALL(fmi3SetContinuousStates);
     NULL_ARRAY3("fmi3SetContinuousStates", continuousStates, nContinuousStates);
     return to3(ME2_CALL(fmi2SetContinuousStates(w->c, continuousStates, nContinuousStates)));
 }
 
-#define AFTER_INIT (BIT(W_EVENT) | BIT(W_CONTINUOUS) | BIT(W_TERMINATED))
-
 EXPORT3 fmi3Status fmi3GetContinuousStateDerivatives(fmi3Instance instance, fmi3Float64 derivatives[],
                                                      size_t nContinuousStates)
 {
-    W3_CALL(fmi3GetContinuousStateDerivatives, AFTER_INIT);
-    ME_ONLY("fmi3GetContinuousStateDerivatives");
+    W3_CALL(fmi3GetContinuousStateDerivatives);
     NULL_ARRAY3("fmi3GetContinuousStateDerivatives", derivatives, nContinuousStates);
     return to3(ME2_CALL(fmi2GetDerivatives(w->c, derivatives, nContinuousStates)));
 }
@@ -942,8 +924,7 @@ EXPORT3 fmi3Status fmi3GetContinuousStateDerivatives(fmi3Instance instance, fmi3
 EXPORT3 fmi3Status fmi3GetEventIndicators(fmi3Instance instance, fmi3Float64 eventIndicators[],
                                           size_t nEventIndicators)
 {
-    W3_CALL(fmi3GetEventIndicators, AFTER_INIT);
-    ME_ONLY("fmi3GetEventIndicators");
+    W3_CALL(fmi3GetEventIndicators);
     NULL_ARRAY3("fmi3GetEventIndicators", eventIndicators, nEventIndicators);
     return to3(ME2_CALL(fmi2GetEventIndicators(w->c, eventIndicators, nEventIndicators)));
 }
@@ -951,8 +932,7 @@ EXPORT3 fmi3Status fmi3GetEventIndicators(fmi3Instance instance, fmi3Float64 eve
 EXPORT3 fmi3Status fmi3GetContinuousStates(fmi3Instance instance, fmi3Float64 continuousStates[],
                                            size_t nContinuousStates)
 {
-    W3_CALL(fmi3GetContinuousStates, AFTER_INIT);
-    ME_ONLY("fmi3GetContinuousStates");
+    W3_CALL(fmi3GetContinuousStates);
     NULL_ARRAY3("fmi3GetContinuousStates", continuousStates, nContinuousStates);
     return to3(ME2_CALL(fmi2GetContinuousStates(w->c, continuousStates, nContinuousStates)));
 }
@@ -960,15 +940,14 @@ EXPORT3 fmi3Status fmi3GetContinuousStates(fmi3Instance instance, fmi3Float64 co
 EXPORT3 fmi3Status fmi3GetNominalsOfContinuousStates(fmi3Instance instance, fmi3Float64 nominals[],
                                                      size_t nContinuousStates)
 {
-    W3_CALL(fmi3GetNominalsOfContinuousStates, BIT(W_INSTANTIATED) | AFTER_INIT);
-    ME_ONLY("fmi3GetNominalsOfContinuousStates");
+    W3_CALL(fmi3GetNominalsOfContinuousStates);
     NULL_ARRAY3("fmi3GetNominalsOfContinuousStates", nominals, nContinuousStates);
     return to3(ME2_CALL(fmi2GetNominalsOfContinuousStates(w->c, nominals, nContinuousStates)));
 }
 
 EXPORT3 fmi3Status fmi3GetNumberOfEventIndicators(fmi3Instance instance, size_t *nEventIndicators)
 {
-    W3_CALL(fmi3GetNumberOfEventIndicators, ANY_MODE);
+    W3_CALL(fmi3GetNumberOfEventIndicators);
     if (nEventIndicators == NULL) return refuse(w, "fmi3GetNumberOfEventIndicators: nEventIndicators is NULL");
     *nEventIndicators = ME_N_INDICATORS;
     return fmi3OK;
@@ -976,7 +955,7 @@ EXPORT3 fmi3Status fmi3GetNumberOfEventIndicators(fmi3Instance instance, size_t 
 
 EXPORT3 fmi3Status fmi3GetNumberOfContinuousStates(fmi3Instance instance, size_t *nContinuousStates)
 {
-    W3_CALL(fmi3GetNumberOfContinuousStates, ANY_MODE);
+    W3_CALL(fmi3GetNumberOfContinuousStates);
     if (nContinuousStates == NULL) return refuse(w, "fmi3GetNumberOfContinuousStates: nContinuousStates is NULL");
     *nContinuousStates = ME_N_STATES;
     return fmi3OK;
