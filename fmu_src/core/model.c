@@ -103,6 +103,32 @@ double vm_accel(const VkModel *m, double t, double x, double v, double U, int *f
     return vm_accel_driven(m, t, NULL, x, v, U, fault);
 }
 
+int vm_outputs(const VkModel *m, double t, double x, double v, double U, double *a, double *f_contact,
+               double *f_electrostatic)
+{
+    int fault = FAULT_NONE;
+    if (m->polynomial) {  /* Eq. 7: its x'' and its forces are different series */
+        double acc = vm_accel(m, t, x, v, U, &fault);
+        if (!fault) fault = vm_forces(m, t, x, f_contact, f_electrostatic);
+        if (!fault) *a = acc;
+        return fault;
+    }
+    /* exact_accel's operations in its order, with the Hertz force and electrostatic() (drive NULL, as vm_forces)
+       each computed once for x'' and the outputs: the same bits as vm_accel then vm_forces, and the same first
+       fault (the cos of omega t comes first in both; electrostatic() faults alike for x'' and the forces) */
+    double hertz = vm_hertz(x), acc = 1.0 + U - m->mu * v;
+    acc -= hertz;
+    if (m->load_forcing) acc += m->Delta * cos_omega_t(m, t, NULL, &fault);
+    if (fault) return fault;
+    double electric = electrostatic(m, t, NULL, x, &fault);
+    if (fault) return fault;
+    if (m->electrostatics) acc += electric;
+    *a = acc;
+    *f_contact = hertz;
+    *f_electrostatic = electric;
+    return FAULT_NONE;
+}
+
 int vm_forces(const VkModel *m, double t, double x, double *f_contact, double *f_electrostatic)
 {
     int fault = FAULT_NONE;

@@ -37,5 +37,10 @@ typedef struct {
 double vm_accel_driven(const VkModel *m, double t, const VmDrive *drive, double x, double v, double U, int *fault);
 /* (F_contact, F_electrostatic) as they enter the model's equation (model.forces); returns a fault */
 int vm_forces(const VkModel *m, double t, double x, double *f_contact, double *f_electrostatic);
+/* x'' at input U and (F_contact, F_electrostatic) at one point, the outputs unwritten on a fault: the bits of
+   vm_accel and vm_forces and the first fault of the two (vm_accel's first); the exact model computes the Hertz force
+   and the electrostatic force (with its drive terms) once for both */
+int vm_outputs(const VkModel *m, double t, double x, double v, double U, double *a, double *f_contact,
+               double *f_electrostatic);
 
 #endif

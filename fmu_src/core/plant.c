@@ -258,25 +258,6 @@ static inline __attribute__((always_inline)) int check_step_with(VkPlant *p, con
     return VK_OK;
 }
 
-/* Plant.do_step(t, h, U_input) */
-static inline __attribute__((always_inline)) int do_step_with(VkPlant *p, const VkSolverOps *ops, double t, double h)
-{
-    double xva[3];
-    if (p->error) return (int)p->error;
-    int code = check_step_with(p, ops, t, h);
-    if (code) return code;
-    code = plant_advance_with(p, ops, t + h, xva);
-    if (code) return code;
-    return vk_outputs_at(p, p->plant_t, xva[0], xva[1], &xva[2]);  /* every output at the new point t + h */
-}
-
-/* One do-step per solver of VK_SOLVER_LIST, on its ops VK_OPS_<name> (a constant: resolved and inlined), in the
-   list's order */
-typedef int (*PlantDoStep)(VkPlant *p, double t, double h);
-#define VK_DO_STEP_CONTAINER VkPlant
-#define VK_DO_STEP_GENERIC do_step_with
-VK_DO_STEP_TABLE(DO_STEP)
-
 int vk_restart(VkPlant *p, double t, double x, double v, double U) { return restart_with(p, ops_of(p), t, x, v, U); }
 
 int vk_value_at(VkPlant *p, double t, double *x, double *v) { return value_at_with(p, ops_of(p), t, x, v); }
@@ -294,7 +275,89 @@ double vk_step_ceiling(VkPlant *p)
     return ops_of(p)->max_step(slots_of(p));
 }
 
+/* Plant.do_step's steps (check_step_with, plant_advance_with) up to the state at t + h, without x'' and the
+   outputs */
+static inline __attribute__((always_inline)) int step_xv_with(VkPlant *p, const VkSolverOps *ops, double t, double h,
+                                                              double *x, double *v)
+{
+    if (p->error) return (int)p->error;
+    int code = check_step_with(p, ops, t, h);
+    if (code) return code;
+    code = set_input_with(p, ops, p->plant_t, p->U_input);  /* at the old time: U changes there */
+    if (!code) code = advance_with(p, ops, t + h);
+    if (code) return code;
+    p->plant_t = t + h;
+    return value_at_with(p, ops, p->plant_t, x, v);
+}
+
+/* The state after a do-step as out[0], out[1] and in_contact (x'' and the forces, out[2..4], not computed) */
+static inline __attribute__((always_inline)) int step_state_with(VkPlant *p, const VkSolverOps *ops, double t,
+                                                                 double h)
+{
+    double x = 0.0, v = 0.0;  /* written by step_xv_with when it returns VK_OK */
+    int code = step_xv_with(p, ops, t, h, &x, &v);
+    if (code) return code;
+    p->out[0] = x;
+    p->out[1] = v;
+    p->in_contact = vm_contact_indentation(x) > 0.0;
+    return VK_OK;
+}
+
+/* Every output at the plant's time from (x, v) there: x'' at U_input and the forces in one pass (vm_outputs: the bits
+   of Plant.state's x'' and of outputs_at's forces, x'' first); nothing written on a fault */
+static inline __attribute__((always_inline)) int outputs_with(VkPlant *p, double x, double v)
+{
+    double a, f_contact, f_electrostatic;
+    int fault = vm_outputs(&p->model, p->plant_t, x, v, p->U_input, &a, &f_contact, &f_electrostatic);
+    if (fault) return raise_fault(p, fault);
+    p->out[0] = x;
+    p->out[1] = v;
+    p->out[2] = a;
+    p->out[3] = f_contact;
+    p->out[4] = f_electrostatic;
+    p->in_contact = vm_contact_indentation(x) > 0.0;
+    return VK_OK;
+}
+
+int vk_step_outputs(VkPlant *p) { return outputs_with(p, p->out[0], p->out[1]); }
+
+/* Plant.do_step(t, h, U_input): Plant.advance's steps, then every output at the new point t + h */
+static inline __attribute__((always_inline)) int do_step_with(VkPlant *p, const VkSolverOps *ops, double t, double h)
+{
+    double x = 0.0, v = 0.0;  /* written by step_xv_with when it returns VK_OK */
+    int code = step_xv_with(p, ops, t, h, &x, &v);
+    return code ? code : outputs_with(p, x, v);
+}
+
+/* One do-step per solver of VK_SOLVER_LIST, on its ops VK_OPS_<name> (a constant: resolved and inlined), in the
+   list's order */
+typedef int (*PlantDoStep)(VkPlant *p, double t, double h);
+#define VK_DO_STEP_CONTAINER VkPlant
+#define VK_DO_STEP_GENERIC do_step_with
+VK_DO_STEP_TABLE(DO_STEP)
+
 int vk_do_step(VkPlant *p, double t, double h) { return DO_STEP[p->solver](p, t, h); }
+
+int vk_do_step_state(VkPlant *p, double t, double h) { return step_state_with(p, ops_of(p), t, h); }
+
+/* Why these bounds make every output finite and fault-free (the exact model, Eq. 3; B = 1e100, all values finite):
+   u = 2x/(3R) with |u| < B and |1 -+ u| > 1e-50 gives (1 -+ u)^2 in (1e-100, 1e200], so both divisions of
+   electrostatic() are by a nonzero number and F3, F2's terms lie in [5e-201, 1e100); the drive's arguments
+   omega t, Omega t, 2 Omega t are below 2e200 (finite: cos and sin have no domain error); then |F_electrostatic| <=
+   |alpha| 2e100 + (|beta| + 2 |gamma|) 1e100 < 1e201, H = s sqrt(s) with |s| = |1 + 2x/3| < 1e100 is below 1e150,
+   and x'' = 1 + U - mu v - H + Delta cos(omega t) + F_electrostatic is a sum of six terms each below 1e201. */
+int vk_outputs_bounded(const VkPlant *p)
+{
+    const VkModel *m = &p->model;
+    const double B = 1e100;
+    if (m->polynomial) return 0;
+    const double constants[] = {m->mu, m->Delta, m->omega, m->Omega, m->alpha, m->beta, m->gamma, m->R};
+    for (size_t i = 0; i < sizeof constants / sizeof constants[0]; i++)
+        if (!(fabs(constants[i]) < B)) return 0;
+    const double x = p->out[0], u = 2.0 * x / (3.0 * m->R);  /* electrostatic()'s u */
+    return fabs(x) < B && fabs(p->out[1]) < B && fabs(p->plant_t) < B && fabs(p->U_input) < B && fabs(u) < B &&
+           fabs(1.0 - u) > 1e-50 && fabs(1.0 + u) > 1e-50;
+}
 
 int vk_run(VkPlant *p, double dt, size_t n, double *x_out)
 {
@@ -326,21 +389,6 @@ size_t vk_run_from(VkPlant *p, double t0, size_t k0, double dt, size_t n, double
         put_outputs(p, out, output_stride, k);
     }
     return n;
-}
-
-/* Plant.do_step's steps (check_step_with, plant_advance_with) up to the state at t + h, without x'' and the
-   outputs */
-static inline __attribute__((always_inline)) int step_xv_with(VkPlant *p, const VkSolverOps *ops, double t, double h,
-                                                              double *x, double *v)
-{
-    if (p->error) return (int)p->error;
-    int code = check_step_with(p, ops, t, h);
-    if (code) return code;
-    code = set_input_with(p, ops, p->plant_t, p->U_input);  /* at the old time: U changes there */
-    if (!code) code = advance_with(p, ops, t + h);
-    if (code) return code;
-    p->plant_t = t + h;
-    return value_at_with(p, ops, p->plant_t, x, v);
 }
 
 size_t vk_run_xv(VkPlant *p, double t0, size_t k0, double dt, size_t n, double *out, size_t output_stride,

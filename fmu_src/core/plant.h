@@ -96,6 +96,15 @@ int vk_plant_advance(VkPlant *p, double t_end, double *xva);
 double vk_step_ceiling(VkPlant *p);
 /* Plant.do_step(t, h, U_input): pre-checks, Plant.advance(t + h), outputs at t + h, plant_t = t + h. */
 int vk_do_step(VkPlant *p, double t, double h);
+/* vk_do_step without x'' and the forces: out[0], out[1] and in_contact at t + h; out[2..4] keep their old values
+   until vk_step_outputs (a host that reads x alone skips them) */
+int vk_do_step_state(VkPlant *p, double t, double h);
+/* out[2..4] after vk_do_step_state: x'' at U_input and the forces at (plant_t, out[0], out[1]), vk_do_step's bits
+   (and its error if the model raises there) */
+int vk_step_outputs(VkPlant *p);
+/* 1 when every output at (plant_t, out[0], out[1]) is finite and fault-free by a bound on the values (the exact
+   model only; plant.c gives the proof), else 0: a host may then leave them to vk_step_outputs until read */
+int vk_outputs_bounded(const VkPlant *p);
 /* The compiled floor: n do_steps of dt, each from plant_t, x after each into x_out; stops at the first error. */
 int vk_run(VkPlant *p, double dt, size_t n, double *x_out);
 /* The Python API's runs (vibrofmu.api), outputs into columns: output j of point k goes to
