@@ -22,7 +22,8 @@ typedef struct {
     double event_t;
     double reached;                /* the time the last doStep reached */
     int64_t step_event;            /* it ended on an event (early when reached < t + h) */
-    int64_t locals_stale;          /* the locals computed on demand (model_lazy_locals) need computing */
+    int64_t locals_stale;          /* the values computed on demand need computing (model_lazy_locals: the
+                                      closed loop's der(...); model_lazy_outputs: the plant's x'' and forces) */
 } MeData;
 
 #endif

@@ -39,6 +39,12 @@ int model_me_event(Instance *inst, State *s, int *terminate);
 void model_do_step_early(Instance *inst, State *s, double t, double h);
 #endif
 
+#ifdef MODEL_LAZY_OUTPUTS
+/* Before an output is read (fmi2_native.c's getter): the outputs a doStep left to be computed when read brought up
+   to date (the plant's x'' and forces: a host that reads x alone never pays for them) */
+void model_lazy_outputs(State *s);
+#endif
+
 #ifdef MODEL_LAZY_LOCALS
 /* Before a local variable is read (fmi2_native.c's getter): the locals the model computes on demand brought up to
    date (the closed loop's der(...): one right-hand side, only when read). */

@@ -16,6 +16,8 @@
 #define HAS_EARLY_RETURN 1
 /* fmi2/3GetDirectionalDerivative: the analytic partials of x, v, a, F_contact, F_electrostatic by x, v, U */
 #define HAS_DIRECTIONAL_DERIVATIVES 1
+/* after a doStep, x'' and the forces are computed when read (model_lazy_outputs; flag: model.me.locals_stale) */
+#define MODEL_LAZY_OUTPUTS 1
 
 typedef struct {
     int64_t built;  /* the kernel below is set up (after a successful fmi2ExitInitializationMode) */

@@ -94,6 +94,32 @@ static void publish(State *s)
     const VkPlant *p = &s->model.plant;
     for (int i = 0; i < 5; i++) s->value[OUTPUT_VRS[i]] = p->out[i];
     s->value[VR_in_contact] = p->in_contact != 0;
+    s->model.me.locals_stale = 0;
+}
+
+/* After a doStep that left x'' and the forces to be computed when read (model_do_step): x, v and in_contact */
+static void publish_state(State *s)
+{
+    const VkPlant *p = &s->model.plant;
+    s->value[VR_x] = p->out[0];
+    s->value[VR_v] = p->out[1];
+    s->value[VR_in_contact] = p->in_contact != 0;
+    s->model.me.locals_stale = 1;
+}
+
+/* x'' and the forces of the last doStep's point, when first read: vk_step_outputs, the bits vk_do_step gives them
+   (model_do_step left them only where vk_outputs_bounded proved them finite; a forged state that breaks the proof
+   reads NaN, which the getter refuses with fmi2Error) */
+void model_lazy_outputs(State *s)
+{
+    if (!s->model.me.locals_stale || !s->model.built || s->model.me.mode != ME_OFF) return;
+    VkPlant *p = &s->model.plant;
+    if (vk_outputs_bounded(p) && vk_step_outputs(p) == VK_OK) {
+        publish(s);
+        return;
+    }
+    for (int i = 2; i < 5; i++) s->value[OUTPUT_VRS[i]] = NAN;
+    s->model.me.locals_stale = 0;
 }
 
 void model_initialise(Instance *inst, State *s)
@@ -182,7 +208,14 @@ void model_do_step(Instance *inst, State *s, double t, double h)
     VkPlant *p = &s->model.plant;
     const double U = s->value[VR_U];
     p->U_input = U;
-    int code = vk_do_step(p, t, h);
+    /* the step to x and v; x'' and the forces when read (model_lazy_outputs) where a bound proves them finite, so
+       that the doStep's status is the one computing them now would give; else now (vk_do_step's bits either way) */
+    int code = vk_do_step_state(p, t, h);
+    if (code == VK_OK && vk_outputs_bounded(p)) {
+        publish_state(s);
+        return;
+    }
+    if (code == VK_OK) code = vk_step_outputs(p);
     if (code == VK_OK) {
         int bad = non_finite_output(p);
         if (bad >= 0) { /* the status shim's fast_outputs_checked */
