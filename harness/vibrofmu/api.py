@@ -235,6 +235,56 @@ def fill_plants(plants: np.ndarray, columns: dict, settings: Settings, start_tim
     return ceilings, warnings, notes
 
 
+@functools.lru_cache(maxsize=8)
+def _rule_rows(fidelity: int) -> tuple[tuple, ...]:
+    """_rule_table's rules as rows of Python values (name, low, high, low inclusive, high inclusive, automatic)."""
+    names = scene_names()
+    rows, low, high, low_inclusive, high_inclusive, automatic = _rule_table(fidelity)
+    return tuple((names[int(r)], float(lo[0]), float(hi[0]), bool(li[0]), bool(hin[0]), float(au[0]))
+                 for r, lo, hi, li, hin, au in zip(rows, low, high, low_inclusive, high_inclusive, automatic))
+
+
+def _broken_one(scene: Scene, fidelity: int) -> bool:
+    """_broken for one scene in Python floats (the same comparisons: a run of one scene skips numpy's per-call
+    cost)."""
+    for name, low, high, low_inclusive, high_inclusive, automatic in _rule_rows(fidelity):
+        value = getattr(scene, name)
+        ok = math.isfinite(value) and (value >= low if low_inclusive else value > low) and (
+            value <= high if high_inclusive else value < high)
+        if not (ok or value == automatic):
+            return True
+    u = 2.0 * scene.x_start / (3.0 * scene.R)  # parameters.electrode_gaps (R > 0: its rule holds here)
+    return not (1.0 - u > PULL_IN_GAP and 1.0 + u > PULL_IN_GAP)
+
+
+def _fill_one(plants: np.ndarray, scene: Scene, settings: Settings, start_time: float,
+              stop_time: float) -> tuple[float, list[str], list[str]]:
+    """fill_plants for one scene of the exact model (c_model EXACT) in Python floats, the same operations on the
+    same values (tests/harness/test_api.py compares the bytes): (its step ceiling, warnings, notes)."""
+    plants.view(np.uint8)[:] = _template(settings, start_time)
+    plant = VkPlant.from_buffer(plants)
+    model = plant.model
+    for name in ("mu", "Delta", "omega", "alpha", "beta", "gamma", "Omega", "R"):
+        setattr(model, name, getattr(scene, name))
+    ac = scene.beta != 0.0 or scene.gamma != 0.0
+    model.pull_in_c = 2.0 / (3.0 * scene.R)
+    model.load_forcing, model.ac = scene.Delta != 0.0, ac
+    model.electrostatics = scene.alpha != 0.0 or ac
+    memory, span = 2.0 / scene.mu if scene.mu > 0.0 else math.inf, stop_time - start_time
+    if span > 0.0 and span < memory:
+        memory = span
+    factor = min(max(ERROR_MEMORY_REFERENCE / memory, TOLERANCE_FACTOR_FLOOR), 1.0)
+    rtol = settings.rtol if factor == 1.0 else max(MIN_RTOL, settings.rtol * factor)
+    fastest = max(scene.omega if scene.Delta != 0.0 else 0.0, scene.Omega if scene.beta != 0.0 else 0.0,
+                  2.0 * scene.Omega if scene.gamma != 0.0 else 0.0)
+    plant.dop.rtol, plant.dop.atol = rtol, rtol * ATOL_PER_RTOL
+    plant.dop.max_step = settings.max_step or (DRIVE_STEP_TURN / fastest if fastest > 0.0 else math.inf)
+    notes = solver_tolerance(scene, settings, start_time, stop_time)[1] if factor < 1.0 else []
+    solver = solver_entry(settings.solver)
+    warnings = rk4_drive_warnings(scene, solver.step(settings.max_step)) if solver.drive_gains is not None else []
+    return (plant.dop.max_step if plant.solver == 0 else plant.rk4.max_step), warnings, notes
+
+
 @functools.lru_cache(maxsize=64)
 def _template(settings: Settings, start_time: float) -> np.ndarray:
     """The bytes of a kernel state structure with what the settings fix, as CompiledPlant sets it (the rest 0): each
@@ -335,8 +385,32 @@ def simulate(scene: Scene | None = None, stop_time: float = 200.0, interval: flo
     Raises ParameterError (naming the parameter and value, as the FMU logs it) for a bad scene, settings, stop time
     or interval; a run that stops early keeps the points before the stop and says why (Run.stopped). outputs: as
     simulate_many's."""
-    return simulate_many([Scene() if scene is None else scene], stop_time, interval, settings, start_time,
-                         outputs).run(0)
+    scene = Scene() if scene is None else scene
+    n = _steps(start_time, stop_time, interval)
+    checked, clamp = _settings(settings)
+    if (not isinstance(scene, Scene) or entry(checked.fidelity).c_model != CModel.EXACT
+            or _broken_one(scene, int(checked.fidelity)) or not set(outputs) <= set(OUTPUTS)):
+        # simulate_many's columns (and its errors, in its order)
+        return simulate_many([scene], stop_time, interval, settings, start_time, outputs).run(0)
+    # one scene of the exact model: simulate_many's steps in Python floats (its numpy costs more for one scene)
+    plants = np.zeros(1, dtype=PLANT_DTYPE)
+    ceiling, warnings, notes = _fill_one(plants, scene, checked, start_time, stop_time)
+    _check_interval(np.array([ceiling]), interval, 0, False)
+    every = not set(outputs) <= set(STATE)
+    out = np.full((len(OUTPUTS) if every else len(STATE), n + 1), np.nan)
+    n_done, codes = np.zeros(1, dtype=np.int64), np.zeros(1, dtype=np.int64)
+    x0, v0 = np.array([scene.x_start]), np.array([scene.v_start])
+    default_library().vk_run_batch(plants.ctypes.data, 1, start_time, x0.ctypes.data_as(_double_p),
+                                   v0.ctypes.data_as(_double_p), interval, n, out.ctypes.data_as(_double_p), n + 1,
+                                   n_done.ctypes.data_as(_int_p), codes.ctypes.data_as(_int_p), int(every))
+    done, stopped, error = int(n_done[0]), "", None
+    if done < n + 1:
+        k = max(done - 1, 0)
+        stopped, error = _stop(VkPlant.from_buffer(plants), int(codes[0]), start_time + k * interval, interval)
+    values = {name: out[j, :done] if j < len(out) else None for j, name in enumerate(OUTPUTS)}
+    if values["in_contact"] is not None:
+        values["in_contact"] = values["in_contact"] != 0.0
+    return Run(**values, stopped=stopped, error=error, warnings=list(clamp) + warnings, notes=notes)
 
 
 class Simulation:
