@@ -158,7 +158,7 @@ def _rule_table(fidelity: int) -> tuple[np.ndarray, ...]:
             column([[math.nan if r.automatic is None else r.automatic] for r in rules]))
 
 
-def _broken(columns: dict, fidelity: int) -> np.ndarray:
+def scenes_broken(columns: dict, fidelity: int) -> np.ndarray:
     """Mask of the scenes that break a rule of parameters.RULES (at this fidelity) or the electrodes' rule of
     validate(): Rule.refusal's test in numpy, every rule and scene at once."""
     rows, low, high, low_inclusive, high_inclusive, automatic = _rule_table(fidelity)
@@ -173,7 +173,7 @@ def _broken(columns: dict, fidelity: int) -> np.ndarray:
 
 def _check(columns: dict, settings: Settings) -> None:
     """Raise the ParameterError of the first scene that breaks a rule (with a note naming the scene)."""
-    bad = np.flatnonzero(_broken(columns, int(settings.fidelity)))
+    bad = np.flatnonzero(scenes_broken(columns, int(settings.fidelity)))
     if len(bad):
         i = int(bad[0])
         scene = _scene(columns, i)
@@ -244,8 +244,8 @@ def _rule_rows(fidelity: int) -> tuple[tuple, ...]:
                  for r, lo, hi, li, hin, au in zip(rows, low, high, low_inclusive, high_inclusive, automatic))
 
 
-def _broken_one(scene: Scene, fidelity: int) -> bool:
-    """_broken for one scene in Python floats (the same comparisons: a run of one scene skips numpy's per-call
+def scene_broken(scene: Scene, fidelity: int) -> bool:
+    """scenes_broken for one scene in Python floats (the same comparisons: a run of one scene skips numpy's per-call
     cost)."""
     for name, low, high, low_inclusive, high_inclusive, automatic in _rule_rows(fidelity):
         value = getattr(scene, name)
@@ -257,7 +257,7 @@ def _broken_one(scene: Scene, fidelity: int) -> bool:
     return not (1.0 - u > PULL_IN_GAP and 1.0 + u > PULL_IN_GAP)
 
 
-def _fill_one(plants: np.ndarray, scene: Scene, settings: Settings, start_time: float,
+def fill_one(plants: np.ndarray, scene: Scene, settings: Settings, start_time: float,
               stop_time: float) -> tuple[float, list[str], list[str]]:
     """fill_plants for one scene of the exact model (c_model EXACT) in Python floats, the same operations on the
     same values (tests/harness/test_api.py compares the bytes): (its step ceiling, warnings, notes)."""
@@ -389,12 +389,12 @@ def simulate(scene: Scene | None = None, stop_time: float = 200.0, interval: flo
     n = _steps(start_time, stop_time, interval)
     checked, clamp = _settings(settings)
     if (not isinstance(scene, Scene) or entry(checked.fidelity).c_model != CModel.EXACT
-            or _broken_one(scene, int(checked.fidelity)) or not set(outputs) <= set(OUTPUTS)):
+            or scene_broken(scene, int(checked.fidelity)) or not set(outputs) <= set(OUTPUTS)):
         # simulate_many's columns (and its errors, in its order)
         return simulate_many([scene], stop_time, interval, settings, start_time, outputs).run(0)
     # one scene of the exact model: simulate_many's steps in Python floats (its numpy costs more for one scene)
     plants = np.zeros(1, dtype=PLANT_DTYPE)
-    ceiling, warnings, notes = _fill_one(plants, scene, checked, start_time, stop_time)
+    ceiling, warnings, notes = fill_one(plants, scene, checked, start_time, stop_time)
     _check_interval(np.array([ceiling]), interval, 0, False)
     every = not set(outputs) <= set(STATE)
     out = np.full((len(OUTPUTS) if every else len(STATE), n + 1), np.nan)

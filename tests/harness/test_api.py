@@ -11,6 +11,7 @@ from vibromodel.compiled import CompiledPlant
 from vibromodel.integrate import TerminalEvent
 from vibromodel.parameters import RULES, ParameterError, Scene, scene_names
 from vibromodel.plant import Settings, Solver
+from vibromodel.settings import checked_settings
 
 
 @pytest.fixture(scope="module")
@@ -216,33 +217,33 @@ def test_the_state_only_run_gives_the_same_x_and_v(settings):
 @pytest.mark.parametrize("settings", [Settings(), Settings(rtol=1e-15), Settings(max_step=0.3),
                                       Settings(solver=Solver.RK4, max_step=0.05)], ids=str)
 def test_one_scene_is_filled_as_simulate_many_fills_it(settings):
-    """simulate's one-scene path (Python floats: _broken_one, _fill_one) against simulate_many's numpy columns:
+    """simulate's one-scene path (Python floats: scene_broken, fill_one) against simulate_many's numpy columns:
     the same kernel structure byte for byte, the same ceiling, warnings and notes, for scenes that take every
     branch (light damping: the tolerance factor; no forcing: no ceiling; each drive term alone; a fast drive:
     RK4's warning) and stop times that bound the factor or not (NaN: a Simulation without a stop time)."""
-    checked, _ = api._settings(settings)
+    checked, _ = checked_settings(Scene(), settings)  # as simulate checks its settings (api._settings)
     scenes = SCENES + [Scene(Delta=0.0, beta=0.01, gamma=0.0, alpha=0.0), Scene(beta=0.0, gamma=0.003),
                        Scene(Omega=40.0), Scene(mu=0.0)]
     for scene in scenes:
         for start, stop in ((0.0, 10.0), (0.0, 1e4), (5.0, math.nan)):
             one, many = np.zeros(1, dtype=api.PLANT_DTYPE), np.zeros(1, dtype=api.PLANT_DTYPE)
-            ceiling, warnings, notes = api._fill_one(one, scene, checked, start, stop)
+            ceiling, warnings, notes = api.fill_one(one, scene, checked, start, stop)
             ceilings, many_warnings, many_notes = api.fill_plants(many, api.scene_columns([scene]), checked, start,
                                                                   stop)
             assert one.tobytes() == many.tobytes(), (scene, start, stop)
             assert (ceiling, warnings, notes) == (ceilings[0], many_warnings[0], many_notes[0])
-            assert not api._broken_one(scene, int(checked.fidelity))
+            assert not api.scene_broken(scene, int(checked.fidelity))
 
 
 def test_one_scene_is_refused_and_stops_as_in_simulate_many(library):
-    """_broken_one flags each rule's breach and the electrodes' as _broken does, and a run that pulls in stops at
+    """scene_broken flags each rule's breach and the electrodes' as scenes_broken does, and a run that pulls in stops at
     the same point with the same message in simulate (one-scene path) and simulate_many."""
     for rule in (r for r in RULES if r.name in scene_names() and r.when is None):
         for value in (rule.low - 1.0, rule.high * 2.0 + 1.0, math.nan):
             scene = Scene(**{rule.name: value})
-            assert api._broken_one(scene, 0) == bool(api._broken(api.scene_columns([scene]), 0)[0]), (rule, value)
+            assert api.scene_broken(scene, 0) == bool(api.scenes_broken(api.scene_columns([scene]), 0)[0]), (rule, value)
     for scene in (Scene(x_start=1.4995, R=1.0), Scene(x_start=-1.4995, R=1.0)):  # 1 -+ 2x/(3R) < 1e-3
-        assert api._broken_one(scene, 0) and api._broken(api.scene_columns([scene]), 0)[0]
+        assert api.scene_broken(scene, 0) and api.scenes_broken(api.scene_columns([scene]), 0)[0]
     pull_in = Scene(alpha=0.5, x_start=1.2)
     one, many = api.simulate(pull_in, 5.0, 0.25), api.simulate_many([pull_in], 5.0, 0.25).run(0)
     assert one.stopped and one.stopped == many.stopped and isinstance(one.error, TerminalEvent)
