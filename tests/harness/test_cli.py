@@ -141,6 +141,8 @@ ISSUE_MISTAKES = [
 ]
 MORE_MISTAKES = [
     (["doctor", "."], "is not a file"),
+    (["closed-loop", "--H", "1e-9", "--out", "o"], "with --H 1e-09 the run has 200,000,000,001 output points"),
+    (["report", "--check", "--quick", "--root", "{dir}"], "--quick: --check compares with the documents"),
     (["simulate", "--fmu", "{other}", "--out", "o"], "needs HertzEAOscillator"),
     (["demo", "--out", "/etc/hostname/sub"], "cannot create the output folder"),
     (["build", "--out-dir", "/etc/hostname"], "a file of that name exists"),
@@ -562,3 +564,17 @@ sys.exit(main(["simulate", "--stop-time", "1"]))
 def test_an_interrupt_while_importing_ends_in_one_line():
     done = subprocess.run([sys.executable, "-c", START_UP_INTERRUPT], capture_output=True, text=True, timeout=120)
     assert (done.returncode, done.stderr) == (130, "error: interrupted\n")
+
+
+def test_the_closed_loop_size_estimate_bounds_its_columns(tmp_path, monkeypatch, controller_fmu, closed_loop_fmu):
+    """closed-loop refuses a run whose output would not fit (--max-output-mb) from a count of values per output
+    point: it must bound the columns a real run writes (monolithic and co-simulated)."""
+    from vibrofmu.commands.closed_loop import COLUMNS
+
+    monkeypatch.chdir(tmp_path)
+    for mode in COLUMNS:
+        study = ["--no-study"] if mode == "cosim" else []
+        assert main(["closed-loop", "--mode", mode, "--stop-time", "0.2", *study, "--fmu-dir",
+                     str(closed_loop_fmu.parent), "--out", mode]) == 0
+        header = (tmp_path / mode / "result.csv").read_text().splitlines()[0]
+        assert len(header.split(",")) <= COLUMNS[mode], (mode, header)

@@ -87,22 +87,25 @@ CSV_BYTES_PER_POINT = 25 * POINT_COLUMNS
 MAX_OUTPUT_MB = 500.0  # the default of simulate --max-output-mb
 
 
-def output_size(stop_time: float, output_interval: float) -> tuple[int, float]:
-    """(output points, the larger of their memory and result.csv sizes in MB) of a run."""
+def output_size(stop_time: float, output_interval: float, columns: int = POINT_COLUMNS) -> tuple[int, float]:
+    """(output points, the larger of their memory and result.csv sizes in MB) of a run with `columns` per point."""
     points = int(round(stop_time / output_interval)) + 1
-    return points, points * max(MEMORY_BYTES_PER_POINT, CSV_BYTES_PER_POINT) / 1e6
+    return points, points * columns * max(MEMORY_BYTES_PER_POINT, CSV_BYTES_PER_POINT) / POINT_COLUMNS / 1e6
 
 
-def check_output_size(stop_time: float, output_interval: float, max_mb: float) -> None:
+def check_output_size(stop_time: float, output_interval: float, max_mb: float, columns: int = POINT_COLUMNS,
+                      interval_option: str = "--output-interval") -> None:
     """ParameterError naming the estimate and the option that raises the limit when a run's output (every output
-    point, kept in memory and written to result.csv) would exceed max_mb megabytes."""
-    points, mb = output_size(stop_time, output_interval)
+    point, kept in memory and written to result.csv) would exceed max_mb megabytes. `columns`: the values per
+    output point; `interval_option`: how the command line names the output interval (closed-loop: --H)."""
+    points, mb = output_size(stop_time, output_interval, columns)
     if mb > max_mb:
+        memory = points * columns * MEMORY_BYTES_PER_POINT / POINT_COLUMNS / 1e6
         raise ParameterError("stop-time", stop_time,
-                             f"with --output-interval {output_interval:g} the run has {points:,} output points, "
-                             f"about {mb:,.0f} MB of results (result.csv; {points * MEMORY_BYTES_PER_POINT / 1e6:,.0f} "
-                             f"MB in memory), over --max-output-mb {max_mb:g}: raise --max-output-mb, lengthen "
-                             "--output-interval or shorten --stop-time")
+                             f"with {interval_option} {output_interval:g} the run has {points:,} output points, "
+                             f"about {mb:,.0f} MB of results (result.csv; {memory:,.0f} MB in memory), over "
+                             f"--max-output-mb {max_mb:g}: raise --max-output-mb, lengthen {interval_option} or "
+                             "shorten --stop-time")
 
 
 def check_inputs(scene: Scene, settings: Settings, stop_time: float, output_interval: float) -> list[str]:

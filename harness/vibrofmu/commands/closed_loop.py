@@ -7,6 +7,11 @@ from vibrofmu.commands.common import (CLOSED_LOOP_NAME, Command, Unused, UserErr
                                       out_folder, positive, progress_printer)
 
 
+# values per output point (result.csv's columns, measured; tests/harness/test_cli.py checks they bound the real ones)
+COLUMNS = {"monolithic": 19, "cosim": 28}
+MAX_OUTPUT_MB = 500.0  # as simulate's
+
+
 def options(p):
     from vibromodel.control import Law
     from vibromodel.tracking import ReferenceKind
@@ -25,6 +30,9 @@ def options(p):
     p.add_argument("--stop-time", type=positive, default=None, help="end of the run (default: 200 monolithic, "
                                                                     "the scene's for cosim)")
     p.add_argument("--no-study", action="store_true", help="cosim: skip the H convergence study")
+    p.add_argument("--max-output-mb", type=positive, default=MAX_OUTPUT_MB,
+                   help="refuse a run whose results (in memory and result.csv) would exceed this many MB "
+                        f"(default: {MAX_OUTPUT_MB:g})")
     p.add_argument("--fmu-dir", default=None, help="where the three FMUs are (default: ./build; built when missing)")
     p.add_argument("--out", required=True, help="output folder (result.csv, summary.json, plots)")
 
@@ -34,6 +42,7 @@ def run(args) -> int:
     from vibromodel.tracking import ReferenceKind
 
     from vibrofmu.analyses import closed_loop
+    from vibrofmu.analyses.simulate import check_output_size
     from vibrofmu.hosts.cosim import SceneError, load_scene
 
     fmu_dir = Path(args.fmu_dir) if args.fmu_dir else paths.build_dir()
@@ -44,6 +53,8 @@ def run(args) -> int:
     H, stop_time = args.H or 0.1, args.stop_time or 200.0  # monolithic; a cosim takes the scene's defaults
     if args.mode == "monolithic" and H > stop_time:
         raise UserError(f"--H {H:g} is longer than the stop time {stop_time:g}")
+    if args.mode == "monolithic":  # before anything runs (a cosim: once its scene gives H and the stop time)
+        check_output_size(stop_time, H, args.max_output_mb, COLUMNS["monolithic"], "--H")
     out = out_folder(args.out)
     built_all(fmu_dir)
     law = Law.from_label(args.law) if args.law else None
@@ -65,6 +76,7 @@ def run(args) -> int:
         if scene.step > scene.stop_time:
             raise UserError(f"the communication step H = {scene.step:g} is longer than the stop time "
                             f"{scene.stop_time:g}")
+        check_output_size(scene.stop_time, scene.step, args.max_output_mb, COLUMNS["cosim"], "--H")
         plant = next((spec.parameters for spec in scene.fmus if spec.name == "plant"), {})
         theta = closed_loop.true_values(plant)
         result = closed_loop.cosimulation(scene, progress)
