@@ -18,7 +18,9 @@
 #include "pytext.h"
 
 #ifdef ME_N_STATES
+#if ME_N_INDICATORS > 0 /* a model on the plant (the controller has no indicators and no plant) */
 #include "plant.h" /* vk_solver_message: the co-simulation's pull-in message (me_stop_at_pull_in) */
+#endif
 
 #define EXPORT FMI2_Export
 
@@ -156,6 +158,7 @@ EXPORT fmi2Status fmi2GetNominalsOfContinuousStates(fmi2Component c, fmi2Real x_
     return native_settle(I);
 }
 
+#if ME_N_INDICATORS > 0
 int me_stop_at_pull_in(Instance *inst, const VkModel *model, const MeData *me, const double *z, int *terminate)
 {
     for (int i = 1; i < ME_N_INDICATORS; i++) {
@@ -174,6 +177,7 @@ int me_stop_at_pull_in(Instance *inst, const VkModel *model, const MeData *me, c
     }
     return 0;
 }
+#endif
 
 #endif
 

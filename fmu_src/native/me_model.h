@@ -16,9 +16,11 @@
 /* After a successful model_initialise of a Model Exchange instance: the states and t from the model's start (the
    caller sets the mode and the stop flag). */
 void model_me_start(Instance *inst, State *s);
+#if ME_N_INDICATORS > 0 /* the models with event indicators are those on the compiled plant (core/plant.h) */
 /* fmi2_me.c, for model_me_event: when a pull-in indicator (z[1] ...) is at or below 0, log the co-simulation's
    pull-in message (vk_solver_message of `model`, at the ME state) as a warning and set *terminate; 1 if it did. */
 int me_stop_at_pull_in(Instance *inst, const VkModel *model, const MeData *me, const double *z, int *terminate);
+#endif
 /* Derivatives of the states s->model.me.x at s->model.me.t (inputs from s->value); 0, or 1 after native_error. */
 int model_me_derivatives(Instance *inst, State *s, double *dx);
 /* The event indicators at the current states (contact, upper gap, lower gap ...), each a continuous function that

@@ -38,13 +38,15 @@ def units():
                           ladder.TIMING_HOST_SOURCE, instructions.FLOOR_DRIVER_SOURCE,
                           native_timing.FMI_VERSIONS_HOST_SOURCE)]
     # the CVODE peer's driver (bench --peers), on the core's model and the system's SUNDIALS headers (.ci/run)
-    cvode = [(peers.CVODE_SOURCE.name, toolchain.HOST, [f"-I{FMU_SRC / 'core'}"], peers.CVODE_SOURCE, ())]
+    cvode = [(peers.CVODE_SOURCE.name, toolchain.HOST, [f"-I{FMU_SRC / 'core'}"], peers.CVODE_SOURCE, ()),
+             # the Model Exchange host on CVODE (tests/fmus/test_controller_model_exchange.py)
+             ("fmi2_me_cvode.c", toolchain.HOST, toolchain.host_includes(), paths.C_HOST_DIR / "fmi2_me_cvode.c", ())]
     return core + shim + hosts + cvode
 
 
 def marked(unit):
     """The CVODE driver needs SUNDIALS' headers (Debian's libsundials-dev): the `tools` tier, not the default run."""
-    needs_cvode = unit[3] == peers.CVODE_SOURCE
+    needs_cvode = unit[3] in (peers.CVODE_SOURCE, paths.C_HOST_DIR / "fmi2_me_cvode.c")
     return pytest.param(unit, id=unit[0], marks=[pytest.mark.tools("cvode/cvode.h")] if needs_cvode else [])
 
 

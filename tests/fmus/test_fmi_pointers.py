@@ -1,5 +1,5 @@
 """Pointer arguments and instance pointers, every FMU (pythonfmu, native FMI 2.0 co-simulation and Model Exchange,
-native FMI 3.0 co-simulation and Model Exchange), each FMU in a subprocess of the probe host (vibrofmu.hosts.probe
+native FMI 3.0 co-simulation and Model Exchange: every native FMU offers both), each FMU in a subprocess of the probe host (vibrofmu.hosts.probe
 pointers / pointers3, vibrofmu.hosts.pointers) so that a crash fails the test instead of ending the run:
   - a NULL array with n > 0 or a NULL result pointer in any FMI function is fmi2Error / fmi3Error with a log line
     naming the function and the argument (fmi2GetReal(c, NULL, 2, buf), fmi2GetReal(c, vr, 2, NULL) and
@@ -46,8 +46,10 @@ def test_fmi2_null_pointers_and_dead_instances(request, fixture):
     expected = {"fmi2GetReal(vr NULL)", "fmi2GetReal(value NULL)", "fmi2SetReal(vr NULL)", "fmi2GetStatus(value NULL)",
                 "fmi2GetDirectionalDerivative(dvUnknown NULL)", "doStep after the refusals", "fmi2GetReal(freed)",
                 "fmi2DoStep(not an instance)", "second fmi2FreeInstance"}
-    if fixture in ("native_plant_fmu", "native_closed_loop_fmu"):  # they offer Model Exchange
-        expected |= {"fmi2GetDerivatives(NULL)", "fmi2SetContinuousStates(NULL)", "fmi2NewDiscreteStates(NULL)"}
+    if fixture.startswith("native"):  # they offer Model Exchange (the controller: no event indicators, so
+        # fmi2GetEventIndicators(NULL) with 0 of them is fmi2OK)
+        expected |= {"fmi2GetDerivatives(NULL)", "fmi2SetContinuousStates(NULL)", "fmi2NewDiscreteStates(NULL)",
+                     "fmi2GetEventIndicators(NULL)"}
     case = check(code, lines, stderr, expected)
     assert case["doStep after the refusals"]["x"] == case["doStep after the refusals"]["x"]  # a number, not NaN
 
@@ -58,6 +60,7 @@ def test_fmi3_null_pointers_and_dead_instances(fmi3_fmus, name):
     expected = {"fmi3GetFloat64(valueReferences NULL)", "fmi3SetFloat64(values NULL)", "fmi3DoStep(outputs NULL)",
                 "fmi3SetDebugLogging(categories NULL)", "fmi3DoStep after the refusals", "fmi3GetFloat64(freed)",
                 "fmi3GetFloat64(not an instance)", "second fmi3FreeInstance"}
-    if name != "controller":
-        expected |= {"fmi3GetContinuousStateDerivatives(NULL)", "fmi3UpdateDiscreteStates(NULL)"}
+    # every native FMU offers Model Exchange
+    expected |= {"fmi3GetContinuousStateDerivatives(NULL)", "fmi3UpdateDiscreteStates(NULL)",
+                 "fmi3GetEventIndicators(NULL)"}
     check(code, lines, stderr, expected)

@@ -10,6 +10,7 @@
 
 #include "fmi2_native.h"
 #include "controller_setup.h"
+#include "me_model.h"
 #include "pytext.h"
 #include "rules.h"
 #include "series.h"
@@ -24,6 +25,7 @@ void model_instantiate(State *s) { memset(&s->model, 0, sizeof s->model); }
 static void copy_outputs(State *s)
 {
     for (int i = 0; i < VC_OUTPUTS; i++) s->value[OUTPUT_VRS[i]] = s->model.c.out[i];
+    s->model.me.locals_stale = 1; /* der(theta^_i) when read: model_lazy_locals */
 }
 
 static void copy_inputs(State *s)
@@ -136,4 +138,83 @@ int model_initial_output(const State *s, fmi2ValueReference vr, double *value, c
     (void)why; (void)size;
     *value = s->value[vr];
     return 1;
+}
+
+/* ---- Model Exchange (me_model.h): states theta^ (the estimates), derivatives the update law's rates
+   theta^' = lambda2 Lambda^-1 phi(t, x, v) e2 at the inputs set (vk_controller_rates: the integrand of the
+   co-simulation's exact increment, vk_controller_increment), no event indicators.  The controller's time and
+   estimates follow the Model Exchange time and states (model_me_outputs), so the setters and getters read the
+   same structure in both interfaces. ---- */
+
+/* The derivative variables der(theta^_i) (with_derivative_variables, native.py) */
+static const fmi2ValueReference DERIVATIVE_VRS[VC_N] = {
+    VR_der_mu_hat_, VR_der_a1_hat_, VR_der_a2_hat_, VR_der_a3_hat_, VR_der_a4_hat_, VR_der_a5_hat_,
+    VR_der_Delta_hat_, VR_der_beta_hat_, VR_der_gamma_hat_};
+
+/* der(theta^_i) at the current point (co-simulation: the last communication point with the inputs held;
+   Model Exchange: the time and inputs set), computed when a local is read after the point changed; NaN where the
+   rate is not finite (a getter refuses it) */
+void model_lazy_locals(State *s)
+{
+    if (!s->model.me.locals_stale || !s->model.built) return;
+    const VcController *c = &s->model.c;
+    double rates[VC_N];
+    const int fault = vk_controller_rates(c, c->t, c->in[0], c->in[1], c->in + 2, rates) != VC_OK;
+    for (int i = 0; i < VC_N; i++) s->value[DERIVATIVE_VRS[i]] = fault ? NAN : rates[i];
+    s->model.me.locals_stale = 0;
+}
+
+void model_me_start(Instance *inst, State *s)
+{
+    (void)inst;
+    s->model.me.t = s->model.c.t;
+    memcpy(s->model.me.x, s->model.c.theta_hat, VC_N * sizeof(double));
+}
+
+int model_me_derivatives(Instance *inst, State *s, double *dx)
+{
+    const VcController *c = &s->model.c;
+    const MeData *me = &s->model.me;
+    char tt[64], xt[64], vt[64];
+    native_repr(me->t, tt, sizeof tt);
+    if (vk_controller_rates(c, me->t, c->in[0], c->in[1], c->in + 2, dx) != VC_OK) { /* an infinite angle */
+        native_error(inst, "fmi2GetDerivatives: at tau = %s: ValueError('math domain error')", tt);
+        return 1;
+    }
+    for (int i = 0; i < VC_N; i++) {
+        if (isfinite(dx[i])) continue;
+        native_repr(c->in[0], xt, sizeof xt);
+        native_repr(c->in[1], vt, sizeof vt);
+        native_error(inst, "fmi2GetDerivatives: at tau = %s, x = %s, v = %s the rate of %s is %g (not finite); the "
+                     "inputs are beyond the model's numerical range", tt, xt, vt, VARIABLES[OUTPUT_VRS[4 + i]].name,
+                     dx[i]);
+        return 1;
+    }
+    return 0;
+}
+
+void model_me_indicators(const State *s, double *z) { (void)s; (void)z; } /* ME_N_INDICATORS 0 */
+
+int model_me_outputs(Instance *inst, State *s)
+{
+    (void)inst;
+    VcController *c = &s->model.c;
+    c->t = s->model.me.t;
+    memcpy(c->theta_hat, s->model.me.x, sizeof c->theta_hat);
+    double out[VC_OUTPUTS];
+    if (vk_controller_outputs(c, c->t, c->theta_hat, out) == VC_OK && vk_controller_non_finite(out) < 0) {
+        memcpy(c->out, out, sizeof c->out);
+        copy_outputs(s);
+        return 0;
+    }
+    for (int i = 0; i < VC_OUTPUTS; i++) s->value[OUTPUT_VRS[i]] = NAN; /* a getter refuses them, naming one */
+    s->model.me.locals_stale = 1;
+    return 0;
+}
+
+/* No events: nothing discrete changes, nothing stops the controller. */
+int model_me_event(Instance *inst, State *s, int *terminate)
+{
+    (void)inst; (void)s; (void)terminate;
+    return 0;
 }

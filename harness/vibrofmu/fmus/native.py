@@ -79,12 +79,14 @@ MODEL_FILES = {
 # the pythonfmu FMU's (value references N, N + 1, ...; with_derivative_variables).
 ESTIMATES = ("mu_hat", "a1_hat", "a2_hat", "a3_hat", "a4_hat", "a5_hat", "Delta_hat", "beta_hat", "gamma_hat")
 ME_STATES = {"HertzEAOscillator": (("x", "v"), ("v", "a")),
+             "AdaptiveLyapunovController": (ESTIMATES, tuple(f"der({e})" for e in ESTIMATES)),
              "HertzEAClosedLoop": (("x", "v", *ESTIMATES), ("v", "der(v)", *(f"der({e})" for e in ESTIMATES)))}
 _INDICATORS = (
     ("contact_indicator", "1 + 2x/3: > 0 in contact (contact loss and re-contact at its zeros)"),
     ("upper_gap_indicator", "pull-in margin of the upper electrode, 1 - gap - 2x/(3R) (pull-in at 0)"),
     ("lower_gap_indicator", "pull-in margin of the lower electrode, 1 - gap + 2x/(3R) (pull-in at 0)"))
-ME_INDICATORS = {"HertzEAOscillator": _INDICATORS, "HertzEAClosedLoop": _INDICATORS}
+ME_INDICATORS = {"HertzEAOscillator": _INDICATORS, "AdaptiveLyapunovController": (),  # smooth: no events
+                 "HertzEAClosedLoop": _INDICATORS}
 # FMI 3.0 co-simulation with early return at contact loss and re-contact (config.h: HAS_EARLY_RETURN)
 EARLY_RETURN = ("HertzEAOscillator",)
 # fmi2/3GetDirectionalDerivative (config.h: HAS_DIRECTIONAL_DERIVATIVES)

@@ -145,16 +145,17 @@ def _model_exchange_cases(probe) -> None:
         probe.take_log()
         return c
 
-    cases = [(call, False, lambda c, call=call, n=n: getattr(f, call)(c, None, n))
+    # (call, in continuous-time mode, the call, its array's size: NULL with size 0 is fine, fmi2OK)
+    cases = [(call, False, lambda c, call=call, n=n: getattr(f, call)(c, None, n), n)
              for call, n in (("fmi2GetEventIndicators", ni), ("fmi2GetContinuousStates", nx),
                              ("fmi2GetNominalsOfContinuousStates", nx), ("fmi2GetDerivatives", nx))]
-    cases += [("fmi2NewDiscreteStates", False, lambda c: f.fmi2NewDiscreteStates(c, None)),
-              ("fmi2SetContinuousStates", True, lambda c: f.fmi2SetContinuousStates(c, None, nx)),
+    cases += [("fmi2NewDiscreteStates", False, lambda c: f.fmi2NewDiscreteStates(c, None), 1),
+              ("fmi2SetContinuousStates", True, lambda c: f.fmi2SetContinuousStates(c, None, nx), nx),
               ("fmi2CompletedIntegratorStep", True,
-               lambda c: f.fmi2CompletedIntegratorStep(c, 1, None, ctypes.byref(flag)))]
-    for call, continuous, make_call in cases:
+               lambda c: f.fmi2CompletedIntegratorStep(c, 1, None, ctypes.byref(flag)), 1)]
+    for call, continuous, make_call, n in cases:
         c = me(continuous)
-        _case(probe, f"{call}(NULL)", call, "NULL", make_call(c))
+        _case(probe, f"{call}(NULL)", call, "NULL" if n else None, make_call(c), ERROR if n else OK)
         f.fmi2FreeInstance(c)
 
 
@@ -245,9 +246,9 @@ def scenario_pointers3(probe: Probe3) -> None:
     flags = (ctypes.c_bool * 4)()
     b, t, size = ctypes.c_bool(), ctypes.c_double(), ctypes.c_size_t()
 
-    def once(case, call, argument, make_call, model_exchange=False):
+    def once(case, call, argument, make_call, model_exchange=False, expected=ERROR):
         c = probe.start(model_exchange=model_exchange)
-        _case(probe, case, call, argument, make_call(c))
+        _case(probe, case, call, argument, make_call(c), expected)
         f.fmi3FreeInstance(c)
 
     for kind, values in (("Float64", real), ("Int32", integer), ("Boolean", flags), ("String", text)):
@@ -269,7 +270,8 @@ def scenario_pointers3(probe: Probe3) -> None:
         nx, ni = len(probe.md.derivatives), probe.md.numberOfEventIndicators
         for call, n in (("fmi3GetEventIndicators", ni), ("fmi3GetContinuousStates", nx),
                         ("fmi3GetNominalsOfContinuousStates", nx), ("fmi3GetContinuousStateDerivatives", nx)):
-            once(f"{call}(NULL)", call, "NULL", lambda c, call=call, n=n: getattr(f, call)(c, None, n), True)
+            once(f"{call}(NULL)", call, "NULL" if n else None, lambda c, call=call, n=n: getattr(f, call)(c, None, n),
+                 True, ERROR if n else OK)  # NULL with size 0 (a model without event indicators) is fine
         for call in ("fmi3GetNumberOfEventIndicators", "fmi3GetNumberOfContinuousStates"):
             once(f"{call}(NULL)", call, "NULL", lambda c, call=call: getattr(f, call)(c, None), True)
         once("fmi3UpdateDiscreteStates(NULL)", "fmi3UpdateDiscreteStates", "NULL",
