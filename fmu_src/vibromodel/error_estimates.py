@@ -41,7 +41,7 @@ from . import forces
 # Calibrated constants (vibrofmu.analyses.error_calibration; docs/rungs.md, Error estimates): each rung's estimate
 # is CALIBRATION[level] times its theoretical sum of terms, chosen so that the estimate bounds the measured error in
 # >= 99 % of the campaign's random scenes.
-CALIBRATION = {"averaged": 3.0, "analytic": 1.0, "adaptive": 1.0, "fixed": 1.0, "truncation": 1.0}
+CALIBRATION = {"averaged": 3.0, "analytic": 1.0, "adaptive": 2.0, "local": 20.0, "fixed": 2.0, "truncation": 1.0}
 # An approximate rung warns when its estimate exceeds its share of the run's amplitude max|x| (the registry's
 # FidelityEntry.warn_share): fidelity 3 AVERAGED_WARN_SHARE (its calibrated estimate is ~10 times its measured error
 # of ~1 % on the paper scene, which is not warned; every cell of the slow-AC grid that is not warned is within 5 %:
@@ -102,7 +102,8 @@ def analytic_terms(scene, solution, span: float) -> dict:
     from .oafm_bases import eq11_operator  # fidelity 4's module (loaded by it)
 
     residual = max(piece.residual_max for piece in solution.pieces)
-    return {"residual": residual, "gain": 1.0 / eq11_operator(scene).k}
+    rms = max(piece.residual_rms for piece in solution.pieces)
+    return {"residual": residual, "residual_rms": rms, "gain": 1.0 / eq11_operator(scene).k}
 
 
 def analytic_estimate(scene, solution, span: float) -> tuple[float, dict]:
@@ -128,6 +129,13 @@ def warning(level: int, share: float | None, estimate: float, amplitude: float) 
 
 # -- the integrated rungs: the exact model's solver settings and the polynomial truncation ------------------------
 
+# DOP853 on y' = i s y (integrate.py's tableau; tests/model/test_error_estimates.py recomputes both): one step of
+# h reads DOP853_ESTIMATOR (s h)^8 on its embedded error estimator and errs by DOP853_LOCAL (s h)^9 (the 8th-order
+# solution's local error), within 10 % for s h <= 2.25 (the drive's step ceiling).
+DOP853_ESTIMATOR = 4.4e-7
+DOP853_LOCAL = 6.5e-8
+
+
 def linear_amplitude(scene) -> tuple[float, float, float]:
     """(x_s, the linear prediction's bound of max|x - x_s|, a1): Eq. 11's static offset x_s = gamma/a1 (a0 = -gamma)
     and the sum of the moduli of its free and forced parts (start, Delta at omega, beta at Omega, gamma at 2 Omega)."""
@@ -147,25 +155,80 @@ def _memory(mu: float, span: float) -> float:
     return span if mu <= 0.0 else min(span, 2.0 / mu)
 
 
-def solver_terms(scene, settings, span: float) -> dict:
-    """The exact model's solver error over a run of `span`:
-    - adaptive DOP853: its per-step error control at rtol accumulates over the response's memory min(span, 2/mu) in
-      periods 2 pi/p: rtol * amplitude * (1 + memory p / (2 pi)) (models.tolerance_factor keeps rtol per that memory);
-    - RK4, step h: the phase error of an oscillation of frequency s and amplitude a grows at a s^5 h^4 / 120 per unit
-      time (RK4's error constant for x'' = -s^2 x), over the memory: sum over the response's parts."""
-    x_s, amplitude, a1 = linear_amplitude(scene)
+def response_parts(scene, span: float) -> dict:
+    """The linear response of Eq. 11 over a run of `span`, in parts of one frequency each (native twin:
+    native/plant_setup.c response_parts):
+    - forced: (|phasor|, s) of Delta cos(omega t), beta sin(Omega t) and -gamma cos(2 Omega t) (the electrostatic
+      drive's linear forcing), each through H(s) = 1/(a1 - s^2 + i mu_eff s) with mu_eff = 2/memory: at resonance
+      the response grows as t/(2 s) for the run's memory min(span, 2/mu), not to the steady 1/(mu s);
+    - free: the modulus of the free vibration the start leaves, (x_start, v_start) minus the forced parts at t = 0,
+      turning at p = sqrt(a1 - mu^2/4)."""
+    a1 = forces.coefficients(scene.alpha, scene.gamma, scene.R)[1]
     mu = scene.mu
-    p = math.sqrt(max(a1 - 0.25 * mu * mu, 1e-300))
     memory = _memory(mu, span)
-    size = abs(x_s) + amplitude
+    mu_eff = 2.0 / memory
+    p = math.sqrt(max(a1 - 0.25 * mu * mu, 1e-300))
+    x_s = scene.gamma / a1
+    dx, dv, forced = scene.x_start - x_s, scene.v_start, []
+    for drive, s in ((complex(scene.Delta, 0.0), scene.omega), (complex(0.0, -scene.beta), scene.Omega),
+                     (complex(-scene.gamma, 0.0), 2.0 * scene.Omega)):
+        z = drive * linear_gain(a1, mu_eff, s)
+        if z != 0.0:
+            forced.append((abs(z), s))
+            dx -= z.real
+            dv += s * z.imag  # -(i s z).real
+    free = math.hypot(dx, (dv + 0.5 * mu * dx) / p)
+    return {"x_s": x_s, "a1": a1, "p": p, "mu": mu, "mu_eff": mu_eff, "memory": memory, "free": free,
+            "forced": forced}
+
+
+def _components(parts: dict) -> list[tuple[float, float]]:
+    """(amplitude, frequency) of every part: the free one at most free + the forced ones (their phases may add)."""
+    forced = parts["forced"]
+    return [(parts["free"] + sum(a for a, _ in forced), parts["p"])] + forced
+
+
+def _remembered(s: float, parts: dict) -> float:
+    """How long an error injected at frequency s adds up in the response: the memory at resonance (s = p), else the
+    time 1/|i s - lambda| (lambda = -mu/2 + i p) over which its phase against the free vibration turns by a radian."""
+    distance = math.hypot(s - parts["p"], 0.5 * parts["mu"])
+    return parts["memory"] if distance * parts["memory"] <= 1.0 else 1.0 / distance
+
+
+def solver_terms(scene, settings, span: float) -> dict:
+    """The exact model's solver error over a run of `span`, summed over the response's parts (amplitude a, frequency
+    s; response_parts):
+    - adaptive DOP853 at the solver's rtol (after models.tolerance_factor): its controller keeps the estimator's
+      error DOP853_ESTIMATOR (s h)^8 a near rtol times the norm's scale (atol + rtol |x|, atol + rtol |v|); the step
+      h is the largest that keeps every part there, at most max_step or the drive's step ceiling. Each step errs
+      by DOP853_LOCAL (s h)^9 a, which adds up over _remembered(s) / h steps ("accumulated", at most 2 a: a phase),
+      and the output within a step errs like the estimator ("local": dense output, the last steps);
+    - RK4, step h: a part errs by (s h)^5 / 120 a per step (RK4's error constant for y' = i s y), adding up likewise:
+      a s^5 h^4 / 120 _remembered(s) (at most 2 a)."""
+    parts = response_parts(scene, span)
+    components = _components(parts)
+    size = abs(parts["x_s"]) + sum(a for a, _ in components)
     if not _fixed(settings):
         rtol, _ = _solver_rtol(scene, settings, span)
-        return {"solver": rtol * size * (1.0 + memory * p / (2.0 * math.pi)), "amplitude": size}
+        scale_x = 0.01 + size  # integrate.ATOL_PER_RTOL = 0.01
+        scale_v = 0.01 + sum(a * s for a, s in components)
+        from .models import drive_step_ceiling
+        h = settings.max_step if settings.max_step > 0.0 else drive_step_ceiling(scene)
+        for a, s in components:
+            if a > 0.0 and s > 0.0:
+                weight = a * math.hypot(1.0 / scale_x, s / scale_v) / math.sqrt(2.0)
+                h = min(h, (rtol / (DOP853_ESTIMATOR * weight)) ** 0.125 / s)
+        accumulated = local = 0.0
+        for a, s in components:
+            accumulated += a * min(2.0, DOP853_LOCAL * (s * h) ** 9 / h * _remembered(s, parts))
+            local += a * DOP853_ESTIMATOR * (s * h) ** 8
+        value = CALIBRATION["adaptive"] * accumulated + CALIBRATION["local"] * local
+        return {"solver": value, "accumulated": accumulated, "local": local, "step": h, "amplitude": size}
     h = settings.max_step or _fixed_default()
-    parts = [(amplitude, p), (abs(scene.beta) * abs(linear_gain(a1, mu, scene.Omega)) + abs(scene.beta) / scene.Omega**2,
-                              scene.Omega),
-             (abs(scene.gamma) / (4.0 * scene.Omega**2), 2.0 * scene.Omega)]
-    return {"solver": sum(a * min(s**5 * h**4 / 120.0 * memory, 2.0) for a, s in parts if a), "amplitude": size}
+    accumulated = 0.0
+    for a, s in components:
+        accumulated += a * min(2.0, s**5 * h**4 / 120.0 * _remembered(s, parts))
+    return {"solver": CALIBRATION["fixed"] * accumulated, "accumulated": accumulated, "amplitude": size}
 
 
 def _fixed(settings) -> bool:
@@ -183,23 +246,64 @@ def _fixed_default():
     return FIXED_DEFAULT_STEP
 
 
+TRUNCATION_ANGLES = 16  # the cycle's samples of the force error's harmonic balance
+TRUNCATION_TIMES = 5  # the AC drive's phases sampled over its period pi/Omega (the electrostatic force's)
+
+
+def _force_error_harmonics(exact, model, scene, x_s: float, amplitude: float) -> tuple[float, float, float]:
+    """Over x = x_s + amplitude cos(theta), theta at TRUNCATION_ANGLES midpoints, and the AC drive's phases: the
+    force error d = F_exact - F_poly's largest |mean|, |stiffness| 2 mean(d cos theta)/amplitude (its first harmonic,
+    the describing function) and |rest| max|d - mean - stiffness amplitude cos theta| (the higher harmonics)."""
+    lo, hi = -1.5 + 1e-9, 1.5 * scene.R * (1.0 - 1e-3)
+    n = TRUNCATION_ANGLES
+    cosines = [math.cos(2.0 * math.pi * (i + 0.5) / n) for i in range(n)]
+    xs = [min(max(x_s + amplitude * c, lo), hi) for c in cosines]
+    ac = (scene.beta != 0.0 or scene.gamma != 0.0) and scene.Omega > 0.0
+    times = [math.pi / scene.Omega * j / TRUNCATION_TIMES for j in range(TRUNCATION_TIMES)] if ac else [0.0]
+    mean = stiffness = rest = 0.0
+    for t in times:
+        d = [exact.accel(t, x, 0.0, 0.0) - model.accel(t, x, 0.0, 0.0) for x in xs]
+        m = first = 0.0
+        for value, c in zip(d, cosines):
+            m += value
+            first += value * c
+        m /= n
+        k = 2.0 * first / n / amplitude if amplitude > 0.0 else 0.0
+        mean, stiffness = max(mean, abs(m)), max(stiffness, abs(k))
+        for value, c in zip(d, cosines):
+            rest = max(rest, abs(value - m - k * amplitude * c))
+    return mean, stiffness, rest
+
+
 def truncation_terms(scene, model, span: float) -> dict:
-    """Fidelities 1 and 2: the polynomial's force error max|F_exact - F_poly| over x in x_s +- the linear amplitude
-    (and the AC phases), answered by the linear response: over a1 off resonance (analytic's argument), at most the
-    impulse response's integral over the run."""
+    """Fidelities 1 and 2: the polynomial's force error d = F_exact - F_poly on the response's cycle (amplitude A =
+    the free part + the forced ones, response_parts), by harmonic balance: its mean moves x by mean/a1 ("mean"); its
+    first harmonic is a stiffness error dk, which turns the free vibration at dk/(2p) more, a phase that grows over the
+    memory (at most 2 radians), and changes each forced part's gain by dk |H(s)| ("stiffness"); the higher harmonics
+    answer off resonance, rest/a1 ("harmonics"). The free vibration decays as e^(-mu t/2) and dk with it as
+    e^(-k mu t/2), k the exponent of dk's growth with the amplitude (dk at A and at the forced parts + half the free
+    one): its phase stops growing after 2/(max(k, 1) mu)."""
     from .models import ExactModel
 
-    x_s, amplitude, a1 = linear_amplitude(scene)
+    parts = response_parts(scene, span)
+    forced = parts["forced"]
+    a1, p, mu = parts["a1"], parts["p"], parts["mu"]
+    f = sum(a for a, _ in forced)
+    free = parts["free"]
+    amplitude = f + free
     exact = ExactModel(scene)
-    lo, hi = max(x_s - amplitude, -1.5 + 1e-9), min(x_s + amplitude, 1.5 * scene.R * (1.0 - 1e-3))
-    xs = np.linspace(lo, hi, 41) if hi > lo else np.array([x_s])
-    period = 2.0 * math.pi / (2.0 * scene.Omega) if scene.Omega > 0.0 else 1.0
-    difference = 0.0
-    for t in np.linspace(0.0, 2.0 * period, 9):
-        for x in xs:
-            difference = max(difference, abs(exact.accel(float(t), float(x), 0.0, 0.0)
-                                             - model.accel(float(t), float(x), 0.0, 0.0)))
-    return {"truncation": difference / a1, "amplitude": abs(x_s) + amplitude}
+    mean, stiffness, rest = _force_error_harmonics(exact, model, scene, parts["x_s"], amplitude)
+    memory = parts["memory"]
+    if free > 0.0 and mu > 0.0 and stiffness > 0.0:
+        half = f + 0.5 * free
+        smaller = _force_error_harmonics(exact, model, scene, parts["x_s"], half)[1]
+        k = math.log(stiffness / smaller) / math.log(amplitude / half) if smaller > 0.0 else 0.0
+        memory = min(memory, 2.0 / (max(k, 1.0) * mu))
+    drift = free * min(2.0, stiffness / (2.0 * p) * memory)
+    for a, s in forced:
+        drift += a * min(2.0, stiffness * abs(linear_gain(a1, parts["mu_eff"], s)))
+    return {"truncation": mean / a1 + drift + rest / a1, "mean": mean / a1, "stiffness": drift,
+            "harmonics": rest / a1, "amplitude": abs(parts["x_s"]) + amplitude}
 
 
 def _result(value: float, amplitude: float, terms: dict) -> dict:
@@ -209,15 +313,13 @@ def _result(value: float, amplitude: float, terms: dict) -> dict:
 def exact_estimate(scene, settings, model, solution, span: float) -> dict:
     """Fidelity 0: the solver's error (solver_terms), calibrated per kind of solver."""
     terms = solver_terms(scene, settings, span)
-    kind = "fixed" if _fixed(settings) else "adaptive"
-    return _result(CALIBRATION[kind] * terms["solver"], terms["amplitude"], terms)
+    return _result(terms["solver"], terms["amplitude"], terms)
 
 
 def polynomial_estimate(scene, settings, model, solution, span: float) -> dict:
     """Fidelities 1 and 2: the solver's error and the polynomial's truncation (truncation_terms)."""
     terms = {**solver_terms(scene, settings, span), **truncation_terms(scene, model, span)}
-    kind = "fixed" if _fixed(settings) else "adaptive"
-    value = CALIBRATION[kind] * terms["solver"] + CALIBRATION["truncation"] * terms["truncation"]
+    value = terms["solver"] + CALIBRATION["truncation"] * terms["truncation"]
     return _result(value, terms["amplitude"], terms)
 
 

@@ -24,6 +24,11 @@ and `vibrofmu report` rewrites the text between them (the markers stay). Blocks:
              says so), so never compared by --check.
 - peers:     the plant beside other ODE solvers at equal accuracy, from a peers.json of `bench --peers` in the
              --from folders (timings; not run by the report itself).
+- calibration: every rung's error estimate against its measured error over random scenes, from the
+             calibration_RUNG.json files (`python -m vibrofmu.analyses.error_calibration campaign RUNG n seed`) in the
+             --from folders (deterministic given the files; not run by the report itself: an hour of campaigns).
+- auto:      fidelity auto's choice against the oracle over random (scene, tolerance) pairs, from an auto.json
+             (`python -m vibrofmu.analyses.error_calibration auto n seed`) in the --from folders (costs are timings).
 
 Without --from, the oafm, stability and speed blocks come from fresh runs of `vibrofmu oafm`, `stability` and
 `bench` (quick: oafm study to order 3, `bench --quick`). `--check` regenerates every block whose numbers do not
@@ -48,12 +53,15 @@ REPO_ROOT = Path(__file__).resolve().parents[2]  # the checkout (README.md, docs
 BLOCK = re.compile(r"<!-- report:(?P<name>[a-z_]+) -->\n(?P<body>.*?)<!-- /report:(?P=name) -->", re.S)
 OPEN = re.compile(r"<!-- report:([a-z_]+) -->")
 CLOSE = re.compile(r"<!-- /report:([a-z_]+) -->")
-NAMES = ("machine", "accuracy", "ssp", "ssp_orderings", "container", "oafm", "stability", "speed", "ranges", "peers")
-FROM_SUMMARIES = ("oafm", "stability", "speed", "peers")  # filled from the --from folders only
+NAMES = ("machine", "accuracy", "ssp", "ssp_orderings", "container", "oafm", "stability", "speed", "ranges", "peers",
+         "calibration", "auto")
+FROM_SUMMARIES = ("oafm", "stability", "speed", "peers", "calibration", "auto")  # filled from the --from folders only
 DETERMINISTIC = ("accuracy", "ssp", "ssp_orderings", "container", "ranges")
 SOURCE_FILES = {"oafm": "an oafm summary.json", "stability": "a stability summary.json",  # what a FROM_SUMMARIES
                 "speed": "a bench.json or an oafm/stability summary.json",  # block reads
-                "peers": "a peers.json (bench --peers)"}
+                "peers": "a peers.json (bench --peers)",
+                "calibration": "calibration_RUNG.json files (python -m vibrofmu.analyses.error_calibration campaign)",
+                "auto": "an auto.json (python -m vibrofmu.analyses.error_calibration auto)"}
 ACCURACY_TAUS = (10.0, 25.0, 50.0, 100.0, 200.0)
 ACCURACY_RTOLS = (1e-4, 1e-6, 1e-8, 1e-10, 1e-12)
 ACCURACY_RK4_STEPS = (0.1, 0.05, 0.025)
@@ -358,12 +366,42 @@ def peers_block(sources: list[Path]) -> str | None:
     return None
 
 
+def calibration_block(sources: list[Path]) -> str | None:
+    """The calibration table from the calibration_*.json files (campaign outputs) in the folders."""
+    from vibrofmu.analyses.error_calibration import calibration_table
+
+    results = [json.loads(file.read_text()) for folder in sources for file in sorted(folder.glob("calibration_*.json"))]
+    if not results:
+        return None
+    commands = sorted({f"python -m vibrofmu.analyses.error_calibration campaign {r['rung']} {r['summary']['scenes']} "
+                       f"{r['seed']} > calibration_{r['rung']}.json" for r in results})
+    return "\n".join(calibration_table(results) + ["", "Regenerate (each campaign one process; then "
+                      "`vibrofmu report --only calibration --from DIR` with the files in DIR):", "", "```",
+                      *commands, "```"])
+
+
+def auto_block(sources: list[Path]) -> str | None:
+    """The auto-against-the-oracle table from the first auto.json in the folders."""
+    from vibrofmu.analyses.error_calibration import auto_table
+
+    for folder in sources:
+        file = folder / "auto.json"
+        if file.is_file():
+            result = json.loads(file.read_text())
+            when = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime(file.stat().st_mtime))
+            return "\n".join(auto_table(result) + [
+                "", f"Measured {when} (costs: thread CPU time on a shared machine). Regenerate: `python -m "
+                f"vibrofmu.analyses.error_calibration auto {result['n']} {result['seed']} > DIR/auto.json`, then "
+                "`vibrofmu report --only auto --from DIR`."])
+    return None
+
+
 # ---------------------------------------------------------------------------------------------- the command
 
 def summary_block(name: str, sources: list[Path]) -> str | None:
     """The body of the FROM_SUMMARIES block `name` from the summaries in `sources` (None: none there)."""
     return {"oafm": oafm_block, "stability": stability_block, "speed": speed_block,
-            "peers": peers_block}[name](sources)
+            "peers": peers_block, "calibration": calibration_block, "auto": auto_block}[name](sources)
 
 
 def generate(names, fmu_dir: Path, sources: list[Path], quick: bool, work_dir: Path, start=None) -> dict[str, str]:

@@ -97,7 +97,8 @@ def slow_ac_grid(fmu, fidelities=(3, 4), stop: float = 50.0, h: float = 0.1, bet
 # -- the calibration campaign ----------------------------------------------------------------------------------------
 
 RUNGS = {"averaged": {"fidelity": 3}, "analytic": {"fidelity": 4}, "exact": {"fidelity": 0},
-         "rk4": {"fidelity": 0, "solver": 1}, "polynomial": {"fidelity": 1}}
+         "rk4": {"fidelity": 0, "solver": 1}, "polynomial": {"fidelity": 1},
+         "polynomial-paper": {"fidelity": 2}}
 
 
 def random_scene(rng: np.random.Generator) -> tuple[Scene, float, dict]:
@@ -164,6 +165,7 @@ def campaign(rung: str, n: int = 1000, seed: int = 0, h: float = 0.1, progress=N
         estimate = plant.error_estimate["estimate"]
         rows.append({**info, "outcome": "warned" if plant.warnings else "accepted", "measured": measured,
                      "estimate": estimate, "amplitude": float(np.max(np.abs(exact[:m]))), "stop": stop,
+                     "terms": plant.error_estimate.get("terms", {}),
                      "exact_stopped": exact_stop is not None, "scene": scene.as_dict(),
                      "settings": {"rtol": settings.rtol, "max_step": settings.max_step}})
         if progress and len(rows) % 25 == 0:
@@ -195,6 +197,169 @@ def summary(rows: list[dict]) -> dict:
             "ratio_max": max(ratios, default=math.nan)}
 
 
+# -- fidelity auto against the oracle --------------------------------------------------------------------------------
+
+def _candidate_key(settings) -> tuple:
+    return (int(settings.fidelity), settings.rtol if int(settings.fidelity) == 0 else None)
+
+
+def _timed_run(plant, rebuild, stop: float, h: float) -> tuple[np.ndarray, float]:
+    """(x at the communication points, the thread CPU time of the loop): the plant's whole doStep loop in C
+    (plant.run, the compiled floor, as the speed ladder's cost per output); a run that ends early (pull-in) raises
+    there, and x is then taken step by step from a fresh plant (rebuild())."""
+    n = int(round(stop / h))
+    started = time.thread_time()
+    try:
+        x = plant.run(h, n)
+        return np.asarray(x, dtype=float), time.thread_time() - started
+    except (ParameterError, IntegrationError):
+        seconds = time.thread_time() - started
+    x, _ = run_steps(rebuild(), stop, h)
+    return x, seconds
+
+
+def auto_campaign(n: int = 500, seed: int = 0, h: float = 0.1, progress=None) -> dict:
+    """n random (scene, tolerance) pairs (random_scene; tolerance log-uniform in [1e-10, 1e-1]): fidelity auto's
+    chooser (vibromodel.auto.choose) against the oracle, the candidate that really met the tolerance at the least
+    measured cost. Every candidate (auto.candidates) is built and run on the compiled kernel at communication step
+    h; its error max|x - x_ref| against DOP853 at rtol 1e-12 ("met": within the tolerance, and the run stops where the
+    reference stops: pull-in). Two costs, in thread CPU time: `run`, the doStep loop (the cost per output that auto
+    ranks its candidates by: the speed ladder's), and `total`, the set-up (the slow flow's table, the OAFM fit) and
+    the run. Each has its own oracle; auto's total also counts the candidates it built and rejected."""
+    from vibromodel.auto import candidates, choose, describe
+
+    library, rows = campaign_kernel(), []
+    rng = np.random.default_rng(seed)
+    started = time.perf_counter()
+    while len(rows) < n:
+        scene, stop, info = random_scene(rng)
+        tolerance = float(10 ** rng.uniform(-10, -1))
+        try:
+            exact, exact_stop = run_steps(make_plant(scene, Settings(rtol=1e-12), 0.0, stop, library=library), stop, h)
+        except (ParameterError, IntegrationError) as error:
+            rows.append({**info, "tolerance": tolerance, "outcome": "reference refused", "message": str(error)[:200]})
+            continue
+        built = {}
+
+        def build(settings, scene=scene, stop=stop, built=built):
+            t0 = time.thread_time()
+            try:
+                plant = make_plant(scene, settings, 0.0, stop, library=library)
+            except (ParameterError, IntegrationError) as error:
+                built[_candidate_key(settings)] = (None, time.thread_time() - t0, str(error)[:200])
+                raise
+            built[_candidate_key(settings)] = (plant, time.thread_time() - t0, None)
+            return plant
+
+        try:
+            _, chosen, _ = choose(scene, Settings(), tolerance, build)
+            choice = _candidate_key(chosen)
+        except ParameterError:
+            choice = None  # auto refused: no candidate's estimate meets the tolerance
+        choice_cost = sum(cost for _, cost, _ in built.values())
+        table = []
+        for _, candidate in candidates(Settings()):
+            key = _candidate_key(candidate)
+            if key not in built:
+                try:
+                    build(candidate)
+                except (ParameterError, IntegrationError):
+                    pass
+            plant, build_cost, refusal = built[key]
+            row = {"candidate": describe(candidate), "key": key, "build": build_cost}
+            if plant is None:
+                table.append({**row, "refused": refusal})
+                continue
+            x, run_cost = _timed_run(plant, lambda c=candidate: make_plant(scene, c, 0.0, stop, library=library),
+                                     stop, h)
+            m = min(len(x), len(exact))
+            error = float(np.max(np.abs(x[:m] - exact[:m]))) if m else math.inf
+            table.append({**row, "run": run_cost, "total": build_cost + run_cost, "error": error,
+                          "estimate": plant.error_estimate["estimate"],
+                          "met": len(x) == len(exact) and error <= tolerance})
+        met = [c for c in table if c.get("met")]
+        mine = next((c for c in table if c["key"] == choice), None)
+        row = {**info, "tolerance": tolerance, "stop": stop, "exact_stopped": exact_stop is not None,
+               "scene": scene.as_dict(), "candidates": table, "chosen": mine["candidate"] if mine else None}
+        if mine is not None:
+            row.update(outcome="chosen", met=bool(mine.get("met")), error=mine.get("error"))
+        else:
+            row.update(outcome="refused", met=not met)  # a refusal is right when no candidate met the tolerance
+        for cost in ("run", "total"):
+            oracle = min(met, key=lambda c: c[cost]) if met else None
+            row[f"oracle_{cost}"] = oracle["candidate"] if oracle else None
+            if oracle is not None and mine is not None and cost in mine:
+                spent = mine[cost] + (choice_cost - mine["build"] if cost == "total" else 0.0)
+                row[f"cost_ratio_{cost}"] = spent / max(oracle[cost], 1e-9)
+        rows.append(row)
+        if progress and len(rows) % 10 == 0:
+            progress(f"auto: {len(rows)}/{n} pairs, {time.perf_counter() - started:.0f} s")
+    return {"n": n, "seed": seed, "rows": rows, "summary": auto_summary(rows)}
+
+
+def auto_summary(rows: list[dict]) -> dict:
+    """Shares over the pairs: auto met the tolerance (or refused where no candidate met it); its cost within 2x the
+    oracle's, over the pairs that have both an oracle and a choice, per cost (run: the doStep loop; total: with the
+    set-up of its choice and of the candidates it built to choose)."""
+    pairs = [r for r in rows if "met" in r]
+
+    def share(hits, total):
+        return hits / total if total else math.nan
+
+    result = {"pairs": len(pairs), "met_share": share(sum(r["met"] for r in pairs), len(pairs)),
+              "refused": sum(r["outcome"] == "refused" for r in pairs)}
+    for cost in ("run", "total"):
+        ratios = [r[f"cost_ratio_{cost}"] for r in pairs if f"cost_ratio_{cost}" in r]
+        result[f"compared_{cost}"] = len(ratios)
+        result[f"within_2x_{cost}_share"] = share(sum(v <= 2.0 for v in ratios), len(ratios))
+        result[f"cost_ratio_{cost}_median"] = float(np.median(ratios)) if ratios else math.nan
+    return result
+
+
+# -- tables (docs/rungs.md's report blocks, vibrofmu bench) ---------------------------------------------------------
+
+RUNG_LABELS = {"exact": "fidelity 0, DOP853 at rtol 10⁻¹⁰ … 10⁻³", "rk4": "fidelity 0, RK4 at h = 0.003 … 0.2",
+               "polynomial": "fidelity 1 (polynomial), DOP853 at 10⁻⁸", "polynomial-paper":
+               "fidelity 2 (printed coefficients), DOP853 at 10⁻⁸", "averaged": "fidelity 3 (averaged)",
+               "analytic": "fidelity 4 (analytic)"}
+
+
+def _percent(share: float) -> str:
+    return f"{100.0 * share:.1f} %"
+
+
+def calibration_table(results: list[dict]) -> list[str]:
+    """Markdown rows of the campaigns' summaries (campaign's output), in RUNGS order."""
+    order = list(RUNGS)
+    lines = ["| rung | scenes (seed) | estimated | bounded | within 100× | estimate / measured: min, median, max |",
+             "|---|---|---|---|---|---|"]
+    for r in sorted(results, key=lambda r: (order.index(r["rung"]) if r["rung"] in order else len(order), r["seed"])):
+        s = r["summary"]
+        lines.append(f"| {RUNG_LABELS.get(r['rung'], r['rung'])} | {s['scenes']:,} ({r['seed']}) | {s['estimated']:,} | "
+                     f"{_percent(s['bounded_share'])} | {_percent(s['within_100x_share'])} | "
+                     f"{s['ratio_min']:.2g}, {s['ratio_median']:.2g}, {s['ratio_max']:.2g} |")
+    return lines
+
+
+def auto_table(result: dict) -> list[str]:
+    """Markdown rows of an auto campaign (auto_campaign's output): the shares, then what auto and the oracle chose."""
+    s = result["summary"]
+    lines = ["| pairs (seed) | met | refused | cost: | compared | ≤ 2× the oracle's | median / the oracle's |",
+             "|---|---|---|---|---|---|---|"]
+    for cost, label in (("run", "doStep loop"), ("total", "set-up + loop")):
+        lines.append(f"| {s['pairs']:,} ({result['seed']}) | {_percent(s['met_share'])} | {s['refused']} | {label} | "
+                     f"{s[f'compared_{cost}']} | {_percent(s[f'within_2x_{cost}_share'])} | "
+                     f"{s[f'cost_ratio_{cost}_median']:.2f} |")
+    chosen: dict = {}
+    for r in result["rows"]:
+        if "met" in r:
+            key = (r.get("chosen") or "refused", r.get("oracle_run") or "none met", r.get("oracle_total") or "none met")
+            chosen[key] = chosen.get(key, 0) + 1
+    lines += ["", "| auto chose | the oracle by the loop's cost | by set-up + loop | pairs |", "|---|---|---|---|"]
+    lines += [f"| {a} | {b} | {c} | {count} |" for (a, b, c), count in sorted(chosen.items(), key=lambda kv: -kv[1])]
+    return lines
+
+
 def main(argv: list[str]) -> None:
     def progress(text):
         print(text, file=sys.stderr, flush=True)
@@ -207,9 +372,15 @@ def main(argv: list[str]) -> None:
         result = campaign(argv[1], n, seed, progress=progress)
         print(json.dumps(result, indent=1))
         progress(json.dumps(result["summary"]))
+    elif argv[:1] == ["auto"] and len(argv) in (1, 2, 3):
+        n = int(argv[1]) if len(argv) > 1 else 500
+        seed = int(argv[2]) if len(argv) > 2 else 0
+        result = auto_campaign(n, seed, progress=progress)
+        print(json.dumps(result, indent=1))
+        progress(json.dumps(result["summary"]))
     else:
         print(f"error: usage: python -m vibrofmu.analyses.error_calibration grid FMU | campaign "
-              f"{{{','.join(RUNGS)}}} [n] [seed]", file=sys.stderr)
+              f"{{{','.join(RUNGS)}}} [n] [seed] | auto [n] [seed]", file=sys.stderr)
         raise SystemExit(2)
 
 

@@ -34,7 +34,10 @@ QUICK_OUT = "out/report"  # where --quick and --from write their documents: neve
 NOT_CHECKED = {"machine": "where and when the numbers were taken", "speed": "timings and instruction counts: they "
                "depend on the machine (CPU, compiler, libm) and its load", "peers": "timings of other ODE solvers "
                "beside ours: they depend on the machine and its load (`vibrofmu bench --peers --out DIR`, then "
-               "`vibrofmu report --from DIR --only peers`)"}
+               "`vibrofmu report --from DIR --only peers`)",
+               "calibration": "the rungs' error estimates against their measured errors: an hour of campaigns "
+               "(docs/rungs.md names them; then `vibrofmu report --from DIR --only calibration`)",
+               "auto": "fidelity auto against the oracle: its costs are timings on a shared machine"}
 # compared by --check too: from the --from summaries, else from fresh full runs of `vibrofmu oafm` and `stability`
 # (about a minute of CPU on 2 cores; the bench is not run: the speed block is not compared)
 FROM_CHECKED = ("oafm", "stability")

@@ -184,7 +184,7 @@ def rules_header() -> str:
     """rules.h: vibromodel.parameters' table of valid ranges (rules_as_records, in checking order, each with the
     refusal text Rule.refusal gives), the constants the models' own checks use, and the scene's names and
     defaults -- all taken from vibromodel, so that the native FMUs check and word what the Python slaves do."""
-    from vibromodel import integrate, models, parameters, plant
+    from vibromodel import error_estimates, integrate, models, parameters, plant
     from vibromodel.parameters import RULES, Scene, rules_as_records, scene_names
 
     constants = {
@@ -193,7 +193,11 @@ def rules_header() -> str:
         "ATOL_PER_RTOL": integrate.ATOL_PER_RTOL, "RK4_DEFAULT_STEP": plant.RK4_DEFAULT_STEP,
         "RK4_DRIVE_THETA": integrate.RK4_DRIVE_THETA, "RK4_DRIVE_ERROR": integrate.RK4_DRIVE_ERROR,
         "ERROR_MEMORY_REFERENCE": models.ERROR_MEMORY_REFERENCE, "TOLERANCE_FACTOR_FLOOR": models.TOLERANCE_FACTOR_FLOOR,
+        "DOP853_ESTIMATOR": error_estimates.DOP853_ESTIMATOR, "DOP853_LOCAL": error_estimates.DOP853_LOCAL,
+        **{f"CALIBRATION_{kind.upper()}": error_estimates.CALIBRATION[kind]
+           for kind in ("adaptive", "local", "fixed", "truncation")},
     }
+    counts = {"TRUNCATION_ANGLES": error_estimates.TRUNCATION_ANGLES, "TRUNCATION_TIMES": error_estimates.TRUNCATION_TIMES}
     texts = {
         "STEP_SIZE": _reason(plant.check_step, 0.0, 0.0, 0.0, 0.0, math.inf),
         "INPUT": _reason(plant.check_step, 0.0, 0.0, 1.0, math.nan, math.inf),
@@ -213,6 +217,7 @@ def rules_header() -> str:
              " * constants of its checks); do not edit.  The native FMUs' checks use it, so that their messages",
              " * are the Python slaves'. */", "#ifndef RULES_H", "#define RULES_H", "", "#include <stddef.h>", ""]
     lines += [f"#define RULE_{name} {_c_double(value)}" for name, value in constants.items()]
+    lines += [f"#define RULE_{name} {int(value)}" for name, value in counts.items()]
     lines += [f"#define RULE_{name} {_c_string(text)}" for name, text in texts.items()]
     lines += [f"#define RULE_TEXT_{name} {_c_string(printf_format(template))}" for name, template in TEXTS.items()]
     lines += ["", "/* vibromodel.parameters.Rule: a finite number (whole for `integer`) in [low, high] (ends open where",

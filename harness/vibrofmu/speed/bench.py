@@ -593,6 +593,9 @@ def run_bench(fmu: Path, out_dir: Path, quick: bool = False, repeats: int | None
     ladder_record = run_ladder_with_fmus(fmu, closed_loop_fmu, quick, say, ladder_rounds, instructions)
     say("native plant: FMI 3 CS beside FMI 2 CS (C host), ME under FMPy's CVode beside CS ...")
     fmi_versions = native_timing.fmi_versions_record(fmu, 3 if quick else 5)
+    pairs = AUTO_PAIRS_QUICK if quick else AUTO_PAIRS
+    say(f"fidelity auto against the oracle ({pairs} random scenes and tolerances) ...")
+    auto_record = auto_oracle_record(pairs)
     summary = {
         "bench": {"quick": quick, "stop_time": plan.stop_time, "repeats": plan.repeats, "threshold": THRESHOLD,
                   "output_intervals": list(INTERVALS), "scene": scene.as_dict(), "fmu": str(fmu),
@@ -610,6 +613,7 @@ def run_bench(fmu: Path, out_dir: Path, quick: bool = False, repeats: int | None
         "extremes": extremes,
         "ladder": ladder_record,
         "fmi_versions": fmi_versions,
+        "auto": auto_record,
     }
     summary["targets"] = targets(records, instantiation, plan)
     summary["machine"]["load_average_at_end"] = list(os.getloadavg()) if hasattr(os, "getloadavg") else None
@@ -618,6 +622,18 @@ def run_bench(fmu: Path, out_dir: Path, quick: bool = False, repeats: int | None
     plot_work_precision(out_dir / "work_precision.png", records, plan)
     ladder.plot_ladder(out_dir / "ladder.png", ladder_record)
     return summary
+
+
+# fidelity auto against the oracle: the quick form of `python -m vibrofmu.analyses.error_calibration auto` (its
+# campaign of >= 500 pairs is in docs/rungs.md); every pair builds and runs all of auto's candidates (~1 s)
+AUTO_PAIRS, AUTO_PAIRS_QUICK, AUTO_SEED = 40, 10, 0
+
+
+def auto_oracle_record(pairs: int) -> dict:
+    """auto_campaign over `pairs` random (scene, tolerance) pairs (error_calibration.auto_campaign)."""
+    from vibrofmu.analyses.error_calibration import auto_campaign
+
+    return auto_campaign(pairs, AUTO_SEED)
 
 
 LADDER_QUICK_STOP, LADDER_QUICK_ROUNDS = 50.0, 3  # --quick: a shorter ladder; 3 rounds for a median of 3
@@ -693,6 +709,11 @@ def summary_lines(summary: dict) -> list[str]:
         lines += ladder.ladder_lines(summary["ladder"])
     if summary.get("fmi_versions"):
         lines += native_timing.fmi_versions_lines(summary["fmi_versions"])
+    if summary.get("auto"):
+        from vibrofmu.analyses.error_calibration import auto_table
+
+        lines.append("  fidelity auto against the oracle (the cheapest candidate that really met the tolerance):")
+        lines += [f"    {line}" for line in auto_table(summary["auto"])]
     inst = t["instantiation"]
     warm = t["inputs"]["instantiation"]["warm_seconds"]
     lines.append("  instantiation (cold): " + ("not measured" if inst["seconds"] is None else
