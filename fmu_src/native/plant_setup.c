@@ -289,7 +289,7 @@ double native_error_estimate(const State *s, int fidelity, double rtol, int fixe
         double drift = r.free * min_first(2.0, h3[1] / (2.0 * r.p) * memory);
         for (int i = 0; i < r.n_forced; i++)
             drift += r.forced[i][0] * min_first(2.0, h3[1] * gain_modulus(r.a1, r.mu_eff, r.forced[i][1]));
-        estimate += RULE_CALIBRATION_TRUNCATION * (h3[0] / r.a1 + drift + h3[2] / r.a1);
+        estimate += RULE_CALIBRATION_TRUNCATION * (h3[0] / r.a1 + drift + h3[2] / (3.0 * r.a1));
     }
     return round3(estimate);
 }

@@ -22,9 +22,12 @@ leaves out; each term below is the amplitude of one neglected part of the soluti
   error is that share of the amplitude.
 
 Fidelity 4 (OAFM): the residual R of Eq. 3 on the fitted x~. Linearized, an error e obeys L[e] = -R with
-L = d^2/dt^2 + mu d/dt + a1; off resonance |e| ~ |R|/a1 (analytic.check_fit's estimate). The resonant gain
-1/(mu p) overestimated the measured error 100-10,000 times (the residual's largest part is not at resonance), so the
-estimate is max|R|/a1 with a calibrated factor.
+L = d^2/dt^2 + mu d/dt + a1 and e(0) = e'(0) = 0 (x~ starts at the scene's start): the estimate is max|e| of that
+equation driven by R sampled over the run (propagated_residual), times a calibrated factor. (max|R|/a1, the off-
+resonance gain alone, was 1-1000 times the measured error; the resonant gain 1/(mu p) 100-10,000 times.)
+
+The integrated rungs (solver_terms, truncation_terms) sum over the linear response's parts (response_parts): each
+error injected at a frequency s adds up over the time the response remembers it at that frequency.
 
 Each level's estimator is its registry entry's `error_estimate` (fidelities.py); make_plant attaches the result to
 the plant (`attach`). A rung whose estimate exceeds its entry's `warn_share` of the amplitude adds an fmi2Warning
@@ -41,7 +44,7 @@ from . import forces
 # Calibrated constants (vibrofmu.analyses.error_calibration; docs/rungs.md, Error estimates): each rung's estimate
 # is CALIBRATION[level] times its theoretical sum of terms, chosen so that the estimate bounds the measured error in
 # >= 99 % of the campaign's random scenes.
-CALIBRATION = {"averaged": 3.0, "analytic": 1.0, "adaptive": 2.0, "local": 20.0, "fixed": 2.0, "truncation": 1.0}
+CALIBRATION = {"averaged": 3.0, "analytic": 3.0, "adaptive": 2.0, "local": 20.0, "fixed": 2.0, "truncation": 1.0}
 # An approximate rung warns when its estimate exceeds its share of the run's amplitude max|x| (the registry's
 # FidelityEntry.warn_share): fidelity 3 AVERAGED_WARN_SHARE (its calibrated estimate is ~10 times its measured error
 # of ~1 % on the paper scene, which is not warned; every cell of the slow-AC grid that is not warned is within 5 %:
@@ -97,19 +100,63 @@ def averaged_estimate(model, solution, span: float) -> tuple[float, dict]:
     return CALIBRATION["averaged"] * sum(v for key, v in terms.items() if key != "amplitude"), terms
 
 
+# The residual's samples for fidelity 4's propagation: a step turns the fastest term of x~ (or the free vibration) by
+# at most RESIDUAL_STEP_TURN radians (the piecewise-linear R then errs by ~1 % of its size); at most RESIDUAL_SAMPLES
+# samples (a run of 2000 at frequency 4: 16,000).
+RESIDUAL_STEP_TURN = 0.5
+RESIDUAL_SAMPLES = 20000
+
+
+def propagated_residual(scene, solution, span: float) -> float:
+    """max|e| over the run of e'' + mu e' + a1 e = -R, e(0) = e'(0) = 0: the error the residual R of Eq. 3 on x~
+    drives through Eq. 11's linear operator (module docstring). R is sampled on the run and taken piecewise linear;
+    e = Im(z)/p with z' = lambda z - R, lambda = -mu/2 + i p, advanced exactly between samples (one linear
+    recurrence, scipy.signal.lfilter)."""
+    from .models import ExactModel
+    from .oafm import residual
+    from .oafm_bases import eq11_operator
+
+    mu, a1 = scene.mu, eq11_operator(scene).k
+    p = math.sqrt(a1 - 0.25 * mu * mu)  # eq11_operator refuses a1 <= mu^2/4
+    fastest = max(solution.fastest_frequency(), p)
+    n = int(min(RESIDUAL_SAMPLES, max(2, math.ceil(span * fastest / RESIDUAL_STEP_TURN) + 1)))
+    tau = solution.pieces[0].start + np.linspace(0.0, span, n)
+    dt = span / (n - 1)
+    x, v, a = solution(tau)
+    return float(np.max(np.abs(linear_response(-residual(ExactModel(scene).accel, tau, x, v, a), dt, mu, a1))))
+
+
+def linear_response(f, dt: float, mu: float, a1: float) -> np.ndarray:
+    """e at the samples of f (spacing dt, f piecewise linear between them) of e'' + mu e' + a1 e = f, e(0) = e'(0) =
+    0, a1 > mu^2/4: e = Im(z)/p, z' = lambda z + f, lambda = -mu/2 + i p, p = sqrt(a1 - mu^2/4), advanced exactly
+    from sample to sample (one linear recurrence, scipy.signal.lfilter)."""
+    from scipy.signal import lfilter
+
+    f = np.asarray(f, dtype=float)
+    p = math.sqrt(a1 - 0.25 * mu * mu)
+    lam = complex(-0.5 * mu, p)
+    step = np.exp(lam * dt)
+    phi1 = (step - 1.0) / lam  # int_0^dt e^(lambda (dt - u)) du
+    phi2 = (step - 1.0 - lam * dt) / (lam * lam * dt)  # int_0^dt e^(lambda (dt - u)) u/dt du
+    z = lfilter([1.0], [1.0, -step], f[:-1] * phi1 + (f[1:] - f[:-1]) * phi2)
+    return np.concatenate(([0.0], z.imag / p))
+
+
 def analytic_terms(scene, solution, span: float) -> dict:
-    """The terms of fidelity 4's estimate (module docstring): max|R| and the off-resonance gain 1/a1."""
+    """The terms of fidelity 4's estimate (module docstring): the residual propagated through Eq. 11's operator; also
+    max|R|, its rms and the off-resonance gain 1/a1 of analytic.check_fit's rule."""
     from .oafm_bases import eq11_operator  # fidelity 4's module (loaded by it)
 
     residual = max(piece.residual_max for piece in solution.pieces)
     rms = max(piece.residual_rms for piece in solution.pieces)
-    return {"residual": residual, "residual_rms": rms, "gain": 1.0 / eq11_operator(scene).k}
+    return {"propagated": propagated_residual(scene, solution, span), "residual": residual, "residual_rms": rms,
+            "gain": 1.0 / eq11_operator(scene).k}
 
 
 def analytic_estimate(scene, solution, span: float) -> tuple[float, dict]:
     """(fidelity 4's estimate of max|x - x_exact| over the run, its terms)."""
     terms = analytic_terms(scene, solution, span)
-    return CALIBRATION["analytic"] * terms["residual"] * terms["gain"], terms
+    return CALIBRATION["analytic"] * terms["propagated"], terms
 
 
 def warning(level: int, share: float | None, estimate: float, amplitude: float) -> list[str]:
@@ -280,7 +327,7 @@ def truncation_terms(scene, model, span: float) -> dict:
     the free part + the forced ones, response_parts), by harmonic balance: its mean moves x by mean/a1 ("mean"); its
     first harmonic is a stiffness error dk, which turns the free vibration at dk/(2p) more, a phase that grows over the
     memory (at most 2 radians), and changes each forced part's gain by dk |H(s)| ("stiffness"); the higher harmonics
-    answer off resonance, rest/a1 ("harmonics"). The free vibration decays as e^(-mu t/2) and dk with it as
+    answer at 2p, 3p, ... with the gain 1/|a1 - (2p)^2| ~ 1/(3 a1) at most, rest/(3 a1) ("harmonics"). The free vibration decays as e^(-mu t/2) and dk with it as
     e^(-k mu t/2), k the exponent of dk's growth with the amplitude (dk at A and at the forced parts + half the free
     one): its phase stops growing after 2/(max(k, 1) mu)."""
     from .models import ExactModel
@@ -302,8 +349,9 @@ def truncation_terms(scene, model, span: float) -> dict:
     drift = free * min(2.0, stiffness / (2.0 * p) * memory)
     for a, s in forced:
         drift += a * min(2.0, stiffness * abs(linear_gain(a1, parts["mu_eff"], s)))
-    return {"truncation": mean / a1 + drift + rest / a1, "mean": mean / a1, "stiffness": drift,
-            "harmonics": rest / a1, "amplitude": abs(parts["x_s"]) + amplitude}
+    harmonics = rest / (3.0 * a1)  # the second harmonic's gain 1/|a1 - (2 p)^2| ~ 1/(3 a1), the higher ones' less
+    return {"truncation": mean / a1 + drift + harmonics, "mean": mean / a1, "stiffness": drift,
+            "harmonics": harmonics, "amplitude": abs(parts["x_s"]) + amplitude}
 
 
 def _result(value: float, amplitude: float, terms: dict) -> dict:

@@ -35,7 +35,7 @@ def chosen(scene, tolerance, library):
 
 @pytest.mark.parametrize("tolerance", [1e-3, 1e-10])
 def test_the_paper_scene_gets_a_rung_whose_measured_error_meets_the_tolerance(tolerance, library):
-    """1e-3: the averaged slow flow (its estimate 4e-3) does not meet it, the analytic solution (7e-8) does; 1e-10: only
+    """1e-3: the averaged slow flow (its estimate 4e-3) does not meet it, the analytic solution (1e-8) does; 1e-10: only
     the exact model at a tight rtol. The measured error against DOP853 at rtol 1e-12 must meet the tolerance too."""
     plant, settings, log = chosen(Scene(), tolerance, library)
     if tolerance == 1e-3:
