@@ -300,3 +300,27 @@ def test_fmi_versions_are_measured_side_by_side_and_printed(quick):
     assert cs["met"] == (cs["fmi3_over_fmi2"] <= cs["limit"] == 1.1)
     assert me["me_over_cs"] == pytest.approx(me["per_output_s"]["me_cvode"] / me["per_output_s"]["cs"])
     assert "FMI 3 CS / FMI 2 CS per output" in stdout and "ME (FMPy CVode) / CS (FMPy) per output" in stdout
+
+
+def test_auto_against_the_oracle_is_recorded_and_printed(quick):
+    """bench's quick form of the auto campaign (vibrofmu.analyses.error_calibration.auto_campaign): per pair every
+    candidate of auto is measured, the oracle is the cheapest one that met the tolerance (recomputed here), auto's
+    cost ratio is its choice's cost over the oracle's; the table is printed."""
+    from vibromodel.auto import candidates
+
+    summary, stdout, _, _ = quick
+    record = summary["auto"]
+    pairs = [r for r in record["rows"] if "met" in r]
+    assert len(record["rows"]) == bench.AUTO_PAIRS_QUICK and record["summary"]["pairs"] == len(pairs)
+    for row in pairs:
+        assert len(row["candidates"]) == len(candidates(Settings()))
+        met = [c for c in row["candidates"] if c.get("met")]
+        for cost in ("run", "total"):
+            oracle = min(met, key=lambda c: c[cost])["candidate"] if met else None
+            assert row[f"oracle_{cost}"] == oracle
+        mine = next((c for c in row["candidates"] if c["candidate"] == row["chosen"]), None)
+        if mine is not None and met:
+            best = min(c["run"] for c in met)
+            assert row["cost_ratio_run"] == pytest.approx(mine["run"] / max(best, 1e-9))
+            assert row["met"] == mine["met"]
+    assert "fidelity auto against the oracle" in stdout and "doStep loop" in stdout

@@ -8,8 +8,9 @@
   communication points, x_ref from the compiled exact plant at rtol 1e-12 (in-process, fast). Counts: the estimate
   bounds the measured error (>= 99 % wanted), within 100x of it (>= 90 % wanted).
 
-Command line: python -m vibrofmu.analyses.error_calibration grid FMU | campaign RUNG [n] [seed]
-(RUNG: averaged, analytic, exact, rk4, polynomial; prints progress on stderr and JSON on stdout).
+Command line: python -m vibrofmu.analyses.error_calibration grid FMU | campaign RUNG [n] [seed] [FILE] | auto [n]
+[seed] (RUNG: exact, rk4, polynomial, polynomial-paper, averaged, analytic; prints progress on stderr and JSON on
+stdout, or the campaign's to FILE, rewritten every 25 scenes).
 """
 from __future__ import annotations
 
@@ -18,6 +19,7 @@ import math
 import sys
 import tempfile
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -141,8 +143,10 @@ def _settings(rung: str, rng: np.random.Generator) -> Settings:
     return Settings(**extras)
 
 
-def campaign(rung: str, n: int = 1000, seed: int = 0, h: float = 0.1, progress=None) -> dict:
-    """The rung's estimate against its measured error over n random scenes (module docstring)."""
+def campaign(rung: str, n: int = 1000, seed: int = 0, h: float = 0.1, progress=None, checkpoint=None) -> dict:
+    """The rung's estimate against its measured error over n random scenes (module docstring); checkpoint(result)
+    is called with the result so far every 25 scenes (the command line writes it to its file: a campaign stopped
+    early keeps the scenes it measured)."""
     library, rows = campaign_kernel(), []
     rng = np.random.default_rng(seed)
     started = time.perf_counter()
@@ -168,8 +172,11 @@ def campaign(rung: str, n: int = 1000, seed: int = 0, h: float = 0.1, progress=N
                      "terms": plant.error_estimate.get("terms", {}),
                      "exact_stopped": exact_stop is not None, "scene": scene.as_dict(),
                      "settings": {"rtol": settings.rtol, "max_step": settings.max_step}})
-        if progress and len(rows) % 25 == 0:
-            progress(f"{rung}: {len(rows)}/{n} scenes, {time.perf_counter() - started:.0f} s")
+        if len(rows) % 25 == 0:
+            if progress:
+                progress(f"{rung}: {len(rows)}/{n} scenes, {time.perf_counter() - started:.0f} s")
+            if checkpoint:
+                checkpoint({"rung": rung, "seed": seed, "rows": rows, "summary": summary(rows)})
     return {"rung": rung, "seed": seed, "rows": rows, "summary": summary(rows)}
 
 
@@ -328,16 +335,23 @@ def _percent(share: float) -> str:
     return f"{100.0 * share:.1f} %"
 
 
+def _ratio(value: float) -> str:
+    return f"{value:.0f}" if 100.0 <= value < 1e5 else f"{value:.2g}"
+
+
+TABLE_ORDER = ("exact", "rk4", "polynomial", "polynomial-paper", "averaged", "analytic")  # by fidelity
+
+
 def calibration_table(results: list[dict]) -> list[str]:
     """Markdown rows of the campaigns' summaries (campaign's output), in RUNGS order."""
-    order = list(RUNGS)
+    order = list(TABLE_ORDER)
     lines = ["| rung | scenes (seed) | estimated | bounded | within 100× | estimate / measured: min, median, max |",
              "|---|---|---|---|---|---|"]
     for r in sorted(results, key=lambda r: (order.index(r["rung"]) if r["rung"] in order else len(order), r["seed"])):
         s = r["summary"]
         lines.append(f"| {RUNG_LABELS.get(r['rung'], r['rung'])} | {s['scenes']:,} ({r['seed']}) | {s['estimated']:,} | "
                      f"{_percent(s['bounded_share'])} | {_percent(s['within_100x_share'])} | "
-                     f"{s['ratio_min']:.2g}, {s['ratio_median']:.2g}, {s['ratio_max']:.2g} |")
+                     f"{_ratio(s['ratio_min'])}, {_ratio(s['ratio_median'])}, {_ratio(s['ratio_max'])} |")
     return lines
 
 
@@ -366,11 +380,21 @@ def main(argv: list[str]) -> None:
 
     if argv[:1] == ["grid"] and len(argv) == 2:
         print(json.dumps(slow_ac_grid(argv[1], progress=progress), indent=1))
-    elif argv[:1] == ["campaign"] and len(argv) in (2, 3, 4) and argv[1] in RUNGS:
+    elif argv[:1] == ["campaign"] and len(argv) in (2, 3, 4, 5) and argv[1] in RUNGS:
         n = int(argv[2]) if len(argv) > 2 else 1000
         seed = int(argv[3]) if len(argv) > 3 else 0
-        result = campaign(argv[1], n, seed, progress=progress)
-        print(json.dumps(result, indent=1))
+        out = Path(argv[4]) if len(argv) > 4 else None
+
+        def write(result):  # to a temporary name, then renamed: the file is always a whole result
+            partial = out.with_name(out.name + ".partial")
+            partial.write_text(json.dumps(result, indent=1))
+            partial.replace(out)
+
+        result = campaign(argv[1], n, seed, progress=progress, checkpoint=write if out else None)
+        if out:
+            write(result)
+        else:
+            print(json.dumps(result, indent=1))
         progress(json.dumps(result["summary"]))
     elif argv[:1] == ["auto"] and len(argv) in (1, 2, 3):
         n = int(argv[1]) if len(argv) > 1 else 500
@@ -380,7 +404,7 @@ def main(argv: list[str]) -> None:
         progress(json.dumps(result["summary"]))
     else:
         print(f"error: usage: python -m vibrofmu.analyses.error_calibration grid FMU | campaign "
-              f"{{{','.join(RUNGS)}}} [n] [seed] | auto [n] [seed]", file=sys.stderr)
+              f"{{{','.join(RUNGS)}}} [n] [seed] [FILE] | auto [n] [seed]", file=sys.stderr)
         raise SystemExit(2)
 
 

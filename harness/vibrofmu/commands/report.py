@@ -46,6 +46,7 @@ FROM_CHECKED = ("oafm", "stability")
 # The studies each generated block reads: a block is rewritten only when every one of them completed (the speed block
 # gathers the three summaries; from two of them it would silently lose the bench's lines).
 BLOCK_STUDIES = {"oafm": {"oafm"}, "stability": {"stability"}, "speed": {"oafm", "stability", "bench"}}
+NEEDS_FMUS = ("accuracy", "ssp", "ssp_orderings", "container")  # the blocks that run the FMUs themselves
 
 
 def run_studies(fmu_dir: Path, work_dir: Path, quick: bool, failed: set | None = None,
@@ -126,7 +127,9 @@ def run(args) -> int:
             print(f"error: --from {', '.join(args.sources)}: no summary for the block{'s' * (len(missing) > 1)} "
                   f"asked for ({text})", file=sys.stderr)
             return 2
-    fmu_dir = built_all(Path(args.fmu_dir or paths.build_dir()))
+    fmu_dir = Path(args.fmu_dir or paths.build_dir())
+    if any(name in NEEDS_FMUS for name in names) or (not sources and any(name in BLOCK_STUDIES for name in names)):
+        fmu_dir = built_all(fmu_dir)  # the blocks from summaries alone (--from) run no FMU
     failed = set()  # the studies that did not complete
     with tempfile.TemporaryDirectory() as work_dir:
         if not sources and any(name in FROM_SUMMARIES for name in names):
