@@ -144,21 +144,23 @@ def test_analytic_estimate_is_its_propagated_residual_and_bounds_the_error(value
 @pytest.mark.slow
 @pytest.mark.parametrize("rung", ["exact", "rk4", "polynomial", "polynomial-paper", "averaged", "analytic"])
 def test_reduced_calibration_campaign(rung):
-    """The calibration campaign (vibrofmu.analyses.error_calibration) at 100 scenes, seed 3: deterministic on one
-    machine, so the acceptance's shares hold for these scenes as for the documented 1,000: the estimate bounds the
-    measured error in >= 99 % and is within 100x of it in >= 90 %."""
+    """The calibration campaign (vibrofmu.analyses.error_calibration) reduced to the first 200 scenes of the documented
+    one (seed 7; docs/rungs.md, the calibration block): deterministic on one machine, so the acceptance's shares must
+    hold for them: the estimate bounds the measured error in >= 99 % and is within 100x of it in >= 90 %. (At 100
+    scenes one miss in 99 estimated is already below 99 %.)"""
     from vibrofmu.analyses.error_calibration import campaign
 
-    summary = campaign(rung, 100, 3)["summary"]
-    assert summary["estimated"] >= 40  # the analytic rung refuses about half of the random scenes
+    summary = campaign(rung, 200, 7)["summary"]
+    assert summary["estimated"] >= 100  # the analytic rung refuses about half of the random scenes
     assert summary["bounded_share"] >= 0.99 and summary["within_100x_share"] >= 0.9, summary
 
 
 @pytest.mark.slow
 def test_reduced_auto_campaign():
-    """Fidelity auto over 30 random (scene, tolerance) pairs: its choice meets the tolerance in >= 99 % of them (its
-    cost against the oracle is a timing: vibrofmu bench prints it)."""
+    """Fidelity auto over the first 30 (scene, tolerance) pairs of the documented auto campaign (seed 7): its choice
+    meets the tolerance in >= 99 % of them, i.e. in all (its cost against the oracle is a timing: vibrofmu bench
+    prints it, and docs/rungs.md's auto block)."""
     from vibrofmu.analyses.error_calibration import auto_campaign
 
-    summary = auto_campaign(30, 3)["summary"]
+    summary = auto_campaign(30, 7)["summary"]
     assert summary["pairs"] == 30 and summary["met_share"] >= 0.99, summary
