@@ -164,7 +164,7 @@ REGISTRY: dict[Fidelity, FidelityEntry] = {e.level: e for e in (
     FidelityEntry(Fidelity.ANALYTIC, "analytic", "4 OAFM analytic", ExactModel, False, CModel.EXACT,
                   open_loop=_analytic_solution, evaluator=Evaluator.OAFM, check_settings=_check_oafm,
                   work=_analytic_work, uses_rtol=False, native_refusal="the native FMU cannot fit the OAFM solution",
-                  ladder=True, ladder_limit=0.5,  # analytic.check_fit warns with the same estimate, max|R|/a1
+                  ladder=True, ladder_limit=0.5,  # analytic.check_fit warns and refuses by max|R|/a1
                   error_estimate=error_estimates.analytic_plant_estimate),
 )}
 
