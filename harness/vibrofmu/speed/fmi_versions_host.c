@@ -60,67 +60,86 @@ static void logger3(fmi3InstanceEnvironment e, fmi3Status s, fmi3String c, fmi3S
 
 static double point(long n, double step, double stop) { return fmin((double)n * step, stop); }
 
+/* The FMI calls each run uses, loaded by name into a table of function pointers (one list per version) */
+#define FMI2_CALLS(X)                                                                                          \
+    X(fmi2Instantiate) X(fmi2SetupExperiment) X(fmi2EnterInitializationMode) X(fmi2ExitInitializationMode)    \
+    X(fmi2DoStep) X(fmi2GetReal) X(fmi2FreeInstance)
+#define FMI3_CALLS(X)                                                                                          \
+    X(fmi3InstantiateCoSimulation) X(fmi3EnterInitializationMode) X(fmi3ExitInitializationMode)               \
+    X(fmi3EnterEventMode) X(fmi3UpdateDiscreteStates) X(fmi3EnterStepMode) X(fmi3DoStep) X(fmi3GetFloat64)    \
+    X(fmi3FreeInstance)
+#define DECLARE(name) name##TYPE *name;
+#define LOAD(name) api.name = (name##TYPE *)symbol(lib, #name);
+typedef struct { FMI2_CALLS(DECLARE) } Fmi2;
+typedef struct { FMI3_CALLS(DECLARE) } Fmi3;
+
+static Fmi2 load2(void *lib)
+{
+    Fmi2 api;
+    FMI2_CALLS(LOAD)
+    return api;
+}
+
+static Fmi3 load3(void *lib)
+{
+    Fmi3 api;
+    FMI3_CALLS(LOAD)
+    return api;
+}
+
 static double run2(void *lib, const char *guid, double stop, double step, unsigned xvr, long *outputs)
 {
-    fmi2InstantiateTYPE *instantiate = symbol(lib, "fmi2Instantiate");
-    fmi2SetupExperimentTYPE *setup = symbol(lib, "fmi2SetupExperiment");
-    fmi2EnterInitializationModeTYPE *enter = symbol(lib, "fmi2EnterInitializationMode");
-    fmi2ExitInitializationModeTYPE *exit_init = symbol(lib, "fmi2ExitInitializationMode");
-    fmi2DoStepTYPE *do_step = symbol(lib, "fmi2DoStep");
-    fmi2GetRealTYPE *get_real = symbol(lib, "fmi2GetReal");
-    fmi2FreeInstanceTYPE *free_instance = symbol(lib, "fmi2FreeInstance");
+    const Fmi2 f = load2(lib);
     fmi2CallbackFunctions cb = {logger2, calloc, free, NULL, NULL};
-    fmi2Component c = instantiate("timing", fmi2CoSimulation, guid, "file:///tmp", &cb, fmi2False, fmi2False);
+    fmi2Component c = f.fmi2Instantiate("timing", fmi2CoSimulation, guid, "file:///tmp", &cb, fmi2False, fmi2False);
     if (c == NULL) exit(2);
-    CHECK(setup(c, fmi2False, 0.0, 0.0, fmi2True, stop));
-    CHECK(enter(c));
-    CHECK(exit_init(c));
+    CHECK(f.fmi2SetupExperiment(c, fmi2False, 0.0, 0.0, fmi2True, stop));
+    CHECK(f.fmi2EnterInitializationMode(c));
+    CHECK(f.fmi2ExitInitializationMode(c));
     double x, t = 0.0, sum = 0.0, started = now();
     long n = 0;
     while (t < stop && fabs(t - stop) > 1e-9 * stop) {
         double next = point(n + 1, step, stop);
-        CHECK(do_step(c, t, next - t, fmi2True));
-        CHECK(get_real(c, &xvr, 1, &x));
+        CHECK(f.fmi2DoStep(c, t, next - t, fmi2True));
+        CHECK(f.fmi2GetReal(c, &xvr, 1, &x));
         sum += x;
         t = next;
         n++;
     }
     double seconds = now() - started;
-    free_instance(c);
+    f.fmi2FreeInstance(c);
     *outputs = n;
     return isfinite(sum) ? seconds : NAN;
+}
+
+/* fmi3UpdateDiscreteStates then fmi3EnterStepMode: the event mode's round, the outputs it reports dropped */
+static void update_and_step(const Fmi3 *f, fmi3Instance c)
+{
+    fmi3Boolean need, terminate, nominals, values, defined;
+    fmi3Float64 next_event;
+    CHECK(f->fmi3UpdateDiscreteStates(c, &need, &terminate, &nominals, &values, &defined, &next_event));
+    CHECK(f->fmi3EnterStepMode(c));
 }
 
 static double run3(void *lib, const char *guid, double stop, double step, unsigned xvr, int early, long *outputs,
                    long *events)
 {
-    fmi3InstantiateCoSimulationTYPE *instantiate = symbol(lib, "fmi3InstantiateCoSimulation");
-    fmi3EnterInitializationModeTYPE *enter = symbol(lib, "fmi3EnterInitializationMode");
-    fmi3ExitInitializationModeTYPE *exit_init = symbol(lib, "fmi3ExitInitializationMode");
-    fmi3EnterEventModeTYPE *enter_event = symbol(lib, "fmi3EnterEventMode");
-    fmi3UpdateDiscreteStatesTYPE *update = symbol(lib, "fmi3UpdateDiscreteStates");
-    fmi3EnterStepModeTYPE *enter_step = symbol(lib, "fmi3EnterStepMode");
-    fmi3DoStepTYPE *do_step = symbol(lib, "fmi3DoStep");
-    fmi3GetFloat64TYPE *get_float = symbol(lib, "fmi3GetFloat64");
-    fmi3FreeInstanceTYPE *free_instance = symbol(lib, "fmi3FreeInstance");
-    fmi3Instance c = instantiate("timing", guid, "/tmp", fmi3False, fmi3False, early, early, NULL, 0, NULL, logger3,
-                                 NULL);
+    const Fmi3 f = load3(lib);
+    fmi3Instance c = f.fmi3InstantiateCoSimulation("timing", guid, "/tmp", fmi3False, fmi3False, early, early, NULL,
+                                                   0, NULL, logger3, NULL);
     if (c == NULL) exit(2);
-    fmi3Boolean need, terminate, nominals, values, defined, event, early_return;
-    fmi3Float64 next_event, last;
-    CHECK(enter(c, fmi3False, 0.0, 0.0, fmi3True, stop));
-    CHECK(exit_init(c));
-    if (early) {
-        CHECK(update(c, &need, &terminate, &nominals, &values, &defined, &next_event));
-        CHECK(enter_step(c));
-    }
+    fmi3Boolean terminate, event, early_return;
+    fmi3Float64 last;
+    CHECK(f.fmi3EnterInitializationMode(c, fmi3False, 0.0, 0.0, fmi3True, stop));
+    CHECK(f.fmi3ExitInitializationMode(c));
+    if (early) update_and_step(&f, c);
     double x, t = 0.0, sum = 0.0, started = now();
     long n = 0;
     *events = 0;
     while (t < stop && fabs(t - stop) > 1e-9 * stop) {
         double next = point(n + 1, step, stop);
-        CHECK(do_step(c, t, next - t, fmi3True, &event, &terminate, &early_return, &last));
-        CHECK(get_float(c, &xvr, 1, &x, 1));
+        CHECK(f.fmi3DoStep(c, t, next - t, fmi3True, &event, &terminate, &early_return, &last));
+        CHECK(f.fmi3GetFloat64(c, &xvr, 1, &x, 1));
         sum += x;
         if (early_return) {
             t = last;
@@ -130,13 +149,12 @@ static double run3(void *lib, const char *guid, double stop, double step, unsign
             n++;
         }
         if (event) {
-            CHECK(enter_event(c));
-            CHECK(update(c, &need, &terminate, &nominals, &values, &defined, &next_event));
-            CHECK(enter_step(c));
+            CHECK(f.fmi3EnterEventMode(c));
+            update_and_step(&f, c);
         }
     }
     double seconds = now() - started;
-    free_instance(c);
+    f.fmi3FreeInstance(c);
     *outputs = n;
     return isfinite(sum) ? seconds : NAN;
 }
