@@ -33,16 +33,41 @@ def new(request, which, stop_time=None):
 
     name, values, output, input_ = FMUS[which]
     instance = FmuInstance(request.getfixturevalue(f"{name}_fmu"), unzip_dir=request.getfixturevalue(f"{name}_unzipped"))
+    initialise(instance, values, stop_time)
+    return instance, values, output, input_
+
+
+def initialise(instance, values, stop_time=None):
+    """setupExperiment from 0, enterInitializationMode and the start values."""
     instance.fmu.setupExperiment(startTime=0.0, stopTime=stop_time)
     instance.fmu.enterInitializationMode()
     instance.set(values)
-    return instance, values, output, input_
 
 
 def last_error(instance):
     errors = instance.log.errors()
     assert errors, "fmi2Error without a log message"
     return errors[-1]
+
+
+def assert_refused(instance, call, *args, says=(), unchanged=None):
+    """call(*args) ends in fmi2Error with a log line holding each of `says` (and leaves the output `unchanged`,
+    where named: nothing stepped)."""
+    before = None if unchanged is None else instance.fmu.getReal(instance.value_references([unchanged]))
+    assert status(call, *args) == ERROR
+    message = last_error(instance)
+    assert all(words in message for words in says), message
+    if unchanged is not None:
+        assert instance.fmu.getReal(instance.value_references([unchanged])) == before
+
+
+def wrong_references(instance, kind, causality=None):
+    """A value reference no variable has, and one of a variable not of type `kind` (nor String; of `causality`
+    where given)."""
+    variables = instance.variables.values()
+    return (max(v.valueReference for v in variables) + 1000,
+            next(v.valueReference for v in variables
+                 if v.type not in (kind, "String") and causality in (None, v.causality)))
 
 
 def steps(instance, n, h=0.1, t0=0.0):
@@ -53,9 +78,7 @@ def steps(instance, n, h=0.1, t0=0.0):
 def assert_reset_runs(instance, values, output):
     """fmi2Reset leaves the error state; the instance then initialises and steps again with finite output."""
     instance.fmu.reset()
-    instance.fmu.setupExperiment(startTime=0.0)
-    instance.fmu.enterInitializationMode()
-    instance.set(values)
+    initialise(instance, values)
     instance.fmu.exitInitializationMode()
     steps(instance, 3)
     assert math.isfinite(instance.fmu.getReal(instance.value_references([output]))[0])
@@ -68,62 +91,49 @@ def test_initialisation_again_after_steps_is_refused(request, which):
     with instance:
         instance.fmu.exitInitializationMode()
         steps(instance, 10)
-        assert status(instance.fmu.enterInitializationMode) == ERROR
-        message = last_error(instance)
-        assert "fmi2EnterInitializationMode" in message and "step mode" in message, message
+        assert_refused(instance, instance.fmu.enterInitializationMode,
+                       says=("fmi2EnterInitializationMode", "step mode"))
         assert status(instance.fmu.exitInitializationMode) == ERROR  # the shim: not after an error
         assert_reset_runs(instance, values, output)
 
 
+# Calls the standard does not allow in a state, each: the state (None: still in initialization mode; else the
+# number of doSteps of 0.1 after fmi2ExitInitializationMode), whether fmi2Terminate came next, the refused call
+# and its arguments, the words its log line must hold, whether the output must stay as it was (nothing stepped).
+REFUSED_CALLS = {
+    "exit_initialisation_twice": (0, False, "exitInitializationMode", (), ("fmi2ExitInitializationMode", "step mode"),
+                                  False),
+    "setup_after_initialisation": (0, False, "setupExperiment", (None, 0.0), ("fmi2SetupExperiment", "step mode"),
+                                   False),
+    "step_before_initialisation": (None, False, "doStep", (0.0, 0.1), ("fmi2DoStep", "initialization mode"), False),
+    # issue 15: doStep after fmi2Terminate returned fmi2OK
+    "step_after_terminate": (2, True, "doStep", (0.2, 0.1), ("fmi2Terminate was called",), True),
+    "terminate_twice": (0, True, "terminate", (), ("fmi2Terminate", "terminated"), False),
+}
+
+
+@pytest.mark.parametrize("case", REFUSED_CALLS)
 @pytest.mark.parametrize("which", FMUS)
-def test_exit_initialisation_twice_and_setup_after_it_are_refused(request, which):
+def test_a_call_out_of_its_state_is_refused(request, which, case):
+    stepped, terminated, call, args, says, unchanged = REFUSED_CALLS[case]
     instance, values, output, _ = new(request, which)
     with instance:
-        instance.fmu.exitInitializationMode()
-        assert status(instance.fmu.exitInitializationMode) == ERROR
-        assert "fmi2ExitInitializationMode" in last_error(instance) and "step mode" in last_error(instance)
-        assert_reset_runs(instance, values, output)
-        assert status(instance.fmu.setupExperiment, None, 0.0) == ERROR
-        assert "fmi2SetupExperiment" in last_error(instance) and "step mode" in last_error(instance)
-
-
-@pytest.mark.parametrize("which", FMUS)
-def test_step_before_initialisation_is_refused(request, which):
-    instance, values, output, _ = new(request, which)
-    with instance:
-        assert status(instance.fmu.doStep, 0.0, 0.1) == ERROR
-        assert "fmi2DoStep" in last_error(instance) and "initialization mode" in last_error(instance)
-        assert_reset_runs(instance, values, output)
-
-
-@pytest.mark.parametrize("which", FMUS)
-def test_step_after_terminate_is_refused(request, which):
-    """Issue 15: doStep after fmi2Terminate returned fmi2OK."""
-    instance, values, output, _ = new(request, which)
-    with instance:
-        instance.fmu.exitInitializationMode()
-        steps(instance, 2)
-        before = instance.fmu.getReal(instance.value_references([output]))
-        instance.fmu.terminate()
-        assert status(instance.fmu.doStep, 0.2, 0.1) == ERROR
-        assert "fmi2Terminate was called" in last_error(instance), last_error(instance)
-        assert instance.fmu.getReal(instance.value_references([output])) == before  # nothing stepped
+        if stepped is not None:
+            instance.fmu.exitInitializationMode()
+            steps(instance, stepped)
+        if terminated:
+            instance.fmu.terminate()
+        assert_refused(instance, getattr(instance.fmu, call), *args, says=says, unchanged=output if unchanged else None)
         assert_reset_runs(instance, values, output)
 
 
-@pytest.mark.parametrize("which", FMUS)
-def test_terminate_twice_and_setting_after_terminate_are_refused(request, which):
+@pytest.mark.parametrize("which", [name for name, (*_, input_) in FMUS.items() if input_ is not None])
+def test_setting_an_input_after_terminate_is_refused(request, which):
     instance, values, output, input_ = new(request, which)
     with instance:
         instance.fmu.exitInitializationMode()
         instance.fmu.terminate()
-        assert status(instance.fmu.terminate) == ERROR
-        assert "fmi2Terminate" in last_error(instance) and "terminated" in last_error(instance)
-        assert_reset_runs(instance, values, output)
-        if input_ is not None:
-            instance.fmu.terminate()
-            assert status(instance.set, {input_: 0.01}) == ERROR
-            assert "terminated state" in last_error(instance)
+        assert_refused(instance, instance.set, {input_: 0.01}, says=("terminated state",))
 
 
 @pytest.mark.parametrize("which", FMUS)
@@ -134,11 +144,8 @@ def test_step_beyond_the_stop_time_is_refused(request, which):
     with instance:
         instance.fmu.exitInitializationMode()
         steps(instance, 3)  # 0.1 * 2 + 0.1 = 0.30000000000000004 > 0.3: within the tolerance
-        before = instance.fmu.getReal(instance.value_references([output]))
-        assert status(instance.fmu.doStep, 0.30000000000000004, 0.1) == ERROR
-        message = last_error(instance)
-        assert "parameter communicationStepSize = 0.1" in message and "stop time 0.3" in message, message
-        assert instance.fmu.getReal(instance.value_references([output])) == before
+        assert_refused(instance, instance.fmu.doStep, 0.30000000000000004, 0.1,
+                       says=("parameter communicationStepSize = 0.1", "stop time 0.3"), unchanged=output)
         if which == "plant_fast":
             assert instance.fast_path_steps() == 3
 
@@ -148,9 +155,7 @@ def test_setting_an_output_is_refused(request, which):
     """Issue 15: setReal on an output before initialisation returned fmi2OK and was ignored."""
     instance, values, output, _ = new(request, which)
     with instance:
-        assert status(instance.set, {output: 0.5}) == ERROR
-        message = last_error(instance)
-        assert f"parameter {output} = 0.5" in message and "output" in message, message
+        assert_refused(instance, instance.set, {output: 0.5}, says=(f"parameter {output} = 0.5", "output"))
         assert_reset_runs(instance, values, output)
 
 
@@ -161,18 +166,13 @@ def test_get_with_unknown_reference_or_wrong_type_is_an_error_not_fatal(request,
     instance, values, output, _ = new(request, which)
     with instance:
         for getter, kind in (("getReal", "Real"), ("getInteger", "Integer"), ("getBoolean", "Boolean")):
-            for vr in (max(v.valueReference for v in instance.variables.values()) + 1000,
-                       next(v.valueReference for v in instance.variables.values() if v.type not in (kind, "String"))):
+            for vr in wrong_references(instance, kind):
                 instance.fmu.exitInitializationMode()
                 steps(instance, 1)
-                assert status(getattr(instance.fmu, getter), [vr]) == ERROR
-                message = last_error(instance)
-                assert f"fmi2G{getter[1:]}" in message and str(vr) in message, message
+                assert_refused(instance, getattr(instance.fmu, getter), [vr], says=(f"fmi2G{getter[1:]}", str(vr)))
                 assert_reset_runs(instance, values, output)
                 instance.fmu.reset()
-                instance.fmu.setupExperiment(startTime=0.0)
-                instance.fmu.enterInitializationMode()
-                instance.set(values)
+                initialise(instance, values)  # for the next reference
 
 
 @pytest.mark.parametrize("which", ["plant_fast", "controller", "closed_loop"])
@@ -182,8 +182,8 @@ def test_get_before_initialisation_is_refused(request, which):
     name, values, output, _ = FMUS[which]
     with FmuInstance(request.getfixturevalue(f"{name}_fmu"),
                      unzip_dir=request.getfixturevalue(f"{name}_unzipped")) as instance:
-        assert status(instance.fmu.getReal, instance.value_references([output])) == ERROR
-        assert "instantiated state" in last_error(instance)
+        assert_refused(instance, instance.fmu.getReal, instance.value_references([output]),
+                       says=("instantiated state",))
         assert_reset_runs(instance, values, output)
 
 
@@ -193,14 +193,10 @@ def test_set_with_unknown_reference_or_wrong_type_is_an_error_not_fatal(request,
     with instance:
         for setter, kind, value in (("setReal", "Real", 1.0), ("setInteger", "Integer", 1),
                                     ("setBoolean", "Boolean", True)):
-            for vr in (max(v.valueReference for v in instance.variables.values()) + 1000,
-                       next(v.valueReference for v in instance.variables.values()
-                            if v.type not in (kind, "String") and v.causality == "parameter")):
+            for vr in wrong_references(instance, kind, causality="parameter"):
                 assert status(getattr(instance.fmu, setter), [vr], [value]) == ERROR
                 message = last_error(instance)
                 assert str(vr) in message or "not of type" in message, message
                 assert_reset_runs(instance, values, output)
                 instance.fmu.reset()
-                instance.fmu.setupExperiment(startTime=0.0)
-                instance.fmu.enterInitializationMode()
-                instance.set(values)
+                initialise(instance, values)  # for the next reference
