@@ -36,16 +36,10 @@ CONNECTIONS = (  # (source, output, target, input) in the order the container co
     ("plant", "v", "controller", "v"),
     ("controller", "U", "plant", "U"),
 )
-# container outputs: (name, component, variable, description); the names of the monolithic closed-loop FMU
-OUTPUTS = (
-    ("x", "plant", "x", "plant displacement x (dimensionless)"),
-    ("v", "plant", "v", "plant velocity x' (dimensionless)"),
-    ("x_ref", "reference", "x", "reference x~ (the plant FMU at fidelity 4: OAFM analytic solution)"),
-    ("U", "controller", "U", "control force U"),
-    ("e1", "controller", "e1", "tracking error e1 = x - x~"),
-    ("e2", "controller", "e2", "filtered error e2 = x' - x~' + c e1"),
-    ("V", "controller", "V", "Lyapunov function V"),
-)
+# container outputs: (name, component, variable), the names of the monolithic closed-loop FMU; each output's
+# description is its component variable's, with the component named
+OUTPUTS = (("x", "plant", "x"), ("v", "plant", "v"), ("x_ref", "reference", "x"), ("U", "controller", "U"),
+           ("e1", "controller", "e1"), ("e2", "controller", "e2"), ("V", "controller", "V"))
 # container parameters: (name, type, start, [(component, variable)], description)
 PARAMETERS = (
     ("x_start", "Real", PLANT_START["x_start"], [("plant", "x_start")], "plant initial displacement"),
@@ -85,7 +79,8 @@ def build_container(fmu_dir: Path, out: Path, step: float = DEFAULT_STEP) -> Pat
                               start=repr(start) if kind == "Real" else str(start), description=description)
             model_variables.append(v)
             mappings[v] = [(components[c], variables[c][var]) for c, var in targets]
-        for name, component, variable, description in OUTPUTS:
+        for name, component, variable in OUTPUTS:
+            description = f"{variables[component][variable].description} (the {component} FMU's {variable})"
             v = ModelVariable(type="Real", variability="continuous", causality="output", initial="calculated",
                               name=name, description=description)
             model_variables.append(v)
