@@ -21,7 +21,6 @@ from vibromodel.compiled import load_library
 from vibromodel.compiled_loop import make_closed_loop
 from vibromodel.control import ESTIMATE_NAMES
 from vibromodel.fidelities import description, integrated
-from vibromodel.parameters import Scene, scene_names
 from vibromodel.plant import DEFAULT_EXPERIMENT, Settings
 from vibromodel.tracking import ReferenceSettings
 
@@ -38,11 +37,7 @@ class HertzEAClosedLoop(fast_path.CompiledModelSlave, StatusSlave):
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
         scene, settings, reference = ERRATA_SCENE, Settings(), ReferenceSettings()
-        for name in scene_names():
-            self._parameter(Real, name, getattr(scene, name))
-        self._parameter(Integer, "fidelity", int(settings.fidelity),
-                        f"plant: {description(integrated())}")  # "plant: 0 exact Eq. 3, 1 polynomial Eq. 7, ..."
-        self._solver_parameters(settings)
+        self._plant_parameters(scene, settings, f"plant: {description(integrated())}")  # "plant: 0 exact Eq. 3, ..."
         self._parameter(Integer, "reference", int(reference.kind),
                         "0 OAFM analytic solution, 1 the corrected closed form x0 + X_f cos(w t - psi), 2 the same + tones "
                         "(persistent excitation)")
@@ -55,10 +50,7 @@ class HertzEAClosedLoop(fast_path.CompiledModelSlave, StatusSlave):
 
     def _make_model(self):
         """The closed loop of the current parameters and experiment; raises ParameterError for bad ones."""
-        scene = Scene(**{name: float(getattr(self, name)) for name in scene_names()})
-        rtol = self.rtol if self.experiment_tolerance is None else self.experiment_tolerance
-        settings = Settings(fidelity=int(self.fidelity), solver=int(self.solver), rtol=float(rtol),
-                            max_step=float(self.max_step), kernel=int(self.kernel))
+        scene, settings = self._plant_values()
         law, gains, estimates = self._controller_settings()
         reference = ReferenceSettings(kind=int(self.reference), x_start=float(self.x_ref_start),
                                       v_start=float(self.v_ref_start))

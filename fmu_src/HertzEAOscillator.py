@@ -59,20 +59,13 @@ class HertzEAOscillator(fast_path.FastPathSwitch, StatusSlave):
 
     x, v, a, F_contact, F_electrostatic = (_output(i) for i in range(len(OUTPUTS)))
     in_contact = _output(None)
-    _model = None
-    _kernel = None  # the model when it is a CompiledPlant
-    _shim = None  # the status shim's attach function (fast_path.shim_attach), if any
 
     def __init__(self, **kwargs):
         self._values = {}  # outputs and input without a compiled plant
         super().__init__(**kwargs)
         self._shim = fast_path.shim_attach(self.resources, type(self).__name__)
         scene, settings, oafm = Scene(), Settings(), OafmSettings()
-        for name in scene_names():
-            self._parameter(Real, name, getattr(scene, name))
-        self._parameter(Integer, "fidelity", int(settings.fidelity),  # "0 exact Eq. 3, 1 polynomial Eq. 7, ..."
-                        description())
-        self._solver_parameters(settings)
+        self._plant_parameters(scene, settings, description())  # "0 exact Eq. 3, 1 polynomial Eq. 7, ..."
         self._parameter(Integer, "kernel", int(settings.kernel),
                         "0 compiled C kernel (fidelities 0-2 with both solvers; 3 and 4: their per-output evaluation; "
                         "pure Python where it is missing), 1 pure Python")
@@ -94,12 +87,8 @@ class HertzEAOscillator(fast_path.FastPathSwitch, StatusSlave):
 
     def _make_model(self):
         """The plant of the current parameters and experiment; raises ParameterError for bad ones."""
-        scene = Scene(**{name: float(getattr(self, name)) for name in scene_names()})
-        rtol = self.rtol if self.experiment_tolerance is None else self.experiment_tolerance
-        oafm = OafmSettings(order=int(self.oafm_order), tau_star=float(self.tau_star),
-                            tau_end=float(self.oafm_tau_end))
-        settings = Settings(fidelity=int(self.fidelity), solver=int(self.solver), rtol=float(rtol),
-                            max_step=float(self.max_step), kernel=int(self.kernel), oafm=oafm)
+        oafm = OafmSettings(order=int(self.oafm_order), tau_star=float(self.tau_star), tau_end=float(self.oafm_tau_end))
+        scene, settings = self._plant_values(oafm=oafm)
         return make_plant(scene, settings, t0=float(self.start_time), stop_time=self.stop_time,
                           cache_dirs=self._cache_dirs(), library=self._library())
 
@@ -118,25 +107,25 @@ class HertzEAOscillator(fast_path.FastPathSwitch, StatusSlave):
         if self._kernel is not None:
             self._kernel.next_input = float(value)
 
-    @property
-    def model(self):
-        return self._model
-
-    @model.setter
+    @fast_path.FastPathSwitch.model.setter
     def model(self, model):
-        """A new model: a compiled one takes over the outputs and input and is handed to the shim."""
-        self._model = model
+        """A new model: its error estimate published; a compiled one takes over the outputs and input (below)."""
+        fast_path.FastPathSwitch.model.fset(self, model)
         estimate = getattr(model, "error_estimate", None)
         value = NO_ESTIMATE if estimate is None else estimate["estimate"]
         self.error_estimate = value if math.isfinite(value) else NO_ESTIMATE
-        self._kernel = model if isinstance(model, (CompiledPlant, CompiledOpenLoopPlant)) else None
-        if self._kernel is not None:
-            for name in (*OUTPUTS, "in_contact", "U"):
-                setattr(self, name, self._values[name])  # into the kernel's memory
-        if self._shim is not None:
-            references = {var.name: vr for vr, var in self.vars.items()}
-            fast_path.attach(self._shim, self._kernel, {references[name]: i for i, name in enumerate(OUTPUTS)},
-                             {references["in_contact"]: 0})
+
+    @staticmethod
+    def _compiled(model):
+        return model if isinstance(model, (CompiledPlant, CompiledOpenLoopPlant)) else None
+
+    def _into_kernel(self, kernel):
+        for name in (*OUTPUTS, "in_contact", "U"):
+            setattr(self, name, self._values[name])  # through the properties, into the kernel's memory
+
+    def _attach(self, kernel, references):
+        fast_path.attach(self._shim, kernel, {references[name]: i for i, name in enumerate(OUTPUTS)},
+                         {references["in_contact"]: 0})
 
     def _start(self):
         """exitInitializationMode: the first outputs are those at the start time without input (U = 0: no step has

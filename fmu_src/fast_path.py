@@ -109,6 +109,23 @@ class FastPathSwitch:
     change of those (initialisation, state restore, error)."""
 
     _kernel = None  # the model when it is compiled
+    _model = None
+    _shim = None  # the status shim's attach function (shim_attach), if any
+
+    @property
+    def model(self):
+        return self._model
+
+    @model.setter
+    def model(self, model):
+        """A new model: a compiled one (`_compiled`) takes over the variables kept in its memory (`_into_kernel`);
+        the shim's fast path gets it, or is detached (`_attach`, given the value references by name)."""
+        self._model = model
+        self._kernel = self._compiled(model)
+        if self._kernel is not None:
+            self._into_kernel(self._kernel)
+        if self._shim is not None:
+            self._attach(self._kernel, {var.name: vr for vr, var in self.vars.items()})
 
     def _enable_fast_path(self):
         if self._kernel is not None:
@@ -136,8 +153,6 @@ class CompiledModelSlave(FastPathSwitch):
     MEMORY: tuple[str, ...] = ()
     FAST_OUTPUTS: tuple[str, ...] = ()
     FAST_INPUTS: tuple[str, ...] = ()  # set in C when the model has an `inputs_function` (0: done)
-    _model = None
-    _shim = None  # the status shim's attach function (shim_attach), if any
 
     def __init__(self, **kwargs):
         self._values = {}
@@ -145,24 +160,18 @@ class CompiledModelSlave(FastPathSwitch):
         self._shim = shim_attach(self.resources, type(self).__name__)
         self._shim_inputs = shim_inputs(self.resources, type(self).__name__) if self.FAST_INPUTS else None
 
-    @property
-    def model(self):
-        return self._model
+    @staticmethod
+    def _compiled(model):
+        return model if hasattr(model, "step_function") else None
 
-    @model.setter
-    def model(self, model):
-        self._model = model
-        self._kernel = model if hasattr(model, "step_function") else None
-        kernel = self._kernel
-        if kernel is not None:
-            for name in self.MEMORY:
-                kernel.set_value(name, self._values[name])  # into the kernel's memory
-        if self._shim is None:
-            return
+    def _into_kernel(self, kernel):
+        for name in self.MEMORY:
+            kernel.set_value(name, self._values[name])
+
+    def _attach(self, kernel, references):
         if kernel is None:
             attach_addresses(self._shim, None, None, None, {}, {})
             return
-        references = {var.name: vr for vr, var in self.vars.items()}
         attached = attach_addresses(self._shim, kernel.step_function, kernel.address, kernel.enabled_address,
                                     {references[name]: kernel.variable_address(name) for name in self.FAST_OUTPUTS},
                                     {})

@@ -19,7 +19,8 @@ from vibromodel import snapshot
 from vibromodel.control import ERRATA_INITIAL_ESTIMATES, ESTIMATE_NAMES, GAIN_NAMES, Gains, Law
 from vibromodel.integrate import IntegrationError
 from vibromodel.solvers import RULE_TEXT
-from vibromodel.parameters import NonFiniteOutput, ParameterError, check_finite, check_parameters, scene_names
+from vibromodel.parameters import NonFiniteOutput, ParameterError, Scene, check_finite, check_parameters, scene_names
+from vibromodel.settings import Settings
 
 STATUS_OK, STATUS_ERROR = 0, 3
 # A KeyboardInterrupt (the host's SIGINT, Ctrl-C, delivered while the slave's Python code ran) is never swallowed:
@@ -231,11 +232,23 @@ class StatusSlave(Fmi2Slave):
         self.register_variable(kind(name, causality=Fmi2Causality.parameter, variability=Fmi2Variability.fixed,
                                     description=description))
 
-    def _solver_parameters(self, settings):
-        """The plant integrator's parameters (the plant and the closed loop): solver, rtol, max_step."""
+    def _plant_parameters(self, scene, settings, fidelity_text):
+        """The plant's parameters (the plant and the closed loop): the scene's, the fidelity and the integrator's
+        (solver, rtol, max_step)."""
+        for name in scene_names():
+            self._parameter(Real, name, getattr(scene, name))
+        self._parameter(Integer, "fidelity", int(settings.fidelity), fidelity_text)
         self._parameter(Integer, "solver", int(settings.solver), RULE_TEXT)
         self._parameter(Real, "rtol", settings.rtol, "relative tolerance (setupExperiment's tolerance wins)")
         self._parameter(Real, "max_step", settings.max_step, "RK4 step / adaptive step ceiling; 0 = automatic")
+
+    def _plant_values(self, **settings):
+        """(the Scene, the Settings) of the current values of _plant_parameters and `kernel` (setupExperiment's
+        tolerance, when given, as rtol); `settings`: the other fields of Settings."""
+        scene = Scene(**{name: float(getattr(self, name)) for name in scene_names()})
+        rtol = self.rtol if self.experiment_tolerance is None else self.experiment_tolerance
+        return scene, Settings(fidelity=int(self.fidelity), solver=int(self.solver), rtol=float(rtol),
+                               max_step=float(self.max_step), kernel=int(self.kernel), **settings)
 
     def _outputs(self, names, values, description=None):
         """Real outputs (initial exact) with their start values."""
