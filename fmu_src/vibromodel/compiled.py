@@ -192,8 +192,59 @@ def constant_ranges():
             (VkPlant.rk4.offset, VkPlant.rk4.offset + Rk4State.t.offset))
 
 
-class CompiledPlant:
+def _reader(part: str, field: str) -> property:
+    """A read-only property: field `field` of the object's attribute `part` (a kernel structure)."""
+    return property(lambda self: getattr(getattr(self, part), field))
+
+
+def _flag(field: str) -> property:
+    """A bool property on int64 field `field` of the object's kernel structure `_struct`."""
+    return property(lambda self: bool(getattr(self._struct, field)),
+                    lambda self, value: setattr(self._struct, field, bool(value)))
+
+
+class FastPathModel:
+    """What the FMU's C fast path (fmu_src/fast_path.py) reads and writes of a compiled model: the kernel structure
+    `_struct` (whose `enabled` flag the kernel clears at an error) at `address`, and the address of the kernel's
+    doStep function named STEP_FUNCTION (f(struct *, t, h)); the model sets `_library` and `address`."""
+
+    STEP_FUNCTION = ""
+
+    @property
+    def enabled_address(self) -> int:
+        return ctypes.addressof(self._struct) + type(self._struct).enabled.offset
+
+    @property
+    def step_function(self) -> int:
+        return ctypes.cast(getattr(self._library, self.STEP_FUNCTION), ctypes.c_void_p).value
+
+    fast_path_enabled = _flag("enabled")  # whether the C fast path may call the step function (cleared at an error)
+
+
+class PlantFastPath(FastPathModel):
+    """FastPathModel of a model whose `_struct` is a VkPlant (the compiled plant, the open-loop levels' plant): its
+    outputs, in_contact and held input, as the plant FMU's slave reads and writes them."""
+
+    def field_address(self, name: str, index: int = 0) -> int:
+        """Address of VkPlant field `name`, or of element `index` of a double array field (out)."""
+        return ctypes.addressof(self._struct) + getattr(VkPlant, name).offset + index * ctypes.sizeof(_double)
+
+    def output(self, index: int) -> float:
+        """out[index]: x, v, a, F_contact, F_electrostatic after the last step."""
+        return self._struct.out[index]
+
+    def set_output(self, index: int, value: float) -> None:
+        self._struct.out[index] = value
+
+    in_contact = _flag("in_contact")
+    next_input = property(lambda self: self._struct.U_input,  # the input U the next step holds (the FMU's input)
+                          lambda self, value: setattr(self._struct, "U_input", value))
+
+
+class CompiledPlant(PlantFastPath):
     """plant.Plant for the integrated fidelities with a compiled model (supports) with either solver, on the kernel `library` (load_library)."""
+
+    STEP_FUNCTION = "vk_do_step"  # vk_do_step(VkPlant *, t, h): one doStep with the held next_input
 
     def __init__(self, scene, settings: Settings, library, t0: float = 0.0, stop_time: float | None = None):
         validate(scene)
@@ -206,7 +257,8 @@ class CompiledPlant:
         self.scene, self.settings, self.notes = scene, settings, []
         self._library = library
         self._plant = VkPlant()
-        self._address = ctypes.addressof(self._plant)
+        self._struct = self._plant
+        self.address = ctypes.addressof(self._plant)  # of the VkPlant, which the kernel's functions take
         max_step = settings.max_step or drive_step_ceiling(scene)  # as Plant gives Dop853
         rtol, notes = solver_tolerance(scene, settings, t0, stop_time)  # as Plant gives its integrator
         self.notes += notes
@@ -219,81 +271,18 @@ class CompiledPlant:
         for name, value in dict(time_tolerance=plant.TIME_TOLERANCE, max_steps_per_dostep=plant.MAX_STEPS_PER_DOSTEP,
                                 plant_t=t0, U_input=0.0, enabled=1).items():
             setattr(self._plant, name, value)
-        self._check(library.vk_init(self._address, t0, scene.x_start, scene.v_start))
+        self._check(library.vk_init(self.address, t0, scene.x_start, scene.v_start))
 
     @property
     def _solver(self):
         return getattr(self._plant, SOLVER_SLOTS[solver_entry(self._plant.solver).family])
 
-    @property
-    def max_step(self) -> float:
-        """The solver's step ceiling (inf: none), as integrator.max_step."""
-        return self._solver.max_step
-
-    # -- the plant's time, input, counters and address -------------------------------------------------------
-    @property
-    def t(self) -> float:
-        return self._plant.plant_t
-
-    @property
-    def U(self) -> float:
-        return self._plant.U_input
-
-    @property
-    def nfev(self) -> int:
-        return self._solver.nfev
-
-    @property
-    def n_steps(self) -> int:
-        return self._solver.n_steps
-
-    # -- what the FMU slave and its C fast path (fast_path.py) read and write ---------------------------------
-    @property
-    def address(self) -> int:
-        """Address of the kernel's VkPlant."""
-        return self._address
-
-    @property
-    def step_function(self) -> int:
-        """Address of vk_do_step(VkPlant *, t, h): one doStep with the held next_input."""
-        return ctypes.cast(self._library.vk_do_step, ctypes.c_void_p).value
-
-    def field_address(self, name: str, index: int = 0) -> int:
-        """Address of VkPlant field `name`, or of element `index` of a double array field (out)."""
-        return self._address + getattr(VkPlant, name).offset + index * ctypes.sizeof(_double)
-
-    def output(self, index: int) -> float:
-        """out[index]: x, v, a, F_contact, F_electrostatic after the last step."""
-        return self._plant.out[index]
-
-    def set_output(self, index: int, value: float) -> None:
-        self._plant.out[index] = value
-
-    @property
-    def in_contact(self) -> bool:
-        return bool(self._plant.in_contact)
-
-    @in_contact.setter
-    def in_contact(self, value: bool) -> None:
-        self._plant.in_contact = bool(value)
-
-    @property
-    def next_input(self) -> float:
-        """The input U that the next vk_do_step holds (the FMU's input variable)."""
-        return self._plant.U_input
-
-    @next_input.setter
-    def next_input(self, value: float) -> None:
-        self._plant.U_input = value
-
-    @property
-    def fast_path_enabled(self) -> bool:
-        """Whether the FMU's C fast path may call vk_do_step (the kernel clears it at an error)."""
-        return bool(self._plant.enabled)
-
-    @fast_path_enabled.setter
-    def fast_path_enabled(self, value: bool) -> None:
-        self._plant.enabled = bool(value)
+    # the plant's time and input, the solver's step ceiling (inf: none, as integrator.max_step) and counters
+    t = _reader("_plant", "plant_t")
+    U = _reader("_plant", "U_input")
+    max_step = _reader("_solver", "max_step")
+    nfev = _reader("_solver", "nfev")
+    n_steps = _reader("_solver", "n_steps")
 
     # -- stepping ---------------------------------------------------------------------------------------------
     def do_step(self, t: float, h: float, U: float) -> Outputs:
@@ -301,7 +290,7 @@ class CompiledPlant:
         (left by the FMU's C fast path) is raised first, without stepping."""
         self._raise_pending()
         previous, self._plant.U_input = self._plant.U_input, U
-        code = self._library.vk_do_step(self._address, t, h)
+        code = self._library.vk_do_step(self.address, t, h)
         if code in PRE_CHECK_CODES:
             self._plant.U_input = previous
             self._refused(code, t, h, U)
@@ -313,14 +302,14 @@ class CompiledPlant:
         self._raise_pending()
         self._plant.U_input = U
         xva = (_double * 3)()
-        self._check(self._library.vk_plant_advance(self._address, t_end, xva))
+        self._check(self._library.vk_plant_advance(self.address, t_end, xva))
         return tuple(xva)
 
     def run(self, dt: float, n: int) -> np.ndarray:
         """x after each of n do_steps of dt (each from the plant's time) with U held: the compiled floor."""
         self._raise_pending()
         x = np.empty(n)
-        code = self._library.vk_run(self._address, dt, n, x.ctypes.data_as(ctypes.POINTER(_double)))
+        code = self._library.vk_run(self.address, dt, n, x.ctypes.data_as(ctypes.POINTER(_double)))
         if code in PRE_CHECK_CODES:
             self._refused(code, self.t, dt, self.U)
         self._check(code)
@@ -329,7 +318,7 @@ class CompiledPlant:
     # -- outputs ----------------------------------------------------------------------------------------------
     def state(self) -> tuple[float, float, float]:
         xva = (_double * 3)()
-        self._check(self._library.vk_plant_state(self._address, xva))
+        self._check(self._library.vk_plant_state(self.address, xva))
         return tuple(xva)
 
     def outputs(self) -> Outputs:
@@ -338,7 +327,7 @@ class CompiledPlant:
     def outputs_at(self, t: float, x: float, v: float, a: float | None = None) -> Outputs:
         """Plant.outputs_at; the kernel's out[] and in_contact (what the FMU reads) take these outputs."""
         given = None if a is None else ctypes.byref(_double(a))
-        self._check(self._library.vk_outputs_at(self._address, t, x, v, given))
+        self._check(self._library.vk_outputs_at(self.address, t, x, v, given))
         return self._outputs()
 
     def _outputs(self) -> Outputs:
@@ -348,7 +337,7 @@ class CompiledPlant:
     # -- snapshots --------------------------------------------------------------------------------------------
     def snapshot(self) -> dict:
         """The kernel structure's bytes (hex), the whole state."""
-        return {"kernel": ctypes.string_at(self._address, ctypes.sizeof(VkPlant)).hex()}
+        return {"kernel": ctypes.string_at(self.address, ctypes.sizeof(VkPlant)).hex()}
 
     def restore(self, snapshot: dict) -> None:
         """Return to the moment `snapshot` was taken; ValueError for anything but a snapshot of a compiled plant
@@ -359,11 +348,11 @@ class CompiledPlant:
             data = b""
         if len(data) != ctypes.sizeof(VkPlant):
             raise ValueError("not a snapshot of a CompiledPlant")
-        current = ctypes.string_at(self._address, len(data))
+        current = ctypes.string_at(self.address, len(data))
         if any(data[start:end] != current[start:end] for start, end in constant_ranges()):
             raise ValueError("the snapshot is of a compiled plant with other parameters or settings")
         check_state(data)
-        ctypes.memmove(self._address, data, len(data))
+        ctypes.memmove(self.address, data, len(data))
 
     # -- errors -----------------------------------------------------------------------------------------------
     def _check(self, code: int) -> None:

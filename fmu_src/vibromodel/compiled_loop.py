@@ -16,7 +16,7 @@ import numpy as np
 
 from . import forces
 from .closedloop import ClosedLoop
-from .compiled import ATOL_PER_RTOL, SOLVER_SLOTS, check_structure, fill_model, take_pending
+from .compiled import ATOL_PER_RTOL, SOLVER_SLOTS, FastPathModel, check_structure, fill_model, take_pending
 from .compiled_open_loop import OafmProgram, oafm_hints
 # controller.h's and closedloop.h's constants and structures, generated from the headers (core_layouts.py)
 from .core_layouts import (VC_GAINS, VC_N, VC_NON_FINITE, VC_OK, VC_RAISED, VL_BAD_STEP, VL_BAD_TIME, VL_OK, VL_TOO_MANY_STEPS, VcController,
@@ -86,31 +86,7 @@ def raise_from(code: int) -> None:
         raise RuntimeError(f"the compiled controller returned code {code} (a kernel bug)")
 
 
-class _FastPath:
-    """What the FMU's C fast path reads and writes of a compiled controller or closed loop: the kernel structure
-    `_struct` at `address`, its `enabled` flag (the kernel clears it at an error), and the address of the kernel's
-    doStep function named STEP_FUNCTION (f(struct *, t, h))."""
-
-    STEP_FUNCTION = ""
-
-    @property
-    def enabled_address(self) -> int:
-        return self.address + type(self._struct).enabled.offset
-
-    @property
-    def step_function(self) -> int:
-        return ctypes.cast(getattr(self._library, self.STEP_FUNCTION), ctypes.c_void_p).value
-
-    @property
-    def fast_path_enabled(self) -> bool:
-        return bool(self._struct.enabled)
-
-    @fast_path_enabled.setter
-    def fast_path_enabled(self, value: bool) -> None:
-        self._struct.enabled = bool(value)
-
-
-class CompiledEstimator(_FastPath):
+class CompiledEstimator(FastPathModel):
     """control.HeldInputEstimator on the kernel `library` (declared by `declare`), plus the controller FMU's
     inputs and outputs. Raises ParameterError for bad arguments."""
 
@@ -243,7 +219,7 @@ def declare_loop(library) -> str | None:
     return None
 
 
-class CompiledClosedLoop(_FastPath):
+class CompiledClosedLoop(FastPathModel):
     """closedloop.ClosedLoop on the kernel: built from a ClosedLoop that did the set-up (validation, warnings,
     model, controller, reference); `problem` says why it cannot run (then use the Python loop)."""
 

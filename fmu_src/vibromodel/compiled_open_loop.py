@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .compiled import VkPlant, fill_model
+from .compiled import PlantFastPath, fill_model
 # oafm_eval.h's and openloop_plant.h's constants and structures, generated from the headers (core_layouts.py)
 from .core_layouts import (OE_BASES, OE_ITEMS, OE_POWERS, OE_RESYNC, OE_STEP_SLACK, OL_BEYOND, OL_REFUSED, OeCache,
                            OePiece, OeSolution, OlPlant, SfTable)
@@ -312,9 +312,16 @@ def oafm_hints(scene):
 
 # ---------------------------------------------------------------- the plant
 
-class CompiledOpenLoopPlant:
+class CompiledOpenLoopPlant(PlantFastPath):
     """plant.Plant of an open-loop fidelity (3, 4) with doStep in C, on the level's evaluator (fidelities.Evaluator);
-    built by make() from a plant.Plant that did the set-up."""
+    built by make() from a plant.Plant that did the set-up. The FMU slave and its C fast path read and write it as
+    a CompiledPlant (PlantFastPath: its VkPlant is the OlPlant's `plant`)."""
+
+    STEP_FUNCTION = "vk_open_loop_do_step"  # vk_open_loop_do_step(OlPlant *, t, h)
+
+    @property
+    def _struct(self):
+        return self._plant.plant
 
     @classmethod
     def make(cls, python_plant, library) -> tuple["CompiledOpenLoopPlant | None", str]:
@@ -338,7 +345,7 @@ class CompiledOpenLoopPlant:
         self.notes, self.warnings = python_plant.notes, python_plant.warnings
         self._library, self._problem = library, None
         self._plant = OlPlant()
-        self._address = ctypes.addressof(self._plant)
+        self.address = ctypes.addressof(self._plant)
         k = self._plant.plant  # the exact model's constants (its forces), the plant's time, input and outputs
         fill_model(k.model, python_plant.model)  # its forces
         k.time_tolerance, k.plant_t, k.U_input, k.enabled = TIME_TOLERANCE, python_plant.t, 0.0, 1
@@ -372,7 +379,7 @@ class CompiledOpenLoopPlant:
     def state_at(self, tau: float) -> tuple[float, float, float]:
         """(x, x', x'') at tau from the C evaluator (the table extended in Python when needed)."""
         xva = (_d * 3)()
-        if self._library.vk_open_loop_state(self._address, tau, xva) == OL_BEYOND:  # outside the table: Python extends it
+        if self._library.vk_open_loop_state(self.address, tau, xva) == OL_BEYOND:  # outside the table: Python extends it
             state = self.python.solution.state(tau)  # (or raises for a time a bounded table has dropped)
             self._load_table()
             return state
@@ -385,7 +392,7 @@ class CompiledOpenLoopPlant:
         """Plant.do_step in C; what C leaves (a bad step or input, a time beyond the table, a non-finite output)
         is done by the wrapped Plant, which raises its error or extends the table."""
         previous, self._plant.plant.U_input = self._plant.plant.U_input, U
-        code = self._library.vk_open_loop_do_step(self._address, t, h)
+        code = self._library.vk_open_loop_do_step(self.address, t, h)
         self._plant.plant.U_input = previous
         if code == 0:
             return self._outputs()
@@ -404,7 +411,7 @@ class CompiledOpenLoopPlant:
         x = np.empty(n)
         done, count = 0, ctypes.c_size_t()
         while done < n:
-            code = self._library.vk_open_loop_run(self._address, dt, n - done, x[done:].ctypes.data_as(_dp), ctypes.byref(count))
+            code = self._library.vk_open_loop_run(self.address, dt, n - done, x[done:].ctypes.data_as(_dp), ctypes.byref(count))
             done += count.value
             if code == 0:
                 break
@@ -455,48 +462,6 @@ class CompiledOpenLoopPlant:
             self._plant.oafm.cache = restored if sane else OeCache(piece=-1)  # else: evaluate directly next
         else:
             self._load_table()
-
-    # -- what the FMU slave and its C fast path read and write (as vibromodel.compiled.CompiledPlant) ---------
-    @property
-    def address(self) -> int:
-        return self._address
-
-    @property
-    def step_function(self) -> int:
-        return ctypes.cast(self._library.vk_open_loop_do_step, ctypes.c_void_p).value
-
-    def field_address(self, name: str, index: int = 0) -> int:
-        return self._address + OlPlant.plant.offset + getattr(VkPlant, name).offset + index * ctypes.sizeof(_d)
-
-    def output(self, index: int) -> float:
-        return self._plant.plant.out[index]
-
-    def set_output(self, index: int, value: float) -> None:
-        self._plant.plant.out[index] = value
-
-    @property
-    def in_contact(self) -> bool:
-        return bool(self._plant.plant.in_contact)
-
-    @in_contact.setter
-    def in_contact(self, value: bool) -> None:
-        self._plant.plant.in_contact = bool(value)
-
-    @property
-    def next_input(self) -> float:
-        return self._plant.plant.U_input
-
-    @next_input.setter
-    def next_input(self, value: float) -> None:
-        self._plant.plant.U_input = value
-
-    @property
-    def fast_path_enabled(self) -> bool:
-        return bool(self._plant.plant.enabled)
-
-    @fast_path_enabled.setter
-    def fast_path_enabled(self, value: bool) -> None:
-        self._plant.plant.enabled = bool(value)
 
     def _outputs(self) -> Outputs:
         return Outputs(*self._plant.plant.out[:], bool(self._plant.plant.in_contact))

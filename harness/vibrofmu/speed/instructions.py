@@ -67,7 +67,7 @@ compile_kernel(out / 'vibrokernel.so')
 library, why = load_library([out])
 assert library is not None, why
 plant = CompiledPlant(Scene(), Settings(), library, 0.0)
-(out / 'plant.bin').write_bytes(ctypes.string_at(plant._address, ctypes.sizeof(plant._plant)))
+(out / 'plant.bin').write_bytes(ctypes.string_at(plant.address, ctypes.sizeof(plant._plant)))
 """
 FLOOR_DRIVER_SOURCE = Path(__file__).with_name("floor_driver.c")  # a C file, compiled with toolchain.HOST
 
