@@ -478,6 +478,11 @@ def run_peers(plant_fmu: Path, out_dir: Path, quick: bool = False, rounds: int |
     return record
 
 
+def _verdict(ratio: float) -> str:
+    """The acceptance of a ratio to the best peer: at most 1."""
+    return f"{'met' if ratio <= 1.0 else 'NOT met'}: <= 1.0"
+
+
 def peers_lines(record: dict) -> list[str]:
     """The verdicts as text lines (the bench's output and the report block)."""
     lines = []
@@ -491,21 +496,19 @@ def peers_lines(record: dict) -> list[str]:
         for ours in OURS:
             if ours in row:
                 ratio = row[ours]["over_best_peer"]
-                lines.append(f"  {ours} / best peer ({row['best_peer']}): {ratio:.2f}x "
-                             f"({'met' if ratio <= 1.0 else 'NOT met'}: <= 1.0; per round "
+                lines.append(f"  {ours} / best peer ({row['best_peer']}): {ratio:.2f}x ({_verdict(ratio)}; per round "
                              f"{', '.join(f'{r:.2f}' for r in row[ours]['per_round'])})")
             else:
                 lines.append(f"  {ours}: no setting reached the error, or no peer ran")
     short = record.get("short_scenes")
     if short:
-        s = short["seconds"]
-        ratio = short["api_over_numbalsoda"]
-        lines.append(f"{short['scenes']} short scenes (tau 0..{short['stop']:g}): simulate_many "
-                     f"{s['Python API, simulate_many']:.3f} s ({short.get('api_line', 'Python API')}, rtol "
-                     f"{short['rtol']['Python API']:g}), numbalsoda LSODA "
-                     f"loop {s['numbalsoda LSODA loop']:.3f} s (rtol {short['rtol']['numbalsoda LSODA']:g}): "
-                     f"{ratio:.2f}x ({'met' if ratio <= 1.0 else 'NOT met'}: <= 1.0); max error over 5 scenes "
-                     + ", ".join(f"{n} {e:.1e}" for n, e in short["max_error_5_scenes"].items()))
+        s, rtol, ratio = short["seconds"], short["rtol"], short["api_over_numbalsoda"]
+        api = (f"{s['Python API, simulate_many']:.3f} s ({short.get('api_line', 'Python API')}, "
+               f"rtol {rtol['Python API']:g})")
+        lsoda = f"{s['numbalsoda LSODA loop']:.3f} s (rtol {rtol['numbalsoda LSODA']:g})"
+        errors = ", ".join(f"{n} {e:.1e}" for n, e in short["max_error_5_scenes"].items())
+        lines.append(f"{short['scenes']} short scenes (tau 0..{short['stop']:g}): simulate_many {api}, "
+                     f"numbalsoda LSODA loop {lsoda}: {ratio:.2f}x ({_verdict(ratio)}); max error over 5 scenes {errors}")
     if record.get("one_off_seconds"):
         lines.append("one-off costs (s, not in the runs): " + ", ".join(
             f"{name} {seconds:.2f}" for name, seconds in record["one_off_seconds"].items()))
