@@ -36,6 +36,18 @@ double native_tolerance_factor(const State *s)
     return factor;
 }
 
+int native_step_outputs_finite(Instance *inst, const double *out, const fmi2ValueReference *vrs, int n, double t)
+{
+    for (int i = 0; i < n; i++)
+        if (!isfinite(out[i])) {
+            native_error(inst, "simulation stopped: output with valueReference %u is %g (not finite) after the step "
+                         "from tau = %.17g; the parameters are beyond the model's numerical range", (unsigned)vrs[i],
+                         out[i], t);
+            return 0;
+        }
+    return 1;
+}
+
 void native_plant_model(VkModel *m, const State *s, int fidelity)
 {
     const double Delta = s->value[VR_Delta], alpha = s->value[VR_alpha], beta = s->value[VR_beta],

@@ -28,5 +28,8 @@ void native_drive_warnings(Instance *inst, const State *s, const VkSolverOps *so
    significant digits as the Python FMU publishes it (error_estimates.round_estimate): the solver's error at rtol (the
    rtol asked, clamped) or RK4's step, and for a polynomial level the truncation of its forces. */
 double native_error_estimate(const State *s, int fidelity, double rtol, int fixed_step);
+/* After a doStep from t: 1 when the n outputs out[i] (value references vrs[i]) are finite; else 0, with the status
+   shim's fast_outputs_checked error logged (fmi2Error naming the first non-finite one). */
+int native_step_outputs_finite(Instance *inst, const double *out, const fmi2ValueReference *vrs, int n, double t);
 
 #endif

@@ -236,14 +236,7 @@ void model_do_step(Instance *inst, State *s, double t, double h)
     char a[64], b[64];
     const int code = vk_loop_do_step(l, t, h);
     if (code == VL_OK) {
-        for (int i = 0; i < VL_OUTPUTS; i++)
-            if (!isfinite(l->out[i])) {
-                native_error(inst, "simulation stopped: output with valueReference %u is %g (not finite) after the "
-                             "step from tau = %.17g; the parameters are beyond the model's numerical range",
-                             (unsigned)OUTPUT_VRS[i], l->out[i], t);
-                return;
-            }
-        publish(s);
+        if (native_step_outputs_finite(inst, l->out, OUTPUT_VRS, VL_OUTPUTS, t)) publish(s);
         return;
     }
     if (code == VL_BAD_STEP) {

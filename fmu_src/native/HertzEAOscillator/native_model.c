@@ -217,14 +217,7 @@ void model_do_step(Instance *inst, State *s, double t, double h)
     }
     if (code == VK_OK) code = vk_step_outputs(p);
     if (code == VK_OK) {
-        int bad = non_finite_output(p);
-        if (bad >= 0) { /* the status shim's fast_outputs_checked */
-            native_error(inst, "simulation stopped: output with valueReference %u is %g (not finite) after the step "
-                         "from tau = %.17g; the parameters are beyond the model's numerical range",
-                         (unsigned)OUTPUT_VRS[bad], p->out[bad], t);
-            return;
-        }
-        publish(s);
+        if (native_step_outputs_finite(inst, p->out, OUTPUT_VRS, 5, t)) publish(s);
         return;
     }
     step_failed(inst, s, code, t, h);
