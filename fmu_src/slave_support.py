@@ -19,7 +19,8 @@ from vibromodel import snapshot
 from vibromodel.control import ERRATA_INITIAL_ESTIMATES, ESTIMATE_NAMES, GAIN_NAMES, Gains, Law
 from vibromodel.integrate import IntegrationError
 from vibromodel.solvers import RULE_TEXT
-from vibromodel.parameters import NonFiniteOutput, ParameterError, Scene, check_finite, check_parameters, scene_names
+from vibromodel.parameters import (NonFiniteOutput, ParameterError, Scene, check_finite, check_parameters,
+                                   model_parameter_names, scene_names)
 from vibromodel.settings import Settings
 
 STATUS_OK, STATUS_ERROR = 0, 3
@@ -187,7 +188,7 @@ RUN_FIELDS = ("phase", "halted", "initialised", "start_time", "stop_time", "expe
 # as start + n*h, which can land an ulp or so beyond the stop time (the plant's time-matching tolerance).
 STOP_TIME_TOLERANCE = 1e-9
 # The scene's parameters without the plant's initial state (the controller's view of the plant).
-MODEL_PARAMETERS = tuple(name for name in scene_names() if name not in ("x_start", "v_start"))
+MODEL_PARAMETERS = tuple(model_parameter_names())
 
 
 def _number(value) -> bool:

@@ -50,10 +50,10 @@ int native_step_outputs_finite(Instance *inst, const double *out, const fmi2Valu
 
 void native_plant_model(VkModel *m, const State *s, int fidelity)
 {
-    const double Delta = s->value[VR_Delta], alpha = s->value[VR_alpha], beta = s->value[VR_beta],
-                 gamma = s->value[VR_gamma], R = s->value[VR_R];
-    m->mu = s->value[VR_mu]; m->Delta = Delta; m->omega = s->value[VR_omega]; m->alpha = alpha; m->beta = beta;
-    m->gamma = gamma; m->Omega = s->value[VR_Omega]; m->R = R;
+#define COPY_PARAMETER(name) m->name = s->value[VR_##name]; /* models.scene_fields: the scene's own values */
+    SCENE_MODEL_FIELDS(COPY_PARAMETER)
+#undef COPY_PARAMETER
+    const double Delta = m->Delta, alpha = m->alpha, beta = m->beta, gamma = m->gamma, R = m->R;
     m->pull_in_c = 2.0 / (3.0 * R); /* models.pull_in_slope */
     m->pull_in_gap = RULE_PULL_IN_GAP;
     m->load_forcing = Delta != 0.0;

@@ -13,7 +13,7 @@ from typing import Callable
 
 from . import forces
 from .messages import text
-from .parameters import MIN_RTOL, PULL_IN_GAP, ParameterError, Scene
+from .parameters import MIN_RTOL, PULL_IN_GAP, ParameterError, Scene, model_parameter_names
 from .solvers import solver_entry
 
 
@@ -161,7 +161,7 @@ def solver_tolerance(s: Scene, settings, t0: float = 0.0, stop_time: float | Non
 def scene_fields(s: Scene) -> dict:
     """The VkModel fields (core/model.h) every model fills from its own scene: the parameters, the pull-in events'
     constants and the switches of the drive terms."""
-    fields = {name: getattr(s, name) for name in ("mu", "Delta", "omega", "alpha", "beta", "gamma", "Omega", "R")}
+    fields = {name: getattr(s, name) for name in model_parameter_names()}
     ac = s.beta != 0.0 or s.gamma != 0.0
     fields.update(pull_in_c=pull_in_slope(s.R), pull_in_gap=PULL_IN_GAP, load_forcing=int(s.Delta != 0.0), ac=int(ac))
     return fields

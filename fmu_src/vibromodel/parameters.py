@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import math
 import sys
-from dataclasses import asdict, dataclass, fields, replace
+from dataclasses import asdict, dataclass, field, fields, replace
 
 from . import forces, solvers
 from .messages import text
@@ -54,20 +54,28 @@ def check_finite(values: dict) -> None:
             raise NonFiniteOutput(name, float(value))  # a plain float: numpy scalars would print as np.float64(inf)
 
 
+def _parameter(default: float, description: str):
+    """A Scene field: its default and the description its FMU variable carries (fmus/fmu_variables.py)."""
+    return field(default=default, metadata={"description": description})
+
+
+# The symbols are those of the dimensionless equation of motion (Eq. 3 corrected):
+# x'' + mu x' + (1 + 2x/3)^(3/2) = 1 + Delta cos(omega tau) + alpha [(1-u)^-2 - (1+u)^-2]
+#                                  + (beta sin(Omega tau) + gamma (1 - cos(2 Omega tau))) (1-u)^-2,  u = 2x/(3R).
 @dataclass(frozen=True)
 class Scene:
     """Dimensionless parameters of Eq. 3 and the initial state x(0), x'(0)."""
 
-    mu: float = 0.1
-    Delta: float = 0.0007
-    omega: float = PAPER_OMEGA
-    Omega: float = 2.0
-    alpha: float = 0.001
-    beta: float = 0.0001
-    gamma: float = 0.0002
-    R: float = 1.0
-    x_start: float = 0.04
-    v_start: float = 0.0
+    mu: float = _parameter(0.1, "damping coefficient mu")
+    Delta: float = _parameter(0.0007, "amplitude Delta of the mechanical forcing Delta cos(omega tau)")
+    omega: float = _parameter(PAPER_OMEGA, "frequency omega of the mechanical forcing")
+    Omega: float = _parameter(2.0, "frequency Omega of the AC voltage")
+    alpha: float = _parameter(0.001, "electrostatic coefficient alpha of the DC bias (both electrodes)")
+    beta: float = _parameter(0.0001, "electrostatic coefficient beta of the DC x AC term beta sin(Omega tau)")
+    gamma: float = _parameter(0.0002, "electrostatic coefficient gamma of the AC^2 term gamma (1 - cos(2 Omega tau))")
+    R: float = _parameter(1.0, "electrode gap over the static compression (pull-in at |x| = 3R/2)")
+    x_start: float = _parameter(0.04, "initial displacement x(0)")
+    v_start: float = _parameter(0.0, "initial velocity x'(0)")
 
     def with_values(self, **values) -> "Scene":
         unknown = set(values) - set(scene_names())
@@ -82,6 +90,21 @@ class Scene:
 
 def scene_names() -> list[str]:
     return [f.name for f in fields(Scene)]
+
+
+# The scene's initial state: its names that are not parameters of the equation of motion
+INITIAL_STATE = ("x_start", "v_start")
+
+
+def model_parameter_names() -> list[str]:
+    """The scene's parameters of the equation of motion (scene_names() but the initial state), in that order: the
+    core's VkModel has a field of each name (models.scene_fields; the native FMUs copy them, rules.h)."""
+    return [name for name in scene_names() if name not in INITIAL_STATE]
+
+
+def scene_descriptions() -> dict[str, str]:
+    """The description of each scene parameter's FMU variable, by name."""
+    return {f.name: f.metadata["description"] for f in fields(Scene)}
 
 
 def electrode_gaps(x: float, R: float) -> tuple[float, float]:

@@ -28,7 +28,8 @@ from vibromodel.core_layouts import VkPlant
 from vibromodel.fidelities import CModel, entry
 from vibromodel.integrate import ATOL_PER_RTOL
 from vibromodel.models import DRIVE_STEP_TURN, ERROR_MEMORY_REFERENCE, TOLERANCE_FACTOR_FLOOR, solver_tolerance
-from vibromodel.parameters import MIN_RTOL, PULL_IN_GAP, RULES, ParameterError, Scene, scene_names, validate
+from vibromodel.parameters import (MIN_RTOL, PULL_IN_GAP, RULES, ParameterError, Scene, model_parameter_names,
+                                   scene_names, validate)
 from vibromodel.settings import (MAX_STEPS_PER_DOSTEP, RK4_DEFAULT_STEP, TIME_TOLERANCE, Kernel, Settings,
                                  check_step, checked_settings, rk4_drive_warnings)
 from vibromodel.solvers import solver_entry
@@ -196,7 +197,7 @@ def fill_plants(plants: np.ndarray, columns: dict, settings: Settings, start_tim
     plants.view(np.uint8).reshape(m, PLANT_DTYPE.itemsize)[:] = _template(settings, start_time)
     model = plants["model"]
     if level.c_model == CModel.EXACT:  # models.scene_fields and ExactModel.compiled_fields, for all scenes at once
-        for name in ("mu", "Delta", "omega", "alpha", "beta", "gamma", "Omega", "R"):
+        for name in model_parameter_names():
             model[name] = columns[name]
         ac = (columns["beta"] != 0.0) | (columns["gamma"] != 0.0)
         model["pull_in_c"] = 2.0 / (3.0 * columns["R"])  # models.pull_in_slope

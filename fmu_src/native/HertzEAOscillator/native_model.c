@@ -275,8 +275,7 @@ static void step_failed(Instance *inst, State *s, int code, double t, double h)
    then validate).  A level without a compiled model: its native refusal. */
 int model_initial_output(const State *s, fmi2ValueReference vr, double *value, char *why, size_t size)
 {
-    static const char *const NAMES[] = {"fidelity", "mu", "Delta", "omega", "Omega", "alpha", "beta", "gamma", "R",
-                                        "x_start", "v_start"}; /* scene_names() */
+    static const char *const NAMES[] = {"fidelity", SCENE_NAMES}; /* rules.h: scene_names() */
     char reason[256], text[64];
     if (native_rule_refusal(s, NAMES, sizeof NAMES / sizeof NAMES[0], why, size)) return 0;
     const double x = s->value[VR_x_start], v = s->value[VR_v_start], t = s->start_time;

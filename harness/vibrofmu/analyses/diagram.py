@@ -41,7 +41,7 @@ import numpy as np
 from scipy.integrate import solve_ivp
 
 from vibromodel.integrate import IntegrationError, TerminalEvent
-from vibromodel.parameters import PULL_IN_GAP, ParameterError, Scene, scene_names, validate
+from vibromodel.parameters import PULL_IN_GAP, ParameterError, Scene, model_parameter_names, validate
 from vibromodel.settings import Settings
 
 from vibrofmu.output import export
@@ -54,7 +54,7 @@ LYAPUNOV_RTOL = 1e-9  # DOP853 on state + Phi: an exponent needs a few digits; 1
 LYAPUNOV_ATOL = 1e-12  # log-stretch error ~ rtol, far below the 1 / (n T) statistical error of the estimate
 SETTINGS = Settings()  # the core's plant: fidelity 0, DOP853, rtol 1e-8 (the FMU's defaults)
 VOLTAGES = ("V_bias", "V_AC")  # factors on the scene's voltages: alpha ~ V_b^2, beta ~ V_b V_AC, gamma ~ V_AC^2
-PARAMETERS = tuple(n for n in scene_names() if n not in ("x_start", "v_start")) + VOLTAGES
+PARAMETERS = tuple(model_parameter_names()) + VOLTAGES
 TWO_PI = 2.0 * math.pi
 CONTACT_LOSS_X = -1.5  # 1 + 2x/3 = 0
 CONTACT_PHASES = 32  # phases per recorded period at which contact loss is looked for (an indicator: a loss

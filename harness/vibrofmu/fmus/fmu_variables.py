@@ -13,22 +13,12 @@ import io
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
+from vibromodel.parameters import scene_descriptions
+
 DIMENSIONLESS = "1"
 
-# The symbols are those of the dimensionless equation of motion (Eq. 3 corrected):
-# x'' + mu x' + (1 + 2x/3)^(3/2) = 1 + Delta cos(omega tau) + alpha [(1-u)^-2 - (1+u)^-2]
-#                                  + (beta sin(Omega tau) + gamma (1 - cos(2 Omega tau))) (1-u)^-2,  u = 2x/(3R).
+# The scene's parameters are described where they are defined (vibromodel.parameters.Scene); the other variables:
 DESCRIPTIONS = {
-    "mu": "damping coefficient mu",
-    "Delta": "amplitude Delta of the mechanical forcing Delta cos(omega tau)",
-    "omega": "frequency omega of the mechanical forcing",
-    "Omega": "frequency Omega of the AC voltage",
-    "alpha": "electrostatic coefficient alpha of the DC bias (both electrodes)",
-    "beta": "electrostatic coefficient beta of the DC x AC term beta sin(Omega tau)",
-    "gamma": "electrostatic coefficient gamma of the AC^2 term gamma (1 - cos(2 Omega tau))",
-    "R": "electrode gap over the static compression (pull-in at |x| = 3R/2)",
-    "x_start": "initial displacement x(0)",
-    "v_start": "initial velocity x'(0)",
     "x": "displacement x (from the loaded equilibrium, in units of the static compression)",
     "v": "velocity x' = dx/dtau",
     "a": "acceleration x'' = d2x/dtau2",
@@ -49,7 +39,7 @@ DESCRIPTIONS = {
 
 def description(name: str) -> str | None:
     """The description of variable `name` when its slave gives none (None: no entry)."""
-    return DESCRIPTIONS.get(name)
+    return DESCRIPTIONS.get(name, scene_descriptions().get(name))
 
 
 def annotated_model_description(xml: bytes) -> bytes:
@@ -61,7 +51,8 @@ def annotated_model_description(xml: bytes) -> bytes:
         if not variable.get("description"):
             text = description(name)
             if text is None:
-                raise ValueError(f"FMU variable {name} has no description (add it to {__name__}.DESCRIPTIONS)")
+                raise ValueError(f"FMU variable {name} has no description (add it to {__name__}.DESCRIPTIONS, or to "
+                                 "vibromodel.parameters.Scene for a scene parameter)")
             variable.set("description", text)
         real = variable.find("Real")
         if real is not None:

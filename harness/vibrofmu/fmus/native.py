@@ -185,7 +185,7 @@ def rules_header() -> str:
     refusal text Rule.refusal gives), the constants the models' own checks use, and the scene's names and
     defaults -- all taken from vibromodel, so that the native FMUs check and word what the Python slaves do."""
     from vibromodel import error_estimates, integrate, models, parameters, plant
-    from vibromodel.parameters import RULES, Scene, rules_as_records, scene_names
+    from vibromodel.parameters import RULES, Scene, model_parameter_names, rules_as_records, scene_names
 
     constants = {
         "PULL_IN_GAP": parameters.PULL_IN_GAP, "MIN_RTOL": parameters.MIN_RTOL,
@@ -227,10 +227,13 @@ def rules_header() -> str:
               "    const char *when;", "    int n_when;", "    double when_values[8];",
               "    const char *text; /* Rule.refusal's text */", "} VibroRule;", "",
               f"#define N_RULES {len(rows)}", "static const VibroRule RULES[N_RULES] = {", *rows, "};", "",
-              "/* the scene's parameters in vibromodel.parameters.scene_names() order, and their defaults */",
+              "/* the scene's parameters in vibromodel.parameters.scene_names() order (a list for an initialiser), and",
+              " * their defaults; X(name) for each parameter of the equation of motion (model_parameter_names()):",
+              " * core/model.h's VkModel has a field of that name, which the native set-up copies from the variable */",
               f"#define SCENE_SIZE {len(scene_names())}",
-              "#define SCENE_NAMES {" + ", ".join(_c_string(name) for name in scene_names()) + "}",
+              "#define SCENE_NAMES " + ", ".join(_c_string(name) for name in scene_names()),
               "#define SCENE_DEFAULTS {" + ", ".join(_c_double(getattr(defaults, n)) for n in scene_names()) + "}",
+              "#define SCENE_MODEL_FIELDS(X) " + " ".join(f"X({name})" for name in model_parameter_names()),
               "", "#endif", ""]
     return "\n".join(lines)
 
