@@ -182,7 +182,11 @@ def supports(settings: Settings) -> bool:
 def fill_model(structure: VkModel, model) -> None:
     """Fill a VkModel from a model object (models.ExactModel / PolynomialModel): its compiled_fields(), the constants
     of its own scene, so the C computes what the model's accel does (the registry's model is the one source)."""
+    known = {name for name, _ in type(structure)._fields_}
     for name, value in model.compiled_fields().items():
+        if name not in known:  # ctypes would keep it as a Python attribute, which the C never sees
+            raise ValueError(f"core/model.h's VkModel has no field {name} (add it there and regenerate "
+                             "vibromodel/core_layouts.py: python3 -m vibrofmu.fmus.layouts)")
         setattr(structure, name, value if isinstance(value, (int, float)) else (_double * 6)(*value))
 
 

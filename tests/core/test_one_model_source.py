@@ -83,3 +83,19 @@ def test_a_model_of_another_compiled_kind_is_refused(monkeypatch):
                         replace(fidelities.REGISTRY[Fidelity.POLYNOMIAL], model=ExactModel))
     with pytest.raises(ValueError, match="its model ExactModel has compiled model EXACT, the entry says POLYNOMIAL"):
         c_header()
+
+
+def test_every_parameter_of_the_equation_reaches_the_core_and_a_missing_field_is_refused(monkeypatch):
+    """Each of parameters.model_parameter_names() is a VkModel field (the native set-up copies them by name from
+    rules.h's SCENE_MODEL_FIELDS), and a model field the core's VkModel lacks (a scene parameter added without its
+    core/model.h field) stops fill_model naming it, instead of staying a Python attribute the C never reads."""
+    from vibromodel.compiled import fill_model
+    from vibromodel.core_layouts import VkModel
+    from vibromodel.parameters import model_parameter_names
+
+    fields = {name for name, _ in VkModel._fields_}
+    assert set(model_parameter_names()) <= fields
+    model = ExactModel(Scene())
+    monkeypatch.setattr(model, "compiled_fields", lambda: ExactModel.compiled_fields(model) | {"kappa": 0.5})
+    with pytest.raises(ValueError, match="VkModel has no field kappa"):
+        fill_model(VkModel(), model)
