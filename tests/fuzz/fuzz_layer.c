@@ -25,9 +25,7 @@ static void logger(fmi2ComponentEnvironment env, fmi2String name, fmi2Status sta
                    fmi2String message, ...)
 {
     (void)env; (void)status;
-    volatile size_t n = (name ? strlen(name) : 0) + (category ? strlen(category) : 0);
-    (void)n;
-    check_message_escaped(message);
+    check_logged(name, category, message);
 }
 
 static const char *const PREFIXES[] = {"", "file:", "file://", "file:///", "file://localhost/", "file:/tmp",

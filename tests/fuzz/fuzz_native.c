@@ -60,9 +60,7 @@ static void logger2(fmi2ComponentEnvironment env, fmi2String name, fmi2Status st
                     fmi2String message, ...)
 {
     (void)env; (void)status;
-    volatile size_t n = (name ? strlen(name) : 0) + (category ? strlen(category) : 0);
-    (void)n;
-    check_message_escaped(message);
+    check_logged(name, category, message);
 }
 
 static void logger3(fmi3InstanceEnvironment env, fmi3Status status, fmi3String category, fmi3String message)
@@ -71,6 +69,25 @@ static void logger3(fmi3InstanceEnvironment env, fmi3Status status, fmi3String c
     if (message == NULL) FUZZ_FAIL("fmi3 log message is NULL");
     volatile size_t n = strlen(message) + (category ? strlen(category) : 0);
     (void)n;
+}
+
+/* A serialized state of `size` bytes perhaps damaged: a byte xored, the length cut; the length to restore */
+static size_t in_damage(In *in, unsigned char *bytes, size_t size)
+{
+    uint8_t damage = in_u8(in);
+    size_t len = size;
+    if (damage & 1) bytes[in_u16(in) % size] ^= in_u8(in);
+    if (damage & 2) len = in_u16(in) % (size + 1);
+    return len;
+}
+
+/* Up to 3 log categories for SetDebugLogging, known, unknown, empty or NULL, into cats; how many */
+static size_t in_categories(In *in, const char *cats[4])
+{
+    static const char *const CATS[] = {"logAll", "logStatusError", "logStatusWarning", "nonsense", "", NULL};
+    size_t n = in_u8(in) % 4;
+    for (size_t i = 0; i < n; i++) cats[i] = CATS[in_u8(in) % 6];
+    return n;
 }
 
 static const fmi2CallbackFunctions CALLBACKS = {logger2, calloc, free, NULL, NULL};
@@ -219,10 +236,7 @@ static void fmi2_op(F2 *f, In *in)
         if (f->states[k] == NULL || fmi2SerializedFMUstateSize(c, f->states[k], &size) != fmi2OK) break;
         fmi2Byte *bytes = malloc(size + 1);
         if (fmi2SerializeFMUstate(c, f->states[k], bytes, size) == fmi2OK) {
-            uint8_t damage = in_u8(in);
-            size_t len = size;
-            if (damage & 1) bytes[in_u16(in) % size] ^= (fmi2Byte)in_u8(in);
-            if (damage & 2) len = in_u16(in) % (size + 1);
+            size_t len = in_damage(in, (unsigned char *)bytes, size);
             fmi2DeSerializeFMUstate(c, bytes, len, &f->states[in_u8(in) & 1]);
         }
         free(bytes);
@@ -231,10 +245,8 @@ static void fmi2_op(F2 *f, In *in)
     case 21: fmi2Terminate(c); break;
     case 22: fmi2Reset(c); f->t = 0.0; break;
     case 23: {
-        static const char *const CATS[] = {"logAll", "logStatusError", "logStatusWarning", "nonsense", "", NULL};
-        size_t n = in_u8(in) % 4;
-        fmi2String cats[4];
-        for (size_t i = 0; i < n; i++) cats[i] = CATS[in_u8(in) % 6];
+        const char *cats[4];
+        size_t n = in_categories(in, cats);
         fmi2SetDebugLogging(c, in_u8(in) & 1, n, NUL((in_u8(in) & 7) == 0) ? NULL : cats);
         break;
     }
@@ -467,10 +479,7 @@ static void fmi3_op(F3 *f, In *in)
         if (f->states[k] == NULL || fmi3SerializedFMUStateSize(c, f->states[k], &size) != fmi3OK) break;
         fmi3Byte *bytes = malloc(size + 1);
         if (fmi3SerializeFMUState(c, f->states[k], bytes, size) == fmi3OK) {
-            uint8_t damage = in_u8(in);
-            size_t len = size;
-            if (damage & 1) bytes[in_u16(in) % size] ^= (fmi3Byte)in_u8(in);
-            if (damage & 2) len = in_u16(in) % (size + 1);
+            size_t len = in_damage(in, (unsigned char *)bytes, size);
             fmi3DeserializeFMUState(c, bytes, len, &f->states[in_u8(in) & 1]);
         }
         free(bytes);
@@ -479,10 +488,8 @@ static void fmi3_op(F3 *f, In *in)
     case 22: fmi3Terminate(c); break;
     case 23: fmi3Reset(c); f->t = 0.0; break;
     case 24: {
-        static const char *const CATS[] = {"logAll", "logStatusError", "logStatusWarning", "nonsense", "", NULL};
-        size_t n = in_u8(in) % 4;
-        fmi3String cats[4];
-        for (size_t i = 0; i < n; i++) cats[i] = CATS[in_u8(in) % 6];
+        const char *cats[4];
+        size_t n = in_categories(in, cats);
         fmi3SetDebugLogging(c, in_u8(in) & 1, n, NUL((in_u8(in) & 7) == 0) ? NULL : cats);
         break;
     }
