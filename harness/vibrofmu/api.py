@@ -44,6 +44,10 @@ _double_p, _int_p = ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_int
 PLANT_DTYPE = np.dtype(VkPlant)
 
 
+# The scene's parameters of the equation: the core's VkModel fields of the same names (models.scene_fields)
+MODEL_PARAMETERS = tuple(model_parameter_names())
+
+
 @functools.cache
 def default_library():
     """The compiled kernel (built on first use; vibrofmu.fmus.kernel.kernel_library), once per process."""
@@ -197,7 +201,7 @@ def fill_plants(plants: np.ndarray, columns: dict, settings: Settings, start_tim
     plants.view(np.uint8).reshape(m, PLANT_DTYPE.itemsize)[:] = _template(settings, start_time)
     model = plants["model"]
     if level.c_model == CModel.EXACT:  # models.scene_fields and ExactModel.compiled_fields, for all scenes at once
-        for name in model_parameter_names():
+        for name in MODEL_PARAMETERS:
             model[name] = columns[name]
         ac = (columns["beta"] != 0.0) | (columns["gamma"] != 0.0)
         model["pull_in_c"] = 2.0 / (3.0 * columns["R"])  # models.pull_in_slope
@@ -265,7 +269,7 @@ def fill_one(plants: np.ndarray, scene: Scene, settings: Settings, start_time: f
     plants.view(np.uint8)[:] = _template(settings, start_time)
     plant = VkPlant.from_buffer(plants)
     model = plant.model
-    for name in ("mu", "Delta", "omega", "alpha", "beta", "gamma", "Omega", "R"):
+    for name in MODEL_PARAMETERS:
         setattr(model, name, getattr(scene, name))
     ac = scene.beta != 0.0 or scene.gamma != 0.0
     model.pull_in_c = 2.0 / (3.0 * scene.R)
