@@ -354,11 +354,11 @@ def test_the_step_to_the_state_then_its_outputs_is_vk_do_step(scene, library):
         U = 0.02 if 100 <= k < 200 else 0.0
         for plant in (stepped, split):
             plant._plant.U_input = U
-        assert library.vk_do_step(stepped._address, 0.1 * k, 0.1) == 0
-        assert library.vk_do_step_state(split._address, 0.1 * k, 0.1) == 0
+        assert library.vk_do_step(stepped.address, 0.1 * k, 0.1) == 0
+        assert library.vk_do_step_state(split.address, 0.1 * k, 0.1) == 0
         assert list(split._plant.out)[:2] == list(stepped._plant.out)[:2]
-        assert library.vk_outputs_bounded(split._address) == 1
-        assert library.vk_step_outputs(split._address) == 0
+        assert library.vk_outputs_bounded(split.address) == 1
+        assert library.vk_step_outputs(split.address) == 0
         assert bytes(split._plant) == bytes(stepped._plant)
 
 
@@ -367,16 +367,16 @@ def test_outputs_are_bounded_only_where_the_proof_holds(library):
     zero) and for a value beyond 1e100; 1 at the same point a rounding away from those."""
     plant = CompiledPlant(Scene(R=2.0), Settings(), library)
     p = plant._plant
-    assert library.vk_outputs_bounded(plant._address) == 1
+    assert library.vk_outputs_bounded(plant.address) == 1
     p.out[0] = 1.5 * 2.0  # u = 2x/(3R) = 1
-    assert library.vk_outputs_bounded(plant._address) == 0
+    assert library.vk_outputs_bounded(plant.address) == 0
     p.out[0] = 1.0
     p.out[1] = 1e101
-    assert library.vk_outputs_bounded(plant._address) == 0
+    assert library.vk_outputs_bounded(plant.address) == 0
     p.out[1] = 0.0
-    assert library.vk_outputs_bounded(plant._address) == 1
+    assert library.vk_outputs_bounded(plant.address) == 1
     polynomial = CompiledPlant(Scene(), Settings(fidelity=1), library)
-    assert library.vk_outputs_bounded(polynomial._address) == 0
+    assert library.vk_outputs_bounded(polynomial.address) == 0
 
 
 def test_vk_run_stops_at_the_first_error(library):
