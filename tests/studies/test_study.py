@@ -265,6 +265,39 @@ def test_an_interrupted_resume_leaves_no_plot_of_an_earlier_run(monkeypatch, tmp
     assert code == 130 and not (out / "basins.png").exists()
 
 
+# A child that blocks SIGINT: bit SIGINT - 1 of the hexadecimal SigBlk mask in /proc/PID/status (Linux).
+SIGINT_BIT = 1 << (signal.SIGINT - 1)
+
+
+def _blocked_mask(pid: int) -> int:
+    for _ in range(600):  # the child's status exists from its fork; wait for it to run Python (its exec)
+        status = Path(f"/proc/{pid}/status").read_text()
+        if "python" in Path(f"/proc/{pid}/cmdline").read_bytes().decode(errors="replace"):
+            return int(next(line.split()[1] for line in status.splitlines() if line.startswith("SigBlk:")), 16)
+        time.sleep(0.05)
+    raise AssertionError(f"child {pid} never ran Python")
+
+
+def test_spawned_workers_start_with_sigint_blocked():
+    """A Ctrl-C reaches the whole process group: a cluster worker still importing (before worker_signals makes
+    it ignore SIGINT) printed a KeyboardInterrupt traceback. After spawn_without_sigint, a spawned child starts
+    with SIGINT blocked, and this process (the study's) does not block it."""
+    import multiprocessing
+
+    from vibrofmu.study import end_children
+    from vibrofmu.study.scheduling import spawn_without_sigint
+
+    spawn_without_sigint()
+    child = multiprocessing.get_context("spawn").Process(target=time.sleep, args=(60,))
+    child.start()
+    try:
+        assert _blocked_mask(child.pid) & SIGINT_BIT
+        assert signal.SIGINT not in signal.pthread_sigmask(signal.SIG_BLOCK, set())
+    finally:
+        end_children()
+        child.join(timeout=30)
+
+
 def test_end_children_ends_a_spawned_child(tmp_path):
     """Before os._exit, study.run ends every process it started (a worker being spawned printed an EOFError
     traceback once its parent was gone)."""

@@ -2,7 +2,8 @@
 
 Ctrl-C in a terminal reaches the whole process group, the workers too; the study's client answers it (it keeps
 every finished case, then ends the workers). A worker inheriting SIG_IGN would need the client to ignore SIGINT
-while it starts them, and a Ctrl-C then would be lost.
+while it starts them, and a Ctrl-C then would be lost; until this runs, SIGINT is blocked in the worker (its
+spawning thread blocked it: scheduling.spawn_without_sigint).
 """
 import signal
 import threading
