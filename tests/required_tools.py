@@ -1,9 +1,10 @@
 """Programs outside Python and the C compiler that some tests need: mingw-w64 and wine (the win64 binaries), valgrind
 (the C hosts under it), cmake (FMPy's build of an FMU's sources/), and one library's headers: SUNDIALS' CVODE (the
-bench's CVODE peer, whose driver the warnings check compiles). Such a test is marked `tools` with the programs it
-needs (@pytest.mark.tools("valgrind")): the default run leaves the tier out and says so in one line
-(tests/conftest.py); `python3 -m pytest -m tools` runs it, and a test whose program is missing fails with one line
-naming what to install, it never skips itself (.ci/run installs them with apt-get when it runs as root)."""
+bench's CVODE peer, whose driver the warnings check compiles, and the Model Exchange C host
+tests/c_host/fmi2_me_cvode.c). Such a test is marked `tools` with the programs it needs
+(@pytest.mark.tools("valgrind")): the default run leaves the tier out and says so in one line (tests/conftest.py);
+`python3 -m pytest -m tools` runs it, and a test whose program is missing fails with one line naming what to
+install, it never skips itself (.ci/run installs them with apt-get when it runs as root)."""
 import shutil
 import subprocess
 
