@@ -1,8 +1,10 @@
 """The FMI 2.0 co-simulation state machine in the three FMUs (issue 15, item 2): every call the standard does
 not allow in the current state gives fmi2Error with a log line naming the call and the state, never fmi2OK
 and never fmi2Fatal; fmi2Reset works afterwards. The plant runs on both paths: the status shim's C fast path
-(kernel 0) and pythonfmu (kernel 1).
+(kernel 0) and pythonfmu (kernel 1). The native FMUs' Model Exchange (every one offers it) likewise: each call out
+of its mode is fmi2Error with a log line, and fmi2Reset gives a working instance.
 """
+import ctypes
 import math
 
 import pytest
@@ -200,3 +202,82 @@ def test_set_with_unknown_reference_or_wrong_type_is_an_error_not_fatal(request,
                 assert_reset_runs(instance, values, output)
                 instance.fmu.reset()
                 initialise(instance, values)  # for the next reference
+
+
+# ---- Model Exchange (the native FMUs, FMI 2.0: every one offers it) ----
+
+def _me_cases(m, nx):
+    """(state reached by `setup`, call name, the call) for calls FMI 2.0 Model Exchange does not allow there."""
+    x = (ctypes.c_double * max(nx, 1))()
+
+    def init():
+        m.setupExperiment(startTime=0.0)
+        m.enterInitializationMode()
+
+    def event():
+        init()
+        m.exitInitializationMode()
+
+    def continuous():
+        event()
+        m.newDiscreteStates()
+        m.enterContinuousTimeMode()
+
+    def terminated():
+        continuous()
+        m.terminate()
+
+    def nothing():
+        return None
+
+    step = m.dll.fmi2DoStep
+    return [(nothing, "fmi2GetDerivatives", lambda: m.getDerivatives(x, nx)),
+            (nothing, "fmi2SetTime", lambda: m.setTime(0.0)),
+            (nothing, "fmi2NewDiscreteStates", m.newDiscreteStates),
+            (init, "fmi2EnterContinuousTimeMode", m.enterContinuousTimeMode),
+            (init, "fmi2SetContinuousStates", lambda: m.setContinuousStates(x, nx)),
+            (event, "fmi2SetContinuousStates", lambda: m.setContinuousStates(x, nx)),
+            (event, "fmi2CompletedIntegratorStep", m.completedIntegratorStep),
+            (continuous, "fmi2NewDiscreteStates", m.newDiscreteStates),
+            (continuous, "fmi2DoStep", lambda: _raise_on(step(ctypes.c_void_p(m.component), ctypes.c_double(0.0),
+                                                                ctypes.c_double(0.1), 1))),
+            (terminated, "fmi2SetTime", lambda: m.setTime(0.1))], continuous
+
+
+def _raise_on(code):
+    if code != OK:
+        raise FMICallException(function="fmi2DoStep", status=code)
+
+
+@pytest.mark.parametrize("name", ["plant", "controller", "closed_loop"])
+def test_native_model_exchange_calls_out_of_their_mode_are_errors(request, name, tmp_path):
+    """Each Model Exchange call in a state FMI 2.0 does not allow it in: fmi2Error with a log line naming the call,
+    never fmi2OK nor a crash; fmi2Reset then gives a working instance (the states and derivatives finite)."""
+    from fmpy import extract, read_model_description
+    from fmpy.fmi2 import FMU2Model
+
+    from vibrofmu.hosts.run import FmuLog
+
+    fmu = request.getfixturevalue(f"native_{name}_fmu")
+    md = read_model_description(str(fmu))
+    nx = len(md.derivatives)
+    log = FmuLog()  # a live logger of this test's own (FMPy's FMI 2 logger is a process-wide proxy)
+    m = FMU2Model(guid=md.guid, unzipDirectory=extract(str(fmu), str(tmp_path)),
+                  modelIdentifier=md.modelExchange.modelIdentifier, instanceName="me")
+    m.instantiate(callbacks=log.callbacks)
+    cases, continuous = _me_cases(m, nx)
+    for setup, call, make_call in cases:
+        m.reset()
+        setup()
+        assert status(make_call) == ERROR, (setup.__name__, call)
+        assert any(call in text for text in log.errors()[-1:]), (setup.__name__, call, log.errors()[-1:])
+    m.reset()
+    continuous()
+    x, dx = (ctypes.c_double * nx)(), (ctypes.c_double * nx)()
+    m.getContinuousStates(x, nx)
+    m.setTime(0.1)
+    m.setContinuousStates(x, nx)
+    m.getDerivatives(dx, nx)
+    assert all(math.isfinite(v) for v in (*x, *dx))
+    m.terminate()
+    m.freeInstance()
