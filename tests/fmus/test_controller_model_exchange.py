@@ -13,13 +13,13 @@ import numpy as np
 import pytest
 from fmpy import extract, read_model_description, simulate_fmu
 from fmpy.fmi1 import FMICallException
-from fmpy.fmi2 import FMU2Model, FMU2Slave
 from fmpy.validation import validate_fmu
 
 from vibrofmu import paths
 from vibrofmu.fmus import toolchain
 from vibrofmu.hosts.run import FmuLog
 from vibrofmu.speed.peers import CVODE_LIBS
+from model_exchange import assert_co_simulation_has_no_derivatives, model_exchange_instance, restart
 
 pytestmark = pytest.mark.fmu
 
@@ -113,33 +113,20 @@ def test_model_exchange_bad_calls_are_errors(native_controller_fmu, tmp_path):
     """Out of order, wrong sizes, a Co-Simulation instance's ME call, an ME instance's doStep, and an input beyond
     its rule: fmi2Error with a log line, never a value with fmi2OK; the derivatives are the update law's rates."""
     log = FmuLog()  # a live logger of this test's own (FMPy's FMI 2 logger is a process-wide proxy)
-    md = read_model_description(str(native_controller_fmu))
-    folder = extract(str(native_controller_fmu), str(tmp_path / "u"))
+    md, folder, fmu = model_exchange_instance(native_controller_fmu, tmp_path, log)
     vr = {v.name: v.valueReference for v in md.modelVariables}
-    fmu = FMU2Model(guid=md.guid, unzipDirectory=folder, modelIdentifier=md.modelExchange.modelIdentifier,
-                    instanceName="me")
-    fmu.instantiate(callbacks=log.callbacks)
     nine = (ctypes.c_double * 9)()
     with pytest.raises(FMICallException):  # before initialisation
         fmu.getDerivatives(nine, 9)
 
-    def restart(continuous_time=False):
-        fmu.reset()
-        fmu.setupExperiment(startTime=0.0)
-        fmu.enterInitializationMode()
-        fmu.exitInitializationMode()
-        if continuous_time:
-            fmu.newDiscreteStates()
-            fmu.enterContinuousTimeMode()
-
-    restart()
+    restart(fmu)
     with pytest.raises(FMICallException):  # event mode: continuous states are set in continuous-time mode
         fmu.setContinuousStates(nine, 9)
-    restart(continuous_time=True)
+    restart(fmu, continuous_time=True)
     assert fmu.dll.fmi2GetDerivatives(ctypes.c_void_p(fmu.component), (ctypes.c_double * 2)(), 2) > 0  # wrong size
-    restart(continuous_time=True)
+    restart(fmu, continuous_time=True)
     assert fmu.dll.fmi2DoStep(ctypes.c_void_p(fmu.component), ctypes.c_double(0.0), ctypes.c_double(0.1), 1) > 0
-    restart(continuous_time=True)
+    restart(fmu, continuous_time=True)
     fmu.getContinuousStates(nine, 9)  # the estimates' start values
     assert list(nine) == [md_start(md, f"{name}_start") for name in ESTIMATES]
     assert fmu.dll.fmi2GetEventIndicators(ctypes.c_void_p(fmu.component), None, 0) == 0  # none: n = 0 is fine
@@ -155,14 +142,7 @@ def test_model_exchange_bad_calls_are_errors(native_controller_fmu, tmp_path):
     # the instance is in the error state: the derivatives are not answered with fmi2OK
     assert fmu.dll.fmi2GetDerivatives(ctypes.c_void_p(fmu.component), derivatives, 9) > 0
     fmu.freeInstance()
-    cs = FMU2Slave(guid=md.guid, unzipDirectory=folder, modelIdentifier=md.coSimulation.modelIdentifier,
-                   instanceName="cs")
-    cs.instantiate(callbacks=log.callbacks)
-    cs.setupExperiment(startTime=0.0)
-    cs.enterInitializationMode()
-    cs.exitInitializationMode()
-    assert cs.dll.fmi2GetDerivatives(ctypes.c_void_p(cs.component), nine, 9) > 0  # a Co-Simulation instance
-    cs.freeInstance()
+    assert_co_simulation_has_no_derivatives(md, folder, log, 9)
     errors = log.errors()  # one line each, naming the call and the state or the interface
     assert any("fmi2SetContinuousStates is not allowed in the event mode state" in m for m in errors), errors
     assert any("fmi2GetDerivatives" in m and "instantiated for Co-Simulation" in m for m in errors), errors

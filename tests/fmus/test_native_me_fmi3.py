@@ -10,13 +10,14 @@ import zipfile
 import numpy as np
 import pytest
 from fmpy import extract, read_model_description, simulate_fmu
-from fmpy.fmi2 import FMU2Model, FMU2Slave
+from fmpy.fmi2 import FMU2Model
 from fmpy.fmi3 import FMU3Model, FMU3Slave
 from fmpy.validation import validate_fmu
 
 from vibromodel.parameters import Scene
 from vibrofmu.analyses.reference import reference_solution
 from vibrofmu.hosts.run import FmuLog
+from model_exchange import assert_co_simulation_has_no_derivatives, model_exchange_instance, restart
 
 pytestmark = pytest.mark.fmu
 
@@ -159,39 +160,24 @@ def _logger():
     return messages, log
 
 
-def _restart(fmu, continuous_time: bool = False) -> None:
-    """Reset and initialise `fmu` again (an Error of the instance ends it): event mode, or continuous-time mode."""
-    fmu.reset()
-    fmu.setupExperiment(startTime=0.0)
-    fmu.enterInitializationMode()
-    fmu.exitInitializationMode()
-    if continuous_time:
-        fmu.newDiscreteStates()
-        fmu.enterContinuousTimeMode()
-
-
 def test_model_exchange_bad_calls_are_errors(native_plant_fmu, tmp_path):
     # FMPy's FMI 2 logger is a process-wide proxy: without a live logger of its own, an instance that logs after
     # another test's logger was collected calls freed memory (hosts.run.FmuLog keeps its callback alive)
     log = FmuLog()
     from fmpy.fmi1 import FMICallException
 
-    md = read_model_description(str(native_plant_fmu))
-    folder = extract(str(native_plant_fmu), str(tmp_path / "u"))
-    fmu = FMU2Model(guid=md.guid, unzipDirectory=folder, modelIdentifier=md.modelExchange.modelIdentifier,
-                    instanceName="me")
-    fmu.instantiate(callbacks=log.callbacks)
+    md, folder, fmu = model_exchange_instance(native_plant_fmu, tmp_path, log)
     with pytest.raises(FMICallException):  # before initialisation
         fmu.getDerivatives((ctypes.c_double * 2)(), 2)
-    _restart(fmu)
+    restart(fmu)
     with pytest.raises(FMICallException):  # event mode: continuous states are set in continuous-time mode
         fmu.setContinuousStates((ctypes.c_double * 2)(0.0, 0.0), 2)
-    _restart(fmu, continuous_time=True)
+    restart(fmu, continuous_time=True)
     assert fmu.dll.fmi2GetDerivatives(ctypes.c_void_p(fmu.component), None, 2) > 0           # NULL array
-    _restart(fmu, continuous_time=True)
+    restart(fmu, continuous_time=True)
     assert fmu.dll.fmi2GetDerivatives(ctypes.c_void_p(fmu.component), (ctypes.c_double * 5)(), 5) > 0  # wrong size
     assert fmu.dll.fmi2GetEventIndicators(None, (ctypes.c_double * 3)(), 3) > 0     # NULL instance
-    _restart(fmu, continuous_time=True)
+    restart(fmu, continuous_time=True)
     x, z = (ctypes.c_double * 2)(), (ctypes.c_double * 3)()
     fmu.getContinuousStates(x, 2)
     fmu.getEventIndicators(z, 3)
@@ -200,14 +186,7 @@ def test_model_exchange_bad_calls_are_errors(native_plant_fmu, tmp_path):
     step = fmu.dll.fmi2DoStep  # a Model Exchange instance has no doStep
     assert step(ctypes.c_void_p(fmu.component), ctypes.c_double(0.0), ctypes.c_double(0.1), 1) > 0
     fmu.freeInstance()
-    cs = FMU2Slave(guid=md.guid, unzipDirectory=folder, modelIdentifier=md.coSimulation.modelIdentifier,
-                   instanceName="cs")
-    cs.instantiate(callbacks=log.callbacks)
-    cs.setupExperiment(startTime=0.0)
-    cs.enterInitializationMode()
-    cs.exitInitializationMode()
-    assert cs.dll.fmi2GetDerivatives(ctypes.c_void_p(cs.component), (ctypes.c_double * 2)(), 2) > 0  # a CS instance
-    cs.freeInstance()
+    assert_co_simulation_has_no_derivatives(md, folder, log, 2)
     assert any("fmi2SetContinuousStates is not allowed in the event mode state" in m for m in log.errors())
     assert any("instantiated for Co-Simulation" in m for m in log.errors())
 
