@@ -309,13 +309,15 @@ def switch_to_doubled(problem: Problem, pd: Point, scale: float, h: float = 0.02
 
 def branch(scene: Scene, param: str, lo: float, hi: float, *, points: int = 200, rtol: float = RTOL,
            tol: float = NEWTON_TOL, start_guess=None, double: bool = True, max_points: int | None = None,
-           progress: Callable[[int, Point], None] | None = None) -> Branch:
+           max_period: int = 2, progress: Callable[[int, Point], None] | None = None) -> Branch:
     """The branch of T-periodic orbits from p = lo (started from the linear response, or start_guess) to
-    p = hi, with events located; at each period doubling the doubled branch is switched to and continued
-    (inside [lo, hi]). The step is sized so that the branch has about `points` points when it is straight:
-    max_step = 1.5 / points of the scaled parameter (range = 1); where the branch runs in the state the
-    arclength step grows up to STRETCH x max_step (continue_from); each branch stops at max_points (default
-    4 points) with the stop reason saying so."""
+    p = hi, with events located; at each period doubling of a branch of period nT with 2n <= max_period the
+    branch of period 2nT is switched to and continued (inside [lo, hi]), and so on: a cascade (result.doubled
+    holds the doubled branches of every level, parents before children; a period doubling on a branch of
+    period max_period is located but not switched). The step is sized so that the branch has about `points`
+    points when it is straight: max_step = 1.5 / points of the scaled parameter (range = 1); where the branch
+    runs in the state the arclength step grows up to STRETCH x max_step (continue_from); each branch stops at
+    max_points (default 4 points) with the stop reason saying so."""
     t0, c0 = time.perf_counter(), time.process_time()
     problem = Problem(scene, param, rtol=rtol, tol=tol)
     scale = abs(hi - lo)
@@ -324,19 +326,48 @@ def branch(scene: Scene, param: str, lo: float, hi: float, *, points: int = 200,
     main, reason = continue_from(problem, start, hi, scale=scale, step=max_step / 2, max_step=max_step,
                                  max_points=max_points or 4 * points, progress=progress)
     result = Branch(problem, main, stop_reason=reason)
-    if double:
-        for pd in [pt for pt in main if pt.event == "period-doubling"]:
+    pending = [result] if double else []
+    while pending:
+        parent = pending.pop(0)
+        if 2 * parent.problem.periods > max_period:
+            continue
+        child_problem = replace(problem, periods=2 * parent.problem.periods)
+        for pd in [pt for pt in parent.points if pt.event == "period-doubling"]:
             try:
-                first = switch_to_doubled(problem, pd, scale)
-                doubled_points, why = continue_from(replace(problem, periods=2), first, hi, scale=scale,
+                first = switch_to_doubled(parent.problem, pd, scale)
+                doubled_points, why = continue_from(child_problem, first, hi, scale=scale,
                                                     step=max_step / 2, max_step=max_step,
                                                     max_points=max_points or 4 * points,
                                                     direction=first.tangent, p_bounds=(min(lo, hi), max(lo, hi)))
-                result.doubled.append(Branch(replace(problem, periods=2), doubled_points, stop_reason=why))
+                child = Branch(child_problem, doubled_points, stop_reason=why)
+                pending.append(child)
             except ShootingError as error:
-                result.doubled.append(Branch(replace(problem, periods=2), [], stop_reason=str(error)))
+                child = Branch(child_problem, [], stop_reason=str(error))
+            result.doubled.append(child)
     result.seconds, result.cpu_seconds = time.perf_counter() - t0, time.process_time() - c0
     return result
+
+
+def cascade(result: Branch) -> list[Point]:
+    """The period doublings of a cascade in the order of their period: the first of the T-branch, then the first
+    on each doubled branch (of period 2T, 4T, ...) switched to from the previous one (branch's result)."""
+    found, periods = [], 1
+    for br in [result, *result.doubled]:
+        if br.problem.periods != periods:
+            continue
+        pds = [pt for pt in br.points if pt.event == "period-doubling"]
+        if not pds:
+            break
+        found.append(pds[0])
+        periods *= 2
+    return found
+
+
+def feigenbaum_ratios(values: list[float]) -> list[float]:
+    """(p_k - p_{k-1}) / (p_{k+1} - p_k) for successive doubling points p_1, p_2, ...: Feigenbaum's
+    delta = 4.6692... in the limit k -> infinity for a map with a quadratic maximum."""
+    d = np.diff(np.asarray(values, dtype=float))
+    return [float(d[k] / d[k + 1]) for k in range(len(d) - 1)]
 
 
 # ----- rows: what branch.parquet holds ---------------------------------------------------------------------

@@ -66,7 +66,7 @@ def plot_branch(path: Path, result: cont.Branch, title: str) -> None:
         x_min = np.array([pt.x_min for pt in pts])
         rho = np.array([np.abs(pt.multipliers) for pt in pts])
         stable = [pt.stable for pt in pts]
-        name = "period-T branch" if index == 0 else f"doubled branch {index} (period 2T)"
+        name = "period-T branch" if index == 0 else f"doubled branch {index} (period {br.problem.periods}T)"
         for start, stop, flag in _segments(p, stable):
             style = "-" if flag else "--"
             label = f"{name}, {'stable' if flag else 'unstable'}"

@@ -26,6 +26,10 @@ def options(p):
                    help="points of a straight branch over [A, B] (sets the largest step; a winding branch takes "
                         "up to 4x as many)")
     p.add_argument("--no-doubling", action="store_true", help="do not switch to the doubled branches")
+    p.add_argument("--max-period", type=count, default=8, metavar="N",
+                   help="follow a period-doubling cascade up to orbits of period N T: at every period doubling of "
+                        "a branch of period n T with 2n <= N the branch of period 2n T is continued (a doubling on "
+                        "a branch of period N T is located, not followed; default 8)")
     p.add_argument("--confirm", action="store_true",
                    help="confirm every located event by long FMU runs on either side (confirmations.json)")
     p.add_argument("--delta", type=positive, default=None,
@@ -118,7 +122,7 @@ def run(args) -> int:
     try:
         result = cont.branch(scene, args.param, args.start, args.stop,
                              points=BENCH_STEP_POINTS if args.bench else args.points,
-                             double=not args.no_doubling, progress=progress,
+                             double=not args.no_doubling, max_period=args.max_period, progress=progress,
                              max_points=BENCH_POINTS if args.bench else None)
     except ShootingError as error:
         hint = (f" (the electrodes sit at x = +-3R/2 = +-{1.5 * scene.R:g}; a larger R, e.g. --set R=3, leaves room "
@@ -134,20 +138,33 @@ def run(args) -> int:
                "cpu_seconds": result.cpu_seconds,
                "events": [{"event": pt.event, "value": pt.p, "x_min": pt.x_min, "x_max": pt.x_max,
                            "multipliers": [[r.real, r.imag] for r in pt.multipliers]} for pt in result.events()],
-               "doubled_branches": [{"points": len(br.points), "stop_reason": br.stop_reason,
+               "doubled_branches": [{"periods": br.problem.periods, "points": len(br.points),
+                                     "stop_reason": br.stop_reason,
                                      "events": [{"event": pt.event, "value": pt.p} for pt in br.events()]}
                                     for br in result.doubled]}
+    steps = cont.cascade(result)
+    if len(steps) >= 2:  # a cascade: the doubling points in order of period, and Feigenbaum's ratios
+        summary["cascade"] = {"param": args.param,
+                              "doublings": [{"periods": pt.periods, "to_periods": 2 * pt.periods, "value": pt.p,
+                                             "multipliers": [[r.real, r.imag] for r in pt.multipliers],
+                                             "residual": pt.residual} for pt in steps],
+                              "ratios": cont.feigenbaum_ratios([pt.p for pt in steps])}
     print(f"{len(result.points)} orbits from {args.param} = {args.start:g} ({result.stop_reason}) in "
           f"{result.seconds:.1f} s ({result.cpu_seconds:.1f} s CPU)")
     for pt in result.events():
         print(f"{pt.event} at {args.param} = {pt.p:.10g}: x in [{pt.x_min:.5g}, {pt.x_max:.5g}], multipliers "
               + ", ".join(f"{r.real:.5g}{r.imag:+.2g}j" if r.imag else f"{r.real:.6g}" for r in pt.multipliers))
     for index, br in enumerate(result.doubled, 1):
-        print(f"doubled branch {index}: {len(br.points)} orbits of period 2T ({br.stop_reason})"
+        print(f"doubled branch {index}: {len(br.points)} orbits of period {br.problem.periods}T ({br.stop_reason})"
               + "".join(f"; {pt.event} at {pt.p:.8g}" for pt in br.events()))
     for name, br in [("branch", result)] + [(f"doubled branch {i}", b) for i, b in enumerate(result.doubled, 1)]:
         if br.stop_reason.startswith("stopped at"):
             print(f"warning: {name} {br.stop_reason} before {args.param} = {args.stop:g}; raise --points")
+    if "cascade" in summary:
+        print("cascade: " + ", ".join(f"{d['periods']}T -> {d['to_periods']}T at {args.param} = {d['value']:.10g}"
+                                      for d in summary["cascade"]["doublings"])
+              + "; ratios of successive intervals " + ", ".join(f"{r:.4f}" for r in summary["cascade"]["ratios"])
+              + " (Feigenbaum's delta 4.6692)")
     status = 0
     if args.confirm:
         delta = args.delta or 0.01 * abs(args.stop - args.start)
@@ -207,6 +224,8 @@ def unused(args) -> list[Unused]:
                           "out") for dest in ("param", "start", "stop") if args.bench]
     if args.bench and not args.chart:  # (--chart reads --points)
         found.append(Unused("points", f"--bench continues its own branch ({BENCH_POINTS} points); leave it out"))
+    if args.no_doubling:
+        found.append(Unused("max_period", "--no-doubling follows no doubled branch; leave --max-period out"))
     if not args.confirm:
         found += [Unused(dest, "only --confirm runs the FMU; add --confirm or leave it out") for dest in ("delta", "fmu")]
     return found
