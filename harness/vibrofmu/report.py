@@ -312,8 +312,7 @@ def speed_block(sources: list[Path]) -> str | None:
     lines = []
     for folder in sources:
         bench_file, summary_file = folder / "bench.json", folder / "summary.json"
-        if bench_file.is_file():
-            data = json.loads(bench_file.read_text())
+        if bench_file.is_file() and "curve" not in (data := json.loads(bench_file.read_text())):
             machine = data.get("machine", {})
             load = machine.get("load_average_at_start")
             when = machine.get("started_utc") or time.strftime("%Y-%m-%d %H:%M UTC",  # older files: their end
@@ -397,6 +396,22 @@ def auto_block(sources: list[Path]) -> str | None:
                 "", f"Measured {when} (costs: thread CPU time on a shared machine). Regenerate: `python -m "
                 f"vibrofmu.analyses.error_calibration auto {result['n']} {result['seed']} > DIR/auto.json`, then "
                 "`vibrofmu report --only auto --from DIR`."])
+    return None
+
+
+def curve_speed_block(sources: list[Path]) -> str | None:
+    """The fold-curve benchmark from the first bench.json of `bench --curve` in the folders."""
+    for folder in sources:
+        file = folder / "bench.json"
+        if file.is_file() and "curve" in (data := json.loads(file.read_text())):
+            c = data["curve"]
+            when = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime(file.stat().st_mtime))
+            return (f"`vibrofmu bench --curve` ({when}, {c['cpu_count']} CPUs, load average "
+                    f"{c['load_average_at_start'][0]:.1f} at its start, {c['load_average_at_end'][0]:.1f} at its end): "
+                    f"a fold curve of {c['points']} points in (ω, Δ) in {c['seconds']:.0f} s wall clock, "
+                    f"{c['cpu_seconds']:.0f} s CPU ({1e3 * c['cpu_seconds_per_point']:.0f} ms CPU per point); the "
+                    f"target is {c['target']}. Timings on a shared machine: the CPU time is the cost, the wall "
+                    "clock follows the load.")
     return None
 
 

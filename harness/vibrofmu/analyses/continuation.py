@@ -295,7 +295,7 @@ def switch_to_doubled(problem: Problem, pd: Point, scale: float, h: float = 0.02
     cont = Continuation(doubled, scale)
     u0 = cont.u_of(pd)
     normal = np.array([v[0], v[1], 0.0])
-    for amplitude in (h, h / 4, h / 16, 4 * h):
+    for amplitude in (h, h / 4, h / 16, h / 64, h / 256, 4 * h):  # small ones for a narrow window (late in a cascade)
         try:
             point, _ = cont.correct(u0 + amplitude * normal, normal)
         except (ShootingError, np.linalg.LinAlgError):

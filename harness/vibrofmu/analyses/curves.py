@@ -19,7 +19,8 @@ continued by Keller's pseudo-arclength method like a branch (shooting.arclength_
 Derivatives: the period map gives M and dP/dp1 (variational equations) and dP/dp2 (a second map with the
 sensitivity to p2); g's gradient is g_y = -v^T (dA/dy) w (the bordered system's derivative), dA/dy = dM/dy by
 forward differences of M over a relative step FD_STEP (4 maps). The corrector is a chord method: the Jacobian
-is formed once per point at the predictor and reused; each iteration re-evaluates the exact residual (1 map).
+is formed once per point at the predictor and reused (its base map is the first iteration's residual); each
+further iteration re-evaluates the exact residual (1 map).
 
 Codimension two on a fold curve: the cusp, where the fold's quadratic coefficient a = v^T P_zz(w, w) / 2
 changes sign. The Jacobian's row g_z gives it for free: g_z w = -v^T (dM/dz w) w = -2 a (v normalised by the
@@ -116,12 +117,13 @@ class Augmented:
         g, _, _ = self.bordered(pmap.monodromy)
         return np.append(pmap.end - z, g), pmap
 
-    def jacobian(self, u: np.ndarray) -> tuple[np.ndarray, float]:
-        """The 3 x 4 Jacobian of (P - z, g) in u (module doc) and g_z w (the cusp's test function)."""
+    def jacobian(self, u: np.ndarray) -> tuple[np.ndarray, float, tuple]:
+        """The 3 x 4 Jacobian of (P - z, g) in u (module doc), g_z w (the cusp's test function) and the residual
+        at u (from the same period map: the corrector's first iteration needs no map of its own)."""
         z, p1, p2 = self.unscale(u)
         base = self.map(z, p1, p2)
         self.set_border(base.monodromy)
-        _, w, v = self.bordered(base.monodromy)
+        g, w, v = self.bordered(base.monodromy)
         J = np.zeros((3, 4))
         J[:2, :2] = base.monodromy - np.eye(2)
         J[:2, 2] = base.d_param * self.scales[0]
@@ -135,7 +137,7 @@ class Augmented:
             J[2, k] = -float(v @ dM @ w) * (1.0 if k < 2 else self.scales[k - 2])
             if k == 3:  # dP/dp2 by the same forward difference (a chord Jacobian and the tangent need ~1e-5)
                 J[:2, 3] = (shifted.end - base.end) / step * self.scales[1]
-        return J, float(J[2, :2] @ w)
+        return J, float(J[2, :2] @ w), (np.append(base.end - z, g), base)
 
     def quadratic(self, u: np.ndarray, base: sh.PeriodMap) -> float:
         """g_z w at u (the cusp's test function: module doc), dM/dz by forward differences (2 maps); the
@@ -173,11 +175,11 @@ def correct(system: Augmented, u_pred: np.ndarray, normal: np.ndarray, max_iter:
             tol: float = TOL) -> tuple[np.ndarray, sh.PeriodMap, np.ndarray, int]:
     """Chord Newton on ((P - z, g), normal . (u - u_pred)) = 0 with the Jacobian at u_pred.
     Returns (u, its period map, the Jacobian at u_pred, iterations); ShootingError if it does not converge."""
-    J, _ = system.jacobian(u_pred)
+    J, _, first = system.jacobian(u_pred)
     K = np.vstack([J, normal])
     u = u_pred.copy()
     for iteration in range(max_iter):
-        F, pmap = system.residual(u)
+        F, pmap = first if iteration == 0 else system.residual(u)
         if np.max(np.abs(F)) <= tol:
             return u, pmap, J, iteration
         u = u - np.linalg.solve(K, np.append(F, np.dot(normal, u - u_pred)))
@@ -211,7 +213,7 @@ def locate_cusp(system: Augmented, u0: np.ndarray, t0: np.ndarray, h: float) -> 
     hh = brentq(lambda x: point(x).quadratic, 0.0, h, xtol=1e-12 * h, rtol=1e-12)
     located = point(hh)
     located.event = "cusp"
-    J, _ = system.jacobian(np.array([*located.z0, located.p1 / system.scales[0], located.p2 / system.scales[1]]))
+    J, _, _ = system.jacobian(np.array([*located.z0, located.p1 / system.scales[0], located.p2 / system.scales[1]]))
     located.tangent = null_vector(J, t0)  # its own: both parameter components vanish at a cusp
     return located
 
@@ -225,7 +227,7 @@ def follow(system: Augmented, start: CurvePoint, direction: float, p2_bounds: tu
     iterations and a tangent turning < TURN, grown x1.5 after an easy step, halved on rejection. A sign change
     of the quadratic coefficient is a cusp, located by Brent."""
     u = np.array([start.z0[0], start.z0[1], start.p1 / system.scales[0], start.p2 / system.scales[1]])
-    J, quadratic = system.jacobian(u)
+    J, quadratic, _ = system.jacobian(u)
     t = null_vector(J, np.array([0.0, 0.0, 0.0, direction]))
     start.tangent, start.quadratic = t, quadratic
     points, h = [start], max_step / 2
@@ -281,7 +283,7 @@ def start_point(system: Augmented, z0, p1: float, p2: float) -> CurvePoint:
     u = np.array([z0[0], z0[1], p1 / system.scales[0], p2 / system.scales[1]])
     normal = np.array([0.0, 0.0, 0.0, 1.0])  # p2 fixed
     u, pmap, _, _ = correct(system, u, normal)
-    J, quadratic = system.jacobian(u)
+    J, quadratic, _ = system.jacobian(u)
     g, _, _ = system.bordered(pmap.monodromy)
     return system.point(u, pmap, g, quadratic)
 
@@ -381,3 +383,34 @@ def rows(curves: Curves) -> list[dict]:
                         "rho2_re": float(pt.multipliers[1].real), "residual": pt.residual, "g": pt.g,
                         "quadratic": pt.quadratic})
     return out
+
+
+# ----- the benchmark: `vibrofmu bench --curve` -------------------------------------------------------------------
+
+BENCH_SCENE = {"mu": 0.05, "Delta": 0.1, "R": 3.0, "beta": 0.0, "gamma": 0.0}  # two folds at omega ~ 0.829, 0.933
+BENCH_POINTS = 200  # the curve's points: the target is BENCH_POINTS in < 60 s on 2 cores
+BENCH_DELTA = (0.02, 0.2)  # the fold curve's range in Delta: through the cusp (Delta ~ 0.06) to the end of both folds
+
+
+def bench_curve(progress: Callable[[str], None] | None = None) -> dict:
+    """The fold curve of BENCH_SCENE in (omega, Delta), from the two folds of the omega-branch at Delta = 0.1,
+    each piece capped so that the curve has BENCH_POINTS points at most; the cost of the curve alone (the
+    branch that starts it is timed apart)."""
+    from vibrofmu.analyses import continuation as cont
+
+    scene = Scene(**BENCH_SCENE)
+    t0, c0 = time.perf_counter(), time.process_time()
+    branch = cont.branch(scene, "omega", 0.8, 0.95, points=20, double=False)
+    branch_seconds, branch_cpu = time.perf_counter() - t0, time.process_time() - c0
+    found = curves_from_branch(branch, "fold", "Delta", BENCH_DELTA[1], BENCH_DELTA[0], points=BENCH_POINTS,
+                               max_points=BENCH_POINTS // 3, progress=progress)
+    points = sum(len(c.points) for c in found.curves)
+    return {"scene": BENCH_SCENE, "delta_range": list(BENCH_DELTA), "points": points,
+            "seconds": found.seconds, "cpu_seconds": found.cpu_seconds,
+            "seconds_per_point": found.seconds / points, "cpu_seconds_per_point": found.cpu_seconds / points,
+            "branch_seconds": branch_seconds, "branch_cpu_seconds": branch_cpu,
+            "events": [{"event": pt.event, "omega": pt.p1, "Delta": pt.p2} for c in found.curves for pt in c.points
+                       if pt.event],
+            "stop_reasons": [c.stop_reason for c in found.curves],
+            "target": f"{BENCH_POINTS} points in < 60 s on 2 cores"}
+

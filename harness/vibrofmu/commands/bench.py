@@ -16,6 +16,9 @@ def options(p):
                    help="only the comparison with other ODE solvers (numbalsoda, diffrax, CVODE, SciPy) at equal "
                         "accuracy, interleaved rounds (--ladder-rounds, default 3): peers.json, peers.png; the "
                         "peers are an optional extra: pip install -e '.[peers]'")
+    p.add_argument("--curve", action="store_true",
+                   help="only the two-parameter continuation benchmark: a fold curve of 200 points in (omega, Delta) "
+                        "(bench.json: seconds, CPU seconds, per point; target < 60 s on 2 cores); needs no FMU")
     p.add_argument("--no-instructions", action="store_true",
                    help="skip the ladder's instruction counts (valgrind's callgrind, a few minutes)")
     p.add_argument("--fmu", default=None, help=FMU_HELP)
@@ -23,6 +26,8 @@ def options(p):
 
 
 def run(args) -> int:
+    if args.curve:
+        return run_curve(args)
     from vibrofmu.analyses import extremes
     from vibrofmu.speed import bench
 
@@ -58,7 +63,30 @@ def run(args) -> int:
     return 0
 
 
+def run_curve(args) -> int:
+    import os
+
+    from vibrofmu.analyses import curves
+    from vibrofmu.output import export
+
+    out = out_folder(args.out)
+    load = os.getloadavg()
+    record = curves.bench_curve(progress=lambda line: print(line, file=sys.stderr, flush=True))
+    record.update({"cpu_count": os.cpu_count(), "load_average_at_start": list(load),
+                   "load_average_at_end": list(os.getloadavg())})
+    export.write_json(out / "bench.json", {"curve": record})
+    print(f"fold curve: {record['points']} points in {record['seconds']:.1f} s wall clock, {record['cpu_seconds']:.1f} s "
+          f"CPU ({1e3 * record['cpu_seconds_per_point']:.0f} ms CPU per point; load average {load[0]:.1f} at the start "
+          f"on {record['cpu_count']} cores; target {record['target']})"
+          + "".join(f"; {e['event']} at omega = {e['omega']:.10g}, Delta = {e['Delta']:.10g}" for e in record["events"]))
+    print(f"wrote {out}/bench.json")
+    return 0
+
+
 def unused(args) -> list[Unused]:
+    if args.curve:
+        return [Unused(dest, "--curve runs only the fold-curve benchmark; leave it out")
+                for dest in ("repeats", "ladder_rounds", "ladder_only", "peers", "no_instructions", "fmu", "quick")]
     if args.peers:
         return [Unused("repeats", "--peers runs each setting once per round (the rounds are --ladder-rounds); leave "
                                   "it out"),
