@@ -394,7 +394,8 @@ BENCH_DELTA = (0.02, 0.2)  # the fold curve's range in Delta: through the cusp (
 
 def bench_curve(progress: Callable[[str], None] | None = None) -> dict:
     """The fold curve of BENCH_SCENE in (omega, Delta), from the two folds of the omega-branch at Delta = 0.1,
-    each piece capped so that the curve has BENCH_POINTS points at most; the cost of the curve alone (the
+    each of its (at most four) pieces, up and down from each fold, capped so that the curve has BENCH_POINTS
+    points at most; the cost of the curve alone (the
     branch that starts it is timed apart)."""
     from vibrofmu.analyses import continuation as cont
 
@@ -403,7 +404,7 @@ def bench_curve(progress: Callable[[str], None] | None = None) -> dict:
     branch = cont.branch(scene, "omega", 0.8, 0.95, points=20, double=False)
     branch_seconds, branch_cpu = time.perf_counter() - t0, time.process_time() - c0
     found = curves_from_branch(branch, "fold", "Delta", BENCH_DELTA[1], BENCH_DELTA[0], points=BENCH_POINTS,
-                               max_points=BENCH_POINTS // 3, progress=progress)
+                               max_points=BENCH_POINTS // 4, progress=progress)
     points = sum(len(c.points) for c in found.curves)
     return {"scene": BENCH_SCENE, "delta_range": list(BENCH_DELTA), "points": points,
             "seconds": found.seconds, "cpu_seconds": found.cpu_seconds,
