@@ -29,6 +29,12 @@ and `vibrofmu report` rewrites the text between them (the markers stay). Blocks:
              --from folders (deterministic given the files; not run by the report itself: an hour of campaigns).
 - auto:      fidelity auto's choice against the oracle over random (scene, tolerance) pairs, from an auto.json
              (`python -m vibrofmu.analyses.error_calibration auto n seed`) in the --from folders (costs are timings).
+- cascade:   a period-doubling cascade followed by `vibrofmu continuation` (its doubling points and the ratios of
+             successive intervals against Feigenbaum's delta), from a continuation summary.json with a cascade in
+             the --from folders (not run by the report itself: minutes).
+- curve_speed: the cost of a fold curve (two-parameter continuation) from a bench.json of `bench --curve` in the
+             --from folders (a timing: not run by the report itself, never compared by --check).
+
 
 Without --from, the oafm, stability and speed blocks come from fresh runs of `vibrofmu oafm`, `stability` and
 `bench` (quick: oafm study to order 3, `bench --quick`). `--check` regenerates every block whose numbers do not
@@ -54,14 +60,16 @@ BLOCK = re.compile(r"<!-- report:(?P<name>[a-z_]+) -->\n(?P<body>.*?)<!-- /repor
 OPEN = re.compile(r"<!-- report:([a-z_]+) -->")
 CLOSE = re.compile(r"<!-- /report:([a-z_]+) -->")
 NAMES = ("machine", "accuracy", "ssp", "ssp_orderings", "container", "oafm", "stability", "speed", "ranges", "peers",
-         "calibration", "auto")
-FROM_SUMMARIES = ("oafm", "stability", "speed", "peers", "calibration", "auto")  # filled from the --from folders only
+         "calibration", "auto", "cascade", "curve_speed")
+FROM_SUMMARIES = ("oafm", "stability", "speed", "peers", "calibration", "auto", "cascade", "curve_speed")  # filled from the --from folders only
 DETERMINISTIC = ("accuracy", "ssp", "ssp_orderings", "container", "ranges")
 SOURCE_FILES = {"oafm": "an oafm summary.json", "stability": "a stability summary.json",  # what a FROM_SUMMARIES
                 "speed": "a bench.json or an oafm/stability summary.json",  # block reads
                 "peers": "a peers.json (bench --peers)",
                 "calibration": "calibration_RUNG.json files (python -m vibrofmu.analyses.error_calibration campaign)",
-                "auto": "an auto.json (python -m vibrofmu.analyses.error_calibration auto)"}
+                "auto": "an auto.json (python -m vibrofmu.analyses.error_calibration auto)",
+                "cascade": "a continuation summary.json with a cascade",
+                "curve_speed": "a bench.json of bench --curve"}
 ACCURACY_TAUS = (10.0, 25.0, 50.0, 100.0, 200.0)
 ACCURACY_RTOLS = (1e-4, 1e-6, 1e-8, 1e-10, 1e-12)
 ACCURACY_RK4_STEPS = (0.1, 0.05, 0.025)
@@ -399,6 +407,34 @@ def auto_block(sources: list[Path]) -> str | None:
     return None
 
 
+FEIGENBAUM_DELTA = 4.669201609  # the limit of the ratios for maps with a quadratic maximum
+
+
+def cascade_block(sources: list[Path]) -> str | None:
+    """The doubling points and Feigenbaum ratios of the first continuation summary.json with a cascade."""
+    summaries = _summaries(sources, "cascade")
+    if not summaries:
+        return None
+    s = summaries[0]
+    c, scene = s["cascade"], s["scene"]
+    name = {"omega": "ω", "Delta": "Δ", "mu": "μ"}.get(c["param"], c["param"])
+    sets = " ".join(f"--set {k}={scene[k]:g}" for k in ("mu", "Delta", "omega", "R", "beta", "gamma")
+                    if k != c["param"] and k in scene)
+    lines = [f"`vibrofmu continuation --param {c['param']} --from {s['from']:g} --to {s['to']:g} {sets}` "
+             f"({s['points']} orbits on the period-T branch, {s['cpu_seconds']:.0f} s CPU for all branches):", "",
+             f"| doubling | {name} | multipliers at the point | interval to the next | ratio of successive "
+             "intervals |", "|---|---|---|---|---|"]
+    values = [d["value"] for d in c["doublings"]]
+    for k, d in enumerate(c["doublings"]):
+        rho = ", ".join(f"{re:.6f}" for re, _ in d["multipliers"])
+        interval = f"{abs(values[k + 1] - values[k]):.9f}" if k + 1 < len(values) else "—"
+        ratio = f"{c['ratios'][k - 1]:.4f}" if 1 <= k <= len(c["ratios"]) else "—"
+        lines.append(f"| {d['periods']}T → {d['to_periods']}T | {d['value']:.10f} | {rho} | {interval} | {ratio} |")
+    lines += ["", f"Feigenbaum's δ = {FEIGENBAUM_DELTA}: the ratios are "
+                  + ", ".join(f"{r:.4f} ({100 * (r / FEIGENBAUM_DELTA - 1):+.1f} %)" for r in c["ratios"]) + "."]
+    return "\n".join(lines)
+
+
 def curve_speed_block(sources: list[Path]) -> str | None:
     """The fold-curve benchmark from the first bench.json of `bench --curve` in the folders."""
     for folder in sources:
@@ -420,7 +456,8 @@ def curve_speed_block(sources: list[Path]) -> str | None:
 def summary_block(name: str, sources: list[Path]) -> str | None:
     """The body of the FROM_SUMMARIES block `name` from the summaries in `sources` (None: none there)."""
     return {"oafm": oafm_block, "stability": stability_block, "speed": speed_block,
-            "peers": peers_block, "calibration": calibration_block, "auto": auto_block}[name](sources)
+            "peers": peers_block, "calibration": calibration_block, "auto": auto_block,
+            "cascade": cascade_block, "curve_speed": curve_speed_block}[name](sources)
 
 
 def generate(names, fmu_dir: Path, sources: list[Path], quick: bool, work_dir: Path, start=None) -> dict[str, str]:
