@@ -420,6 +420,8 @@ def cascade_block(sources: list[Path]) -> str | None:
     name = {"omega": "ω", "Delta": "Δ", "mu": "μ"}.get(c["param"], c["param"])
     sets = " ".join(f"--set {k}={scene[k]:g}" for k in ("mu", "Delta", "omega", "R", "beta", "gamma")
                     if k != c["param"] and k in scene)
+    last = max(d["periods"] for d in c["doublings"])  # the last period followed (a doubling on it is not)
+    sets += f" --max-period {last}" if last != 8 else ""
     lines = [f"`vibrofmu continuation --param {c['param']} --from {s['from']:g} --to {s['to']:g} {sets}` "
              f"({s['points']} orbits on the period-T branch, {s['cpu_seconds']:.0f} s CPU for all branches):", "",
              f"| doubling | {name} | multipliers at the point | interval to the next | ratio of successive "

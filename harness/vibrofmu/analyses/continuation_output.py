@@ -49,6 +49,10 @@ def _segments(values, flags):
     return runs
 
 
+# one colour per branch along a cascade (T, 2T, ..., 64T and more), none the event markers' (purple, orange)
+BRANCH_COLOURS = ["k", "tab:blue", "tab:green", "tab:cyan", "tab:brown", "tab:olive", "tab:pink", "tab:gray", "tab:red"]
+
+
 def plot_branch(path: Path, result: cont.Branch, title: str) -> None:
     """Amplitude (x_max - x_min)/2, x_min and the Floquet multipliers' moduli against the parameter: stable
     solid, unstable dashed, events marked (one marker per kind, in the legend), doubled branches in their own
@@ -57,7 +61,7 @@ def plot_branch(path: Path, result: cont.Branch, title: str) -> None:
     fig, axes = plt.subplots(3, 1, figsize=(8, 9.5), sharex=True, layout="constrained",
                              gridspec_kw={"height_ratios": [3, 2, 2]})
     seen = set()
-    for index, (br, color) in enumerate(zip([result, *result.doubled], ["k", "tab:blue", "tab:green", "tab:cyan"] * 9)):
+    for index, (br, color) in enumerate(zip([result, *result.doubled], BRANCH_COLOURS * 4)):
         pts = [pt for pt in br.points]
         if not pts:
             continue
