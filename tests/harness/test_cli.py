@@ -581,3 +581,18 @@ def test_the_closed_loop_size_estimate_bounds_its_columns(tmp_path, monkeypatch,
                      str(closed_loop_fmu.parent), "--out", mode]) == 0
         header = (tmp_path / mode / "result.csv").read_text().splitlines()[0]
         assert len(header.split(",")) <= COLUMNS[mode], (mode, header)
+
+
+def test_an_fmu_that_does_not_start_is_one_line(plant_fmu, tmp_path, monkeypatch, capsys):
+    """fmi2Instantiate answering NULL (here: a plant FMU whose resources lost their identity file, which its loader
+    refuses) ends the command with one `error:` line carrying the FMU's own reason, not FMPy's traceback."""
+    damaged = tmp_path / "HertzEAOscillator.fmu"
+    with zipfile.ZipFile(plant_fmu) as source, zipfile.ZipFile(damaged, "w", zipfile.ZIP_DEFLATED) as target:
+        for item in source.infolist():
+            if not item.filename.endswith("vibrofmu_identity.txt"):
+                target.writestr(item, source.read(item.filename))
+    monkeypatch.chdir(tmp_path)
+    assert main(["simulate", "--fmu", str(damaged), "--stop-time", "1", "--out", "o"]) == 1
+    err = [line for line in capsys.readouterr().err.splitlines() if not line.startswith("note: ")]  # (the scene's)
+    assert len(err) == 1 and err[0].startswith(f"error: {damaged}: fmi2Instantiate failed"), err
+    assert "vibrofmu_identity.txt is missing" in err[0], err

@@ -169,6 +169,13 @@ def run(command: Callable[[argparse.Namespace], int], args: argparse.Namespace) 
     except RegistryNotBuildable as error:  # the tree's fidelity registry and core/fidelity.h: what is missing
         print(f"error: {error}", file=sys.stderr)
         return 2
+    except Exception as error:
+        from vibrofmu.hosts.run import FmuInstantiationError  # (fmpy: imported only when something failed)
+
+        if not isinstance(error, FmuInstantiationError):
+            raise
+        print(f"error: {error}", file=sys.stderr)  # an FMU that refused to start: its own words, one line
+        return 1
     finally:
         if code != 0:
             _remove_empty(_CREATED[created:])

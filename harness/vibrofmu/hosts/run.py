@@ -121,6 +121,10 @@ class FmuLog:
         return [m for m in messages if m.startswith(("[error]", "[fatal]", "[discard]"))]
 
 
+class FmuInstantiationError(RuntimeError):
+    """fmi2Instantiate returned NULL: the message names the FMU and carries the FMU's own log lines (why)."""
+
+
 class FmuInstance:
     """One instantiated co-simulation FMU with name-based access to its variables."""
 
@@ -136,7 +140,14 @@ class FmuInstance:
         self.fmu = FMU2Slave(guid=self.model_description.guid, unzipDirectory=self.unzip_dir,
                              modelIdentifier=self.model_description.coSimulation.modelIdentifier,
                              instanceName=instance_name)
-        self.fmu.instantiate(callbacks=self.log.callbacks, loggingOn=True)
+        seen = len(self.log.messages)
+        try:
+            self.fmu.instantiate(callbacks=self.log.callbacks, loggingOn=True)
+        except Exception as error:  # FMPy: "Failed to instantiate model" (NULL), nothing else said
+            if self.owns_unzip_dir:
+                shutil.rmtree(self.unzip_dir, ignore_errors=True)
+            why = "; ".join(" ".join(m.split()) for m in self.log.messages[seen:]) or "the FMU logged nothing"
+            raise FmuInstantiationError(f"{fmu_path}: fmi2Instantiate failed ({error}): {why}") from None
 
     def set(self, values: dict):
         for name, value in values.items():
