@@ -596,3 +596,19 @@ def test_an_fmu_that_does_not_start_is_one_line(plant_fmu, tmp_path, monkeypatch
     err = [line for line in capsys.readouterr().err.splitlines() if not line.startswith("note: ")]  # (the scene's)
     assert len(err) == 1 and err[0].startswith(f"error: {damaged}: fmi2Instantiate failed"), err
     assert "vibrofmu_identity.txt is missing" in err[0], err
+
+
+def test_the_program_exits_at_once_after_an_interrupt_with_its_atexit_handlers_run():
+    """The `vibrofmu` program is cli.console (pyproject.toml): after a Ctrl-C it skips the modules' teardown
+    (seconds of a loaded machine) but still runs the atexit handlers (temporary folders, multiprocessing)."""
+    import tomllib
+
+    scripts = tomllib.loads((Path(__file__).resolve().parents[2] / "pyproject.toml").read_text())["project"]["scripts"]
+    assert scripts["vibrofmu"] == "vibrofmu.cli:console"
+    code = ("import atexit; atexit.register(print, 'atexit ran', flush=True)\n"
+            + START_UP_INTERRUPT.replace("from vibrofmu.cli import main\n", "from vibrofmu.cli import console\n")
+            .replace('sys.exit(main(["simulate", "--stop-time", "1"]))',
+                     'sys.argv[1:] = ["simulate", "--stop-time", "1"]\nsys.exit(console())'))
+    assert "console()" in code
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert (done.returncode, done.stderr, done.stdout) == (130, "error: interrupted\n", "atexit ran\n")
