@@ -635,9 +635,7 @@ EXPORT void fmi2FreeInstance(fmi2Component c)
 EXPORT fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingOn, size_t n, const fmi2String cats[])
 {
     SHIM(c); ALLOWED(fmi2SetDebugLogging);
-    if (FMI2_NULL_ARRAY(&S->fmi, "fmi2SetDebugLogging", cats, n) != fmi2OK) return fmi2Error;
-    fmi2_layer_set_logging(&S->fmi, loggingOn, n, cats);
-    return fmi2OK;
+    return fmi2_layer_debug_logging(&S->fmi, loggingOn, n, cats);
 }
 
 EXPORT fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean tolDef, fmi2Real tol, fmi2Real tStart,
@@ -732,21 +730,11 @@ SETTER(String, fmi2String)
    the instance lost) or a NULL pointer argument (a crash).  The shim refuses those with fmi2Error and a log line,
    before forwarding, and leaves the instance as it was (not in the error state: nothing was changed).
    fmi2FreeFMUstate sets the caller's pointer to NULL, as FMI 2.0 asks (pythonfmu leaves it). */
-static fmi2Status refuse_null(Shim *s, const char *call, const char *argument)
-{
-    fmi2_layer_log(&s->fmi, fmi2Error, "%s refused: %s = NULL", call, argument);
-    return fmi2Error;
-}
-
+#define refuse_null(s, call, argument) fmi2_layer_null_refusal(&(s)->fmi, (call), (argument), NULL, 0)
 /* A state pointer that is not a live state of this binary (freed, another FMU's, made up): pythonfmu would use it
-   as its own; refused instead.  The states pythonfmu hands out are recorded (fmi2_live, kind FMI2_LIVE_STATE). */
-static int foreign_state(Shim *s, const char *call, const void *state)
-{
-    if (fmi2_live(state, FMI2_LIVE_STATE)) return 0;
-    fmi2_layer_log(&s->fmi, fmi2Error, "%s refused: FMUstate = %p is not a state of this FMU (freed, or another "
-                   "FMU's)", call, state);
-    return 1;
-}
+   as its own; refused instead (fmi2_layer_foreign_state).  The states pythonfmu hands out are recorded (fmi2_live,
+   kind FMI2_LIVE_STATE). */
+#define foreign_state(s, call, state) fmi2_layer_foreign_state(&(s)->fmi, (call), (state))
 
 /* After pythonfmu stored a state in *state (old: what was there before): the new one recorded as live. */
 static fmi2Status record_state(Shim *s, fmi2Status st, fmi2FMUstate old, fmi2FMUstate *state)

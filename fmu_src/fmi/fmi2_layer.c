@@ -117,6 +117,21 @@ void fmi2_layer_log(const Fmi2Layer *L, fmi2Status status, const char *format, .
     va_end(args);
 }
 
+fmi2Status fmi2_layer_debug_logging(Fmi2Layer *L, fmi2Boolean loggingOn, size_t n, const fmi2String cats[])
+{
+    if (FMI2_NULL_ARRAY(L, "fmi2SetDebugLogging", cats, n) != fmi2OK) return fmi2Error; /* "cats = NULL with n = 2" */
+    fmi2_layer_set_logging(L, loggingOn, n, cats);
+    return fmi2OK;
+}
+
+int fmi2_layer_foreign_state(const Fmi2Layer *L, const char *call, const void *state)
+{
+    if (fmi2_live(state, FMI2_LIVE_STATE)) return 0;
+    fmi2_layer_log(L, fmi2Error, "%s refused: FMUstate = %p is not a state of this FMU (freed, or another FMU's)",
+                   call, state);
+    return 1;
+}
+
 fmi2Status fmi2_layer_mode_refusal(const Fmi2Layer *L, const char *call, unsigned mask)
 {
     if (L->mode == FMI2_MODE_FATAL) return fmi2Fatal; /* already reported once */

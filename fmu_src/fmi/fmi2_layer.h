@@ -45,6 +45,9 @@ void fmi2_layer_free(Fmi2Layer *L);
 void fmi2_layer_free_categories(Fmi2Layer *L);
 /* fmi2SetDebugLogging: the flag, and the categories (n == 0: all). */
 void fmi2_layer_set_logging(Fmi2Layer *L, fmi2Boolean loggingOn, size_t n, const fmi2String categories[]);
+/* fmi2SetDebugLogging's work in every FMI 2.0 layer: categories NULL with n > 0 refused (logged), else
+   fmi2_layer_set_logging; fmi2OK or fmi2Error. */
+fmi2Status fmi2_layer_debug_logging(Fmi2Layer *L, fmi2Boolean loggingOn, size_t n, const fmi2String categories[]);
 
 /* A message to a host's logger as text ('%' doubled), without filtering. */
 void fmi2_log_to(const fmi2CallbackFunctions *cb, fmi2String instanceName, fmi2Status status, fmi2String category,
@@ -123,6 +126,10 @@ int fmi2_live(const void *instance, int kind);
 /* kinds: an FMI 2.0 instance, an FMI 3.0 instance, an FMU state of each (a state of another FMU, or one freed, is
    refused by every state call: fmi3GetFMUState into another model's state overwrote it in place) */
 enum { FMI2_LIVE_INSTANCE = 1, FMI2_LIVE_FMI3 = 2, FMI2_LIVE_STATE = 3, FMI2_LIVE_FMI3_STATE = 4 };
+/* An FMU state pointer given to call `call` that is not a live FMI 2.0 state of this binary (freed, another FMU's,
+   made up): 1, logged "<call> refused: FMUstate = <p> is not a state of this FMU (freed, or another FMU's)"
+   (fmi2Error); a live one: 0.  Such a pointer is never read or written. */
+int fmi2_layer_foreign_state(const Fmi2Layer *L, const char *call, const void *state);
 
 /* ---- fmi2Instantiate's arguments (issue 25) ----
    fmuResourceLocation as a local folder: 1 and its path (no trailing '/') in `path`, or 0 and why in `why`.

@@ -114,9 +114,10 @@ fmi2Status native_allowed(Instance *inst, const char *call, unsigned cs, unsigne
     fmi2Status st = fmi2_layer_mode_check(&inst->fmi, call, mask);
     if (st != fmi2OK || (mask & FMI2_BIT(native_table_state(inst)))) return st;
     char why[256];
-    native_error(inst, "%s", inst->model_exchange
-                 ? fmi_call_refusal(FMI2ME_LABEL, FMI2ME_INTERFACE, call, mask, native_table_state(inst), why, sizeof why)
-                 : fmi_call_refusal(FMI2_LABEL, FMI2_INTERFACE, call, mask, native_table_state(inst), why, sizeof why));
+    const int me_table = inst->model_exchange;
+    native_error(inst, "%s", fmi_call_refusal(me_table ? FMI2ME_LABEL : FMI2_LABEL,
+                                              me_table ? FMI2ME_INTERFACE : FMI2_INTERFACE, call, mask,
+                                              native_table_state(inst), why, sizeof why));
     return native_settle(inst);
 }
 
@@ -314,9 +315,7 @@ EXPORT void fmi2FreeInstance(fmi2Component c)
 EXPORT fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingOn, size_t n, const fmi2String cats[])
 {
     INST(c); ALLOWED(fmi2SetDebugLogging);
-    if (FMI2_NULL_ARRAY(&I->fmi, "fmi2SetDebugLogging", cats, n) != fmi2OK) return fmi2Error;
-    fmi2_layer_set_logging(&I->fmi, loggingOn, n, cats);
-    return fmi2OK;
+    return fmi2_layer_debug_logging(&I->fmi, loggingOn, n, cats);
 }
 
 EXPORT fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean tolDef, fmi2Real tol, fmi2Real tStart,
@@ -606,20 +605,9 @@ EXPORT fmi2Status fmi2CancelStep(fmi2Component c)
 
 /* ---- FMU state: a copy of the State ---- */
 
-static fmi2Status refuse_null(Instance *I, const char *call, const char *argument)
-{
-    native_log(I, fmi2Error, "%s refused: %s = NULL", call, argument);
-    return fmi2Error;
-}
-
+#define refuse_null(I, call, argument) fmi2_layer_null_refusal(&(I)->fmi, (call), (argument), NULL, 0)
 /* A state pointer that is not a live state of this binary (freed, another FMU's, made up): never read or written. */
-static int foreign_state(Instance *I, const char *call, const void *state)
-{
-    if (fmi2_live(state, FMI2_LIVE_STATE)) return 0;
-    native_log(I, fmi2Error, "%s refused: FMUstate = %p is not a state of this FMU (freed, or another FMU's)", call,
-               state);
-    return 1;
-}
+#define foreign_state(I, call, state) fmi2_layer_foreign_state(&(I)->fmi, (call), (state))
 
 EXPORT fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *state)
 {
@@ -659,11 +647,8 @@ EXPORT fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *state)
 {
     INST(c); ALLOWED(fmi2FreeFMUstate);
     if (state == NULL || *state == NULL) return fmi2OK; /* nothing to free (FMI 2.0: a no-op) */
-    if (!fmi2_live_remove(*state, FMI2_LIVE_STATE)) {
-        native_log(I, fmi2Error, "fmi2FreeFMUstate refused: FMUstate = %p is not a state of this FMU (freed, or "
-                   "another FMU's)", *state);
-        return fmi2Error;
-    }
+    if (foreign_state(I, "fmi2FreeFMUstate", *state)) return fmi2Error;
+    fmi2_live_remove(*state, FMI2_LIVE_STATE);
     free(*state);
     *state = NULL;
     return fmi2OK;
@@ -794,30 +779,15 @@ EXPORT fmi2Status fmi2GetStatus(fmi2Component c, const fmi2StatusKind s, fmi2Sta
     return fmi2OK;
 }
 
-EXPORT fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind s, fmi2Real *value)
-{
-    INST(c); ALLOWED(fmi2GetRealStatus); POINTER(fmi2GetRealStatus, value);
-    (void)s; (void)value;
-    return fmi2Discard;
-}
-
-EXPORT fmi2Status fmi2GetIntegerStatus(fmi2Component c, const fmi2StatusKind s, fmi2Integer *value)
-{
-    INST(c); ALLOWED(fmi2GetIntegerStatus); POINTER(fmi2GetIntegerStatus, value);
-    (void)s; (void)value;
-    return fmi2Discard;
-}
-
-EXPORT fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind s, fmi2Boolean *value)
-{
-    INST(c); ALLOWED(fmi2GetBooleanStatus); POINTER(fmi2GetBooleanStatus, value);
-    (void)s; (void)value;
-    return fmi2Discard;
-}
-
-EXPORT fmi2Status fmi2GetStringStatus(fmi2Component c, const fmi2StatusKind s, fmi2String *value)
-{
-    INST(c); ALLOWED(fmi2GetStringStatus); POINTER(fmi2GetStringStatus, value);
-    (void)s; (void)value;
-    return fmi2Discard;
-}
+/* The other status queries: no such status (fmi2Discard), after the table and the pointer checks */
+#define NO_STATUS(Name, T)                                                                                        \
+    EXPORT fmi2Status fmi2Get##Name(fmi2Component c, const fmi2StatusKind s, T *value)                            \
+    {                                                                                                             \
+        INST(c); ALLOWED(fmi2Get##Name); POINTER(fmi2Get##Name, value);                                           \
+        (void)s;                                                                                                  \
+        return fmi2Discard;                                                                                       \
+    }
+NO_STATUS(RealStatus, fmi2Real)
+NO_STATUS(IntegerStatus, fmi2Integer)
+NO_STATUS(BooleanStatus, fmi2Boolean)
+NO_STATUS(StringStatus, fmi2String)

@@ -301,6 +301,15 @@ static int arrays_given(W3 *w, const char *call, const void *vr, const void *val
     return 0;
 }
 
+/* The variable calls' checks: nValues = nValueReferences (every variable a scalar) and both arrays given */
+static int values_given(W3 *w, const char *call, const void *vr, size_t nvr, const void *values, size_t nValues,
+                        fmi3Status *st)
+{
+    return sizes_match(w, call, nvr, nValues, st) && arrays_given(w, call, vr, values, nvr, st);
+}
+#define VALUES_GIVEN(F)                                                                                         \
+    if (!values_given(w, #F, valueReferences, nValueReferences, values, nValues, &st_)) return st_
+
 /* an FMI 3.0-only variable (time, indicators) as a Float64: 1 with its value */
 static int extra_float64(W3 *w, fmi3ValueReference vr, double *value)
 {
@@ -323,8 +332,7 @@ EXPORT3 fmi3Status fmi3GetFloat64(fmi3Instance instance, const fmi3ValueReferenc
                                   size_t nValueReferences, fmi3Float64 values[], size_t nValues)
 {
     W3_CALL(fmi3GetFloat64);
-    if (!sizes_match(w, "fmi3GetFloat64", nValueReferences, nValues, &st_)) return st_;
-    if (!arrays_given(w, "fmi3GetFloat64", valueReferences, values, nValueReferences, &st_)) return st_;
+    VALUES_GIVEN(fmi3GetFloat64);
     int plain = 1;
     for (size_t i = 0; i < nValueReferences; i++) plain &= valueReferences[i] < VR_TIME;
     if (plain) return to3(fmi2GetReal(w->c, valueReferences, nValueReferences, values));
@@ -347,8 +355,7 @@ EXPORT3 fmi3Status fmi3SetFloat64(fmi3Instance instance, const fmi3ValueReferenc
                                   size_t nValueReferences, const fmi3Float64 values[], size_t nValues)
 {
     W3_CALL(fmi3SetFloat64);
-    if (!sizes_match(w, "fmi3SetFloat64", nValueReferences, nValues, &st_)) return st_;
-    if (!arrays_given(w, "fmi3SetFloat64", valueReferences, values, nValueReferences, &st_)) return st_;
+    VALUES_GIVEN(fmi3SetFloat64);
     for (size_t i = 0; i < nValueReferences; i++)
         if (valueReferences[i] >= VR_TIME && valueReferences[i] <= VR_TIME + N_INDICATOR_VARIABLES)
             return refuse(w, "fmi3SetFloat64: variable with valueReference %u (%s) is computed by the FMU and cannot "
@@ -356,31 +363,26 @@ EXPORT3 fmi3Status fmi3SetFloat64(fmi3Instance instance, const fmi3ValueReferenc
     return to3(fmi2SetReal(w->c, valueReferences, nValueReferences, values));
 }
 
-EXPORT3 fmi3Status fmi3GetInt32(fmi3Instance instance, const fmi3ValueReference valueReferences[],
-                                size_t nValueReferences, fmi3Int32 values[], size_t nValues)
-{
-    W3_CALL(fmi3GetInt32);
-    if (!sizes_match(w, "fmi3GetInt32", nValueReferences, nValues, &st_)) return st_;
-    if (!arrays_given(w, "fmi3GetInt32", valueReferences, values, nValueReferences, &st_)) return st_;
-    return to3(fmi2GetInteger(w->c, valueReferences, nValueReferences, values));
-}
-
-EXPORT3 fmi3Status fmi3SetInt32(fmi3Instance instance, const fmi3ValueReference valueReferences[],
-                                size_t nValueReferences, const fmi3Int32 values[], size_t nValues)
-{
-    W3_CALL(fmi3SetInt32);
-    if (!sizes_match(w, "fmi3SetInt32", nValueReferences, nValues, &st_)) return st_;
-    if (!arrays_given(w, "fmi3SetInt32", valueReferences, values, nValueReferences, &st_)) return st_;
-    return to3(fmi2SetInteger(w->c, valueReferences, nValueReferences, values));
-}
+/* The getters and setters that are the FMI 2.0 ones of the same values */
+#define FORWARD(Name, T, F2)                                                                                    \
+    EXPORT3 fmi3Status fmi3##Name(fmi3Instance instance, const fmi3ValueReference valueReferences[],            \
+                                  size_t nValueReferences, T values[], size_t nValues)                          \
+    {                                                                                                           \
+        W3_CALL(fmi3##Name);                                                                                    \
+        VALUES_GIVEN(fmi3##Name);                                                                               \
+        return to3(F2(w->c, valueReferences, nValueReferences, values));                                        \
+    }
+FORWARD(GetInt32, fmi3Int32, fmi2GetInteger)
+FORWARD(SetInt32, const fmi3Int32, fmi2SetInteger)
+FORWARD(GetString, fmi3String, fmi2GetString)
+FORWARD(SetString, const fmi3String, fmi2SetString)
 
 #define CHUNK 64
 EXPORT3 fmi3Status fmi3GetBoolean(fmi3Instance instance, const fmi3ValueReference valueReferences[],
                                   size_t nValueReferences, fmi3Boolean values[], size_t nValues)
 {
     W3_CALL(fmi3GetBoolean);
-    if (!sizes_match(w, "fmi3GetBoolean", nValueReferences, nValues, &st_)) return st_;
-    if (!arrays_given(w, "fmi3GetBoolean", valueReferences, values, nValueReferences, &st_)) return st_;
+    VALUES_GIVEN(fmi3GetBoolean);
     fmi3Status worst = fmi3OK;
     for (size_t done = 0; done < nValueReferences; done += CHUNK) {
         size_t n = nValueReferences - done < CHUNK ? nValueReferences - done : CHUNK;
@@ -396,8 +398,7 @@ EXPORT3 fmi3Status fmi3SetBoolean(fmi3Instance instance, const fmi3ValueReferenc
                                   size_t nValueReferences, const fmi3Boolean values[], size_t nValues)
 {
     W3_CALL(fmi3SetBoolean);
-    if (!sizes_match(w, "fmi3SetBoolean", nValueReferences, nValues, &st_)) return st_;
-    if (!arrays_given(w, "fmi3SetBoolean", valueReferences, values, nValueReferences, &st_)) return st_;
+    VALUES_GIVEN(fmi3SetBoolean);
     fmi3Status worst = fmi3OK;
     for (size_t done = 0; done < nValueReferences; done += CHUNK) {
         size_t n = nValueReferences - done < CHUNK ? nValueReferences - done : CHUNK;
@@ -407,24 +408,6 @@ EXPORT3 fmi3Status fmi3SetBoolean(fmi3Instance instance, const fmi3ValueReferenc
         if (st > worst) worst = st;
     }
     return worst;
-}
-
-EXPORT3 fmi3Status fmi3GetString(fmi3Instance instance, const fmi3ValueReference valueReferences[],
-                                 size_t nValueReferences, fmi3String values[], size_t nValues)
-{
-    W3_CALL(fmi3GetString);
-    if (!sizes_match(w, "fmi3GetString", nValueReferences, nValues, &st_)) return st_;
-    if (!arrays_given(w, "fmi3GetString", valueReferences, values, nValueReferences, &st_)) return st_;
-    return to3(fmi2GetString(w->c, valueReferences, nValueReferences, values));
-}
-
-EXPORT3 fmi3Status fmi3SetString(fmi3Instance instance, const fmi3ValueReference valueReferences[],
-                                 size_t nValueReferences, const fmi3String values[], size_t nValues)
-{
-    W3_CALL(fmi3SetString);
-    if (!sizes_match(w, "fmi3SetString", nValueReferences, nValues, &st_)) return st_;
-    if (!arrays_given(w, "fmi3SetString", valueReferences, values, nValueReferences, &st_)) return st_;
-    return to3(fmi2SetString(w->c, valueReferences, nValueReferences, values));
 }
 
 /* The types this FMU has no variable of: any value reference is an error naming the type */
@@ -475,21 +458,27 @@ EXPORT3 fmi3Status fmi3SetBinary(fmi3Instance instance, const fmi3ValueReference
     return no_such_type(w, "fmi3SetBinary", "Binary", nValueReferences);
 }
 
-EXPORT3 fmi3Status fmi3GetClock(fmi3Instance instance, const fmi3ValueReference valueReferences[],
-                                size_t nValueReferences, fmi3Clock values[])
-{
-    W3_CALL(fmi3GetClock);
-    (void)valueReferences; (void)values;
-    return no_such_type(w, "fmi3GetClock", "Clock", nValueReferences);
-}
-
-EXPORT3 fmi3Status fmi3SetClock(fmi3Instance instance, const fmi3ValueReference valueReferences[],
-                                size_t nValueReferences, const fmi3Clock values[])
-{
-    W3_CALL(fmi3SetClock);
-    (void)valueReferences; (void)values;
-    return no_such_type(w, "fmi3SetClock", "Clock", nValueReferences);
-}
+/* The Clock calls: this FMU has no Clock variable, so any value reference is an error naming the type (the arrays
+   after the value references are not read) */
+#define UNREAD __attribute__((unused))
+#define NO_CLOCK(Name, ...)                                                                                     \
+    EXPORT3 fmi3Status fmi3##Name(fmi3Instance instance, const fmi3ValueReference valueReferences[] UNREAD,     \
+                                  size_t nValueReferences, __VA_ARGS__)                                         \
+    {                                                                                                           \
+        W3_CALL(fmi3##Name);                                                                                    \
+        return no_such_type(w, "fmi3" #Name, "Clock", nValueReferences);                                        \
+    }
+NO_CLOCK(GetClock, fmi3Clock values[] UNREAD)
+NO_CLOCK(SetClock, const fmi3Clock values[] UNREAD)
+NO_CLOCK(GetIntervalDecimal, fmi3Float64 intervals[] UNREAD, fmi3IntervalQualifier qualifiers[] UNREAD)
+NO_CLOCK(GetIntervalFraction, fmi3UInt64 counters[] UNREAD, fmi3UInt64 resolutions[] UNREAD,
+         fmi3IntervalQualifier qualifiers[] UNREAD)
+NO_CLOCK(GetShiftDecimal, fmi3Float64 shifts[] UNREAD)
+NO_CLOCK(GetShiftFraction, fmi3UInt64 counters[] UNREAD, fmi3UInt64 resolutions[] UNREAD)
+NO_CLOCK(SetIntervalDecimal, const fmi3Float64 intervals[] UNREAD)
+NO_CLOCK(SetIntervalFraction, const fmi3UInt64 counters[] UNREAD, const fmi3UInt64 resolutions[] UNREAD)
+NO_CLOCK(SetShiftDecimal, const fmi3Float64 shifts[] UNREAD)
+NO_CLOCK(SetShiftFraction, const fmi3UInt64 counters[] UNREAD, const fmi3UInt64 resolutions[] UNREAD)
 
 /* ---- not provided (the modelDescription says so) ---- */
 
@@ -559,74 +548,6 @@ EXPORT3 fmi3Status fmi3ExitConfigurationMode(fmi3Instance instance)
 }
 
 #define U(x) (void)(x)
-EXPORT3 fmi3Status fmi3GetIntervalDecimal(fmi3Instance instance, const fmi3ValueReference valueReferences[],
-                                          size_t nValueReferences, fmi3Float64 intervals[],
-                                          fmi3IntervalQualifier qualifiers[])
-{
-    W3_CALL(fmi3GetIntervalDecimal);
-    U(valueReferences); U(intervals); U(qualifiers);
-    return no_such_type(w, "fmi3GetIntervalDecimal", "Clock", nValueReferences);
-}
-
-EXPORT3 fmi3Status fmi3GetIntervalFraction(fmi3Instance instance, const fmi3ValueReference valueReferences[],
-                                           size_t nValueReferences, fmi3UInt64 counters[], fmi3UInt64 resolutions[],
-                                           fmi3IntervalQualifier qualifiers[])
-{
-    W3_CALL(fmi3GetIntervalFraction);
-    U(valueReferences); U(counters); U(resolutions); U(qualifiers);
-    return no_such_type(w, "fmi3GetIntervalFraction", "Clock", nValueReferences);
-}
-
-EXPORT3 fmi3Status fmi3GetShiftDecimal(fmi3Instance instance, const fmi3ValueReference valueReferences[],
-                                       size_t nValueReferences, fmi3Float64 shifts[])
-{
-    W3_CALL(fmi3GetShiftDecimal);
-    U(valueReferences); U(shifts);
-    return no_such_type(w, "fmi3GetShiftDecimal", "Clock", nValueReferences);
-}
-
-EXPORT3 fmi3Status fmi3GetShiftFraction(fmi3Instance instance, const fmi3ValueReference valueReferences[],
-                                        size_t nValueReferences, fmi3UInt64 counters[], fmi3UInt64 resolutions[])
-{
-    W3_CALL(fmi3GetShiftFraction);
-    U(valueReferences); U(counters); U(resolutions);
-    return no_such_type(w, "fmi3GetShiftFraction", "Clock", nValueReferences);
-}
-
-EXPORT3 fmi3Status fmi3SetIntervalDecimal(fmi3Instance instance, const fmi3ValueReference valueReferences[],
-                                          size_t nValueReferences, const fmi3Float64 intervals[])
-{
-    W3_CALL(fmi3SetIntervalDecimal);
-    U(valueReferences); U(intervals);
-    return no_such_type(w, "fmi3SetIntervalDecimal", "Clock", nValueReferences);
-}
-
-EXPORT3 fmi3Status fmi3SetIntervalFraction(fmi3Instance instance, const fmi3ValueReference valueReferences[],
-                                           size_t nValueReferences, const fmi3UInt64 counters[],
-                                           const fmi3UInt64 resolutions[])
-{
-    W3_CALL(fmi3SetIntervalFraction);
-    U(valueReferences); U(counters); U(resolutions);
-    return no_such_type(w, "fmi3SetIntervalFraction", "Clock", nValueReferences);
-}
-
-EXPORT3 fmi3Status fmi3SetShiftDecimal(fmi3Instance instance, const fmi3ValueReference valueReferences[],
-                                       size_t nValueReferences, const fmi3Float64 shifts[])
-{
-    W3_CALL(fmi3SetShiftDecimal);
-    U(valueReferences); U(shifts);
-    return no_such_type(w, "fmi3SetShiftDecimal", "Clock", nValueReferences);
-}
-
-EXPORT3 fmi3Status fmi3SetShiftFraction(fmi3Instance instance, const fmi3ValueReference valueReferences[],
-                                        size_t nValueReferences, const fmi3UInt64 counters[],
-                                        const fmi3UInt64 resolutions[])
-{
-    W3_CALL(fmi3SetShiftFraction);
-    U(valueReferences); U(counters); U(resolutions);
-    return no_such_type(w, "fmi3SetShiftFraction", "Clock", nValueReferences);
-}
-
 EXPORT3 fmi3Status fmi3EvaluateDiscreteStates(fmi3Instance instance)
 {
     W3_CALL(fmi3EvaluateDiscreteStates);
@@ -905,45 +826,19 @@ EXPORT3 fmi3Status fmi3SetTime(fmi3Instance instance, fmi3Float64 time)
     return to3(st);
 }
 
-EXPORT3 fmi3Status fmi3SetContinuousStates(fmi3Instance instance, const fmi3Float64 continuousStates[],
-                                           size_t nContinuousStates)
-{
-    W3_CALL(fmi3SetContinuousStates);
-    NULL_ARRAY3("fmi3SetContinuousStates", continuousStates, nContinuousStates);
-    return to3(ME2_CALL(fmi2SetContinuousStates(w->c, continuousStates, nContinuousStates)));
-}
-
-EXPORT3 fmi3Status fmi3GetContinuousStateDerivatives(fmi3Instance instance, fmi3Float64 derivatives[],
-                                                     size_t nContinuousStates)
-{
-    W3_CALL(fmi3GetContinuousStateDerivatives);
-    NULL_ARRAY3("fmi3GetContinuousStateDerivatives", derivatives, nContinuousStates);
-    return to3(ME2_CALL(fmi2GetDerivatives(w->c, derivatives, nContinuousStates)));
-}
-
-EXPORT3 fmi3Status fmi3GetEventIndicators(fmi3Instance instance, fmi3Float64 eventIndicators[],
-                                          size_t nEventIndicators)
-{
-    W3_CALL(fmi3GetEventIndicators);
-    NULL_ARRAY3("fmi3GetEventIndicators", eventIndicators, nEventIndicators);
-    return to3(ME2_CALL(fmi2GetEventIndicators(w->c, eventIndicators, nEventIndicators)));
-}
-
-EXPORT3 fmi3Status fmi3GetContinuousStates(fmi3Instance instance, fmi3Float64 continuousStates[],
-                                           size_t nContinuousStates)
-{
-    W3_CALL(fmi3GetContinuousStates);
-    NULL_ARRAY3("fmi3GetContinuousStates", continuousStates, nContinuousStates);
-    return to3(ME2_CALL(fmi2GetContinuousStates(w->c, continuousStates, nContinuousStates)));
-}
-
-EXPORT3 fmi3Status fmi3GetNominalsOfContinuousStates(fmi3Instance instance, fmi3Float64 nominals[],
-                                                     size_t nContinuousStates)
-{
-    W3_CALL(fmi3GetNominalsOfContinuousStates);
-    NULL_ARRAY3("fmi3GetNominalsOfContinuousStates", nominals, nContinuousStates);
-    return to3(ME2_CALL(fmi2GetNominalsOfContinuousStates(w->c, nominals, nContinuousStates)));
-}
+/* Model Exchange's calls on an array of n values: the table, the NULL check, then the FMI 2.0 call (F2) */
+#define ME_ARRAY(Name, F2, T, array, n)                                                                        \
+    EXPORT3 fmi3Status fmi3##Name(fmi3Instance instance, T array[], size_t n)                                  \
+    {                                                                                                         \
+        W3_CALL(fmi3##Name);                                                                                  \
+        NULL_ARRAY3("fmi3" #Name, array, n);                                                                  \
+        return to3(ME2_CALL(F2(w->c, array, n)));                                                             \
+    }
+ME_ARRAY(SetContinuousStates, fmi2SetContinuousStates, const fmi3Float64, continuousStates, nContinuousStates)
+ME_ARRAY(GetContinuousStateDerivatives, fmi2GetDerivatives, fmi3Float64, derivatives, nContinuousStates)
+ME_ARRAY(GetEventIndicators, fmi2GetEventIndicators, fmi3Float64, eventIndicators, nEventIndicators)
+ME_ARRAY(GetContinuousStates, fmi2GetContinuousStates, fmi3Float64, continuousStates, nContinuousStates)
+ME_ARRAY(GetNominalsOfContinuousStates, fmi2GetNominalsOfContinuousStates, fmi3Float64, nominals, nContinuousStates)
 
 EXPORT3 fmi3Status fmi3GetNumberOfEventIndicators(fmi3Instance instance, size_t *nEventIndicators)
 {
