@@ -12,6 +12,12 @@
 /* Eq. 3: indentation 1 + 2x/3 */
 double vm_contact_indentation(double x) { return 1.0 + 2.0 * x / 3.0; }
 
+int vm_in_contact(double x, double v, double a)
+{
+    const double indentation = vm_contact_indentation(x);
+    return indentation > 0.0 || (indentation == 0.0 && (v > 0.0 || (v == 0.0 && a > 0.0)));
+}
+
 /* Eq. 3: Hertz law (1 + 2x/3)^(3/2), no tension */
 double vm_hertz(double x)
 {

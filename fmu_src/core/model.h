@@ -22,6 +22,10 @@ typedef struct {
 
 /* 1 + 2x/3 = z/z_s: positive in contact (forces.contact_indentation) */
 double vm_contact_indentation(double x);
+/* The contact flag at a state (x, v, x'' = a): in contact where the indentation is positive; exactly on the contact
+   surface (x = -3/2) the motion decides: moving in (v > 0), or at rest with x'' > 0 (about to indent) -- so a start
+   at rest on the surface that the forces push in is in contact from its first point (forces.in_contact) */
+int vm_in_contact(double x, double v, double a);
 /* Hertz contact force (1 + 2x/3)^(3/2) of Eq. 3, 0 without contact (forces.hertz) */
 double vm_hertz(double x);
 /* alpha F2(x) + (beta sin Omega t + gamma (1 - cos 2 Omega t)) F3(x) of Eq. 3 (forces.electrostatic) */

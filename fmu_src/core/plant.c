@@ -167,7 +167,7 @@ int vk_outputs_at(VkPlant *p, double t, double x, double v, const double *a)
     p->out[2] = a == NULL ? a_model : *a;
     p->out[3] = f_contact;
     p->out[4] = f_electrostatic;
-    p->in_contact = vm_contact_indentation(x) > 0.0;
+    p->in_contact = vm_in_contact(x, v, p->out[2]);
     return VK_OK;
 }
 

@@ -25,6 +25,13 @@ def contact_indentation(x: float) -> float:
     return 1.0 + 2.0 * x / 3.0
 
 
+def in_contact(x: float, v: float, a: float) -> bool:
+    """The contact flag at a state (x, v, x'' = a): in contact where the indentation is positive; exactly on the
+    contact surface (x = -3/2) the motion decides: moving in (v > 0), or at rest with x'' > 0 (about to indent)."""
+    indentation = contact_indentation(x)
+    return indentation > 0.0 or (indentation == 0.0 and (v > 0.0 or (v == 0.0 and a > 0.0)))
+
+
 def electrostatic(t: float, x: float, alpha: float, beta: float, gamma: float, Omega: float, R: float,
                   drive: tuple[float, float] | None = None) -> float:
     """Right-hand electrostatic terms of Eq. 3: alpha*F2(x) + (beta sin Omega t + gamma(1 - cos 2 Omega t)) F3(x).

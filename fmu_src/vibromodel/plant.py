@@ -119,7 +119,7 @@ class Plant:
         if a is None:
             a = self.model.accel(t, x, v, self.U)
         return Outputs(x=x, v=v, a=a, F_contact=f_contact,
-                       F_electrostatic=f_electrostatic, in_contact=forces.contact_indentation(x) > 0.0)
+                       F_electrostatic=f_electrostatic, in_contact=forces.in_contact(x, v, a))
 
 
 def make_plant(scene: Scene, settings: Settings, t0: float = 0.0, stop_time: float | None = None,

@@ -103,7 +103,26 @@ def test_model_exchange_at_rest_on_the_contact_surface(native_plant_fmu):
     r = run(EDGE.format(fmu=str(native_plant_fmu)))
     assert r["me_x"][0] == -1.5 and max(r["me_x"]) > -1.5  # it moves into the contact
     assert all(r["me_contact"]), r["me_contact"]  # 0 for the whole run before
-    assert all(r["cs_contact"][1:])  # the co-simulation: 1 from its first step on
+    assert all(r["cs_contact"]), r["cs_contact"]  # the co-simulation too, from its start (0 at t = 0 before)
+
+
+CS_EDGE = """
+    import json
+    from fmpy import simulate_fmu
+    runs = {{kernel: simulate_fmu({fmu!r}, start_values=dict(x_start=-1.5, v_start=0.0, R=2.0, kernel=kernel),
+                                 stop_time=0.5, output=["x", "in_contact"], output_interval=0.1)
+            for kernel in (0, 1)}}
+    print(json.dumps({{k: dict(contact=r["in_contact"].tolist(), x=r["x"].tolist()) for k, r in runs.items()}}))
+"""
+
+
+def test_co_simulation_at_rest_on_the_contact_surface_is_in_contact_from_its_start(plant_fmu):
+    """The pythonfmu plant on both kernels (0: the compiled core, 1: pure Python) as the native one: at rest on the
+    surface with the forces pushing in (x'' = 1 there at U = 0), in_contact is 1 at t = 0, not only after a step."""
+    r = run(CS_EDGE.format(fmu=str(plant_fmu)))
+    for kernel, run_ in r.items():
+        assert run_["x"][0] == -1.5 and run_["x"][1] > -1.5, kernel  # it moves into the contact
+        assert all(run_["contact"]), (kernel, run_["contact"])
 
 
 EVENTS = """

@@ -79,3 +79,13 @@ def test_hertz_force_is_zero_without_contact_and_never_complex():
     # default rel 1e-6: 1 + 2x/3 = 0.067 is computed two ways, differing by the cancellation's rounding
     # (~ulp(1)/0.067 = 3e-15 relative); the check is that this branch gives the Hertz force, not 0 or a complex
     assert forces.hertz(-1.4) == pytest.approx((1 - 2.8 / 3) ** 1.5)
+
+
+def test_the_contact_flag_on_the_surface_follows_the_motion():
+    """forces.in_contact (the twin of core/model.c's vm_in_contact): the indentation's sign off the surface;
+    exactly on it (x = -3/2) moving in, or at rest and pushed in."""
+    in_contact = forces.in_contact
+    assert in_contact(-1.4, -5.0, -5.0) and not in_contact(-1.6, 5.0, 5.0)  # off the surface: the side decides
+    assert in_contact(-1.5, 1e-300, -1.0) and not in_contact(-1.5, -1e-300, 1.0)  # on it, moving: the direction
+    assert in_contact(-1.5, 0.0, 1.0) and not in_contact(-1.5, 0.0, -1.0)  # at rest: the acceleration
+    assert not in_contact(-1.5, 0.0, 0.0) and not in_contact(-1.5, 0.0, float("nan"))  # in equilibrium: not

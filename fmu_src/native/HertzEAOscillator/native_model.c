@@ -303,7 +303,7 @@ int model_initial_output(const State *s, fmi2ValueReference vr, double *value, c
         return 0;
     }
     if (vr == VR_in_contact) {
-        *value = vm_contact_indentation(x) > 0.0;
+        *value = vm_in_contact(x, v, out[2]);
         return 1;
     }
     for (int i = 0; i < 5; i++) {
