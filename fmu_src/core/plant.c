@@ -299,7 +299,11 @@ static inline __attribute__((always_inline)) int step_state_with(VkPlant *p, con
     if (code) return code;
     p->out[0] = x;
     p->out[1] = v;
-    p->in_contact = vm_contact_indentation(x) > 0.0;
+    /* vm_in_contact; x'' only where it decides: at rest exactly on the contact surface */
+    int fault = 0;
+    const int on_surface_at_rest = vm_contact_indentation(x) == 0.0 && v == 0.0;
+    p->in_contact = vm_in_contact(x, v, on_surface_at_rest ? vm_accel(&p->model, p->plant_t, x, v, p->U_input, &fault)
+                                                           : 0.0);
     return VK_OK;
 }
 
@@ -315,7 +319,7 @@ static inline __attribute__((always_inline)) int outputs_with(VkPlant *p, double
     p->out[2] = a;
     p->out[3] = f_contact;
     p->out[4] = f_electrostatic;
-    p->in_contact = vm_contact_indentation(x) > 0.0;
+    p->in_contact = vm_in_contact(x, v, a);
     return VK_OK;
 }
 
