@@ -367,10 +367,15 @@ def auto_table(result: dict) -> list[str]:
     chosen: dict = {}
     for r in result["rows"]:
         if "met" in r:
-            key = (r.get("chosen") or "refused", r.get("oracle_run") or "none met", r.get("oracle_total") or "none met")
-            chosen[key] = chosen.get(key, 0) + 1
-    lines += ["", "| auto chose | the oracle by the loop's cost | by set-up + loop | pairs |", "|---|---|---|---|"]
-    lines += [f"| {a} | {b} | {c} | {count} |" for (a, b, c), count in sorted(chosen.items(), key=lambda kv: -kv[1])]
+            row = chosen.setdefault(r.get("chosen") or "refused", [0, 0, 0, 0])
+            row[0] += 1
+            row[1] += bool(r["met"])
+            row[2] += r.get("oracle_run") == r.get("chosen")
+            row[3] += r.get("cost_ratio_run", math.inf) <= 2.0
+    lines += ["", "| auto chose | pairs | met | the oracle itself (loop's cost) | loop's cost ≤ 2× the oracle's |",
+              "|---|---|---|---|---|"]
+    lines += [f"| {name} | {n} | {met} | {same} | {within} |"
+              for name, (n, met, same, within) in sorted(chosen.items(), key=lambda kv: -kv[1][0])]
     return lines
 
 
