@@ -405,7 +405,7 @@ static fmi2Status get_values(Instance *I, const fmi2ValueReference vr[], size_t 
             if (VARIABLES[vr[i]].causality == C_LOCAL) model_lazy_locals(&I->s); /* me_model.h */
 #endif
 #ifdef MODEL_LAZY_OUTPUTS
-            if (VARIABLES[vr[i]].causality == C_OUTPUT) model_lazy_outputs(&I->s); /* me_model.h */
+            if (VARIABLES[vr[i]].causality == C_OUTPUT) model_lazy_outputs(&I->s, vr[i]); /* me_model.h */
 #endif
             out[i] = I->s.value[vr[i]];
             continue;
@@ -471,7 +471,7 @@ static const char *set_refusal(Instance *I, fmi2ValueReference vr, char *buf, si
     if (I->s.initialised) {
         char current[64];
 #ifdef MODEL_LAZY_OUTPUTS
-        if (v->causality == C_OUTPUT) model_lazy_outputs(&I->s); /* me_model.h: the value it keeps */
+        if (v->causality == C_OUTPUT) model_lazy_outputs(&I->s, vr); /* me_model.h: the value it keeps */
 #endif
         value_text(&I->s, vr, current, sizeof current);
         snprintf(buf, size, "a %s %s cannot be set after fmi2ExitInitializationMode (FMI 2.0: only inputs and "

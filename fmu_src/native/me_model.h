@@ -42,9 +42,9 @@ void model_do_step_early(Instance *inst, State *s, double t, double h);
 #endif
 
 #ifdef MODEL_LAZY_OUTPUTS
-/* Before an output is read (fmi2_native.c's getter): the outputs a doStep left to be computed when read brought up
-   to date (the plant's x'' and forces: a host that reads x alone never pays for them) */
-void model_lazy_outputs(State *s);
+/* Before output vr is read (fmi2_native.c's getter): if it is one a doStep left to be computed when read, those
+   outputs brought up to date (the plant's x'' and forces: a host that reads x alone never pays for them) */
+void model_lazy_outputs(State *s, fmi2ValueReference vr);
 #endif
 
 #ifdef MODEL_LAZY_LOCALS

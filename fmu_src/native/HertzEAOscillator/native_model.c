@@ -110,9 +110,10 @@ static void publish_state(State *s)
 /* x'' and the forces of the last doStep's point, when first read: vk_step_outputs, the bits vk_do_step gives them
    (model_do_step left them only where vk_outputs_bounded proved them finite; a forged state that breaks the proof
    reads NaN, which the getter refuses with fmi2Error) */
-void model_lazy_outputs(State *s)
+void model_lazy_outputs(State *s, fmi2ValueReference vr)
 {
-    if (!s->model.me.locals_stale || !s->model.built || s->model.me.mode != ME_OFF) return;
+    if (!s->model.me.locals_stale || (vr != VR_a && vr != VR_F_contact && vr != VR_F_electrostatic)) return;
+    if (!s->model.built || s->model.me.mode != ME_OFF) return;
     VkPlant *p = &s->model.plant;
     if (vk_outputs_bounded(p) && vk_step_outputs(p) == VK_OK) {
         publish(s);
