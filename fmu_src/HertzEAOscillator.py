@@ -9,6 +9,7 @@ the kernel's memory: the status shim's fast path (fast_path.py) steps it and rea
 Python, so the output and input variables below are properties on that memory.
 """
 import math
+from dataclasses import replace
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -20,14 +21,16 @@ import fast_path
 fast_path.use_packed_packages(Path(__file__).parent)  # before any vibromodel import
 from slave_support import StatusSlave
 from vibromodel.analytic import OafmSettings
+from vibromodel.auto import DEFAULT_TOLERANCE, auto_plant, is_auto
 from vibromodel.compiled import CompiledPlant, load_library
 from vibromodel.compiled_open_loop import CompiledOpenLoopPlant
-from vibromodel.fidelities import description, entry
+from vibromodel.fidelities import AUTO, Fidelity, description, entry
 from vibromodel.parameters import Scene, check_finite, check_parameters, scene_names, validate
 from vibromodel.plant import DEFAULT_EXPERIMENT, Plant, Settings, make_plant
 
 OUTPUTS = ("x", "v", "a", "F_contact", "F_electrostatic")
 NO_ESTIMATE = -1.0  # error_estimate before initialisation, or when the rung cannot estimate (it then warns)
+NOT_CHOSEN = -1  # fidelity_chosen before initialisation (its start value, as error_estimate's)
 
 
 def _output(index: int):
@@ -65,7 +68,11 @@ class HertzEAOscillator(fast_path.FastPathSwitch, StatusSlave):
         super().__init__(**kwargs)
         self._shim = fast_path.shim_attach(self.resources, type(self).__name__)
         scene, settings, oafm = Scene(), Settings(), OafmSettings()
-        self._plant_parameters(scene, settings, description())  # "0 exact Eq. 3, 1 polynomial Eq. 7, ..."
+        self._plant_parameters(scene, settings,  # "0 exact Eq. 3, 1 polynomial Eq. 7, ..., -1 auto: ..."
+                               f"{description()}, {AUTO} auto: the cheapest rung whose error estimate meets tolerance")
+        self._parameter(Real, "tolerance", DEFAULT_TOLERANCE,
+                        "fidelity auto: the bound on max|x - x_exact| in x's units (docs/rungs.md, Choosing by "
+                        "tolerance)")
         self._parameter(Integer, "kernel", int(settings.kernel),
                         "0 compiled C kernel (fidelities 0-2 with both solvers; 3 and 4: their per-output evaluation; "
                         "pure Python where it is missing), 1 pure Python")
@@ -81,6 +88,11 @@ class HertzEAOscillator(fast_path.FastPathSwitch, StatusSlave):
                                     variability=Fmi2Variability.discrete, initial=Fmi2Initial.exact,
                                     description="estimate of max|x - x_exact| over the run (x's units), set at "
                                                 "initialisation (docs/rungs.md, Error estimates); -1: none"))
+        self.fidelity_chosen = NOT_CHOSEN
+        self.register_variable(Integer("fidelity_chosen", causality=Fmi2Causality.output,
+                                       variability=Fmi2Variability.discrete, initial=Fmi2Initial.exact,
+                                       description="the fidelity the plant runs, set at initialisation: `fidelity`, or "
+                                                   "the one fidelity auto chose (docs/rungs.md); -1 before"))
         self.in_contact = True
         self.register_variable(Boolean("in_contact", causality=Fmi2Causality.output,
                                        variability=Fmi2Variability.discrete, initial=Fmi2Initial.exact))
@@ -89,8 +101,14 @@ class HertzEAOscillator(fast_path.FastPathSwitch, StatusSlave):
         """The plant of the current parameters and experiment; raises ParameterError for bad ones."""
         oafm = OafmSettings(order=int(self.oafm_order), tau_star=float(self.tau_star), tau_end=float(self.oafm_tau_end))
         scene, settings = self._plant_values(oafm=oafm)
-        return make_plant(scene, settings, t0=float(self.start_time), stop_time=self.stop_time,
-                          cache_dirs=self._cache_dirs(), library=self._library())
+
+        def build(settings):
+            return make_plant(scene, settings, t0=float(self.start_time), stop_time=self.stop_time,
+                              cache_dirs=self._cache_dirs(), library=self._library())
+
+        if is_auto(settings.fidelity):  # the choice's settings replace fidelity, solver, rtol and max_step
+            return auto_plant(scene, replace(settings, fidelity=int(Fidelity.EXACT)), float(self.tolerance), build)
+        return build(settings)
 
     def _library(self):
         """(the compiled kernel packed in resources, or None; why not)."""
@@ -114,6 +132,7 @@ class HertzEAOscillator(fast_path.FastPathSwitch, StatusSlave):
         estimate = getattr(model, "error_estimate", None)
         value = NO_ESTIMATE if estimate is None else estimate["estimate"]
         self.error_estimate = value if math.isfinite(value) else NO_ESTIMATE
+        self.fidelity_chosen = NOT_CHOSEN if model is None else int(model.settings.fidelity)
 
     @staticmethod
     def _compiled(model):
@@ -143,11 +162,15 @@ class HertzEAOscillator(fast_path.FastPathSwitch, StatusSlave):
         ParameterError when the scene breaks a rule (the parameter named)."""
         if name == "error_estimate":  # set at exitInitializationMode, with the plant
             return NO_ESTIMATE
+        if name == "fidelity_chosen":  # likewise (fidelity auto chooses then)
+            return NOT_CHOSEN
         values = self._parameter_values()
         check_parameters({key: values[key] for key in ("fidelity", *scene_names())})
+        fidelity = int(values["fidelity"])
         scene = Scene(**{key: float(values[key]) for key in scene_names()})
         validate(scene)
-        plant = SimpleNamespace(model=entry(int(values["fidelity"])).model(scene), U=0.0)
+        # fidelity auto: Eq. 3 (every candidate's forces are the exact model's: auto.candidates)
+        plant = SimpleNamespace(model=entry(Fidelity.EXACT if is_auto(fidelity) else fidelity).model(scene), U=0.0)
         out = Plant.outputs_at(plant, float(self.start_time), scene.x_start, scene.v_start)  # one implementation
         value = getattr(out, name)
         if name != "in_contact":

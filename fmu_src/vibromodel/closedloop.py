@@ -52,10 +52,10 @@ class ClosedLoop:
     def __init__(self, scene: Scene, settings: Settings, loop: LoopSettings, t0: float = 0.0,
                  stop_time: float | None = None, cache_dirs: tuple = ()):
         validate(scene)
+        if settings.fidelity not in PLANT_FIDELITIES:  # before checked_settings, which knows no fidelity auto (-1)
+            raise ParameterError("fidelity", settings.fidelity, closed_loop_refusal())
         settings, self.warnings = checked_settings(scene, settings)  # rtol clamped; RK4 drive resolution
         loop.validate()
-        if settings.fidelity not in PLANT_FIDELITIES:
-            raise ParameterError("fidelity", settings.fidelity, closed_loop_refusal())
         self.scene, self.settings, self.loop = scene, settings, loop
         self.model = entry(settings.fidelity).model(scene)
         self.controller = Controller(scene, loop.gains, loop.law)

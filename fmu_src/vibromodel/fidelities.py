@@ -30,6 +30,9 @@ class Fidelity(IntEnum):
     ANALYTIC = 4  # OAFM closed form (analytic.py); its forces are those of Eq. 3 at x~
 
 
+AUTO = -1  # the `fidelity` value that asks for fidelity auto (auto.py): the plant FMU picks the level by `tolerance`
+
+
 class Evaluator(IntEnum):
     """The compiled per-output evaluator of an open-loop level (core/openloop_plant.c)."""
     NONE = 0  # none: the level integrates (or runs in Python only)
@@ -220,14 +223,15 @@ def native_refusal(level: int) -> str | None:
 
 
 def rule() -> Rule:
-    """parameters.RULES's `fidelity` rule: a whole number from the lowest to the highest level, the reason naming
-    the levels by kind ("0 exact, 1 and 2 polynomial, 3 averaged, 4 analytic": levels of one model kind share
-    their name)."""
+    """parameters.RULES's `fidelity` rule: a whole number from the lowest to the highest level or AUTO, the reason
+    naming the levels by kind ("0 exact, 1 and 2 polynomial, 3 averaged, 4 analytic": levels of one model kind share
+    their name) and auto. Only the plant accepts AUTO: the closed loop refuses it (closed_loop_refusal)."""
     groups: dict[str, list[int]] = {}
     for e in REGISTRY.values():
         groups.setdefault(e.key.split("-")[0], []).append(int(e.level))
     reason = ", ".join(f"{' and '.join(map(str, levels))} {kind}" for kind, levels in groups.items())
-    return Rule("fidelity", int(min(REGISTRY)), int(max(REGISTRY)), reason=reason, integer=True)
+    return Rule("fidelity", int(min(REGISTRY)), int(max(REGISTRY)), reason=f"{reason}, {AUTO} auto", integer=True,
+                automatic=AUTO)
 
 
 def open_loop_rule_levels() -> tuple[int, ...]:

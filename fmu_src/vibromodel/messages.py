@@ -15,6 +15,16 @@ TEXTS = {
     # parameters.clamp_tolerance's warning; requested: the value's exact text
     "RTOL_CLAMPED": ("parameter rtol = {requested} is below {floor:.3g} (100 machine epsilons: the error control "
                      "would see only rounding): using rtol = {floor:.3g}"),
+    # fidelity auto (auto.choose; the native plant's model_initialise): the choice's log line (fmi2OK), the refusal
+    # naming `tolerance`, and the parts of their lists of the candidates passed over
+    "AUTO_CHOSE": ("fidelity auto chose {rung} (cost {cost:.3g} of exact at rtol 1e-8): its error estimate "
+                   "{estimate:.3g} meets the tolerance {tolerance:g}{skipped}"),
+    "AUTO_SKIPPED": "; skipped: {tried}",
+    "AUTO_NONE": "no rung's error estimate meets it ({tried}); raise the tolerance",
+    "AUTO_ESTIMATE": "{rung}: estimate {estimate:.3g}",
+    "AUTO_REFUSED": "fidelity {level:g}: refused ({parameter})",
+    "AUTO_EXACT_RUNG": "fidelity {level:g} at rtol {rtol:g}",
+    "AUTO_RUNG": "fidelity {level:g}",
 }
 
 

@@ -187,7 +187,7 @@ void model_initialise(Instance *inst, State *s)
                    "control would see only rounding): using rtol = %.3g", requested, RULE_MIN_RTOL, RULE_MIN_RTOL);
     }
     native_drive_warnings(inst, s, vk_solvers[solver], max_step != 0.0 ? max_step : RULE_RK4_DEFAULT_STEP);
-    if (!VK_FIDELITIES[fidelity].integrated) { /* the registry's levels (fidelity.h) */
+    if (fidelity < 0 || !VK_FIDELITIES[fidelity].integrated) { /* the registry's levels (fidelity.h); -1: auto, the plant FMU's */
         native_halt_parameter(inst, "fidelity", fidelity, 1, VK_FIDELITY_CLOSED_LOOP_REFUSAL);
         return;
     }

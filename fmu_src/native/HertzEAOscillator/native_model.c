@@ -47,7 +47,8 @@ static int valid(Instance *inst, const State *s)
         native_halt_parameter(inst, "x_start", s->value[VR_x_start], 0, reason);
         return 0;
     }
-    if (VK_FIDELITIES[(int)s->value[VR_fidelity]].oafm_settings) {
+    const int fidelity = (int)s->value[VR_fidelity];
+    if (fidelity != RULE_AUTO_FIDELITY && VK_FIDELITIES[fidelity].oafm_settings) {
         const double tau_star = s->value[VR_tau_star], tau_end = s->value[VR_oafm_tau_end];
         if (tau_end != 0.0 && tau_star != 0.0 && tau_end <= tau_star) {
             snprintf(reason, sizeof reason, "must exceed tau_star = %g", tau_star);
@@ -123,11 +124,56 @@ void model_lazy_outputs(State *s, fmi2ValueReference vr)
     s->model.me.locals_stale = 0;
 }
 
+/* auto.choose over the candidates of rules.h (auto.candidates, cheapest first): the first the native FMU runs whose
+   estimate (native_error_estimate, error_estimates' to the digit) is at most `tolerance`, its index, the log line of
+   the choice in *line; -1 and the refusal's reason in *line when none meets it. */
+static int auto_choose(const State *s, double tolerance, char *line, size_t size)
+{
+    char tried[2048] = "", item[160], rung[96];
+    size_t used = 0;
+    for (int i = 0; i < N_AUTO_CANDIDATES; i++) {
+        const AutoCandidate *c = &AUTO_CANDIDATES[i];
+        if (VK_FIDELITIES[c->fidelity].native_refusal) {
+            snprintf(item, sizeof item, RULE_TEXT_AUTO_REFUSED, (double)c->fidelity, RULE_AUTO_NEEDS_PYTHON);
+        } else {
+            if (VK_FIDELITIES[c->fidelity].integrated)
+                snprintf(rung, sizeof rung, RULE_TEXT_AUTO_EXACT_RUNG, (double)c->fidelity, c->rtol);
+            else
+                snprintf(rung, sizeof rung, RULE_TEXT_AUTO_RUNG, (double)c->fidelity);
+            const double estimate = native_error_estimate(s, c->fidelity, c->rtol, !vk_solvers[c->solver]->reads_tolerance);
+            if (isfinite(estimate) && estimate <= tolerance) {
+                char skipped[sizeof tried + 16] = "";
+                if (used) snprintf(skipped, sizeof skipped, RULE_TEXT_AUTO_SKIPPED, tried);
+                snprintf(line, size, RULE_TEXT_AUTO_CHOSE, rung, c->cost, estimate, tolerance, skipped);
+                return i;
+            }
+            snprintf(item, sizeof item, RULE_TEXT_AUTO_ESTIMATE, rung, estimate);
+        }
+        used += (size_t)snprintf(tried + used, sizeof tried - used, "%s%s", used ? "; " : "", item);
+        if (used >= sizeof tried) used = sizeof tried - 1;
+    }
+    snprintf(line, size, RULE_TEXT_AUTO_NONE, tried);
+    return -1;
+}
+
 void model_initialise(Instance *inst, State *s)
 {
-    const double rtol_requested = s->has_tolerance ? s->tolerance : s->value[VR_rtol];
+    double rtol_requested = s->has_tolerance ? s->tolerance : s->value[VR_rtol];
     if (!valid(inst, s)) return;
-    const int fidelity = (int)s->value[VR_fidelity], solver = (int)s->value[VR_solver];
+    int fidelity = (int)s->value[VR_fidelity], solver = (int)s->value[VR_solver];
+    double max_step = s->value[VR_max_step];
+    char choice[3072] = "";
+    if (fidelity == RULE_AUTO_FIDELITY) { /* the choice's settings replace fidelity, solver, rtol and max_step */
+        const int chosen = auto_choose(s, s->value[VR_tolerance], choice, sizeof choice);
+        if (chosen < 0) {
+            native_halt_parameter(inst, "tolerance", s->value[VR_tolerance], 0, choice);
+            return;
+        }
+        fidelity = AUTO_CANDIDATES[chosen].fidelity;
+        solver = AUTO_CANDIDATES[chosen].solver;
+        rtol_requested = AUTO_CANDIDATES[chosen].rtol;
+        max_step = 0.0;
+    }
     if (VK_FIDELITIES[fidelity].native_refusal) {
         char reason[256];
         snprintf(reason, sizeof reason, "%s; %s", VK_FIDELITIES[fidelity].native_refusal, PYTHONFMU_ALTERNATIVE);
@@ -140,7 +186,6 @@ void model_initialise(Instance *inst, State *s)
     VkPlant *p = &s->model.plant;
     memset(p, 0, sizeof *p);
     native_plant_model(&p->model, s, fidelity); /* the level's model from the parameters (fidelity.h vouches) */
-    const double max_step = s->value[VR_max_step];
     const double factor = native_tolerance_factor(s); /* models.solver_tolerance */
     double solver_rtol = rtol * factor;
     if (solver_rtol < RULE_MIN_RTOL) solver_rtol = RULE_MIN_RTOL;
@@ -160,10 +205,12 @@ void model_initialise(Instance *inst, State *s)
     double et, ex, ev, xva[3];
     int code = vk_init(p, s->start_time, s->value[VR_x_start], s->value[VR_v_start]);
     if (code == VK_OK) { /* the slave's _start: notes (fmi2OK), warnings, the first outputs */
+        if (choice[0]) native_log(inst, fmi2OK, "%s", choice); /* fidelity auto's choice first, as auto.auto_plant */
         native_log(inst, fmi2OK, "%s on the native FMU's compiled kernel (no Python)", vk_solvers[solver]->name);
         /* error_estimates.attach: the level's estimate, -1 (HertzEAOscillator.NO_ESTIMATE) when not finite */
         const double estimate = native_error_estimate(s, fidelity, rtol, !vk_solvers[solver]->reads_tolerance);
         s->value[VR_error_estimate] = isfinite(estimate) ? estimate : -1.0;
+        s->value[VR_fidelity_chosen] = fidelity;
         native_log(inst, fmi2OK, "error estimate: max|x - x_exact| ~ %.3g over the run", estimate);
         if (factor != 1.0 && vk_solvers[solver]->reads_tolerance)
             native_log(inst, fmi2OK, RULE_TEXT_TOLERANCE_FACTOR, solver_rtol, rtol, factor, native_error_memory(s),
@@ -285,7 +332,8 @@ int model_initial_output(const State *s, fmi2ValueReference vr, double *value, c
         snprintf(why, size, "parameter x_start = %s: %s", text, reason);
         return 0;
     }
-    const int fidelity = (int)s->value[VR_fidelity];
+    int fidelity = (int)s->value[VR_fidelity];
+    if (fidelity == RULE_AUTO_FIDELITY) fidelity = VK_FID_EXACT; /* every candidate's forces are Eq. 3's */
     if (VK_FIDELITIES[fidelity].model == VK_MODEL_NONE) {
         snprintf(why, size, "parameter fidelity = %d: %s; %s", fidelity, VK_FIDELITIES[fidelity].native_refusal,
                  PYTHONFMU_ALTERNATIVE);

@@ -234,8 +234,24 @@ def rules_header() -> str:
               "#define SCENE_NAMES " + ", ".join(_c_string(name) for name in scene_names()),
               "#define SCENE_DEFAULTS {" + ", ".join(_c_double(getattr(defaults, n)) for n in scene_names()) + "}",
               "#define SCENE_MODEL_FIELDS(X) " + " ".join(f"X({name})" for name in model_parameter_names()),
-              "", "#endif", ""]
+              "", *auto_rows(), "", "#endif", ""]
     return "\n".join(lines)
+
+
+def auto_rows() -> list[str]:
+    """rules.h's part of fidelity auto (vibromodel.auto): its `fidelity` value and its candidates in its order (cheapest
+    first), each the level, solver, rtol and cost the native plant's model_initialise walks as auto.choose does."""
+    from vibromodel import auto, fidelities
+    from vibromodel.plant import Settings
+
+    rows = [f"    {{{int(c.fidelity)}, {int(c.solver)}, {_c_double(c.rtol)}, {_c_double(cost)}}},"
+            for cost, c in auto.candidates(Settings())]
+    return ["/* fidelity auto (vibromodel.auto.candidates, cheapest first): level, solver, rtol, cost per output */",
+            f"#define RULE_AUTO_FIDELITY ({fidelities.AUTO})",
+            f"#define RULE_AUTO_NEEDS_PYTHON {_c_string(fidelities.NATIVE_NEEDS_PYTHON)}",
+            "typedef struct {", "    int fidelity, solver;", "    double rtol, cost;", "} AutoCandidate;",
+            f"#define N_AUTO_CANDIDATES {len(rows)}", "static const AutoCandidate AUTO_CANDIDATES[N_AUTO_CANDIDATES] = {",
+            *rows, "};"]
 
 
 # The closed loop's references the native FMU carries: the kinds whose set-up (vibromodel.tracking.make_reference)

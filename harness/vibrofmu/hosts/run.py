@@ -166,19 +166,20 @@ class FmuInstance:
         return [v.name for v in self.model_description.modelVariables if v.causality == "output"]
 
     def output_columns(self) -> list[str]:
-        """The Real outputs, then the Boolean ones: the order of read_outputs."""
+        """The Real outputs, then the Integer ones (the plant's fidelity_chosen), then the Boolean ones: the order of
+        read_outputs."""
         names = self.output_names()
-        return ([n for n in names if self.variables[n].type == "Real"]
-                + [n for n in names if self.variables[n].type == "Boolean"])
+        return [n for kind in ("Real", "Integer", "Boolean") for n in names if self.variables[n].type == kind]
 
     def read_outputs(self) -> list[float]:
-        """Every output's current value (Booleans as 0.0/1.0), in the order of output_columns."""
+        """Every output's current value (Integers as floats, Booleans as 0.0/1.0), in the order of output_columns."""
         if not hasattr(self, "_output_refs"):
             columns = self.output_columns()
-            self._output_refs = (self.value_references([n for n in columns if self.variables[n].type == "Real"]),
-                                 self.value_references([n for n in columns if self.variables[n].type == "Boolean"]))
-        reals, booleans = self._output_refs
-        return self.fmu.getReal(reals) + [float(b) for b in self.fmu.getBoolean(booleans)]
+            self._output_refs = tuple(self.value_references([n for n in columns if self.variables[n].type == kind])
+                                      for kind in ("Real", "Integer", "Boolean"))
+        reals, integers, booleans = self._output_refs
+        return (self.fmu.getReal(reals) + ([float(i) for i in self.fmu.getInteger(integers)] if integers else [])
+                + [float(b) for b in self.fmu.getBoolean(booleans)])
 
     def fast_path_steps(self) -> int:
         """doSteps the status shim's C fast path has done for this instance (fmi2_status_shim.c)."""
