@@ -60,8 +60,8 @@ BLOCK = re.compile(r"<!-- report:(?P<name>[a-z_]+) -->\n(?P<body>.*?)<!-- /repor
 OPEN = re.compile(r"<!-- report:([a-z_]+) -->")
 CLOSE = re.compile(r"<!-- /report:([a-z_]+) -->")
 NAMES = ("machine", "accuracy", "ssp", "ssp_orderings", "container", "oafm", "stability", "speed", "ranges", "peers",
-         "calibration", "auto", "cascade", "curve_speed")
-FROM_SUMMARIES = ("oafm", "stability", "speed", "peers", "calibration", "auto", "cascade", "curve_speed")  # filled from the --from folders only
+         "calibration", "auto", "cascade", "curve_speed", "auto_setup")
+FROM_SUMMARIES = ("oafm", "stability", "speed", "peers", "calibration", "auto", "cascade", "curve_speed", "auto_setup")  # filled from the --from folders only
 DETERMINISTIC = ("accuracy", "ssp", "ssp_orderings", "container", "ranges")
 SOURCE_FILES = {"oafm": "an oafm summary.json", "stability": "a stability summary.json",  # what a FROM_SUMMARIES
                 "speed": "a bench.json or an oafm/stability summary.json",  # block reads
@@ -69,7 +69,8 @@ SOURCE_FILES = {"oafm": "an oafm summary.json", "stability": "a stability summar
                 "calibration": "calibration_RUNG.json files (python -m vibrofmu.analyses.error_calibration campaign)",
                 "auto": "an auto.json (python -m vibrofmu.analyses.error_calibration auto)",
                 "cascade": "a continuation summary.json with a cascade",
-                "curve_speed": "a bench.json of bench --curve"}
+                "curve_speed": "a bench.json of bench --curve",
+                "auto_setup": "a bench.json with fidelity auto's set-up (bench, bench --auto-only)"}
 ACCURACY_TAUS = (10.0, 25.0, 50.0, 100.0, 200.0)
 ACCURACY_RTOLS = (1e-4, 1e-6, 1e-8, 1e-10, 1e-12)
 ACCURACY_RK4_STEPS = (0.1, 0.05, 0.025)
@@ -320,7 +321,8 @@ def speed_block(sources: list[Path]) -> str | None:
     lines = []
     for folder in sources:
         bench_file, summary_file = folder / "bench.json", folder / "summary.json"
-        if bench_file.is_file() and "curve" not in (data := json.loads(bench_file.read_text())):
+        if (bench_file.is_file() and "curve" not in (data := json.loads(bench_file.read_text()))
+                and not data.get("bench", {}).get("auto_only")):
             machine = data.get("machine", {})
             load = machine.get("load_average_at_start")
             when = machine.get("started_utc") or time.strftime("%Y-%m-%d %H:%M UTC",  # older files: their end
@@ -453,13 +455,36 @@ def curve_speed_block(sources: list[Path]) -> str | None:
     return None
 
 
+def auto_setup_block(sources: list[Path]) -> str | None:
+    """Fidelity auto's set-up and the estimates' cost from the first bench.json with them (`vibrofmu bench`, or
+    `vibrofmu bench --auto-only`)."""
+    from vibrofmu.speed import auto_cost
+
+    for folder in sources:
+        file = folder / "bench.json"
+        if file.is_file():
+            data = json.loads(file.read_text())
+            if "auto_setup" not in data:
+                continue
+            machine = data.get("machine", {})
+            load = machine.get("load_average_at_start")
+            flag = " --auto-only" if data.get("bench", {}).get("auto_only") else ""
+            head = (f"`vibrofmu bench{flag}` ({machine.get('started_utc', '?')}, {machine.get('cpu_count', '?')} CPUs"
+                    + (f", load average {load[0]:.1f} at its start" if load else "") + "):")
+            lines = [f"- {line.strip()}" for line in auto_cost.auto_lines(data["auto_setup"])]
+            return "\n".join([head, "", *lines, "- Timings on a shared machine vary between runs: compare the items "
+                               "within one run only."])
+    return None
+
+
 # ---------------------------------------------------------------------------------------------- the command
 
 def summary_block(name: str, sources: list[Path]) -> str | None:
     """The body of the FROM_SUMMARIES block `name` from the summaries in `sources` (None: none there)."""
     return {"oafm": oafm_block, "stability": stability_block, "speed": speed_block,
             "peers": peers_block, "calibration": calibration_block, "auto": auto_block,
-            "cascade": cascade_block, "curve_speed": curve_speed_block}[name](sources)
+            "cascade": cascade_block, "curve_speed": curve_speed_block,
+            "auto_setup": auto_setup_block}[name](sources)
 
 
 def generate(names, fmu_dir: Path, sources: list[Path], quick: bool, work_dir: Path, start=None) -> dict[str, str]:

@@ -137,6 +137,7 @@ def print_note(scene: Scene) -> None:
         print(f"note: {note}", file=sys.stderr)
 
 
+INITIALISATION_OUTPUTS = ("error_estimate", "fidelity_chosen")  # the plant FMU's outputs set once, at initialisation
 ESTIMATE_NOTE = "error estimate: max|x - x_exact| ~ "  # vibromodel.error_estimates.attach's log line
 
 
@@ -198,8 +199,8 @@ def simulate(fmu: Path, scene: Scene, settings: Settings, stop_time: float, outp
                                 "stop_event": reference.stop_event,
                                 "contact_changes_tau": reference.contact_changes}
         summary["error"] = errors(run.time, run.outputs["x"], run.outputs["v"], reference)
-    export.write_csv(out_dir / "result.csv", run.time,  # error_estimate is fixed at initialisation: summary.json
-                     {name: values for name, values in run.outputs.items() if name != "error_estimate"})
+    export.write_csv(out_dir / "result.csv", run.time,  # fixed at initialisation: in summary.json
+                     {name: values for name, values in run.outputs.items() if name not in INITIALISATION_OUTPUTS})
     export.write_json(out_dir / "summary.json", summary)
     if len(run.time) >= 2:  # an FMU that failed before its first step has nothing to plot: no empty figure
         export.plot_x(out_dir / "x.png", run.time, run.outputs["x"], run_title(given, output_interval),

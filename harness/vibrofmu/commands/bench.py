@@ -19,6 +19,8 @@ def options(p):
     p.add_argument("--curve", action="store_true",
                    help="only the two-parameter continuation benchmark: a fold curve of 200 points in (omega, Delta) "
                         "(bench.json: seconds, CPU seconds, per point; target < 60 s on 2 cores); needs no FMU")
+    p.add_argument("--auto-only", action="store_true",
+                   help="only what fidelity auto and the error estimates cost at set-up (a minute): bench.json")
     p.add_argument("--no-instructions", action="store_true",
                    help="skip the ladder's instruction counts (valgrind's callgrind, a few minutes)")
     p.add_argument("--fmu", default=None, help=FMU_HELP)
@@ -45,6 +47,12 @@ def run(args) -> int:
         for line in peers.peers_lines(record):
             print(line)
         print(f"peers in {record['peers']['seconds']:.0f} s; wrote {out}/peers.json, {out}/peers.png")
+        return 0
+    if args.auto_only:
+        summary = bench.run_auto_only(fmu, out, rounds=args.ladder_rounds, progress=say)
+        for line in bench.summary_lines(summary):
+            print(line)
+        print(f"auto in {summary['bench']['seconds']:.0f} s; wrote {out}/bench.json")
         return 0
     if args.ladder_only:
         summary = bench.run_ladder_only(fmu, out, quick=args.quick, progress=say, ladder_rounds=args.ladder_rounds,
@@ -86,12 +94,18 @@ def run_curve(args) -> int:
 def unused(args) -> list[Unused]:
     if args.curve:
         return [Unused(dest, "--curve runs only the fold-curve benchmark; leave it out")
-                for dest in ("repeats", "ladder_rounds", "ladder_only", "peers", "no_instructions", "fmu", "quick")]
+                for dest in ("repeats", "ladder_rounds", "ladder_only", "peers", "no_instructions", "fmu", "quick",
+                             "auto_only")]
     if args.peers:
         return [Unused("repeats", "--peers runs each setting once per round (the rounds are --ladder-rounds); leave "
                                   "it out"),
                 Unused("ladder_only", "--peers runs only the comparison with other solvers; give one of the two"),
                 Unused("no_instructions", "--peers counts no instructions; leave it out", harmless=True)]
+    if args.auto_only:
+        return [Unused("repeats", "--auto-only runs no work-precision cases (its rounds are --ladder-rounds); leave "
+                                  "it out"),
+                Unused("ladder_only", "--auto-only runs no ladder; give one of the two"),
+                Unused("no_instructions", "--auto-only counts no instructions; leave it out", harmless=True)]
     return [Unused("repeats", "--ladder-only runs no work-precision cases (the ladder's rounds are --ladder-rounds); "
                               "leave it out")] if args.ladder_only else []
 

@@ -37,7 +37,7 @@ from vibromodel.plant import Kernel, Settings, Solver
 
 from vibrofmu.output import export
 
-from vibrofmu.speed import ladder, native_timing
+from vibrofmu.speed import auto_cost, ladder, native_timing
 from vibrofmu.fmus.kernel import kernel_library
 from vibrofmu.analyses.reference import reference_solution
 from vibrofmu.hosts.run import FmuInstance, FmuLog, call_failure_reason
@@ -591,6 +591,8 @@ def run_bench(fmu: Path, out_dir: Path, quick: bool = False, repeats: int | None
     extremes = extreme_rows(quick) if extreme_rows is not None else []
     say("speed-accuracy ladder (C host and FMPy) ...")
     ladder_record = run_ladder_with_fmus(fmu, closed_loop_fmu, quick, say, ladder_rounds, instructions)
+    say("fidelity auto and the error estimates at set-up ...")
+    auto_costs = auto_cost.auto_record(fmu, ladder_rounds or LADDER_ROUNDS, ladder_record)
     say("native plant: FMI 3 CS beside FMI 2 CS (C host), ME under FMPy's CVode beside CS ...")
     fmi_versions = native_timing.fmi_versions_record(fmu, 3 if quick else 5)
     pairs = AUTO_PAIRS_QUICK if quick else AUTO_PAIRS
@@ -614,6 +616,7 @@ def run_bench(fmu: Path, out_dir: Path, quick: bool = False, repeats: int | None
         "ladder": ladder_record,
         "fmi_versions": fmi_versions,
         "auto": auto_record,
+        "auto_setup": auto_costs,
     }
     summary["targets"] = targets(records, instantiation, plan)
     summary["machine"]["load_average_at_end"] = list(os.getloadavg()) if hasattr(os, "getloadavg") else None
@@ -679,6 +682,21 @@ def run_ladder_only(fmu: Path, out_dir: Path, quick: bool = False, progress: Cal
     return summary
 
 
+def run_auto_only(fmu: Path, out_dir: Path, rounds: int | None = None,
+                  progress: Callable[[str], None] | None = None) -> dict:
+    """Only what fidelity auto and the error estimates cost at set-up (`vibrofmu bench --auto-only`, auto_cost.py):
+    out_dir/bench.json with the machine and "auto_setup"; returns the JSON's content."""
+    started = time.perf_counter()
+    out_dir.mkdir(parents=True, exist_ok=True)
+    (progress or (lambda line: None))("fidelity auto and the error estimates at set-up ...")
+    summary = {"bench": {"auto_only": True, "scene": Scene().as_dict(), "fmu": str(fmu)}, "machine": machine_info()}
+    summary["auto_setup"] = auto_cost.auto_record(Path(fmu), rounds or LADDER_ROUNDS)
+    summary["machine"]["load_average_at_end"] = list(os.getloadavg()) if hasattr(os, "getloadavg") else None
+    summary["bench"]["seconds"] = time.perf_counter() - started
+    export.write_json(out_dir / "bench.json", summary)
+    return summary
+
+
 def progress_line(number: int, total: int, r: dict) -> str:
     head = f"[{number}/{total}] {r['method']}, {r['setting']}, interval {r['output_interval']:g}: "
     if r.get("errors") is None:
@@ -690,7 +708,9 @@ def progress_line(number: int, total: int, r: dict) -> str:
 def summary_lines(summary: dict) -> list[str]:
     """What the command prints: the targets with their inputs, and the ladder (a --ladder-only run: the ladder)."""
     if "targets" not in summary:
-        return ladder.ladder_lines(summary["ladder"])
+        if "ladder" in summary:
+            return ladder.ladder_lines(summary["ladder"])
+        return auto_cost.auto_lines(summary["auto_setup"])
     t = summary["targets"]
     lines = [f"targets ({t['note']}; L-infinity <= {t['threshold_linf_x']:g}, output interval "
              f"{t['output_interval']:g}):"]
@@ -715,6 +735,8 @@ def summary_lines(summary: dict) -> list[str]:
 
         lines.append("  fidelity auto against the oracle (the cheapest candidate that really met the tolerance):")
         lines += [f"    {line}" for line in auto_table(summary["auto"])]
+    if summary.get("auto_setup"):
+        lines += auto_cost.auto_lines(summary["auto_setup"])
     inst = t["instantiation"]
     warm = t["inputs"]["instantiation"]["warm_seconds"]
     lines.append("  instantiation (cold): " + ("not measured" if inst["seconds"] is None else
