@@ -89,6 +89,8 @@ def test_simulate_fidelity_auto_chooses_by_the_tolerance(tmp_path, plant_fmu, ca
     summary = json.loads((out / "summary.json").read_text())
     assert summary["fidelity_chosen"] == "analytic" and summary["tolerance"] == 1e-3
     assert summary["error"]["max_abs_error_x"] <= summary["error_estimate"] <= 1e-3
+    assert summary["estimate_and_measured"] == {"error_estimate": summary["error_estimate"],
+                                                "max_abs_error_x": summary["error"]["max_abs_error_x"]}
 
 
 def test_simulate_reports_an_early_stop(tmp_path, plant_fmu, capsys):

@@ -199,6 +199,8 @@ def simulate(fmu: Path, scene: Scene, settings: Settings, stop_time: float, outp
                                 "stop_event": reference.stop_event,
                                 "contact_changes_tau": reference.contact_changes}
         summary["error"] = errors(run.time, run.outputs["x"], run.outputs["v"], reference)
+        summary["estimate_and_measured"] = {"error_estimate": summary["error_estimate"],  # side by side
+                                            "max_abs_error_x": summary["error"]["max_abs_error_x"]}
     export.write_csv(out_dir / "result.csv", run.time,  # fixed at initialisation: in summary.json
                      {name: values for name, values in run.outputs.items() if name not in INITIALISATION_OUTPUTS})
     export.write_json(out_dir / "summary.json", summary)
