@@ -4,8 +4,10 @@ import numpy as np
 import pytest
 
 from vibrofmu.fmus import kernel
-from vibromodel.auto import choose
-from vibromodel.fidelities import Fidelity
+from vibrofmu.fmus.native import auto_rows
+from vibromodel.auto import LADDER_COST, candidates, choose
+from vibromodel.fidelities import Fidelity, entry
+from vibromodel.models import ExactModel
 from vibromodel.integrate import TerminalEvent
 from vibromodel.parameters import ParameterError, Scene
 from vibromodel.plant import Settings, make_plant
@@ -62,3 +64,31 @@ def test_a_tolerance_nothing_meets_is_refused_naming_it(tolerance, library):
     with pytest.raises(ParameterError) as refusal:
         chosen(Scene(), tolerance, library)
     assert refusal.value.name == "tolerance"
+
+
+def test_every_candidate_s_forces_are_the_exact_model_s():
+    """The plant FMU publishes Eq. 3's a and forces in Initialization Mode under fidelity auto (HertzEAOscillator.
+    _initial_output, native model_initial_output): right only if every candidate's model is the exact one."""
+    for _, candidate in candidates(Settings()):
+        assert entry(candidate.fidelity).model is ExactModel, candidate
+
+
+def test_the_candidates_run_cheapest_first_and_the_native_fmu_gets_them_all():
+    """The native FMU's rules.h carries the list (fmus/native.auto_rows) in auto's order, costs included."""
+    rows = candidates(Settings())
+    costs = [cost for cost, _ in rows]
+    assert costs == sorted(costs) and costs[0] == min(LADDER_COST.values())
+    table = [line.strip() for line in auto_rows() if line.strip().startswith("{") and line.strip().endswith("},")]
+    assert len(table) == len(rows)
+    for line, (cost, settings) in zip(table, rows):
+        level, solver, rtol, c = (float(v) for v in line.strip("{},").split(","))
+        assert (level, solver, rtol, c) == (settings.fidelity, settings.solver, settings.rtol, cost)
+
+
+def test_the_native_choice_is_auto_s_over_the_rungs_without_python(library):
+    """choose(..., native=True) passes over the averaged and analytic rungs (native_refusal) without building them:
+    on the paper scene at 1e-3 the exact model at rtol 1e-8 (the tightest of the cheapest cost)."""
+    plant, settings, log = choose(Scene(), Settings(), 1e-3, lambda s: make_plant(Scene(), s, 0.0, STOP,
+                                                                                  library=library), native=True)
+    assert (settings.fidelity, settings.rtol) == (Fidelity.EXACT, 1e-8)
+    assert "skipped: fidelity 3: refused (needs Python); fidelity 4: refused (needs Python)" in log[0]
