@@ -34,7 +34,8 @@ and `vibrofmu report` rewrites the text between them (the markers stay). Blocks:
              the --from folders (not run by the report itself: minutes).
 - curve_speed: the cost of a fold curve (two-parameter continuation) from a bench.json of `bench --curve` in the
              --from folders (a timing: not run by the report itself, never compared by --check).
-
+- auto_setup: fidelity auto's set-up and each rung's estimate over its initialisation, from a bench.json (`bench`,
+             or `bench --auto-only`; timings, never compared by --check).
 
 Without --from, the oafm, stability and speed blocks come from fresh runs of `vibrofmu oafm`, `stability` and
 `bench` (quick: oafm study to order 3, `bench --quick`). `--check` regenerates every block whose numbers do not
@@ -472,8 +473,10 @@ def auto_setup_block(sources: list[Path]) -> str | None:
             head = (f"`vibrofmu bench{flag}` ({machine.get('started_utc', '?')}, {machine.get('cpu_count', '?')} CPUs"
                     + (f", load average {load[0]:.1f} at its start" if load else "") + "):")
             lines = [f"- {line.strip()}" for line in auto_cost.auto_lines(data["auto_setup"])]
-            return "\n".join([head, "", *lines, "- Timings on a shared machine vary between runs: compare the items "
-                               "within one run only."])
+            return "\n".join([head, "", *lines, "- Depend on the machine (so `vibrofmu report --check` does not "
+                               "compare this block): every time and share of times. The choices and estimates do "
+                               "not. Timings on a shared machine vary between runs: compare the items within one "
+                               "run only."])
     return None
 
 

@@ -37,7 +37,10 @@ NOT_CHECKED = {"machine": "where and when the numbers were taken", "speed": "tim
                "`vibrofmu report --from DIR --only peers`)",
                "calibration": "the rungs' error estimates against their measured errors: an hour of campaigns "
                "(docs/rungs.md names them; then `vibrofmu report --from DIR --only calibration`)",
-               "auto": "fidelity auto against the oracle: its costs are timings on a shared machine"}
+               "auto": "fidelity auto against the oracle: its costs are timings on a shared machine",
+               "auto_setup": "fidelity auto's set-up and the estimates' share of the initialisation: times, they "
+               "depend on the machine and its load (`vibrofmu bench --auto-only --out DIR`, then `vibrofmu report "
+               "--from DIR --only auto_setup`)"}
 # compared by --check too: from the --from summaries, else from fresh full runs of `vibrofmu oafm` and `stability`
 # (about a minute of CPU on 2 cores; the bench is not run: the speed block is not compared)
 FROM_CHECKED = ("oafm", "stability")
@@ -45,7 +48,8 @@ FROM_CHECKED = ("oafm", "stability")
 
 # The studies each generated block reads: a block is rewritten only when every one of them completed (the speed block
 # gathers the three summaries; from two of them it would silently lose the bench's lines).
-BLOCK_STUDIES = {"oafm": {"oafm"}, "stability": {"stability"}, "speed": {"oafm", "stability", "bench"}}
+BLOCK_STUDIES = {"oafm": {"oafm"}, "stability": {"stability"}, "speed": {"oafm", "stability", "bench"},
+                 "auto_setup": {"bench"}}
 NEEDS_FMUS = ("accuracy", "ssp", "ssp_orderings", "container")  # the blocks that run the FMUs themselves
 
 
