@@ -204,7 +204,8 @@ RULES: tuple[Rule, ...] = (
     Rule("fidelity", 0, 4, reason="0 exact, 1 and 2 polynomial, 3 averaged, 4 analytic, -1 auto", integer=True,
          automatic=-1),
     Rule("tolerance", 0.0, 1.5 * R_MAX, low_inclusive=False,
-         reason="fidelity auto's bound on max|x - x_exact| in x's units (x stays inside the electrodes at +-3R/2)"),
+         reason="fidelity auto's bound on the largest error of x over the run, in x's units (x stays inside the "
+                "electrodes at +-3R/2)"),
     Rule("solver", 0, len(solvers.SOLVERS) - 1, reason=solvers.RULE_TEXT, integer=True),
     Rule("kernel", 0, 1, reason="0 compiled, 1 pure Python", integer=True),
     Rule("rtol", 0.0, MAX_RTOL, low_inclusive=False,
