@@ -547,7 +547,7 @@ def test_report_leaves_the_blocks_of_a_failed_study_alone(monkeypatch, tmp_path,
     monkeypatch.setattr(report, "generate", lambda names, *args: asked.extend(names) or {})
     assert main(["report", "--only", "oafm", "speed", "--root", str(root), "--fmu-dir", str(fmus)]) == 1
     assert asked == ["oafm"]
-    assert "the blocks that read its summary (auto, speed) are not updated" in capsys.readouterr().err
+    assert "the blocks that read its summary (auto_setup, speed) are not updated" in capsys.readouterr().err
 
 
 # A Ctrl-C while `vibrofmu` is still importing the model (about 0.5 s at start-up) is an interrupt like any other.
