@@ -94,3 +94,30 @@ def test_each_located_doubling_has_a_multiplier_at_minus_one_on_an_independent_m
         assert np.max(np.abs(end - pt.z0)) <= ORBIT_TOL, (pt.periods, pt.p)
         rho = np.linalg.eigvals(independent_monodromy(scene, pt.z0, pt.periods))
         assert np.min(np.abs(rho + 1.0)) <= MULTIPLIER_TOL, (pt.periods, pt.p, rho)
+
+
+GRAZING_FOLD_SCENE = Scene(mu=0.05, R=2.0, omega=0.8, beta=0.0, gamma=0.0)  # the Delta branch of docs/continuation.md
+
+
+@pytest.mark.slow
+def test_the_contact_loss_orbit_of_the_delta_branch_doubles_and_is_a_flip_saddle_beyond():
+    """The period-T orbit beyond the lower fold is stable only up to a period doubling; past it one real multiplier
+    is below -1 (a flip saddle), on the independent map too."""
+    result = cont.branch(GRAZING_FOLD_SCENE, "Delta", 0.002, 0.5, double=False)  # the documented command
+    events = [pt.event for pt in result.events()]
+    assert events[:3] == ["grazing", "fold", "fold"] or events[:3] == ["fold", "grazing", "fold"], events
+    pd_index = next(i for i, pt in enumerate(result.points) if pt.event == "period-doubling")
+    pd = result.points[pd_index]
+    assert pd.x_min < cont.CONTACT_EDGE  # on the contact-loss part, beyond the lower fold
+    scene = GRAZING_FOLD_SCENE.with_values(Delta=pd.p)
+    assert np.max(np.abs(independent_map(scene, pd.z0, 1) - pd.z0)) <= ORBIT_TOL
+    rho = np.linalg.eigvals(independent_monodromy(scene, pd.z0, 1))
+    assert np.min(np.abs(rho + 1.0)) <= MULTIPLIER_TOL, rho
+    beyond = [pt for pt in result.points[pd_index + 1:] if 0.15 <= pt.p <= 0.25]
+    assert beyond
+    for pt in beyond[:: max(1, len(beyond) // 2)]:
+        rho = np.sort(np.linalg.eigvals(independent_monodromy(GRAZING_FOLD_SCENE.with_values(Delta=pt.p), pt.z0, 1)).real)
+        assert rho[0] < -1.0, (pt.p, rho)  # a flip saddle: unstable, not the stable motion
+        # the engine's multipliers within the independent map's own accuracy (1e-6 relative, Liouville above)
+        engine = np.sort(pt.multipliers.real)
+        assert np.allclose(rho, engine, rtol=1e-5, atol=1e-8), (pt.p, rho, engine)
