@@ -24,6 +24,8 @@ and `vibrofmu report` rewrites the text between them (the markers stay). Blocks:
              says so), so never compared by --check.
 - peers:     the plant beside other ODE solvers at equal accuracy, from a peers.json of `bench --peers` in the
              --from folders (timings; not run by the report itself).
+- calibration_replay: the first scenes of each calibration campaign run again, estimate / measured error
+             (deterministic: ten seconds of runs; --check compares it, so a changed estimate or model shows).
 - calibration: every rung's error estimate against its measured error over random scenes, from the
              calibration_RUNG.json files (`python -m vibrofmu.analyses.error_calibration campaign RUNG n seed`) in the
              --from folders (deterministic given the files; not run by the report itself: an hour of campaigns).
@@ -61,9 +63,9 @@ BLOCK = re.compile(r"<!-- report:(?P<name>[a-z_]+) -->\n(?P<body>.*?)<!-- /repor
 OPEN = re.compile(r"<!-- report:([a-z_]+) -->")
 CLOSE = re.compile(r"<!-- /report:([a-z_]+) -->")
 NAMES = ("machine", "accuracy", "ssp", "ssp_orderings", "container", "oafm", "stability", "speed", "ranges", "peers",
-         "calibration", "auto", "cascade", "curve_speed", "auto_setup")
+         "calibration", "calibration_replay", "auto", "cascade", "curve_speed", "auto_setup")
 FROM_SUMMARIES = ("oafm", "stability", "speed", "peers", "calibration", "auto", "cascade", "curve_speed", "auto_setup")  # filled from the --from folders only
-DETERMINISTIC = ("accuracy", "ssp", "ssp_orderings", "container", "ranges")
+DETERMINISTIC = ("accuracy", "ssp", "ssp_orderings", "container", "ranges", "calibration_replay")
 SOURCE_FILES = {"oafm": "an oafm summary.json", "stability": "a stability summary.json",  # what a FROM_SUMMARIES
                 "speed": "a bench.json or an oafm/stability summary.json",  # block reads
                 "peers": "a peers.json (bench --peers)",
@@ -508,6 +510,10 @@ def generate(names, fmu_dir: Path, sources: list[Path], quick: bool, work_dir: P
             bodies[name] = container_block(fmu_dir, quick)
         elif name == "ranges":
             bodies[name] = ranges_block()
+        elif name == "calibration_replay":
+            from vibrofmu.analyses.error_calibration import replay_table
+
+            bodies[name] = "\n".join(replay_table())
         elif name in FROM_SUMMARIES:
             body = summary_block(name, sources)
             if body is not None:

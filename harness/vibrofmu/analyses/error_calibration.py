@@ -342,6 +342,25 @@ def _ratio(value: float) -> str:
 TABLE_ORDER = ("exact", "rk4", "polynomial", "polynomial-paper", "averaged", "analytic")  # by fidelity
 
 
+# (rung, seed) of the campaigns docs/rungs.md's calibration block reports (tests/docs check the block's commands)
+DOCUMENTED_CAMPAIGNS = (("exact", 7), ("rk4", 7), ("polynomial", 7), ("polynomial-paper", 7), ("averaged", 7),
+                        ("analytic", 7), ("analytic", 8))
+REPLAYED_SCENES = 3  # per campaign: ~10 s of CPU in all (fidelity 4's fits the most)
+
+
+def replay_table(scenes: int = REPLAYED_SCENES) -> list[str]:
+    """Markdown rows: the first `scenes` scenes of each documented campaign run again (the campaigns' random
+    scenes come from their seed alone), estimate / measured error per scene. Deterministic on one machine: a
+    change of an estimate or of the model changes these rows, which `vibrofmu report --check` compares."""
+    lines = ["| campaign (seed) | " + " | ".join(f"scene {i + 1}: estimate / measured" for i in range(scenes)) + " |",
+             "|---|" + "---|" * scenes]
+    for rung, seed in DOCUMENTED_CAMPAIGNS:
+        cells = [f"{row['estimate']:.3g} / {row['measured']:.3g}" if "measured" in row else "refused"
+                 for row in campaign(rung, scenes, seed)["rows"]]
+        lines.append(f"| {RUNG_LABELS.get(rung, rung)} ({seed}) | " + " | ".join(cells) + " |")
+    return lines
+
+
 def calibration_table(results: list[dict]) -> list[str]:
     """Markdown rows of the campaigns' summaries (campaign's output), in RUNGS order."""
     order = list(TABLE_ORDER)

@@ -30,13 +30,18 @@ def options(p):
 
 
 QUICK_OUT = "out/report"  # where --quick and --from write their documents: never the published ones
-# the blocks --check does not compare, and why (printed by every --check)
+# the blocks --check does not compare, and why (printed by every --check); every other block of report.NAMES is
+# compared (tests/docs/test_docs.py: each name is compared or listed here)
 NOT_CHECKED = {"machine": "where and when the numbers were taken", "speed": "timings and instruction counts: they "
                "depend on the machine (CPU, compiler, libm) and its load", "peers": "timings of other ODE solvers "
                "beside ours: they depend on the machine and its load (`vibrofmu bench --peers --out DIR`, then "
                "`vibrofmu report --from DIR --only peers`)",
                "calibration": "the rungs' error estimates against their measured errors: an hour of campaigns "
-               "(docs/rungs.md names them; then `vibrofmu report --from DIR --only calibration`)",
+               "(docs/rungs.md names them; then `vibrofmu report --from DIR --only calibration`); the first scenes "
+               "of each are compared (calibration_replay)",
+               "cascade": "minutes of continuation, and its CPU time depends on the machine (its doubling points are "
+               "checked against an independent period map by tests/studies/test_cascade.py, slow)",
+               "curve_speed": "a fold curve's time: it depends on the machine and its load",
                "auto": "fidelity auto against the oracle: its costs are timings on a shared machine",
                "auto_setup": "fidelity auto's set-up and the estimates' share of the initialisation: times, they "
                "depend on the machine and its load (`vibrofmu bench --auto-only --out DIR`, then `vibrofmu report "
