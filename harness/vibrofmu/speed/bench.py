@@ -15,7 +15,6 @@ import json
 import os
 import platform
 import shutil
-import subprocess
 import sys
 import tempfile
 import time
@@ -42,6 +41,7 @@ from vibrofmu.fmus.kernel import kernel_library
 from vibrofmu.analyses.reference import reference_solution
 from vibrofmu.hosts.run import FmuInstance, FmuLog, call_failure_reason
 from vibrofmu.analyses.simulate import plant_run, start_values
+from vibrofmu.speed import child
 
 BENCH_RTOL = 1e-13  # the reference's rtol (atol = 1e-2 rtol, like everything here)
 SELF_CHECK_RTOL = 1e-12  # a second reference, to show the first one's own error
@@ -482,7 +482,7 @@ def cold_instantiation(fmu: Path, stop_time: float, repeats: int) -> dict:
     """Instantiation with the FMU's default parameters in fresh processes: what a host pays the first time."""
     runs = []
     for _ in range(repeats):
-        out = subprocess.run([sys.executable, "-c", COLD_SCRIPT, str(fmu), repr(stop_time)], capture_output=True,
+        out = child.run([sys.executable, "-c", COLD_SCRIPT, str(fmu), repr(stop_time)], capture_output=True,
                              text=True, timeout=600)
         if out.returncode != 0:
             return {"reason": f"the cold instantiation failed: {out.stderr.strip().splitlines()[-1:]}"}

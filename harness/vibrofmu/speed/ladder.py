@@ -43,6 +43,7 @@ from vibrofmu.fmus import toolchain
 from vibrofmu.hosts.doctor import host_environment
 from vibrofmu.analyses.reference import reference_solution
 from vibrofmu.hosts.run import FmuInstance
+from vibrofmu.speed import child
 
 TIMING_HOST_SOURCE = Path(__file__).with_name("timing_host.c")
 FMU_SRC = paths.FMU_SRC  # the checkout's fmu_src/ or the installed vibrofmu/fmu_src/
@@ -148,7 +149,7 @@ def host_runs(host: Path, unzip_dir: Path, specs: list[tuple[dict, float]], stop
     """Several rungs of one FMU [(start values, interval)] in one C host process, one run each from a fresh
     instance, in the given order: one record per rung (as host_run's)."""
     cmd, env = host_command(host, unzip_dir, specs, stop, 1)
-    proc = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=1800)
+    proc = child.run(cmd, capture_output=True, text=True, env=env, timeout=1800)
     if proc.returncode != 0:
         raise RuntimeError(f"timing host failed ({proc.returncode}): {proc.stderr.strip()[-500:]}")
     return parse_host_output(proc.stdout, len(specs))
@@ -157,7 +158,7 @@ def host_runs(host: Path, unzip_dir: Path, specs: list[tuple[dict, float]], stop
 def host_run(host: Path, unzip_dir: Path, start: dict, stop: float, step: float, repeats: int) -> dict:
     """One rung in the C host: {"loop": [seconds per run], "init": [...], "t": grid, "x": x of the last run}."""
     cmd, env = host_command(host, unzip_dir, [(start, step)], stop, repeats)
-    proc = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=1800)
+    proc = child.run(cmd, capture_output=True, text=True, env=env, timeout=1800)
     if proc.returncode != 0:
         raise RuntimeError(f"timing host failed ({proc.returncode}): {proc.stderr.strip()[-500:]}")
     return parse_host_output(proc.stdout, 1)[0]
@@ -178,7 +179,7 @@ def callgrind_counts(cmd: list[str], env: dict, runs: int) -> tuple[list[int], s
     two functions, and a profile is dumped after each run (timing_run_done)."""
     with tempfile.TemporaryDirectory(prefix="vibrofmu-callgrind-") as tmp:
         out = Path(tmp) / "callgrind.out"
-        proc = subprocess.run(["valgrind", "--tool=callgrind", "--collect-atstart=no",
+        proc = child.run(["valgrind", "--tool=callgrind", "--collect-atstart=no",
                                "--toggle-collect=timing_do_step", "--toggle-collect=timing_get_real",
                                "--dump-after=timing_run_done", f"--callgrind-out-file={out}", *cmd],
                               capture_output=True, text=True, env=env, timeout=3600)

@@ -3,8 +3,8 @@ started with an empty environment): `python -m vibrofmu.speed.native_timing [BUI
 from __future__ import annotations
 
 import math
-import subprocess
 import tempfile
+from vibrofmu.speed import child
 from pathlib import Path
 
 
@@ -23,7 +23,7 @@ def host_timing(host: Path, fmu: Path, repeats: int = 3, stop: float = 200.0, st
         vr = {v.name: v.valueReference for v in md.modelVariables}["x"]
         library = unzipped / "binaries" / "linux64" / f"{md.coSimulation.modelIdentifier}.so"
         for _ in range(repeats):
-            proc = subprocess.run([str(host), str(library), (unzipped / "resources").as_uri(), md.guid, "0.0",
+            proc = child.run([str(host), str(library), (unzipped / "resources").as_uri(), md.guid, "0.0",
                                    repr(stop), repr(step), str(vr)], capture_output=True, text=True,
                                   env={"FMI2_HOST_TIMING": "1", "FMI2_HOST_QUIET": "1"})
             match = re.search(r"instantiate_s=(\S+) per_output_s=(\S+)", proc.stderr)
@@ -53,7 +53,7 @@ def fmi_versions_timing(fmu2: Path, fmu3: Path, repeats: int = 5, stop: float = 
         md = read_model_description(str(u2))
         model_id = md.coSimulation.modelIdentifier
         vr = {v.name: v.valueReference for v in md.modelVariables}["x"]
-        proc = subprocess.run([str(host), str(u2 / "binaries" / "linux64" / f"{model_id}.so"),
+        proc = child.run([str(host), str(u2 / "binaries" / "linux64" / f"{model_id}.so"),
                                str(u3 / "binaries" / FMI3_PLATFORMS[0] / f"{model_id}.so"), md.guid, repr(stop),
                                repr(step), str(repeats), str(vr)], capture_output=True, text=True)
     if proc.returncode != 0:

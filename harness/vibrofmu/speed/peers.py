@@ -28,7 +28,6 @@ from __future__ import annotations
 import importlib.util
 import math
 import os
-import subprocess
 import tempfile
 import time
 from pathlib import Path
@@ -43,6 +42,7 @@ from vibrofmu import api, paths
 from vibrofmu.analyses.reference import reference_solution
 from vibrofmu.analyses.simulate import start_values
 from vibrofmu.fmus import toolchain
+from vibrofmu.speed import child
 
 STOP, INTERVAL = 200.0, 0.1
 SCENES = {"paper": Scene(), "contact loss": Scene(x_start=-1.3, v_start=-0.8, R=2.0)}
@@ -191,7 +191,7 @@ def cvode_contenders(work: Path) -> dict:
     program = work / "cvode_peer"
     cmd = [*toolchain.c_compiler(), "-O2", *include, "-o", str(program), str(CVODE_SOURCE),
            str(paths.FMU_SRC / "core" / "model.c"), str(paths.FMU_SRC / "core" / "pyfloat.c"), *libs]
-    proc = subprocess.run(cmd, capture_output=True, text=True)
+    proc = child.run(cmd, capture_output=True, text=True)
     if proc.returncode != 0:
         raise RuntimeError(f"compiling cvode_peer.c failed ({' '.join(cmd)}):\n{proc.stderr}")
 
@@ -201,7 +201,7 @@ def cvode_contenders(work: Path) -> dict:
                       scene.x_start, scene.v_start]
 
             def run(rtol):
-                proc = subprocess.run([str(program), method, repr(rtol), repr(ATOL_PER_RTOL * rtol), repr(stop),
+                proc = child.run([str(program), method, repr(rtol), repr(ATOL_PER_RTOL * rtol), repr(stop),
                                        repr(INTERVAL), "1", *map(repr, values)], capture_output=True, text=True)
                 if proc.returncode != 0:
                     return None
