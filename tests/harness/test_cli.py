@@ -614,3 +614,16 @@ def test_the_program_exits_at_once_after_an_interrupt_with_its_atexit_handlers_r
     assert "console()" in code
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert (done.returncode, done.stderr, done.stdout) == (130, "error: interrupted\n", "atexit ran\n")
+
+
+def test_an_fmu_without_a_variable_the_run_needs_is_one_line(tmp_path):
+    """An FMU built by another version of vibrofmu may lack a variable a command reads: FmuInstance names the FMU
+    and the variable (FmuVariableMissing, printed in one line by the command line), never a bare KeyError."""
+    from vibrofmu.hosts.run import FmuInstance, FmuUnusable
+
+    instance = FmuInstance.__new__(FmuInstance)  # (no FMU needed: the lookup alone)
+    instance.path, instance.variables = tmp_path / "old.fmu", {}
+    with pytest.raises(FmuUnusable, match=r"old.fmu: the FMU has no variable 'fidelity_chosen' \(an FMU built by "):
+        instance.value_references(["fidelity_chosen"])
+    with pytest.raises(KeyError):  # still a KeyError for code that expects one
+        instance.variable("x")

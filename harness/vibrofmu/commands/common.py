@@ -170,11 +170,11 @@ def run(command: Callable[[argparse.Namespace], int], args: argparse.Namespace) 
         print(f"error: {error}", file=sys.stderr)
         return 2
     except Exception as error:
-        from vibrofmu.hosts.run import FmuInstantiationError  # (fmpy: imported only when something failed)
+        from vibrofmu.hosts.run import FmuUnusable  # (fmpy: imported only when something failed)
 
-        if not isinstance(error, FmuInstantiationError):
+        if not isinstance(error, FmuUnusable):
             raise
-        print(f"error: {error}", file=sys.stderr)  # an FMU that refused to start: its own words, one line
+        print(f"error: {error}", file=sys.stderr)  # an FMU that cannot serve: which and why, one line
         return 1
     finally:
         if code != 0:

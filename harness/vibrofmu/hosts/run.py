@@ -121,8 +121,19 @@ class FmuLog:
         return [m for m in messages if m.startswith(("[error]", "[fatal]", "[discard]"))]
 
 
-class FmuInstantiationError(RuntimeError):
+class FmuUnusable(RuntimeError):
+    """An FMU this run cannot use: the message names the FMU and why (the command line prints it in one line)."""
+
+
+class FmuInstantiationError(FmuUnusable):
     """fmi2Instantiate returned NULL: the message names the FMU and carries the FMU's own log lines (why)."""
+
+
+class FmuVariableMissing(FmuUnusable, KeyError):
+    """A variable the run needs is not in the FMU's modelDescription (an FMU of another vibrofmu version)."""
+
+    def __str__(self) -> str:  # (KeyError's would quote the message)
+        return str(self.args[0])
 
 
 class FmuInstance:
@@ -132,6 +143,7 @@ class FmuInstance:
                  unzip_dir: Path | str | None = None):
         """log: shared by several instances (FMPy's logger is process-wide); unzip_dir: an FMU already
         extracted there (kept on close); by default a fresh one per instance."""
+        self.path = fmu_path
         self.model_description = read_model_description(str(fmu_path))
         self.variables = {v.name: v for v in self.model_description.modelVariables}
         self.owns_unzip_dir = unzip_dir is None
@@ -151,7 +163,7 @@ class FmuInstance:
 
     def set(self, values: dict):
         for name, value in values.items():
-            variable = self.variables[name]
+            variable = self.variable(name)
             if variable.type == "Integer":
                 self.fmu.setInteger([variable.valueReference], [int(value)])
             elif variable.type == "Boolean":
@@ -160,7 +172,15 @@ class FmuInstance:
                 self.fmu.setReal([variable.valueReference], [float(value)])
 
     def value_references(self, names):
-        return [self.variables[n].valueReference for n in names]
+        return [self.variable(n).valueReference for n in names]
+
+    def variable(self, name: str):
+        """The model variable `name`; FmuVariableMissing naming the FMU when it has none of that name."""
+        try:
+            return self.variables[name]
+        except KeyError:
+            raise FmuVariableMissing(f"{self.path}: the FMU has no variable {name!r} (an FMU built by another "
+                                     "version of vibrofmu? rebuild it: vibrofmu build)") from None
 
     def output_names(self):
         return [v.name for v in self.model_description.modelVariables if v.causality == "output"]
