@@ -1,21 +1,25 @@
 """Build and run the libFuzzer targets of the FMI layers (tests/fuzz/*.c) under AddressSanitizer and
 UndefinedBehaviorSanitizer.
 
-    python3 tests/fuzz/run.py [--seconds 60] [--jobs 2] [--runs N] [--out build/fuzz] [TARGET ...]
+    python3 tests/fuzz/run.py [--seconds 60] [--jobs 2] [--runs N] [--timeout 30] [--out build/fuzz] [TARGET ...]
+    python3 tests/fuzz/run.py --merge tests/fuzz/merged [--out build/fuzz] [TARGET ...]
 
 Targets: calls_<Model> and state_<Model> for each native FMU (fuzz_native.c with FUZZ_CALLS / FUZZ_STATE, compiled
 with the model's native sources for FMI 3.0 -- which hold the FMI 2.0 layer too -- and its generated headers,
 vibrofmu.fmus.native.write_sources), and layer (fuzz_layer.c on fmu_src/fmi/fmi2_layer.c).  Each runs from its
-seed corpus tests/fuzz/corpus/<target>/ (read only) plus a working corpus <out>/corpus/<target>/; --seconds is the
-wall-clock budget of the whole run, shared by the targets (--jobs at a time); --runs N runs each target for N
-executions instead.  Exit 1 on a finding (the input is kept as <out>/findings/<target>-crash-...; rerun it with
-<out>/bin/<target> FILE), 2 when clang or a target cannot be built.  The compiler: $FUZZ_CC, else clang-14, else
-clang (Debian: apt-get install clang-14 libclang-rt-14-dev libfuzzer-14-dev).
+seeds -- tests/fuzz/corpus/<target>/ (seeds.py's programs) and tests/fuzz/merged/<target>.hex (a campaign's
+corpus, minimized: --merge) -- read only, plus a working corpus <out>/corpus/<target>/; --seconds is the wall-clock budget
+of the whole run, shared by the targets (--jobs at a time); --runs N stops each target after N executions (with
+--seconds too, at whichever limit comes first).  Exit 1 on a finding (the input is kept as
+<out>/findings/<target>-crash-...; rerun it with <out>/bin/<target> FILE), 2 when clang or a target cannot be
+built.  The compiler: $FUZZ_CC, else clang-14, else clang (Debian: apt-get install clang-14 libclang-rt-14-dev
+libfuzzer-14-dev).
 """
 from __future__ import annotations
 
 import argparse
 import concurrent.futures
+import hashlib
 import os
 import re
 import shutil
@@ -29,8 +33,21 @@ HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
 MODELS = ("HertzEAOscillator", "AdaptiveLyapunovController", "HertzEAClosedLoop")
 SANITIZE = "-fsanitize=address,undefined"
-# -fno-sanitize-recover: every UBSan report aborts (a finding), as ASan's do
-FLAGS = ("-g", "-O1", "-Wall", "-Wextra", "-std=c11", "-ffp-contract=off", "-fno-sanitize-recover=all", "-fno-omit-frame-pointer")
+# -fno-sanitize-recover: every UBSan report aborts (a finding), as ASan's do.
+# -fsanitize-coverage-ignorelist: the functions whose coverage tells the fuzzer nothing but costs a callback per
+# byte (coverage_ignore.txt: the states' checksum loops); ASan and UBSan still check them.
+FLAGS = ("-g", "-O1", "-Wall", "-Wextra", "-std=c11", "-ffp-contract=off", "-fno-sanitize-recover=all",
+         "-fno-omit-frame-pointer", f"-fsanitize-coverage-ignorelist={HERE / 'coverage_ignore.txt'}")
+# The most solver steps one doStep may take in the fuzz build (the FMUs allow 10^6: rules.h's
+# RULE_MAX_STEPS_PER_DOSTEP, closedloop.h's VL_MAX_STEPS_PER_DOSTEP).  Under the sanitizers a closed-loop DOP853
+# step costs about 44 us of CPU (2 us in the FMU's -O2 build), so an input that set max_step or rtol small ran one
+# doStep for 44 s of CPU, minutes of wall-clock time on a loaded machine: the budget's work, not a hang.  10^3 steps
+# keep a doStep of the fuzz build under 0.05 s of CPU and an input of 48 calls under about 2 s, and still take a
+# doStep of the longest length the targets make (4 time units) at the default steps (RK4 0.01: 400 steps); the code
+# paths are the FMU's, only the threshold moves: refused up front when h / max_step exceeds it, stopped with the
+# budget's error when the adaptive solver spends it.
+FUZZ_STEP_BUDGET = 1000
+BUDGET_MACROS = {"rules.h": "RULE_MAX_STEPS_PER_DOSTEP", "closedloop.h": "VL_MAX_STEPS_PER_DOSTEP"}
 
 
 def targets() -> list[str]:
@@ -63,6 +80,21 @@ def run(cmd: list[str]) -> None:
         sys.exit(2)
 
 
+def fuzz_step_budget(sources: Path) -> None:
+    """The generated sources with FUZZ_STEP_BUDGET solver steps per doStep (every copy of the 10^6 present)."""
+    for name, macro in BUDGET_MACROS.items():
+        header = sources / name
+        if not header.exists():
+            continue
+        text, n = re.subn(rf"^#define {macro} \S+$", f"#define {macro} {FUZZ_STEP_BUDGET:.1f}", header.read_text(),
+                          flags=re.M)
+        if n != 1:
+            sys.exit(f"error: {header} has no '#define {macro}' line to set the fuzz build's step budget in")
+        header.write_text(text)
+    if not (sources / "rules.h").exists():
+        sys.exit(f"error: no rules.h in {sources}")
+
+
 def build(out: Path, wanted: list[str], skip_null: bool = False) -> None:
     """<out>/bin/<target> for each wanted target (rebuilt every time: the sources may have changed)."""
     from vibrofmu.fmus import native, toolchain
@@ -81,6 +113,7 @@ def build(out: Path, wanted: list[str], skip_null: bool = False) -> None:
         if sources.exists():
             shutil.rmtree(sources)
         c_files = native.write_sources(model, model_description(model), sources, fmi_version=3)
+        fuzz_step_budget(sources)
         objects = []
         for name in c_files:  # the model's sources once (instrumented), linked into both of its targets
             objects.append(str(sources / f"{name}.o"))
@@ -103,20 +136,32 @@ STAT = re.compile(r"^stat::(\w+):\s*(\d+)", re.M)
 DONE = re.compile(r"#(\d+)\s+(?:DONE|pulse|NEW|REDUCE|INITED)\s+cov: (\d+) ft: (\d+) corp: (\d+)")
 
 
-def fuzz(out: Path, target: str, seconds: float | None, runs: int | None) -> dict:
+# ASan's quarantine (freed memory held back to catch a use after free) at 64 MB rather than 256 MB, and never
+# handed back to the system: an input allocates well under 1 MB (a closed-loop instance and its states, 20 KB
+# each), so 64 MB still spans hundreds of inputs, while each target's resident set stays near 150 MB instead of
+# 400 MB (the machine is shared) and the page faults of re-touching released memory (8 % of a state target's
+# time) are gone.  Leaks are findings (libFuzzer checks an input whose mallocs and frees do not match).
+ASAN_OPTIONS = "detect_leaks=1:quarantine_size_mb=64:allocator_release_to_os_interval_ms=-1"
+
+
+def fuzz(out: Path, target: str, seconds: float | None, runs: int | None, timeout: int = 30) -> dict:
     corpus = out / "corpus" / target
     corpus.mkdir(parents=True, exist_ok=True)
     findings = out / "findings"
     findings.mkdir(parents=True, exist_ok=True)
-    seeds = HERE / "corpus" / target
-    limit = [f"-runs={runs}"] if runs is not None else [f"-max_total_time={max(1, int(seconds))}"]
-    # -timeout: one input may take at most 10 s (a hang is a finding); -rss_limit_mb: a leak or a blow-up is one;
-    # -max_len: the longest program the targets read in full
-    cmd = [str(out / "bin" / target), *limit, "-timeout=10", "-rss_limit_mb=2048", "-max_len=512",
+    seeds = [d for d in (HERE / "corpus" / target, unpack_merged(out, target)) if d is not None and d.is_dir()]
+    limit = [*([f"-runs={runs}"] if runs is not None else []),
+             *([f"-max_total_time={max(1, int(seconds))}"] if seconds is not None else [])]
+    # -timeout: the wall-clock seconds one input may take (a hang is a finding).  With FUZZ_STEP_BUDGET an input's
+    # work is bounded: at most 48 calls (fuzz_native.c's MAX_OPS), each doStep at most 10^3 solver steps, so an
+    # input needs at most about 2 s of CPU (44 closed-loop doSteps of 10^3 DOP853 steps: 1.9 s), most a few ms; 30 s
+    # leaves room for a loaded machine (a campaign at nice 19 beside other work may need more: --timeout).
+    # -rss_limit_mb: a leak or a blow-up is a finding; -max_len: the longest program the targets read in full.
+    cmd = [str(out / "bin" / target), *limit, f"-timeout={timeout}", "-rss_limit_mb=2048", "-max_len=512",
            "-print_final_stats=1", f"-artifact_prefix={findings}/{target}-", str(corpus),
-           *([str(seeds)] if seeds.is_dir() else [])]
+           *map(str, seeds)]
     start = time.monotonic()
-    proc = subprocess.run(cmd, capture_output=True, text=True, env={**os.environ, "ASAN_OPTIONS": "detect_leaks=1",
+    proc = subprocess.run(cmd, capture_output=True, text=True, env={**os.environ, "ASAN_OPTIONS": ASAN_OPTIONS,
                                                                     "UBSAN_OPTIONS": "print_stacktrace=1"})
     elapsed = time.monotonic() - start
     stats = {k: int(v) for k, v in STAT.findall(proc.stderr)}
@@ -128,16 +173,63 @@ def fuzz(out: Path, target: str, seconds: float | None, runs: int | None) -> dic
     return result
 
 
+def unpack_merged(out: Path, target: str) -> Path | None:
+    """<out>/merged/<target>/: the inputs of tests/fuzz/merged/<target>.hex (one input a line, in hex), one file
+    each, for libFuzzer to read; None when there is no such file."""
+    packed = HERE / "merged" / f"{target}.hex"
+    if not packed.exists():
+        return None
+    folder = out / "merged" / target
+    if folder.exists():
+        shutil.rmtree(folder)
+    folder.mkdir(parents=True)
+    for line in packed.read_text().split():
+        data = bytes.fromhex(line)
+        (folder / hashlib.sha1(data).hexdigest()).write_bytes(data)
+    return folder
+
+
+def merge(out: Path, target: str, dest: Path) -> int:
+    """dest/<target>.hex: a smallest-first subset of the working corpus <out>/corpus/<target>/ that covers every
+    edge it covers beyond the seeds (libFuzzer's -merge=1 on edges alone, -use_counters=0: with hit counts it keeps
+    about twice as many), one input a line in hex (a text file rather than hundreds of binary ones).  The committed
+    tests/fuzz/merged/ is this, so that a short run starts from the coverage a campaign reached.  The number of
+    inputs kept."""
+    seeds = HERE / "corpus" / target
+    work = out / "merge" / target
+    if work.exists():
+        shutil.rmtree(work)
+    work.mkdir(parents=True)
+    for seed in seeds.iterdir():  # the seeds first: only what they miss is added
+        shutil.copy(seed, work / seed.name)
+    proc = subprocess.run([str(out / "bin" / target), "-merge=1", "-use_counters=0", "-timeout=60", str(work),
+                           str(out / "corpus" / target)], capture_output=True, text=True,
+                          env={**os.environ, "ASAN_OPTIONS": ASAN_OPTIONS})
+    if proc.returncode != 0:
+        print(f"error: merging {target}\n{proc.stderr[-3000:]}", file=sys.stderr)
+        sys.exit(1)
+    known = {seed.read_bytes() for seed in seeds.iterdir()}
+    kept = sorted(f.read_bytes().hex() for f in work.iterdir() if f.read_bytes() not in known)
+    dest.mkdir(parents=True, exist_ok=True)
+    (dest / f"{target}.hex").write_text("".join(line + "\n" for line in kept))
+    return len(kept)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("targets", nargs="*", help=f"default: all ({', '.join(targets())})")
-    parser.add_argument("--seconds", type=float, default=60.0, help="wall-clock budget of the whole run")
-    parser.add_argument("--runs", type=int, default=None, help="executions per target (instead of --seconds)")
+    parser.add_argument("--seconds", type=float, default=None, help="wall-clock budget of the whole run (default "
+                        "60 s without --runs)")
+    parser.add_argument("--runs", type=int, default=None,
+                        help="executions per target (with --seconds: whichever limit comes first)")
+    parser.add_argument("--timeout", type=int, default=30, help="wall-clock seconds one input may take (a finding)")
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--out", type=Path, default=ROOT / "build" / "fuzz")
     parser.add_argument("--no-build", action="store_true", help="reuse <out>/bin")
     parser.add_argument("--skip-null", action="store_true",
                         help="no NULL pointer arguments (to look past a known NULL-argument finding)")
+    parser.add_argument("--merge", type=Path, metavar="DIR",
+                        help="no fuzzing: write DIR/<target>.hex, the working corpus minimized (tests/fuzz/merged)")
     args = parser.parse_args(argv)
     wanted = args.targets or targets()
     unknown = sorted(set(wanted) - set(targets()))
@@ -146,13 +238,18 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     out = args.out.resolve()
     start = time.monotonic()
+    if args.merge is not None:
+        for target in wanted:
+            print(f"{target}: {merge(out, target, args.merge.resolve())} inputs kept")
+        return 0
     if not args.no_build:
         build(out, wanted, args.skip_null)
     built = time.monotonic() - start
     # each target's share of the wall-clock budget, --jobs at a time
-    share = args.seconds * args.jobs / len(wanted)
+    seconds = 60.0 if args.seconds is None and args.runs is None else args.seconds
+    share = None if seconds is None else seconds * args.jobs / len(wanted)
     with concurrent.futures.ThreadPoolExecutor(max_workers=args.jobs) as pool:
-        results = list(pool.map(lambda t: fuzz(out, t, share, args.runs), wanted))
+        results = list(pool.map(lambda t: fuzz(out, t, share, args.runs, args.timeout), wanted))
     failed = 0
     print(f"fuzz: built in {built:.0f} s; {len(wanted)} targets, {args.jobs} at a time")
     print(f"{'target':40s} {'executions':>12s} {'exec/s':>8s} {'cov':>6s} {'ft':>6s} {'corpus':>7s} {'s':>6s}")
