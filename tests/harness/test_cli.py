@@ -627,3 +627,17 @@ def test_an_fmu_without_a_variable_the_run_needs_is_one_line(tmp_path):
         instance.value_references(["fidelity_chosen"])
     with pytest.raises(KeyError):  # still a KeyError for code that expects one
         instance.variable("x")
+
+
+def test_an_fmi3_plant_fmu_is_refused_in_one_line(tmp_path, monkeypatch, capsys):
+    """The harness drives FMI 2.0 co-simulation FMUs: an FMI 3.0 plant FMU (build/native/fmi3/) given to simulate
+    ended in FMPy's 'Cannot find shared library' traceback; now one line naming the FMU and what it is."""
+    fmu = tmp_path / "HertzEAOscillator.fmu"
+    with zipfile.ZipFile(fmu, "w") as archive:
+        archive.writestr("modelDescription.xml", '<fmiModelDescription fmiVersion="3.0" modelName="HertzEAOscillator">'
+                         '<CoSimulation modelIdentifier="HertzEAOscillator"/></fmiModelDescription>')
+    monkeypatch.chdir(tmp_path)
+    assert main(["simulate", "--fmu", str(fmu), "--stop-time", "1", "--out", "o"]) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert err == [f"error: {fmu} is an FMI 3.0 FMU; this command runs FMI 2.0 co-simulation FMUs (vibrofmu build "
+                   "writes them to build/ and build/native/)"]

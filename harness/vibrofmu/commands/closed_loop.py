@@ -61,7 +61,7 @@ def run(args) -> int:
     progress = progress_printer("closed-loop")
     if args.mode == "monolithic":
         values = {"law": int(law or Law.PAPER_CORRECTED), "reference": int(ReferenceKind[args.reference.upper()])}
-        fmu = checked_fmu(fmu_dir / CLOSED_LOOP_NAME, "HertzEAClosedLoop")
+        fmu = checked_fmu(fmu_dir / CLOSED_LOOP_NAME, "HertzEAClosedLoop", fmi2_cs=True)
         result = closed_loop.monolithic(fmu, values, stop_time, H, progress)
         theta = closed_loop.true_values({})
         title = f"HertzEAClosedLoop: {(law or Law.PAPER_CORRECTED).label}, reference {args.reference}"

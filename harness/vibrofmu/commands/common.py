@@ -245,22 +245,28 @@ def study_fmu_options(p: argparse.ArgumentParser, fmu_use: str, no_fmu_help: str
     p.add_argument("--out", required=True, help=out_help)
 
 
-def checked_fmu(path: Path, model: str | None = None) -> Path:
+def checked_fmu(path: Path, model: str | None = None, fmi2_cs: bool = False) -> Path:
     """`path` if it is an FMU file (a zip archive with modelDescription.xml) of `model` (its modelName; None:
-    any); UserError otherwise."""
+    any) and, with fmi2_cs, an FMI 2.0 co-simulation FMU (what the harness's FMPy runs drive); UserError
+    otherwise."""
     if not path.exists():
         raise UserError(f"no FMU at {path}")
     if not path.is_file():
         raise UserError(f"{path} is not a file (an FMU is a .fmu file)")
     try:
         with zipfile.ZipFile(path) as archive:
-            name = ElementTree.fromstring(archive.read("modelDescription.xml")).get("modelName")
+            root = ElementTree.fromstring(archive.read("modelDescription.xml"))
     except (zipfile.BadZipFile, KeyError, ElementTree.ParseError):
         raise UserError(f"{path} is not an FMU (no zip archive with a modelDescription.xml)") from None
     except OSError as error:
         raise UserError(f"cannot read {path}: {error.strerror}") from None
+    name = root.get("modelName")
     if model is not None and name != model:
         raise UserError(f"{path} is the FMU of {name}; this command needs {model}")
+    if fmi2_cs and (root.get("fmiVersion") != "2.0" or root.find("CoSimulation") is None):
+        kind = f"an FMI {root.get('fmiVersion')} FMU" if root.get("fmiVersion") != "2.0" else "a Model Exchange FMU"
+        raise UserError(f"{path} is {kind}; this command runs FMI 2.0 co-simulation FMUs (vibrofmu build writes "
+                        "them to build/ and build/native/)")
     return path
 
 
@@ -268,7 +274,7 @@ def plant_fmu(given: str | None) -> Path:
     """The plant FMU the user named (checked now: it must exist and be the plant's), or the default
     ./build/HertzEAOscillator.fmu (built_plant builds it when missing, once the other checks passed)."""
     if given is not None:
-        return checked_fmu(Path(given), PLANT_MODEL)
+        return checked_fmu(Path(given), PLANT_MODEL, fmi2_cs=True)
     return paths.build_dir() / PLANT_NAME
 
 
@@ -282,7 +288,7 @@ def built_plant(path: Path) -> Path:
         print(f"building {path} ...{_half_done(path)}", file=sys.stderr)
         say_compiled_parts()
         build_plant(path.parent)
-    return checked_fmu(path, PLANT_MODEL)
+    return checked_fmu(path, PLANT_MODEL, fmi2_cs=True)
 
 
 def _finished(path: Path) -> bool:
