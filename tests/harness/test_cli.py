@@ -338,7 +338,7 @@ def test_closed_loop_lists_only_the_files_it_wrote(tmp_path, monkeypatch, capsys
     from vibrofmu.commands import closed_loop as command
 
     monkeypatch.setattr(command, "built_all", lambda folder: folder)
-    monkeypatch.setattr(command, "checked_fmu", lambda path, model: path)
+    monkeypatch.setattr(command, "checked_fmu", lambda path, model, **checks: path)
     stopped = {"time": np.array([0.0]), "series": {"x": np.array([0.1])}, "completed": False,
                "stop_reason": "pull-in at tau = 0", "wall_time_s": 0.0, "log": []}
     monkeypatch.setattr(closed_loop, "monolithic", lambda *args: stopped)
