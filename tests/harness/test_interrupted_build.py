@@ -169,7 +169,7 @@ def test_a_half_built_default_fmu_is_rebuilt_not_used(tmp_path, monkeypatch, cap
 
     monkeypatch.setattr(build, "build_plant", fake_build_plant)
     monkeypatch.setattr(common, "say_compiled_parts", lambda natives=False: None)
-    monkeypatch.setattr(common, "checked_fmu", lambda path, model=None: path)
+    monkeypatch.setattr(common, "checked_fmu", lambda path, model=None, **checks: path)
     monkeypatch.setattr(common.paths, "build_dir", lambda: tmp_path)
     assert common.built_plant(named) == named and built == []  # used as it is
     assert common.built_plant(half) == half

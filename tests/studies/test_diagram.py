@@ -242,7 +242,9 @@ def _interrupt(tmp_path, workers: str):
             "omega", "--from", "1.8", "--to", "2.2", "--points", "40", "--set", "mu=0.1", "--set", "Delta=2.5",
             "--set", "R=3", "--set", "beta=0", "--set", "gamma=0", "--workers", workers, "--out", str(out)]
     process = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
-                               start_new_session=True)
+                               start_new_session=True,  # SIGINT's default action, as in a terminal (a test run
+                               preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))  # in the background
+                                                                                                 # ignores it)
     chunks = []
     reader = threading.Thread(target=lambda: chunks.extend(iter(lambda: process.stderr.read(1), "")))
     reader.start()

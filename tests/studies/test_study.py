@@ -145,7 +145,9 @@ def test_ctrl_c_leaves_a_readable_parquet_file(tmp_path):
     out = tmp_path / "out"
     process = subprocess.Popen([str(BIN / "vibrofmu"), "study", "monte-carlo", "--engine", "core", "--workers", "1",
                                 "--out", str(out), "--set", "mu=0.01", "--set", "samples=200"],
-                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
+                               # SIGINT's default action, as in a terminal (a test run in the background ignores it)
+                               preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
         deadline = time.monotonic() + WAIT_S
         while not (out / "parts").exists() or not list((out / "parts").glob("*.parquet")):
@@ -296,6 +298,29 @@ def test_spawned_workers_start_with_sigint_blocked():
     finally:
         end_children()
         child.join(timeout=30)
+
+
+def test_end_children_ends_a_child_being_spawned():
+    """A child spawned but not yet among multiprocessing's active children (its start-up data not yet written) is
+    ended too: left alone it read an empty pipe once this process was gone and printed an EOFError traceback."""
+    from multiprocessing import util
+
+    from vibrofmu.study import end_children
+    from vibrofmu.study.scheduling import spawn_without_sigint
+
+    spawn_without_sigint()
+    pid = util.spawnv_passfds(b"/bin/sleep", [b"sleep", b"60"], ())  # spawned, never registered as a Process
+    end_children()
+    for _ in range(600):  # (a child left running would make waitpid block: poll, then kill it and fail)
+        done, status = os.waitpid(pid, os.WNOHANG)
+        if done:
+            break
+        time.sleep(0.1)
+    else:
+        os.kill(pid, signal.SIGKILL)
+        os.waitpid(pid, 0)
+        raise AssertionError("end_children left the child being spawned running")
+    assert os.WIFSIGNALED(status) and os.WTERMSIG(status) == signal.SIGKILL
 
 
 def test_end_children_ends_a_spawned_child(tmp_path):

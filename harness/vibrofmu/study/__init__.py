@@ -64,10 +64,22 @@ def end_children() -> None:
     its start-up data prints a multiprocessing traceback (EOFError) on the terminal after our last line."""
     import multiprocessing
 
-    for child in multiprocessing.active_children():
-        if child.pid:
-            with contextlib.suppress(OSError):
-                os.kill(child.pid, signal.SIGKILL)
+    from vibrofmu.study.scheduling import SPAWNED
+
+    pids = {child.pid for child in multiprocessing.active_children() if child.pid}
+    pids |= {pid for pid in SPAWNED if _parent_of(pid) == os.getpid()}  # also one being spawned (still ours)
+    for pid in pids:
+        with contextlib.suppress(OSError):
+            os.kill(pid, signal.SIGKILL)
+
+
+def _parent_of(pid: int) -> int | None:
+    """The parent's pid of process `pid` (Linux /proc), None when it is gone."""
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return None
+    return int(stat.rsplit(")", 1)[1].split()[1])
 
 
 PLOTS = ("monte_carlo.png", "basins.png", "response_map.png")  # plots.plot's files, one per kind

@@ -129,6 +129,12 @@ def quiet_dask() -> None:
         logging.getLogger(name).setLevel(logging.CRITICAL)
 
 
+# every process spawn_without_sigint's spawns started (study.end_children ends those still ours: a child being
+# spawned is not among multiprocessing's active children until its start-up data is written, and if this process
+# exits meanwhile the child prints an EOFError traceback)
+SPAWNED: set[int] = set()
+
+
 def spawn_without_sigint() -> None:
     """From now on, every process multiprocessing spawns in this one (the local cluster's workers, its resource
     tracker) starts with SIGINT blocked: the spawning thread blocks it for the spawn call alone and the child
@@ -144,7 +150,9 @@ def spawn_without_sigint() -> None:
     def spawnv_passfds(path, args, passfds):
         old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
         try:
-            return spawn(path, args, passfds)
+            pid = spawn(path, args, passfds)
+            SPAWNED.add(pid)
+            return pid
         finally:
             signal.pthread_sigmask(signal.SIG_SETMASK, old)
 
