@@ -451,10 +451,14 @@ def curve_speed_block(sources: list[Path]) -> str | None:
             when = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime(file.stat().st_mtime))
             return (f"`vibrofmu bench --curve` ({when}, {c['cpu_count']} CPUs, load average "
                     f"{c['load_average_at_start'][0]:.1f} at its start, {c['load_average_at_end'][0]:.1f} at its end): "
-                    f"a fold curve of {c['points']} points in (ω, Δ) in {c['seconds']:.0f} s wall clock, "
-                    f"{c['cpu_seconds']:.0f} s CPU ({1e3 * c['cpu_seconds_per_point']:.0f} ms CPU per point); the "
+                    f"a fold curve of {c['points']} points in (ω, Δ) in {c['seconds']:.1f} s wall clock, "
+                    f"{c['cpu_seconds']:.1f} s CPU ({1e3 * c['cpu_seconds_per_point']:.0f} ms CPU per point); the "
                     f"target is {c['target']}. Timings on a shared machine: the CPU time is the cost, the wall "
-                    "clock follows the load.")
+                    "clock follows the load."
+                    + (f" Every point checked afterwards (not timed) against the fold system P(z) = z, "
+                       f"det(M − I) = 0 by {c['fold_system']['checked_by']}: |P(z) − z| ≤ "
+                       f"{c['fold_system']['max_residual']:.1e}, |det(M − I)| ≤ {c['fold_system']['max_det']:.1e} "
+                       f"over its {c['fold_system']['points']} points." if "fold_system" in c else ""))
     return None
 
 

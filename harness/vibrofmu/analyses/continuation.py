@@ -53,9 +53,11 @@ CONTACT_EDGE = -1.5  # 1 + 2x/3 = 0
 
 # ----- the n-period map with the sensitivity to one parameter: shooting's ----------------------------------
 
-def n_period_map(scene: Scene, param: str, z0, periods: int = 1, rtol: float = RTOL) -> sh.PeriodMap:
-    """shooting.period_map of the scene's PeriodicModel over `periods` periods with the sensitivity to `param`."""
-    return sh.period_map(PeriodicModel(scene), z0, scene.omega, rtol, param, periods)
+def n_period_map(scene: Scene, param: str, z0, periods: int = 1, rtol: float = RTOL,
+                 dense: bool = False) -> sh.PeriodMap:
+    """shooting.period_map of the scene's PeriodicModel over `periods` periods with the sensitivity to `param`;
+    without dense output unless asked (the compiled period map: a branch needs no x(s))."""
+    return sh.period_map(PeriodicModel(scene), z0, scene.omega, rtol, param, periods, dense)
 
 
 # ----- points of a branch ---------------------------------------------------------------------------------
@@ -577,7 +579,7 @@ def free_orbits(energies, rtol: float = RTOL, R: float = 3.0) -> list[FreeOrbit]
             u = np.array([math.sqrt(2.0 * energy), 1.0])
         for _ in range(30):
             s = scene.with_values(omega=float(u[1]))
-            result = n_period_map(s, "omega", [u[0], 0.0], 1, rtol)
+            result = n_period_map(s, "omega", [u[0], 0.0], 1, rtol, dense=True)
             F = np.array([forces.potential(u[0]) - v_ref - energy, result.end[1]])
             if abs(F[1]) <= NEWTON_TOL and abs(F[0]) <= 1e-14 * max(1.0, energy):
                 break

@@ -95,7 +95,8 @@ class Augmented:
 
     def map(self, z, p1: float, p2: float, param: str | None = None) -> sh.PeriodMap:
         s = self.at(p1, p2)
-        return sh.period_map(sh.PeriodicModel(s), z, s.omega, self.rtol, param or self.params[0], self.periods)
+        return sh.period_map(sh.PeriodicModel(s), z, s.omega, self.rtol, param or self.params[0], self.periods,
+                             dense=False)
 
     def unscale(self, u: np.ndarray) -> tuple[np.ndarray, float, float]:
         return u[:2], u[2] * self.scales[0], u[3] * self.scales[1]
@@ -385,6 +386,25 @@ def rows(curves: Curves) -> list[dict]:
     return out
 
 
+# the check's rtol: scipy's DOP853 at the engine's 1e-11 leaves ~3e-9 in M on the bench curve (its det(M - I) was 1e-8
+# where the converged value, rtol 1e-13 in both integrators, is 1.5e-10); at 1e-13 its error is ~1e-11, far below 1e-8
+CHECK_RTOL = 1e-13
+
+
+def fold_system_check(scene: Scene, points: list, param1: str, param2: str) -> dict:
+    """Each point against the fold system P(z) = z, det(M - I) = 0 evaluated by scipy's DOP853 period map
+    (shooting.period_map with dense output: the Python right-hand side and scipy's solver, not the compiled
+    twin that continued the curve) at rtol CHECK_RTOL: the largest |P(z) - z|_inf and |det(M - I)| over the points."""
+    worst_residual = worst_det = 0.0
+    for pt in points:
+        s = scene.with_values(**{param1: pt.p1, param2: pt.p2})
+        pmap = sh.period_map(sh.PeriodicModel(s), pt.z0, s.omega, CHECK_RTOL, "omega", pt.periods, dense=True)
+        worst_residual = max(worst_residual, float(np.max(np.abs(pmap.end - pt.z0))))
+        worst_det = max(worst_det, abs(float(np.linalg.det(pmap.monodromy + SIGN[pt.kind] * np.eye(2)))))
+    return {"points": len(points), "max_residual": worst_residual, "max_det": worst_det,
+            "checked_by": f"scipy's DOP853 at rtol {CHECK_RTOL:g} (shooting.period_map with dense output)"}
+
+
 # ----- the benchmark: `vibrofmu bench --curve` -------------------------------------------------------------------
 
 BENCH_SCENE = {"mu": 0.05, "Delta": 0.1, "R": 3.0, "beta": 0.0, "gamma": 0.0}  # two folds at omega ~ 0.829, 0.933
@@ -406,7 +426,9 @@ def bench_curve(progress: Callable[[str], None] | None = None) -> dict:
     found = curves_from_branch(branch, "fold", "Delta", BENCH_DELTA[1], BENCH_DELTA[0], points=BENCH_POINTS,
                                max_points=BENCH_POINTS // 4, progress=progress)
     points = sum(len(c.points) for c in found.curves)
-    return {"scene": BENCH_SCENE, "delta_range": list(BENCH_DELTA), "points": points,
+    check = fold_system_check(scene, [pt for c in found.curves for pt in c.points], "omega", "Delta")
+    return {"scene": BENCH_SCENE, "engine": sh.compiled_period_map()[1] or "the compiled period map",
+            "fold_system": check, "delta_range": list(BENCH_DELTA), "points": points,
             "seconds": found.seconds, "cpu_seconds": found.cpu_seconds,
             "seconds_per_point": found.seconds / points, "cpu_seconds_per_point": found.cpu_seconds / points,
             "branch_seconds": branch_seconds, "branch_cpu_seconds": branch_cpu,

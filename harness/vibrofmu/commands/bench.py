@@ -87,6 +87,9 @@ def run_curve(args) -> int:
           f"CPU ({1e3 * record['cpu_seconds_per_point']:.0f} ms CPU per point; load average {load[0]:.1f} at the start "
           f"on {record['cpu_count']} cores; target {record['target']})"
           + "".join(f"; {e['event']} at omega = {e['omega']:.10g}, Delta = {e['Delta']:.10g}" for e in record["events"]))
+    check = record["fold_system"]
+    print(f"fold system at all {check['points']} points by {check['checked_by']}: |P(z) - z| <= "
+          f"{check['max_residual']:.1e}, |det(M - I)| <= {check['max_det']:.1e}")
     print(f"wrote {out}/bench.json")
     return 0
 
