@@ -38,6 +38,9 @@ and `vibrofmu report` rewrites the text between them (the markers stay). Blocks:
              --from folders (a timing: not run by the report itself, never compared by --check).
 - auto_setup: fidelity auto's set-up and each rung's estimate over its initialisation, from a bench.json (`bench`,
              or `bench --auto-only`; timings, never compared by --check).
+- cusp_order: the exact cusp beside the slow flow's over a family of scenes with a shrinking small parameter, the
+             errors and their fitted order, from a cusp_order.json (`python3 -m vibrofmu.analyses.cusp_order OUT`)
+             in the --from folders (not run by the report itself).
 
 Without --from, the oafm, stability and speed blocks come from fresh runs of `vibrofmu oafm`, `stability` and
 `bench` (quick: oafm study to order 3, `bench --quick`). `--check` regenerates every block whose numbers do not
@@ -63,8 +66,9 @@ BLOCK = re.compile(r"<!-- report:(?P<name>[a-z_]+) -->\n(?P<body>.*?)<!-- /repor
 OPEN = re.compile(r"<!-- report:([a-z_]+) -->")
 CLOSE = re.compile(r"<!-- /report:([a-z_]+) -->")
 NAMES = ("machine", "accuracy", "ssp", "ssp_orderings", "container", "oafm", "stability", "speed", "ranges", "peers",
-         "calibration", "calibration_replay", "auto", "cascade", "curve_speed", "auto_setup")
-FROM_SUMMARIES = ("oafm", "stability", "speed", "peers", "calibration", "auto", "cascade", "curve_speed", "auto_setup")  # filled from the --from folders only
+         "calibration", "calibration_replay", "auto", "cascade", "curve_speed", "auto_setup", "cusp_order")
+FROM_SUMMARIES = ("oafm", "stability", "speed", "peers", "calibration", "auto", "cascade", "curve_speed", "auto_setup",
+                  "cusp_order")  # filled from the --from folders only
 DETERMINISTIC = ("accuracy", "ssp", "ssp_orderings", "container", "ranges", "calibration_replay")
 SOURCE_FILES = {"oafm": "an oafm summary.json", "stability": "a stability summary.json",  # what a FROM_SUMMARIES
                 "speed": "a bench.json or an oafm/stability summary.json",  # block reads
@@ -73,7 +77,8 @@ SOURCE_FILES = {"oafm": "an oafm summary.json", "stability": "a stability summar
                 "auto": "an auto.json (python -m vibrofmu.analyses.error_calibration auto)",
                 "cascade": "a continuation summary.json with a cascade",
                 "curve_speed": "a bench.json of bench --curve",
-                "auto_setup": "a bench.json with fidelity auto's set-up (bench, bench --auto-only)"}
+                "auto_setup": "a bench.json with fidelity auto's set-up (bench, bench --auto-only)",
+                "cusp_order": "a cusp_order.json (python3 -m vibrofmu.analyses.cusp_order)"}
 ACCURACY_TAUS = (10.0, 25.0, 50.0, 100.0, 200.0)
 ACCURACY_RTOLS = (1e-4, 1e-6, 1e-8, 1e-10, 1e-12)
 ACCURACY_RK4_STEPS = (0.1, 0.05, 0.025)
@@ -442,6 +447,48 @@ def cascade_block(sources: list[Path]) -> str | None:
     return "\n".join(lines)
 
 
+def _power_of_ten(value: float, digits: int = 3) -> str:
+    """value as m·10ᵏ (Unicode superscripts)."""
+    if value == 0.0:
+        return "0"
+    mantissa, exponent = f"{value:.{digits - 1}e}".split("e")
+    sup = str(int(exponent)).translate(str.maketrans("-0123456789", "⁻⁰¹²³⁴⁵⁶⁷⁸⁹"))
+    return f"{mantissa}·10{sup}"
+
+
+def cusp_order_block(sources: list[Path]) -> str | None:
+    """The exact cusp against the slow flow's over eps, from the first cusp_order.json in the folders."""
+    for folder in sources:
+        file = folder / "cusp_order.json"
+        if not file.is_file():
+            continue
+        d = json.loads(file.read_text())
+        f = d["family"]
+        lines = [f"`python3 -m vibrofmu.analyses.cusp_order OUT` (μ = {f['mu'].replace(' eps^2', ' ε²')}, the "
+                 f"branch at Δ = {f['Delta_start'].replace(' eps^3', ' ε³')}, R = {f['R']:g}, β = γ = 0; the exact "
+                 f"cusp with the period map at rtol {d['tight'][0]:g}, the fold system solved to {d['tight'][1]:g}; "
+                 f"{d['cpu_seconds']:.0f} s CPU):", "",
+                 "| ε | exact cusp ω, Δ | slow flow's cusp ω, Δ | error in Δ (relative) | error in ω | exact cusp's "
+                 "own error in Δ, ω |", "|---|---|---|---|---|---|"]
+        for r in d["rows"]:
+            own = f"{_power_of_ten(abs(r['exact_Delta'] - r['check_Delta']), 1)}, " \
+                  f"{_power_of_ten(abs(r['exact_omega'] - r['check_omega']), 1)}"
+            lines.append(f"| {r['eps']:g} | {r['exact_omega']:.12f}, {_power_of_ten(r['exact_Delta'], 10)} | "
+                         f"{r['slow_omega']:.12f}, {_power_of_ten(r['slow_Delta'], 10)} | "
+                         f"{_power_of_ten(r['error_Delta'])} ({_power_of_ten(r['error_Delta'] / r['slow_Delta'], 2)}) | "
+                         f"{_power_of_ten(r['error_omega'])} | {own} |")
+        lines.append("")
+        for name, symbol in (("Delta", "Δ"), ("omega", "ω")):
+            o = d["orders"][name]
+            local = ", ".join("— (a sign change)" if x is None else f"{x:.2f}" for x in o["local"])
+            lines.append(f"Error in {symbol}: order {o['order']:.3f} ± {o['stderr']:.3f} (least squares of log |error| "
+                         f"on log ε over ε ≤ {d['fit_max']:g}, {o['fit_points']} scenes; derived: {o['expected']}); "
+                         f"local orders between successive ε: {local}.")
+            lines.append("")
+        return "\n".join(lines).rstrip()
+    return None
+
+
 def curve_speed_block(sources: list[Path]) -> str | None:
     """The fold-curve benchmark from the first bench.json of `bench --curve` in the folders."""
     for folder in sources:
@@ -493,7 +540,7 @@ def summary_block(name: str, sources: list[Path]) -> str | None:
     return {"oafm": oafm_block, "stability": stability_block, "speed": speed_block,
             "peers": peers_block, "calibration": calibration_block, "auto": auto_block,
             "cascade": cascade_block, "curve_speed": curve_speed_block,
-            "auto_setup": auto_setup_block}[name](sources)
+            "auto_setup": auto_setup_block, "cusp_order": cusp_order_block}[name](sources)
 
 
 def generate(names, fmu_dir: Path, sources: list[Path], quick: bool, work_dir: Path, start=None) -> dict[str, str]:

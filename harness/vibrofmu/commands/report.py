@@ -42,6 +42,9 @@ NOT_CHECKED = {"machine": "where and when the numbers were taken", "speed": "tim
                "cascade": "minutes of continuation, and its CPU time depends on the machine (its doubling points are "
                "checked against an independent period map by tests/studies/test_cascade.py, slow)",
                "curve_speed": "a fold curve's time: it depends on the machine and its load",
+               "cusp_order": "the cusp study's CPU time depends on the machine; its located cusps and orders are "
+               "checked by tests/studies/test_cusp_order.py (`python3 -m vibrofmu.analyses.cusp_order DIR`, then "
+               "`vibrofmu report --from DIR --only cusp_order`)",
                "auto": "fidelity auto against the oracle: its costs are timings on a shared machine",
                "auto_setup": "fidelity auto's set-up and the estimates' share of the initialisation: times, they "
                "depend on the machine and its load (`vibrofmu bench --auto-only --out DIR`, then `vibrofmu report "
