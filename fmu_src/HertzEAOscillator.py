@@ -107,7 +107,9 @@ class HertzEAOscillator(fast_path.FastPathSwitch, StatusSlave):
                               cache_dirs=self._cache_dirs(), library=self._library())
 
         if is_auto(settings.fidelity):  # the choice's settings replace fidelity, solver, rtol and max_step
-            return auto_plant(scene, replace(settings, fidelity=int(Fidelity.EXACT)), float(self.tolerance), build)
+            span = None if self.stop_time is None else float(self.stop_time) - float(self.start_time)
+            return auto_plant(scene, replace(settings, fidelity=int(Fidelity.EXACT)), float(self.tolerance), build,
+                              span=span)
         return build(settings)
 
     def _library(self):

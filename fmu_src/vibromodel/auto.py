@@ -3,11 +3,17 @@
 (fidelities.AUTO) with its parameter `tolerance`, and `vibrofmu simulate --fidelity auto --tolerance T`.
 
 The candidates, cheapest first by their cost per output relative to the exact model at rtol 1e-8 (LADDER_COST: the
-speed ladder's measured ratios; DOP853's steps grow as rtol^(-1/8) below rtol 1e-8, its order's step-size rule, and
-are taken as no cheaper above it, where the drive's step ceiling bounds the steps): the averaged slow flow, the OAFM
-analytic solution, then DOP853 on the exact model at rtol 1e-4 ... 1e-12 (at one cost the tightest first). Each is
-built in turn (a rung that refuses the scene is skipped) until one's estimate meets the tolerance; none: refused,
-naming the tolerance. The first plant that meets it is the one the run uses.
+speed ladder's measured ratios; EXACT_RUN_COST: the exact model's per rtol, measured by the auto campaign): the
+averaged slow flow, the OAFM analytic solution, then DOP853 on the exact model from the loosest rtol (1e-4) to the
+tightest (1e-12). A run also pays its rung's set-up (SETUP_COST: the slow flow's table, the OAFM fit, the exact
+model's ~a millisecond), which on runs of a few thousand outputs is most of the cheap rungs' cost. So the chooser
+first estimates the exact model at each rtol (a closed form of the scene: no plant is built), takes the loosest that
+meets the tolerance as the fallback, and builds an averaged or analytic rung only when its set-up plus its run
+(at the ladder's output interval 0.1 over the run's span) is modelled cheaper than the fallback's whole run: then
+a rung built and rejected costs at most the fallback's own cost. Their estimate needs their set-up (the slow-flow
+solution, the OAFM residual): the plant built to estimate is the plant the run uses. Only the chosen exact
+candidate is built. A rung that refuses the scene (a ParameterError) is passed over; none meets: refused, naming the
+tolerance.
 
 The native FMU (no Python: no averaged or analytic rung) walks the same list, generated into its rules.h
 (harness/vibrofmu/fmus/native.py: auto_rows), passing over the levels it cannot run; its estimates of the exact
@@ -23,25 +29,59 @@ from .messages import text
 from .parameters import ParameterError
 
 DEFAULT_TOLERANCE = 1e-6  # max|x - x_exact| in x's units (the paper scene's amplitude is 0.04)
-EXACT_RTOLS = (1e-4, 1e-6, 1e-8, 1e-10, 1e-12)
 # The speed ladder's cost per output relative to exact f0 (DOP853 at rtol 1e-8): the C host at output interval 0.1,
 # median over its rounds of the thread-CPU ratio (`vibrofmu bench`, docs/numerics.md's speed block; the bench prints
 # this table beside the ratios it measures, `auto_costs` in bench.json).
 LADDER_COST = {Fidelity.AVERAGED: 0.284, Fidelity.ANALYTIC: 0.362}
-EXACT_RTOL_EXPONENT = 0.125  # DOP853 (order 8): steps per unit time ~ rtol^(-1/8)
-
-
-def exact_cost(rtol: float) -> float:
-    """The exact model's cost at rtol, relative to rtol 1e-8."""
-    return max(1.0, (1e-8 / rtol) ** EXACT_RTOL_EXPONENT)
+# The exact model's cost per output at each candidate rtol relative to rtol 1e-8, and each level's set-up (make_plant
+# with its error estimate) in outputs of the exact model's loop at rtol 1e-8: medians over the 500 pairs of the auto
+# campaign (`python -m vibrofmu.analyses.error_calibration auto 500 7`: its candidates' thread CPU on the compiled
+# kernel, the doStep loop at interval 0.1; its report block prints the medians it measured beside these). The
+# averaged set-up's 90th percentile is 2.4x its median, the analytic one's 2.8x.
+# The odd decades are the geometric mean of their neighbours' (not measured alone; the campaign's block prints the
+# measured medians of all): a ladder of one decade, so that the estimate's over-estimate (10-100x, docs/rungs.md's
+# calibration) costs a step of ~1.2x, not of ~1.5x.
+EXACT_RUN_COST = {1e-4: 0.69, 1e-5: 0.7, 1e-6: 0.71, 1e-7: 0.84, 1e-8: 1.0, 1e-9: 1.23, 1e-10: 1.52, 1e-11: 1.83, 1e-12: 2.21}
+EXACT_RTOLS = tuple(EXACT_RUN_COST)
+SETUP_COST = {Fidelity.EXACT: 250.0, Fidelity.AVERAGED: 10700.0, Fidelity.ANALYTIC: 370000.0}
+OUTPUT_INTERVAL = 0.1  # the outputs a run is costed by (FMI 2 tells no communication step at initialisation)
 
 
 def candidates(settings):
-    """(cost, settings) of every candidate, cheapest first (at one cost, the tightest rtol first)."""
+    """(cost per output, settings) of every candidate, cheapest first (the exact model from its loosest rtol)."""
     rows = [(cost, replace(settings, fidelity=int(level))) for level, cost in LADDER_COST.items()]
-    rows += [(exact_cost(rtol), replace(settings, fidelity=int(Fidelity.EXACT), solver=0, rtol=rtol, max_step=0.0))
-             for rtol in EXACT_RTOLS]
-    return sorted(rows, key=lambda row: (row[0], row[1].rtol if entry(row[1].fidelity).integrated else 0.0))
+    rows += [(cost, replace(settings, fidelity=int(Fidelity.EXACT), solver=0, rtol=rtol, max_step=0.0))
+             for rtol, cost in EXACT_RUN_COST.items()]
+    return sorted(rows, key=lambda row: row[0])
+
+
+def run_cost(level, per_output: float, span: float) -> float:
+    """A candidate's modelled cost of a run of `span`: its set-up and its outputs at OUTPUT_INTERVAL, in outputs of
+    the exact model at rtol 1e-8."""
+    return SETUP_COST[Fidelity(int(level))] + per_output * span / OUTPUT_INTERVAL
+
+
+def exact_estimate(scene, rtol: float, span: float, parts: dict | None = None) -> float:
+    """The estimate of the exact model's candidate at rtol (DOP853, max_step automatic) without building its plant:
+    the registry's estimator's value (error_estimates.solver_terms on the candidate's solver, rtol and max_step), as
+    the plant publishes it (rounded: error_estimates.attach); nan when it cannot estimate. parts: the scene's
+    error_estimates.response_parts over the span, shared by the candidates."""
+    from .error_estimates import round_estimate, solver_terms
+    try:
+        return round_estimate(solver_terms(scene, _ExactCandidate(rtol), span, parts)["solver"])
+    except (ArithmeticError, ValueError):
+        return math.nan
+
+
+class _ExactCandidate:
+    """What solver_terms reads of an exact candidate's settings (candidates: solver 0, max_step 0), without building
+    a Settings (its checks cost more than the estimate)."""
+    __slots__ = ("rtol",)
+    solver = 0
+    max_step = 0.0
+
+    def __init__(self, rtol: float):
+        self.rtol = rtol
 
 
 def describe(settings) -> str:
@@ -56,24 +96,55 @@ def check_tolerance(tolerance: float) -> None:
         raise ParameterError("tolerance", tolerance, "must be a positive bound on max|x - x_exact|")
 
 
-def choose(scene, settings, tolerance: float, build, native: bool = False):
+def choose(scene, settings, tolerance: float, build, native: bool = False, span: float | None = None):
     """(the plant of the cheapest candidate whose estimate meets `tolerance`, its settings, the log lines of the
-    choice). build(settings) -> plant (make_plant with the run's arguments). ParameterError naming `tolerance` when
-    none meets it. native: as the native FMU chooses (the levels it cannot run passed over, without building them)."""
+    choice). build(settings) -> plant (make_plant with the run's arguments); span: the run's length (None: the
+    estimates' DEFAULT_SPAN). ParameterError naming `tolerance` when none meets it. native: as the native FMU
+    chooses (the levels it cannot run passed over, without building them). The exact model's estimates are asked
+    lazily, loosest rtol first, and the first that meets the tolerance is the fallback the cheap rungs must beat."""
+    from .error_estimates import DEFAULT_SPAN, response_parts
+
     check_tolerance(tolerance)
+    span = DEFAULT_SPAN if span is None or not math.isfinite(span) or span <= 0.0 else float(span)
+    parts = response_parts(scene, span)
+    exact_rows = [(cost, rtol) for rtol, cost in sorted(EXACT_RUN_COST.items(), key=lambda item: item[1])]
+    estimates = {}
+
+    def estimate_at(rtol):
+        if rtol not in estimates:
+            estimates[rtol] = exact_estimate(scene, rtol, span, parts)
+        return estimates[rtol]
+
+    fallback = next(((cost, rtol) for cost, rtol in exact_rows if estimate_at(rtol) <= tolerance), None)
+    fallback_cost = run_cost(Fidelity.EXACT, fallback[0], span) if fallback is not None else math.inf
+    rows = sorted([(cost, int(level), None) for level, cost in LADDER_COST.items()]
+                  + [(cost, int(Fidelity.EXACT), rtol) for cost, rtol in exact_rows], key=lambda row: row[0])
     tried = []
-    for cost, candidate in candidates(settings):
-        level = entry(candidate.fidelity)
+    for cost, fidelity, rtol in rows:
+        level = entry(fidelity)
         if native and level.native_refusal is not None:
-            tried.append(text("AUTO_REFUSED", level=int(level.level), parameter=NATIVE_NEEDS_PYTHON))
+            tried.append(text("AUTO_REFUSED", level=fidelity, parameter=NATIVE_NEEDS_PYTHON))
             continue
+        if rtol is not None:
+            rung = text("AUTO_EXACT_RUNG", level=fidelity, rtol=rtol)
+            estimate = estimate_at(rtol)
+            if not (math.isfinite(estimate) and estimate <= tolerance):
+                tried.append(text("AUTO_ESTIMATE", rung=rung, estimate=estimate))
+                continue
+            candidate = replace(settings, fidelity=fidelity, solver=0, rtol=rtol, max_step=0.0)
+        else:
+            rung = text("AUTO_RUNG", level=fidelity)
+            if not native and run_cost(fidelity, cost, span) >= fallback_cost:
+                tried.append(text("AUTO_SETUP", rung=rung, fallback=text("AUTO_EXACT_RUNG", level=0,
+                                                                         rtol=fallback[1])))
+                continue
+            candidate = replace(settings, fidelity=fidelity)
         try:
             plant = build(candidate)
         except ParameterError as refusal:
-            tried.append(text("AUTO_REFUSED", level=int(level.level), parameter=refusal.name))
+            tried.append(text("AUTO_REFUSED", level=fidelity, parameter=refusal.name))
             continue
         estimate = plant.error_estimate["estimate"] if plant.error_estimate else math.nan
-        rung = describe(candidate)
         if math.isfinite(estimate) and estimate <= tolerance:
             skipped = text("AUTO_SKIPPED", tried="; ".join(tried)) if tried else ""
             return plant, candidate, [text("AUTO_CHOSE", rung=rung, cost=cost, estimate=estimate, tolerance=tolerance,
@@ -82,9 +153,9 @@ def choose(scene, settings, tolerance: float, build, native: bool = False):
     raise ParameterError("tolerance", tolerance, text("AUTO_NONE", tried="; ".join(tried)))
 
 
-def auto_plant(scene, settings, tolerance: float, build):
+def auto_plant(scene, settings, tolerance: float, build, span: float | None = None):
     """The plant fidelity auto runs (choose), its notes opened by the choice's log line (the FMU logs it, fmi2OK)."""
-    plant, chosen, log = choose(scene, settings, tolerance, build)
+    plant, chosen, log = choose(scene, settings, tolerance, build, span=span)
     plant.notes[:0] = log
     return plant
 

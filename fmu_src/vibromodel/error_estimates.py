@@ -40,6 +40,8 @@ import math
 import numpy as np
 
 from . import forces
+from .models import MIN_RTOL, drive_step_ceiling, tolerance_factor
+from .solvers import FIXED_DEFAULT_STEP, solver_entry
 
 # Calibrated constants (vibrofmu.analyses.error_calibration; docs/rungs.md, Error estimates): each rung's estimate
 # is CALIBRATION[kind] times its theoretical terms, chosen on campaigns of 300-400 scenes (seed 11) so that the
@@ -52,7 +54,8 @@ CALIBRATION = {"averaged": 3.0, "analytic": 3.0, "adaptive": 2.0, "local": 20.0,
 # An approximate rung warns when its estimate exceeds its share of the run's amplitude max|x| (the registry's
 # FidelityEntry.warn_share): fidelity 3 AVERAGED_WARN_SHARE (its calibrated estimate is ~10 times its measured error
 # of ~1 % on the paper scene, which is not warned; every cell of the slow-AC grid that is not warned is within 5 %:
-# tests/fmus/test_error_estimates.py), fidelity 4 analytic.FIT_WARN.
+# tests/fmus/test_error_estimates.py), fidelity 4 analytic.FIT_WARN; above its refuse_share (fidelity 4:
+# analytic.FIT_REFUSE) or not finite, the rung refuses the scene (ParameterError naming `fidelity`).
 AVERAGED_WARN_SHARE = 0.15
 
 
@@ -116,18 +119,34 @@ def propagated_residual(scene, solution, span: float) -> float:
     drives through Eq. 11's linear operator (module docstring). R is sampled on the run and taken piecewise linear;
     e = Im(z)/p with z' = lambda z - R, lambda = -mu/2 + i p, advanced exactly between samples (one linear
     recurrence, scipy.signal.lfilter)."""
-    from .models import ExactModel
-    from .oafm import residual
     from .oafm_bases import eq11_operator
 
     mu, a1 = scene.mu, eq11_operator(scene).k
     p = math.sqrt(a1 - 0.25 * mu * mu)  # eq11_operator refuses a1 <= mu^2/4
     fastest = max(solution.fastest_frequency(), p)
     n = int(min(RESIDUAL_SAMPLES, max(2, math.ceil(span * fastest / RESIDUAL_STEP_TURN) + 1)))
-    tau = solution.pieces[0].start + np.linspace(0.0, span, n)
     dt = span / (n - 1)
-    x, v, a = solution(tau)
-    return float(np.max(np.abs(linear_response(-residual(ExactModel(scene).accel, tau, x, v, a), dt, mu, a1))))
+    tau, (x, v, a) = solution.sample_grid(solution.pieces[0].start, dt, n)
+    return float(np.max(np.abs(linear_response(exact_accel(scene, tau, x, v) - a, dt, mu, a1))))
+
+
+def exact_accel(scene, t, x, v) -> np.ndarray:
+    """Eq. 3's acceleration (models.ExactModel.accel at U = 0) on arrays: the residual R = x'' - accel of the
+    estimate's samples at once (tests/model/test_error_estimate_theory.py checks it against ExactModel.accel)."""
+    s = 1.0 + 2.0 * x / 3.0
+    positive = np.maximum(s, 0.0)
+    a = 1.0 - scene.mu * v - positive * np.sqrt(positive)
+    if scene.Delta != 0.0:
+        a = a + scene.Delta * np.cos(scene.omega * t)
+    if scene.alpha != 0.0 or scene.beta != 0.0 or scene.gamma != 0.0:
+        u = 2.0 * x / (3.0 * scene.R)
+        f3 = 1.0 / ((1.0 - u) * (1.0 - u))
+        force = scene.alpha * (f3 - 1.0 / ((1.0 + u) * (1.0 + u)))
+        if scene.beta != 0.0 or scene.gamma != 0.0:
+            force = force + (scene.beta * np.sin(scene.Omega * t)
+                             + scene.gamma * (1.0 - np.cos(2.0 * scene.Omega * t))) * f3
+        a = a + force
+    return a
 
 
 def linear_response(f, dt: float, mu: float, a1: float) -> np.ndarray:
@@ -190,7 +209,7 @@ DOP853_LOCAL = 6.5e-8
 def linear_amplitude(scene) -> tuple[float, float, float]:
     """(x_s, the linear prediction's bound of max|x - x_s|, a1): Eq. 11's static offset x_s = gamma/a1 (a0 = -gamma)
     and the sum of the moduli of its free and forced parts (start, Delta at omega, beta at Omega, gamma at 2 Omega)."""
-    a1 = forces.coefficients(scene.alpha, scene.gamma, scene.R)[1]
+    a1 = forces.linear_stiffness(scene.alpha, scene.gamma, scene.R)
     mu = scene.mu
     p = math.sqrt(max(a1 - 0.25 * mu * mu, 1e-300))
     x_s = scene.gamma / a1
@@ -214,7 +233,7 @@ def response_parts(scene, span: float) -> dict:
       the response grows as t/(2 s) for the run's memory min(span, 2/mu), not to the steady 1/(mu s);
     - free: the modulus of the free vibration the start leaves, (x_start, v_start) minus the forced parts at t = 0,
       turning at p = sqrt(a1 - mu^2/4)."""
-    a1 = forces.coefficients(scene.alpha, scene.gamma, scene.R)[1]
+    a1 = forces.linear_stiffness(scene.alpha, scene.gamma, scene.R)
     mu = scene.mu
     memory = _memory(mu, span)
     mu_eff = 2.0 / memory
@@ -246,7 +265,7 @@ def _remembered(s: float, parts: dict) -> float:
     return parts["memory"] if distance * parts["memory"] <= 1.0 else 1.0 / distance
 
 
-def solver_terms(scene, settings, span: float) -> dict:
+def solver_terms(scene, settings, span: float, parts: dict | None = None) -> dict:
     """The exact model's solver error over a run of `span`, summed over the response's parts (amplitude a, frequency
     s; response_parts):
     - adaptive DOP853 at the solver's rtol (after models.tolerance_factor): its controller keeps the estimator's
@@ -255,15 +274,14 @@ def solver_terms(scene, settings, span: float) -> dict:
       by DOP853_LOCAL (s h)^9 a, which adds up over _remembered(s) / h steps ("accumulated", at most 2 a: a phase),
       and the output within a step errs like the estimator ("local": dense output, the last steps);
     - RK4, step h: a part errs by (s h)^5 / 120 a per step (RK4's error constant for y' = i s y), adding up likewise:
-      a s^5 h^4 / 120 _remembered(s) (at most 2 a)."""
-    parts = response_parts(scene, span)
+      a s^5 h^4 / 120 _remembered(s) (at most 2 a). parts: response_parts(scene, span) when already computed."""
+    parts = parts or response_parts(scene, span)
     components = _components(parts)
     size = abs(parts["x_s"]) + sum(a for a, _ in components)
     if not _fixed(settings):
         rtol, _ = _solver_rtol(scene, settings, span)
         scale_x = 0.01 + size  # integrate.ATOL_PER_RTOL = 0.01
         scale_v = 0.01 + sum(a * s for a, s in components)
-        from .models import drive_step_ceiling
         h = settings.max_step if settings.max_step > 0.0 else drive_step_ceiling(scene)
         for a, s in components:
             if a > 0.0 and s > 0.0:
@@ -283,17 +301,16 @@ def solver_terms(scene, settings, span: float) -> dict:
 
 
 def _fixed(settings) -> bool:
-    from .solvers import solver_entry
     return solver_entry(settings.solver).fixed_step
 
 
 def _solver_rtol(scene, settings, span):
-    from .models import solver_tolerance
-    return solver_tolerance(scene, settings, 0.0, span)
+    """(the rtol the plant's solver runs at: models.solver_tolerance's value, without its note, None)."""
+    factor = tolerance_factor(scene, span)
+    return (settings.rtol if factor == 1.0 else max(MIN_RTOL, settings.rtol * factor)), None
 
 
 def _fixed_default():
-    from .solvers import FIXED_DEFAULT_STEP
     return FIXED_DEFAULT_STEP
 
 
@@ -301,53 +318,82 @@ TRUNCATION_ANGLES = 16  # the cycle's samples of the force error's harmonic bala
 TRUNCATION_TIMES = 5  # the AC drive's phases sampled over its period pi/Omega (the electrostatic force's)
 
 
-def _force_error_harmonics(exact, model, scene, x_s: float, amplitude: float) -> tuple[float, float, float]:
+def force_error_parts(model, scene):
+    """F_exact - F_poly of Eq. 3 against Eq. 7 (`model`: models.PolynomialModel, its a0..a5 and G3), the difference
+    of their accelerations at v = 0, U = 0: a function of x -> (A, B), the difference being A + w B at the AC drive's
+    value w = beta sin(Omega t) - gamma cos(2 Omega t). Both share Delta cos(omega t); A = 1 - H(x) + alpha (F3 - F2)
+    + gamma F3 + sum a_k x^k, B = F3 - G3(x) (tests/model/test_error_estimate_theory.py checks A + w B against the
+    models' accel)."""
+    a0, a1, a2, a3, a4, a5 = model.a
+    g0, g1, g2, g3, g4, g5 = model.g3
+    alpha, gamma, three_r = scene.alpha, scene.gamma, 3.0 * scene.R
+    sqrt = math.sqrt
+
+    def parts(x: float) -> tuple[float, float]:
+        s = 1.0 + 2.0 * x / 3.0
+        u = 2.0 * x / three_r
+        f3 = 1.0 / ((1.0 - u) * (1.0 - u))
+        static = (1.0 - (s * sqrt(s) if s > 0.0 else 0.0) + alpha * (f3 - 1.0 / ((1.0 + u) * (1.0 + u))) + gamma * f3
+                  + (a0 + x * (a1 + x * (a2 + x * (a3 + x * (a4 + x * a5))))))
+        return static, f3 - (g0 + x * (g1 + x * (g2 + x * (g3 + x * (g4 + x * g5)))))
+
+    return parts
+
+
+# cos(theta) at TRUNCATION_ANGLES midpoints of the cycle
+TRUNCATION_COSINES = tuple(math.cos(2.0 * math.pi * (i + 0.5) / TRUNCATION_ANGLES) for i in range(TRUNCATION_ANGLES))
+
+
+def _force_error_harmonics(model, scene, x_s: float, amplitude: float,
+                           with_rest: bool = True) -> tuple[float, float, float]:
     """Over x = x_s + amplitude cos(theta), theta at TRUNCATION_ANGLES midpoints, and the AC drive's phases: the
     force error d = F_exact - F_poly's largest |mean|, |stiffness| 2 mean(d cos theta)/amplitude (its first harmonic,
-    the describing function) and |rest| max|d - mean - stiffness amplitude cos theta| (the higher harmonics)."""
+    the describing function) and |rest| max|d - mean - stiffness amplitude cos theta| (the higher harmonics). d is
+    A(x) + w B(x) (force_error_parts), so each harmonic is its A part plus w times its B part: the x samples are
+    evaluated once for every phase of the drive. with_rest False: rest nan (not computed)."""
     lo, hi = -1.5 + 1e-9, 1.5 * scene.R * (1.0 - 1e-3)
-    n = TRUNCATION_ANGLES
-    cosines = [math.cos(2.0 * math.pi * (i + 0.5) / n) for i in range(n)]
-    xs = [min(max(x_s + amplitude * c, lo), hi) for c in cosines]
+    n, cosines, error = TRUNCATION_ANGLES, TRUNCATION_COSINES, force_error_parts(model, scene)
+    parts = [error(min(max(x_s + amplitude * c, lo), hi)) for c in cosines]
     ac = (scene.beta != 0.0 or scene.gamma != 0.0) and scene.Omega > 0.0
     times = [math.pi / scene.Omega * j / TRUNCATION_TIMES for j in range(TRUNCATION_TIMES)] if ac else [0.0]
-    mean = stiffness = rest = 0.0
-    for t in times:
-        d = [exact.accel(t, x, 0.0, 0.0) - model.accel(t, x, 0.0, 0.0) for x in xs]
-        m = first = 0.0
-        for value, c in zip(d, cosines):
-            m += value
-            first += value * c
-        m /= n
-        k = 2.0 * first / n / amplitude if amplitude > 0.0 else 0.0
-        mean, stiffness = max(mean, abs(m)), max(stiffness, abs(k))
-        for value, c in zip(d, cosines):
-            rest = max(rest, abs(value - m - k * amplitude * c))
+    ws = [scene.beta * math.sin(scene.Omega * t) - scene.gamma * math.cos(2.0 * scene.Omega * t) for t in times]
+    # |a + w b| is convex in w: its largest over the drive's phases is at the least or the greatest w
+    ends = (min(ws), max(ws))
+    mean_a = sum(a for a, _ in parts) / n
+    mean_b = sum(b for _, b in parts) / n
+    scale = 2.0 / n / amplitude if amplitude > 0.0 else 0.0
+    k_a = scale * sum(a * c for (a, _), c in zip(parts, cosines))
+    k_b = scale * sum(b * c for (_, b), c in zip(parts, cosines))
+    mean = max(abs(mean_a + w * mean_b) for w in ends)
+    stiffness = max(abs(k_a + w * k_b) for w in ends)
+    if not with_rest:
+        return mean, stiffness, math.nan
+    rest = 0.0
+    for (a, b), c in zip(parts, cosines):
+        ra, rb = a - mean_a - k_a * amplitude * c, b - mean_b - k_b * amplitude * c
+        rest = max(rest, abs(ra + ends[0] * rb), abs(ra + ends[1] * rb))
     return mean, stiffness, rest
 
 
-def truncation_terms(scene, model, span: float) -> dict:
+def truncation_terms(scene, model, span: float, parts: dict | None = None) -> dict:
     """Fidelities 1 and 2: the polynomial's force error d = F_exact - F_poly on the response's cycle (amplitude A =
     the free part + the forced ones, response_parts), by harmonic balance: its mean moves x by mean/a1 ("mean"); its
     first harmonic is a stiffness error dk, which turns the free vibration at dk/(2p) more, a phase that grows over the
     memory (at most 2 radians), and changes each forced part's gain by dk |H(s)| ("stiffness"); the higher harmonics
     answer at 2p, 3p, ... with the gain 1/|a1 - (2p)^2| ~ 1/(3 a1) at most, rest/(3 a1) ("harmonics"). The free vibration decays as e^(-mu t/2) and dk with it as
     e^(-k mu t/2), k the exponent of dk's growth with the amplitude (dk at A and at the forced parts + half the free
-    one): its phase stops growing after 2/(max(k, 1) mu)."""
-    from .models import ExactModel
-
-    parts = response_parts(scene, span)
+    one): its phase stops growing after 2/(max(k, 1) mu). parts: response_parts(scene, span) when already computed."""
+    parts = parts or response_parts(scene, span)
     forced = parts["forced"]
     a1, p, mu = parts["a1"], parts["p"], parts["mu"]
     f = sum(a for a, _ in forced)
     free = parts["free"]
     amplitude = f + free
-    exact = ExactModel(scene)
-    mean, stiffness, rest = _force_error_harmonics(exact, model, scene, parts["x_s"], amplitude)
+    mean, stiffness, rest = _force_error_harmonics(model, scene, parts["x_s"], amplitude)
     memory = parts["memory"]
     if free > 0.0 and mu > 0.0 and stiffness > 0.0:
         half = f + 0.5 * free
-        smaller = _force_error_harmonics(exact, model, scene, parts["x_s"], half)[1]
+        smaller = _force_error_harmonics(model, scene, parts["x_s"], half, with_rest=False)[1]
         k = math.log(stiffness / smaller) / math.log(amplitude / half) if smaller > 0.0 else 0.0
         memory = min(memory, 2.0 / (max(k, 1.0) * mu))
     drift = free * min(2.0, stiffness / (2.0 * p) * memory)
@@ -370,7 +416,8 @@ def exact_estimate(scene, settings, model, solution, span: float) -> dict:
 
 def polynomial_estimate(scene, settings, model, solution, span: float) -> dict:
     """Fidelities 1 and 2: the solver's error and the polynomial's truncation (truncation_terms)."""
-    terms = {**solver_terms(scene, settings, span), **truncation_terms(scene, model, span)}
+    parts = response_parts(scene, span)
+    terms = {**solver_terms(scene, settings, span, parts), **truncation_terms(scene, model, span, parts)}
     value = terms["solver"] + CALIBRATION["truncation"] * terms["truncation"]
     return _result(value, terms["amplitude"], terms)
 
@@ -416,4 +463,21 @@ def attach(plant, level, t0: float, stop_time: float | None) -> None:
     plant.error_estimate = result
     terms = ", ".join(f"{k} {v:.3g}" for k, v in result["terms"].items())
     plant.notes.append(f"error estimate: max|x - x_exact| ~ {result['estimate']:.3g} over the run ({terms})")
+    refusal = refused(int(level.level), level.refuse_share, result["estimate"], result["amplitude"])
+    if refusal is not None:
+        from .parameters import ParameterError
+        raise ParameterError("fidelity", int(level.level), refusal)
     plant.warnings += warning(int(level.level), level.warn_share, result["estimate"], result["amplitude"])
+
+
+def refused(level: int, share: float | None, estimate: float, amplitude: float) -> str | None:
+    """Why a rung refuses the scene: its estimate is above `share` (fidelities.FidelityEntry.refuse_share) of the
+    amplitude or not finite (None: it does not refuse; a rung without a share never does)."""
+    if share is None:
+        return None
+    if not math.isfinite(estimate):
+        return f"fidelity {level} cannot estimate its error here (estimate {estimate!r}); use fidelity 0"
+    if estimate > share * amplitude:
+        return (f"fidelity {level}'s error estimate max|x - x_exact| ~ {estimate:.3g} exceeds {share:g} of the "
+                f"amplitude max|x| ~ {amplitude:.4g}: outside its domain; use fidelity 0")
+    return None

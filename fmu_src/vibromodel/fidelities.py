@@ -17,7 +17,7 @@ from enum import IntEnum
 from typing import Callable
 
 from . import error_estimates
-from .analytic import cached_solve, check_fit, covering
+from .analytic import FIT_REFUSE, FIT_WARN, cached_solve, check_fit, covering
 from .models import CModel, ExactModel, PolynomialModel, scene_model
 from .parameters import ParameterError, Rule, Scene
 
@@ -67,7 +67,8 @@ class FidelityEntry:
     ladder_limit: the rung's acceptance limit there, cost per output over the base's (None: none).
     error_estimate(scene, settings, model, solution, span) -> {"estimate", "amplitude", "terms"}: the level's estimate
     of max|x - x_exact| over a run of span (vibromodel/error_estimates.py); warn_share: above this share of the
-    amplitude the plant warns (fmi2Warning) with the estimate (None: never; the integrated levels)."""
+    amplitude the plant warns (fmi2Warning) with the estimate (None: never; the integrated levels); refuse_share:
+    above this share, or when it cannot estimate, the plant refuses the scene (ParameterError naming `fidelity`)."""
 
     level: Fidelity
     key: str
@@ -87,6 +88,7 @@ class FidelityEntry:
     ladder_limit: float | None = None
     error_estimate: Callable | None = None
     warn_share: float | None = None
+    refuse_share: float | None = None
 
     @property
     def name(self) -> str:
@@ -167,8 +169,8 @@ REGISTRY: dict[Fidelity, FidelityEntry] = {e.level: e for e in (
     FidelityEntry(Fidelity.ANALYTIC, "analytic", "4 OAFM analytic", ExactModel, False, CModel.EXACT,
                   open_loop=_analytic_solution, evaluator=Evaluator.OAFM, check_settings=_check_oafm,
                   work=_analytic_work, uses_rtol=False, native_refusal="the native FMU cannot fit the OAFM solution",
-                  ladder=True, ladder_limit=0.5,  # analytic.check_fit warns and refuses by max|R|/a1
-                  error_estimate=error_estimates.analytic_plant_estimate),
+                  ladder=True, ladder_limit=0.5, error_estimate=error_estimates.analytic_plant_estimate,
+                  warn_share=FIT_WARN, refuse_share=FIT_REFUSE),
 )}
 
 

@@ -74,6 +74,11 @@ def series_g3(R: float) -> tuple[float, ...]:
     return (1.0, 4.0 / (3.0 * R), 4.0 / (3.0 * R**2), 32.0 / (27.0 * R**3), 80.0 / (81.0 * R**4), 64.0 / (81.0 * R**5))
 
 
+def linear_stiffness(alpha: float, gamma: float, R: float) -> float:
+    """a1 of Eq. 7, coefficients(alpha, gamma, R)[1] to the bit (the same operations), without the others."""
+    return 1.0 - alpha * (8.0 / (3.0 * R)) - gamma * (4.0 / (3.0 * R))
+
+
 def coefficients(alpha: float, gamma: float, R: float) -> tuple[float, ...]:
     """a0..a5 of Eq. 7 (corrected Eq. 8): a_k = G1_k - alpha G2_k - gamma G3_k, a0 = -gamma."""
     g1, g2, g3 = series_g1(), series_g2(R), series_g3(R)

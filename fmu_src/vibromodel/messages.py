@@ -23,6 +23,8 @@ TEXTS = {
     "AUTO_NONE": "no rung's error estimate meets it ({tried}); raise the tolerance",
     "AUTO_ESTIMATE": "{rung}: estimate {estimate:.3g}",
     "AUTO_REFUSED": "fidelity {level:g}: refused ({parameter})",
+    # Python only (the native FMU has no rung with a set-up to weigh): a cheap rung not built
+    "AUTO_SETUP": "{rung}: its set-up and run cost more than {fallback}'s run",
     "AUTO_EXACT_RUNG": "fidelity {level:g} at rtol {rtol:g}",
     "AUTO_RUNG": "fidelity {level:g}",
 }

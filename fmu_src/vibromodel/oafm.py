@@ -116,6 +116,22 @@ class Piece:
             z = np.where(self._secular, s_col * z, z)
         return (z[..., None, :] * self._coefficients).sum(axis=-1).real
 
+    def evaluate_grid(self, s0: float, ds: float, n: int) -> np.ndarray:
+        """(x, x', x'') at the n local times s0 + k ds, shape (n, 3): evaluate's values to rounding, not to the bit,
+        at a fraction of its cost on many times (the error estimate's samples: error_estimates.propagated_residual).
+        e^(rate s) steps by the factor e^(rate ds) from sample to sample (a running product: k roundings at the k-th,
+        ~1e-12 relative at 10^4 samples) instead of one complex exp per term and time; Re(z c) = Re z Re c - Im z
+        Im c, two real matrix products."""
+        z = np.empty((n, self._rates.size), dtype=complex)
+        z[0] = np.exp(s0 * self._rates)
+        z[1:] = np.exp(ds * self._rates)
+        z = np.cumprod(z, axis=0)
+        if self._secular.any():
+            s_col = (s0 + ds * np.arange(n))[:, None]
+            z = np.where(self._secular, s_col * z, z)
+        c = self._coefficients.T
+        return z.real @ np.ascontiguousarray(c.real) - z.imag @ np.ascontiguousarray(c.imag)
+
 
 class AnalyticSolution:
     """x~(tau), x~'(tau), x~''(tau) of a sequence of pieces; the last piece extends to infinity."""
@@ -157,6 +173,20 @@ class AnalyticSolution:
             if inside.any():
                 out[:, inside] = piece.evaluate(tau[inside] - piece.start).T
         return out
+
+    def sample_grid(self, t0: float, dt: float, n: int) -> tuple[np.ndarray, np.ndarray]:
+        """(the times t0 + k dt, k < n; (x, x', x'') at them, shape (3, n)): __call__'s values to rounding
+        (Piece.evaluate_grid), each piece's times being a run of the grid."""
+        tau = t0 + dt * np.arange(n)
+        index = self._index(tau)
+        out = np.empty((3, n))
+        for i, piece in enumerate(self.pieces):
+            inside = np.flatnonzero(index == i)
+            if inside.size:
+                first = int(inside[0])
+                out[:, first:first + inside.size] = piece.evaluate_grid(float(tau[first]) - piece.start, dt,
+                                                                        inside.size).T
+        return tau, out
 
 
 # The model's accel is called point by point on Python floats (tolist): the same IEEE operations as on numpy's

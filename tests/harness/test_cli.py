@@ -78,19 +78,34 @@ def test_simulate_with_compare_writes_all_results(tmp_path, plant_fmu, capsys):
     assert (out / "x.png").stat().st_size > 10_000
 
 
-def test_simulate_fidelity_auto_chooses_by_the_tolerance(tmp_path, plant_fmu, capsys):
-    """--fidelity auto --tolerance 1e-3 on the paper scene: the analytic rung (the averaged one's estimate, 4e-3, is
-    above it); summary.json names the choice as --fidelity accepts it, its estimate, and with --compare the error."""
+def test_simulate_fidelity_auto_lets_the_fmu_choose(tmp_path, plant_fmu, capsys):
+    """--fidelity auto --tolerance 1e-3 gives the FMU fidelity = -1 and the tolerance: the FMU chooses (its log line
+    of the choice is the one printed) and summary.json reads its outputs: fidelity_chosen as --fidelity accepts it
+    (over tau in [0, 20] the exact model at its loosest rtol: the cheap rungs' set-up costs more than its run) and
+    error_estimate, with --compare the measured error beside it."""
     out = tmp_path / "auto"
     code = main(["simulate", "--fmu", str(plant_fmu), "--fidelity", "auto", "--tolerance", "1e-3", "--stop-time", "20",
                  "--compare", "--out", str(out)])
     assert code == 0
-    assert "fidelity auto chose fidelity 4" in capsys.readouterr().out
+    printed = capsys.readouterr().out
     summary = json.loads((out / "summary.json").read_text())
-    assert summary["fidelity_chosen"] == "analytic" and summary["tolerance"] == 1e-3
+    assert summary["settings"]["fidelity"] == -1 and summary["tolerance"] == 1e-3
+    assert summary["auto_choice"].startswith("fidelity auto chose fidelity 0 at rtol 0.0001 ")
+    assert summary["auto_choice"] in printed and f"[ok] {summary['auto_choice']}" in summary["fmu_log"]
+    assert summary["fidelity_chosen"] == "exact"
     assert summary["error"]["max_abs_error_x"] <= summary["error_estimate"] <= 1e-3
     assert summary["estimate_and_measured"] == {"error_estimate": summary["error_estimate"],
                                                 "max_abs_error_x": summary["error"]["max_abs_error_x"]}
+
+
+@pytest.mark.slow  # the FMU builds the averaged and analytic rungs before it refuses (~1 s of CPU)
+def test_simulate_fidelity_auto_a_tolerance_nothing_meets_is_a_user_error(tmp_path, plant_fmu, capsys):
+    """The FMU's refusal naming `tolerance` becomes one line naming --tolerance, exit 2."""
+    code = main(["simulate", "--fmu", str(plant_fmu), "--fidelity", "auto", "--tolerance", "1e-16", "--stop-time",
+                 "1", "--out", str(tmp_path / "refused")])
+    err = capsys.readouterr().err
+    assert code == 2
+    assert "error: --tolerance 1e-16: no rung's error estimate meets it (" in err and "Traceback" not in err
 
 
 def test_simulate_reports_an_early_stop(tmp_path, plant_fmu, capsys):

@@ -88,25 +88,82 @@ def test_polynomial_estimate_bounds_its_error_within_100x(fidelity, library):
     assert error <= estimate <= 100.0 * error, (error, estimate)
 
 
-def test_estimates_cost_little_beside_the_plant_set_up(library):
+def test_estimates_cost_little_beside_the_plant_set_up(monkeypatch):
     """The estimates are formulas (no integration): each is at most a few force evaluations per cycle sample. Counted,
-    not timed: fidelity 0's calls no model force; fidelities 1 and 2 call each model's accel at most
-    2 x TRUNCATION_ANGLES x TRUNCATION_TIMES times (the force error at two amplitudes)."""
+    not timed: fidelity 0's evaluates no force; fidelities 1 and 2 evaluate the force error at most
+    2 x TRUNCATION_ANGLES times (its samples over the cycle at two amplitudes; the drive's phases reuse them)."""
     calls = 0
-    entry = REGISTRY[1]
-    model = entry.model(Scene())
+    wrapped = error_estimates.force_error_parts
 
-    class Counting:
-        def __init__(self, inner):
-            self.inner = inner
+    def counting(model, scene):
+        inner = wrapped(model, scene)
 
-        def accel(self, *args):
+        def parts(x):
             nonlocal calls
             calls += 1
-            return self.inner.accel(*args)
+            return inner(x)
+        return parts
 
-    error_estimates.polynomial_estimate(Scene(), Settings(fidelity=1), Counting(model), None, STOP)
-    assert 0 < calls <= 2 * error_estimates.TRUNCATION_ANGLES * error_estimates.TRUNCATION_TIMES
+    monkeypatch.setattr(error_estimates, "force_error_parts", counting)
+    error_estimates.exact_estimate(Scene(), Settings(), None, None, STOP)
+    assert calls == 0
+    error_estimates.polynomial_estimate(Scene(), Settings(fidelity=1), REGISTRY[1].model(Scene()), None, STOP)
+    assert 0 < calls <= 2 * error_estimates.TRUNCATION_ANGLES
+
+
+# the paper's; strong electrostatics, a narrow gap; no AC drive and a gap wider than the contact (x < -1.5: lost)
+SCENES = [Scene(), Scene(Delta=0.05, beta=0.02, gamma=0.005, alpha=0.03, R=0.6), Scene(beta=0.0, gamma=0.0, R=1.3)]
+
+
+@pytest.mark.parametrize("scene", SCENES)
+@pytest.mark.parametrize("fidelity", [1, 2])
+def test_the_force_error_is_the_models_accel_difference(scene, fidelity):
+    """force_error_parts' A + w B, w = beta sin(Omega t) - gamma cos(2 Omega t), against exact.accel - poly.accel of
+    the models themselves (models.py) over x across 95 % of the gap (contact lost below -1.5) and the drive's phases.
+    Both are sums of a few terms, each rounded: 1e-13 of the largest acceleration's size bounds the difference."""
+    exact, poly = REGISTRY[0].model(scene), REGISTRY[fidelity].model(scene)
+    parts = error_estimates.force_error_parts(poly, scene)
+    for t in np.linspace(0.0, 7.0, 9):
+        w = scene.beta * math.sin(scene.Omega * t) - scene.gamma * math.cos(2.0 * scene.Omega * t)
+        for x in np.linspace(-0.95, 0.95, 23) * 1.5 * scene.R:
+            a, b = parts(float(x))
+            e, q = exact.accel(t, x, 0.0, 0.0), poly.accel(t, x, 0.0, 0.0)
+            assert abs(a + w * b - (e - q)) <= 1e-13 * max(1.0, abs(e), abs(q)), (t, x)
+
+
+@pytest.mark.parametrize("scene", SCENES)
+def test_the_arrays_exact_accel_is_the_model_s(scene):
+    """exact_accel (fidelity 4's residual on its samples at once) against ExactModel.accel point by point, x across
+    the contact edge and v of both signs: the same operations (numpy's cos and sqrt may differ from math's by an
+    ulp), so 1e-14 of the acceleration's size."""
+    model = REGISTRY[0].model(scene)
+    rng = np.random.default_rng(3)
+    t, v = rng.uniform(0.0, 50.0, 200), rng.uniform(-1.0, 1.0, 200)
+    x = rng.uniform(-0.95, 0.95, 200) * 1.5 * scene.R
+    expected = np.array([model.accel(*point, 0.0) for point in zip(t, x, v)])
+    assert np.all(np.abs(error_estimates.exact_accel(scene, t, x, v) - expected) <= 1e-14 * np.maximum(1.0, abs(expected)))
+
+
+@pytest.mark.parametrize("scene", SCENES[:2])
+def test_the_grid_evaluation_is_the_piece_s_to_rounding(scene):
+    """Piece.evaluate_grid (fidelity 4's estimate samples the solution by a running product of e^(rate dt)) against
+    Piece.evaluate (one exp per term and time) on Eq. 11's linear prediction x0 (a piece of the same form as the fitted
+    ones, without a fit): 4000 samples, k roundings at the k-th, so 1e-11 of max|x| bounds the difference."""
+    from vibromodel.oafm import Piece
+    from vibromodel.oafm_bases import eq11_operator, forced_x0
+
+    x0 = forced_x0(eq11_operator(scene), scene, 0.0, scene.x_start, scene.v_start)[0].merged()
+    piece = Piece(start=0.0, end=200.0, basis_name="x0", C=(), x=x0)
+    s = 0.05 * np.arange(4000)
+    expected = piece.evaluate(s)
+    assert np.max(np.abs(piece.evaluate_grid(0.0, 0.05, 4000) - expected)) <= 1e-11 * np.max(np.abs(expected))
+
+
+def test_the_cheaper_a1_is_the_coefficients_one_to_the_bit():
+    from vibromodel import forces
+
+    for alpha, gamma, R in ((0.001, 0.0002, 1.0), (0.03, 0.005, 0.6), (0.0, 0.0, 0.3)):
+        assert forces.linear_stiffness(alpha, gamma, R) == forces.coefficients(alpha, gamma, R)[1]
 
 
 def test_linear_response_matches_solve_ivp():

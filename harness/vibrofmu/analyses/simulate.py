@@ -162,24 +162,46 @@ def published_estimate(run: RunResult) -> float | None:
     return logged_estimate(run.log)
 
 
+AUTO_CHOICE = "fidelity auto chose "  # the start of the plant FMU's log line of its choice (vibromodel.messages)
+
+
+def auto_summary(run: RunResult, tolerance: float) -> dict:
+    """summary.json's entries on fidelity auto's choice, read from the FMU: its fidelity_chosen output as the name
+    --fidelity accepts (None: it chose nothing, refused), its log line of the choice, the tolerance."""
+    names = {level: key for key, level in FIDELITIES.items()}
+    chosen = run.outputs.get("fidelity_chosen")
+    level = int(chosen[-1]) if chosen is not None and len(chosen) else None
+    if level is None and run.after_failure and "fidelity_chosen" in run.after_failure:
+        level = int(run.after_failure["fidelity_chosen"])
+    choice = next((m.split(AUTO_CHOICE, 1)[1] for m in run.log if AUTO_CHOICE in m), None)
+    return {"tolerance": tolerance, "fidelity_chosen": names.get(level),
+            "auto_choice": AUTO_CHOICE + choice if choice is not None else None}
+
+
 def simulate(fmu: Path, scene: Scene, settings: Settings, stop_time: float, output_interval: float,
              out_dir: Path, compare: bool = False, progress=None,
-             summary_extra: dict | None = None) -> tuple[RunResult, dict, Reference | None]:
+             summary_extra: dict | None = None,
+             auto_tolerance: float | None = None) -> tuple[RunResult, dict, Reference | None]:
     """Run the FMU, write out_dir/result.csv, summary.json and x.png; return the run, the summary
-    and the reference (None without compare). summary_extra: entries added to the summary (fidelity auto's
-    choice)."""
+    and the reference (None without compare). summary_extra: entries added to the summary. auto_tolerance: fidelity
+    auto (`settings` then the exact model's, which every candidate's forces are, for the checks and the reference):
+    the FMU gets fidelity = -1 and this tolerance and chooses; the summary reads its choice (auto_summary)."""
     warnings = check_inputs(scene, settings, stop_time, output_interval)
     print_note(scene)
     for warning in warnings:
         print(f"warning: {warning}", file=sys.stderr)
     given = fmu_settings(settings, output_interval)
-    run = run_fmu(fmu, start_values(scene, given), stop_time, output_interval, progress=progress)
+    values = start_values(scene, given)
+    if auto_tolerance is not None:
+        values.update(fidelity=fidelities.AUTO, tolerance=auto_tolerance)
+    run = run_fmu(fmu, values, stop_time, output_interval, progress=progress)
     out_dir.mkdir(parents=True, exist_ok=True)
     summary = {
         "fmu": str(fmu),
         "parameters": scene.as_dict(),
         "settings": {**dataclasses.asdict(settings), "stop_time": stop_time, "output_interval": output_interval,
-                     **({"fmu_max_step": given.max_step} if given != settings else {})},
+                     **({"fmu_max_step": given.max_step} if given != settings else {}),
+                     **({"fidelity": fidelities.AUTO} if auto_tolerance is not None else {})},
         "warnings": warnings,
         "notes": [note for note in [consistency_warning(scene)] if note],
         "completed": run.completed,
@@ -189,6 +211,7 @@ def simulate(fmu: Path, scene: Scene, settings: Settings, stop_time: float, outp
         "instantiate_time_s": run.instantiate_time,
         "fmu_log": run.log[-20:],
         "error_estimate": published_estimate(run),
+        **(auto_summary(run, auto_tolerance) if auto_tolerance is not None else {}),
         **(summary_extra or {}),
     }
     reference = reference_x = None
@@ -205,7 +228,10 @@ def simulate(fmu: Path, scene: Scene, settings: Settings, stop_time: float, outp
                      {name: values for name, values in run.outputs.items() if name not in INITIALISATION_OUTPUTS})
     export.write_json(out_dir / "summary.json", summary)
     if len(run.time) >= 2:  # an FMU that failed before its first step has nothing to plot: no empty figure
-        export.plot_x(out_dir / "x.png", run.time, run.outputs["x"], run_title(given, output_interval),
+        title = run_title(given, output_interval)
+        if auto_tolerance is not None:
+            title = f"HertzEAOscillator: fidelity auto, tolerance {auto_tolerance:g}: {summary['fidelity_chosen']}"
+        export.plot_x(out_dir / "x.png", run.time, run.outputs["x"], title,
                       reference_x=reference_x, in_contact=run.outputs.get("in_contact"),
                       stop=None if run.completed else (run.end_time, run.stop_reason))
     return run, summary, reference

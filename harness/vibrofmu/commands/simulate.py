@@ -56,13 +56,19 @@ def run(args) -> int:
                   .replace("fidelity 0-3", "another --fidelity").replace("fidelity 4", "--fidelity analytic"))
         raise UserError(f"--stop-time {args.stop_time:g}: {advice}") from None
     check_output_size(args.stop_time, args.output_interval, args.max_output_mb)  # before anything runs
-    extra = None
-    if auto:  # the choice (vibromodel.auto), made here; the FMU then runs the chosen rung and setting
-        settings, extra = choose_settings(scene, settings, args.tolerance, args.stop_time)
-        print(extra["auto_choice"])
+    tolerance = None
+    if auto:  # the FMU chooses (fidelity = -1 and its tolerance); the checks above were the exact model's
+        from vibromodel.auto import DEFAULT_TOLERANCE
+        tolerance = DEFAULT_TOLERANCE if args.tolerance is None else args.tolerance
     out = out_folder(args.out)
     result, summary, _ = simulate(built_plant(fmu), scene, settings, args.stop_time, args.output_interval, out,
-                                  compare=args.compare, progress=progress_printer("simulate"), summary_extra=extra)
+                                  compare=args.compare, progress=progress_printer("simulate"),
+                                  auto_tolerance=tolerance)
+    if auto:
+        refusal = f"parameter tolerance = {tolerance!r}: "
+        if summary["fidelity_chosen"] is None and refusal in (result.stop_reason or ""):
+            raise UserError(f"--tolerance {tolerance:g}: {result.stop_reason.split(refusal, 1)[1]}")
+        print(summary["auto_choice"])
     plotted = ", x.png" if (out / "x.png").exists() else " (no x.png: no run to plot)"
     print(f"wrote {out}/result.csv, summary.json{plotted} ({len(result.time)} points, "
           f"wall time {result.wall_time:.3f} s)")
@@ -80,27 +86,6 @@ def run(args) -> int:
         print(f"error: the FMU {where}: {result.stop_reason}", file=sys.stderr)
         return 1
     return 0
-
-
-def choose_settings(scene, settings, tolerance, stop_time):
-    """(the settings fidelity auto chooses for --tolerance, summary.json's entries on the choice). A tolerance no
-    rung meets is a user error naming it."""
-    from vibromodel.auto import DEFAULT_TOLERANCE, choose
-    from vibromodel.parameters import ParameterError
-    from vibromodel.plant import make_plant
-
-    from vibrofmu.analyses.simulate import FIDELITIES
-
-    tolerance = DEFAULT_TOLERANCE if tolerance is None else tolerance
-    try:
-        plant, chosen, log = choose(scene, settings, tolerance, lambda s: make_plant(scene, s, 0.0, stop_time))
-    except ParameterError as error:
-        if error.name != "tolerance":
-            raise
-        raise UserError(f"--tolerance {tolerance:g}: {error.reason}") from None
-    name = {level: key for key, level in FIDELITIES.items()}[chosen.fidelity]
-    return chosen, {"tolerance": tolerance, "fidelity_chosen": name, "rtol_chosen": chosen.rtol,
-                    "auto_choice": log[0], "auto_error_estimate": plant.error_estimate["estimate"]}
 
 
 def unused(args) -> list[Unused]:
