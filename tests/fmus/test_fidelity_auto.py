@@ -68,14 +68,17 @@ def test_the_pythonfmu_fmu_chooses_what_auto_chooses_and_the_native_fmu_its_shar
 def test_a_run_the_exact_model_ends_at_pull_in_ends_there_under_auto(plant_fmu, native_plant_fmu):
     """x_start = 0.29, R = 0.2 pulls in at tau ~ 0.13: auto runs the exact model (the averaged and analytic rungs
     cost more over this run, and refuse the scene: tests/model/test_auto.py), which stops at the same communication
-    point with the same message."""
+    point."""
     scene = {"x_start": 0.29, "R": 0.2}
     for fmu in (plant_fmu, native_plant_fmu):
         exact = run_fmu(fmu, scene, STOP, H)
         run = run_fmu(fmu, auto(1e-3, **scene), STOP, H)
         assert not exact.completed and "pull-in" in exact.stop_reason
-        assert run.status == exact.status == FMI2_ERROR and run.stop_reason == exact.stop_reason
-        assert len(run.time) == len(exact.time) < STOP / H and np.array_equal(run.outputs["x"], exact.outputs["x"])
+        # auto runs rtol 1e-4 (its tolerance allows it), the fixed rung 1e-8: the same communication point, the
+        # pull-in's tau to the solvers' accuracy, x within the tolerance
+        assert run.status == exact.status == FMI2_ERROR and "pull-in" in run.stop_reason
+        assert len(run.time) == len(exact.time) < STOP / H
+        assert np.max(np.abs(run.outputs["x"] - exact.outputs["x"])) <= 1e-3
         assert run.outputs["fidelity_chosen"][0] == Fidelity.EXACT
 
 

@@ -221,3 +221,34 @@ def test_reduced_auto_campaign():
 
     summary = auto_campaign(30, 7)["summary"]
     assert summary["pairs"] == 30 and summary["met_share"] >= 0.99, summary
+
+
+@pytest.mark.parametrize("estimate, outcome", [(1e-7, "quiet"), (1e-4, "warned"), (0.05, "refused"),
+                                               (float("nan"), "refused")])
+def test_fidelity_4_warns_and_refuses_by_its_estimate(estimate, outcome):
+    """Fidelity 4's registry entry warns above FIT_WARN of the amplitude and refuses above FIT_REFUSE (or when it
+    cannot estimate) by its error estimate (error_estimates.attach), whatever its residual's max|R|/a1: a stand-in
+    estimator gives the estimate, on an amplitude of 0.1 (FIT_WARN: 1e-5, FIT_REFUSE: 0.01)."""
+    from dataclasses import replace
+    from types import SimpleNamespace
+
+    from vibromodel.analytic import FIT_REFUSE, FIT_WARN
+    from vibromodel.parameters import ParameterError
+
+    level = REGISTRY[4]
+    assert (level.warn_share, level.refuse_share) == (FIT_WARN, FIT_REFUSE)
+    stand_in = replace(level, error_estimate=lambda *args: {"estimate": estimate, "amplitude": 0.1, "terms": {}})
+    plant = SimpleNamespace(scene=Scene(), settings=Settings(fidelity=4), model=None, solution=None, notes=[],
+                            warnings=[])
+    if outcome == "refused":
+        with pytest.raises(ParameterError) as refusal:
+            error_estimates.attach(plant, stand_in, 0.0, STOP)
+        assert refusal.value.name == "fidelity" and "use fidelity 0" in refusal.value.reason
+        return
+    error_estimates.attach(plant, stand_in, 0.0, STOP)
+    assert plant.error_estimate["estimate"] == estimate
+    if outcome == "warned":
+        assert len(plant.warnings) == 1 and f"error estimate max|x - x_exact| ~ {estimate:.3g}" in plant.warnings[0]
+        assert "use fidelity 0" in plant.warnings[0]
+    else:
+        assert plant.warnings == []
