@@ -102,3 +102,23 @@ def test_the_fold_beside_a_grazing_is_where_m_minus_i_is_singular():
     assert np.min(np.abs(rho - 1.0)) <= 1e-6  # a multiplier at +1 (|rho - 1| ~ |det(M - I)| / (1 - rho2))
     assert fold.x_min > cont.CONTACT_EDGE  # the fold orbit still in contact; the grazing one touches the edge
     assert abs(grazing.x_min - cont.CONTACT_EDGE) <= 1e-9
+
+
+def _at(p1, p2, z0=(0.0, 0.0)):
+    return curves.CurvePoint(kind="fold", p1=p1, p2=p2, z0=np.array(z0), periods=1, period=1.0,
+                             multipliers=np.ones(2), x_min=0.0, x_max=0.0, residual=0.0, g=0.0, quadratic=0.0)
+
+
+def test_a_cusp_is_kept_only_where_the_parameters_turn():
+    # the measured cusp of the mu = 0.05 curve (omega and Delta both turn) and the dropped sign change near pull-in
+    # (both go on monotonically, omega at 0.12 of the state's move): points 183, 184 (located), 185 and 911, 912, 913
+    # of that curve
+    assert curves.parameters_turn(_at(0.9609378590714457, 0.05962776012493513, (0.3741620135413197, 0.9981036012690473)),
+                                  _at(0.9609381117160323, 0.059627524664295196, (0.3726394323978897, 0.9996554486362746)),
+                                  _at(0.9609365970966298, 0.059628928118328234, (0.3689094676246529, 1.0034571954272644)))
+    assert not curves.parameters_turn(
+        _at(0.6367760693467331, 0.12980414610676405, (-2.5412460274615416, 1.8856721958133948)),
+        _at(0.6367725822063229, 0.12980420872287107, (-2.5412729294051015, 1.885658306944098)),
+        _at(0.6367693204547975, 0.12980426729861164, (-2.541298092542524, 1.8856453156377457)))
+    # monotone but by far less than the step: a turning below the resolution, kept
+    assert curves.parameters_turn(_at(0.0, 0.0, (0.0, 0.0)), _at(1e-9, 1e-9, (0.5, 0.0)), _at(2e-9, 2e-9, (1.0, 0.0)))

@@ -9,6 +9,7 @@ from typing import Callable
 
 import numpy as np
 import pyarrow as pa
+from scipy.optimize import brentq
 
 from vibromodel import averaging as av
 from vibromodel.parameters import Scene
@@ -179,19 +180,44 @@ def slow_flow_folds(scene: Scene, samples: int = 801) -> list[av.Fold]:
     return sorted(found, key=lambda fold: fold.omega)
 
 
-def slow_flow_cusp(scene: Scene, lo: float, hi: float) -> float | None:
-    """The smallest Delta in [lo, hi] with slow-flow folds (bisection on 'has folds'), None if none has."""
-    def has(delta):
-        return bool(slow_flow_folds(scene.with_values(Delta=delta)))
-
-    if not has(hi):
+def slow_flow_cusp_point(scene: Scene) -> dict | None:
+    """(omega, Delta, r) of the slow flow's cusp, without sampling: its steady states are s (mu^2/4 + u^2) = d^2 with
+    s = r^2, u = D - k(s), k(s) = kappa2 s + kappa4 s^2 (the backbone), D = (omega^2 - k1) / (2 omega), d = Delta /
+    (2 omega); the cusp is a triple root in s: F_ss = 0 gives u = s k'^2 / (2 k' + s k''), then F_s = mu^2/4 + u^2 -
+    2 s u k' = 0 is one equation in s, bracketed around its kappa4 = 0 root mu / (sqrt 3 |kappa2|) and solved by
+    Brent; D = u + k(s), omega = D + sqrt(D^2 + k1), Delta = 2 omega sqrt(s (mu^2/4 + u^2)). None without a cubic
+    backbone term or damping (no cusp)."""
+    model = av.averaged(scene)
+    k1, mu = model.eq.k[1], scene.mu
+    k2, k4 = model.backbone.kappa2, model.backbone.kappa4
+    if k2 == 0.0 or mu <= 0.0:
         return None
-    if has(lo):
-        return lo
-    for _ in range(30):
-        mid = math.sqrt(lo * hi)
-        lo, hi = (lo, mid) if has(mid) else (mid, hi)
-    return hi
+
+    def u_of(s):
+        kp = k2 + 2 * k4 * s
+        return s * kp * kp / (2 * kp + 2 * k4 * s)
+
+    def fold(s):
+        u = u_of(s)
+        return mu * mu / 4 + u * u - 2 * s * u * (k2 + 2 * k4 * s)
+
+    s0 = mu / (math.sqrt(3.0) * abs(k2))
+    if fold(0.5 * s0) * fold(2.0 * s0) > 0.0:
+        return None
+    s = brentq(fold, 0.5 * s0, 2.0 * s0, xtol=1e-16 * s0, rtol=1e-15)
+    u = u_of(s)
+    D = u + k2 * s + k4 * s * s
+    omega = D + math.sqrt(D * D + k1)
+    return {"omega": omega, "Delta": 2 * omega * math.sqrt(s * (mu * mu / 4 + u * u)), "r": math.sqrt(s)}
+
+
+def slow_flow_cusp(scene: Scene, lo: float, hi: float) -> float | None:
+    """The smallest Delta in [lo, hi] with slow-flow folds (the cusp's, slow_flow_cusp_point, or lo beyond it), None
+    if there is none in the range."""
+    cusp = slow_flow_cusp_point(scene)
+    if cusp is None or cusp["Delta"] > hi:
+        return None
+    return max(lo, cusp["Delta"])
 
 
 def omega_window(scene: Scene) -> tuple[float, float]:
@@ -280,11 +306,9 @@ def plot_chart(path: Path, data: dict) -> None:
     xs = [w for c in curve for w in c["folds"]]
     ys = [c["Delta"] for c in curve for _ in c["folds"]]
     ax.plot(xs, ys, ".", color="tab:blue", ms=4, label="slow-flow folds")  # dots: the count changes along Delta
-    if data["slow_flow_cusp_Delta"]:
-        cusp_row = next((c for c in curve if c["folds"]), None)
-        if cusp_row:
-            ax.plot(cusp_row["folds"][0], data["slow_flow_cusp_Delta"], "^", color="tab:blue", ms=8,
-                    label="slow-flow cusp")
+    cusp = slow_flow_cusp_point(Scene(**data["scene"]))
+    if data["slow_flow_cusp_Delta"] and cusp is not None and cusp["Delta"] == data["slow_flow_cusp_Delta"]:
+        ax.plot(cusp["omega"], cusp["Delta"], "^", color="tab:blue", ms=8, label="slow-flow cusp")
     for key, marker, color, label in (("exact_folds", "s", "tab:red", "exact folds"),
                                       ("grazing", "o", "tab:orange", "exact grazing (contact first lost)"),
                                       ("period_doubling", "D", "tab:purple", "exact period doubling")):
@@ -361,12 +385,9 @@ def plot_curves(path: Path, curves: two.Curves, scene: Scene, title: str) -> Non
                     label="curve stopped (point budget)" if "stop" not in seen else None)
             seen.add("stop")
     if (p1, p2) == ("omega", "Delta") and any(pt.event == "cusp" for c in curves.curves for pt in c.points):
-        values = [pt.p2 for c in curves.curves for pt in c.points]
-        slow = slow_flow_cusp(scene, max(min(values) / 4, 1e-6), max(values))
+        slow = slow_flow_cusp_point(scene)
         if slow is not None:
-            folds = slow_flow_folds(scene.with_values(Delta=slow * (1 + 1e-9)))
-            if folds:
-                ax.plot(folds[0].omega, slow, "^", color="tab:blue", ms=9, label="slow flow's cusp (averaging)")
+            ax.plot(slow["omega"], slow["Delta"], "^", color="tab:blue", ms=9, label="slow flow's cusp (averaging)")
     ax.set_xlabel(parameter_label(p1))
     ax.set_ylabel(parameter_label(p2))
     ax.grid(True, alpha=0.3)

@@ -25,7 +25,8 @@ further iteration re-evaluates the exact residual (1 map).
 Codimension two on a fold curve: the cusp, where the fold's quadratic coefficient a = v^T P_zz(w, w) / 2
 changes sign. The Jacobian's row g_z gives it for free: g_z w = -v^T (dM/dz w) w = -2 a (v normalised by the
 bordered system), so a sign change of g_z w between two points is located by Brent on the arclength; at the
-cusp both parameters turn (the curve's tangent lies in the state), which is checked and reported.
+cusp both parameters turn (the curve's tangent lies in the state): a located point where they do not is dropped
+(parameters_turn).
 """
 from __future__ import annotations
 
@@ -48,6 +49,9 @@ SIGN = {"fold": -1.0, "period-doubling": 1.0}  # A = M + SIGN I
 FD_STEP = 1e-6
 TOL = 1e-10  # |P(z) - z|_inf and |g|: shooting.NEWTON_TOL
 TURN = 0.2  # largest accepted turning of the tangent per step (rad), as for a branch
+# parameters_turn: over a step through a cusp the parameters move by O(step^2), measured <= 1e-6 of the state's move
+# where they did not visibly turn (eps = 1/32 of cusp_order: noise); through the false one by 0.12 of it
+TURN_SLOPE = 0.01
 
 
 @dataclass
@@ -250,7 +254,9 @@ def follow(system: Augmented, start: CurvePoint, direction: float, p2_bounds: tu
             continue
         if system.kind == "fold" and last.quadratic * point.quadratic < 0.0:
             try:
-                points.append(locate_cusp(system, u, t, h))
+                located = locate_cusp(system, u, t, h)
+                if parameters_turn(last, located, point):
+                    points.append(located)
             except (sh.ShootingError, ValueError):
                 pass
         points.append(point)
@@ -267,6 +273,22 @@ def follow(system: Augmented, start: CurvePoint, direction: float, p2_bounds: tu
             break
         h = min(max_step, 1.5 * h) if iterations <= 2 else min(max_step, h)
     return points, reason, joined
+
+
+def parameters_turn(before: CurvePoint, at: CurvePoint, after: CurvePoint) -> bool:
+    """The parameters turn at `at` between the curve's points before and after it -- the cusp's geometric signature:
+    the tangent lies in the state there, so over the step the parameters move by O(step^2) and turn -- unless a
+    parameter turns (the located point may lie a little past the other's turning), or the parameters' move over the
+    step is below TURN_SLOPE times the state's (a turning below the corrector's resolution: the curve's points carry
+    its absolute tolerances, coarse beside parameters ~1e-7 at the smallest cusp_order scenes). A sign
+    change of the quadratic coefficient without it is not a cusp: g_z w comes from forward differences of M, whose
+    bias moves its zero where the true coefficient is small (seen near pull-in on the fold curve of mu = 0.05, R = 3
+    at omega ~ 0.637, Delta ~ 0.1298: omega went on monotonically at 0.12 of the state's move)."""
+    if (at.p1 - before.p1) * (after.p1 - at.p1) < 0.0 or (at.p2 - before.p2) * (after.p2 - at.p2) < 0.0:
+        return True
+    step = float(np.linalg.norm(after.z0 - before.z0))
+    move = max(abs(after.p1 - before.p1), abs(after.p2 - before.p2))
+    return move <= TURN_SLOPE * step
 
 
 def _between(a: CurvePoint, b: CurvePoint, q: CurvePoint, scales) -> bool:

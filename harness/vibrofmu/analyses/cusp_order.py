@@ -36,14 +36,13 @@ import time
 from pathlib import Path
 
 import numpy as np
-from scipy.optimize import brentq, minimize_scalar
+from scipy.optimize import minimize_scalar
 
-from vibromodel import averaging as av
 from vibromodel.parameters import Scene
 
 from vibrofmu.analyses import continuation as cont
 from vibrofmu.analyses import curves
-from vibrofmu.analyses.continuation_output import omega_window
+from vibrofmu.analyses.continuation_output import omega_window, slow_flow_cusp_point
 
 MU1, DELTA1, R = 0.01, 0.008, 3.0  # mu = MU1 eps^2, the starting branch at Delta = DELTA1 eps^3
 EPSILONS = (1.0, 0.5, 0.25, 0.125, 0.0625, 0.03125)
@@ -63,26 +62,8 @@ def scene_of(eps: float) -> Scene:
 
 
 def slow_flow_cusp(scene: Scene) -> dict:
-    """(omega, Delta, r) of the slow flow's cusp (module doc)."""
-    model = av.averaged(scene)
-    k1, mu = model.eq.k[1], scene.mu
-    k2, k4 = model.backbone.kappa2, model.backbone.kappa4
-
-    def u_of(s):
-        kp, kpp = k2 + 2 * k4 * s, 2 * k4
-        return s * kp * kp / (2 * kp + s * kpp)
-
-    def fold(s):
-        u = u_of(s)
-        return mu * mu / 4 + u * u - 2 * s * u * (k2 + 2 * k4 * s)
-
-    s0 = mu / (math.sqrt(3.0) * abs(k2))
-    lo, hi = 0.5 * s0, 2.0 * s0
-    s = brentq(fold, lo, hi, xtol=1e-16 * s0, rtol=1e-15)
-    u = u_of(s)
-    D = u + k2 * s + k4 * s * s
-    omega = D + math.sqrt(D * D + k1)
-    return {"omega": omega, "Delta": 2 * omega * math.sqrt(s * (mu * mu / 4 + u * u)), "r": math.sqrt(s)}
+    """(omega, Delta, r) of the slow flow's cusp (module doc; continuation_output.slow_flow_cusp_point)."""
+    return slow_flow_cusp_point(scene)
 
 
 def refine_cusp(system: curves.Augmented, estimate: curves.CurvePoint, width: float,

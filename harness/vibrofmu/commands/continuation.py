@@ -89,9 +89,6 @@ def run(args) -> int:
             raise UserError("--follow needs --param2 NAME --to2 VALUE")
         if args.param2 == args.param:
             raise UserError(f"--param2 {args.param2}: it is the branch's parameter already; name another")
-        if args.param2 in parse_set(args.set):
-            raise UserError(f"--set {args.param2}=...: {args.param2} is --param2 (its start is the default "
-                            f"{getattr(scene, args.param2):g}; the curves start at the branch)")
         from vibromodel.parameters import validate
 
         for value in (args.to2, args.from2):
