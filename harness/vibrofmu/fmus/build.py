@@ -9,6 +9,7 @@ returns fmi2Discard or fmi2Fatal instead of fmi2Error). `compiled_parts()` says 
 """
 from __future__ import annotations
 
+import functools
 import os
 import tempfile
 from pathlib import Path
@@ -16,7 +17,6 @@ from pathlib import Path
 from fmpy import read_model_description
 from pythonfmu import FmuBuilder
 from vibromodel.analytic import OafmSettings, cached_solve, covering
-from vibromodel.compiled import LIBRARY_NAME
 from vibromodel.parameters import Scene
 from vibromodel.plant import DEFAULT_EXPERIMENT
 
@@ -24,11 +24,11 @@ from vibrofmu import paths
 from vibrofmu.fmus.archive import normalize_entries, publish, staging
 from vibrofmu.fmus.entry import importable, pythonfmu_entry
 from vibrofmu.fmus.fmu_variables import annotate
-from vibrofmu.fmus.kernel import compile_kernel
+from vibrofmu.fmus.kernel import kernel_file
 from vibrofmu.fmus.pythonenv import pack_python_env
 from vibrofmu.fmus.refresult import pack_reference
 from vibrofmu.fmus.shim import install_status_shim
-from vibrofmu.fmus import toolchain
+from vibrofmu.fmus import compilers, toolchain
 
 FMU_SRC = paths.FMU_SRC
 PLANT_SLAVE = FMU_SRC / "HertzEAOscillator.py"
@@ -99,42 +99,43 @@ def build_with_default_oafm(slave: Path, scene: Scene, out_dir: Path, extra_reso
 def build_plant(out_dir: Path | None = None) -> Path:
     """The plant FMU with the compiled kernel (when there is a C compiler); fidelity 4 of its default scene
     starts without a fit."""
-    with tempfile.TemporaryDirectory() as tmp:
-        return build_with_default_oafm(PLANT_SLAVE, Scene(), out_dir, extra_resources=_kernel(Path(tmp)))
+    return build_with_default_oafm(PLANT_SLAVE, Scene(), out_dir, extra_resources=_kernel())
 
 
 def build_controller(out_dir: Path | None = None) -> Path:
     """The controller FMU with the compiled kernel (fmu_src/core/controller.c is in it) when there is a C
     compiler."""
-    with tempfile.TemporaryDirectory() as tmp:
-        return build_fmu(CONTROLLER_SLAVE, out_dir, extra_resources=_kernel(Path(tmp)))
+    return build_fmu(CONTROLLER_SLAVE, out_dir, extra_resources=_kernel())
 
 
 def build_closed_loop(out_dir: Path | None = None) -> Path:
     """The monolithic closed loop with the compiled kernel (fmu_src/core/closedloop.c is in it) when there is a C
     compiler; its OAFM reference (x~(0) = 0.04, x~'(0) = 0: the paper example) is packed."""
-    with tempfile.TemporaryDirectory() as tmp:
-        return build_with_default_oafm(CLOSED_LOOP_SLAVE, Scene(), out_dir, extra_resources=_kernel(Path(tmp)))
+    return build_with_default_oafm(CLOSED_LOOP_SLAVE, Scene(), out_dir, extra_resources=_kernel())
 
 
-def _kernel(folder: Path) -> tuple[Path, ...]:
-    """(the compiled kernel in folder,), or () without a C compiler."""
-    return () if compiled_parts() else (compile_kernel(folder / LIBRARY_NAME),)
+def _kernel() -> tuple[Path, ...]:
+    """(the compiled kernel,), or () without a C compiler: kernel.kernel_file(), compiled once per source version
+    and compiler (its cache) rather than once per FMU."""
+    return () if compiled_parts() else (kernel_file(),)
 
 
-def build_all(out_dir: Path | None = None) -> list[Path]:
-    """The pythonfmu FMUs in out_dir (default ./build) and their native twins in out_dir/native (vibrofmu.fmus.native)."""
+def build_all(out_dir: Path | None = None, win64: bool | None = None) -> list[Path]:
+    """The pythonfmu FMUs in out_dir (default ./build) and their native twins in out_dir/native (vibrofmu.fmus.native;
+    win64 as build_native takes it)."""
     fmus = [build(out_dir) for build in (build_plant, build_controller, build_closed_loop)]
-    return fmus + build_natives(fmus, Path(fmus[0]).parent / "native")
+    return fmus + build_natives(fmus, Path(fmus[0]).parent / "native", win64)
 
 
-def build_natives(fmus: list[Path], out_dir: Path) -> list[Path]:
+def build_natives(fmus: list[Path], out_dir: Path, win64: bool | None = None) -> list[Path]:
     """The native FMU of each pythonfmu FMU that has a native model (fmu_src/native/<id>/), as FMI 2.0 in out_dir
-    and as FMI 3.0 in out_dir/fmi3; none without a C compiler."""
+    and as FMI 3.0 in out_dir/fmi3 (with win64 binaries: win64 None when mingw-w64 is installed, else as given);
+    none without a C compiler."""
     from vibrofmu.fmus.native import NATIVE_SRC, build_native
 
     if compiled_parts() is not None:
         return []
     natives = [fmu for fmu in fmus if (NATIVE_SRC / Path(fmu).stem / "native_model.c").is_file()]
-    return [build_native(fmu, out_dir) for fmu in natives] + [
-        build_native(fmu, Path(out_dir) / "fmi3", fmi_version=3) for fmu in natives]
+    steps = [functools.partial(build_native, fmu, out_dir, win64) for fmu in natives] + [
+        functools.partial(build_native, fmu, Path(out_dir) / "fmi3", win64, fmi_version=3) for fmu in natives]
+    return compilers.in_parallel(steps)  # one compiler per core; Ctrl-C or a failure stops them all

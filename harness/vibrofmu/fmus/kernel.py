@@ -108,9 +108,10 @@ def exclusive(lock_file: Path):
             fcntl.flock(handle, fcntl.LOCK_UN)
 
 
-def kernel_library():
-    """The kernel library, compiled once per source version into library_folder(), loaded with the layout
-    check of vibromodel.compiled; raises RuntimeError if it cannot be loaded."""
+def kernel_file() -> Path:
+    """The kernel library's file, compiled once per source version into library_folder() (the FMU builds pack
+    this one file instead of compiling the kernel once per FMU)."""
+    check_fidelity_header()  # (a cached library of the same sources exists only if the header was current)
     folder = library_folder()
     if not (folder / compiled.LIBRARY_NAME).exists():
         folder.mkdir(parents=True, exist_ok=True)
@@ -118,6 +119,13 @@ def kernel_library():
             if not (folder / compiled.LIBRARY_NAME).exists():
                 with tempfile.TemporaryDirectory(dir=folder) as tmp:  # a reader sees no file or a whole one
                     os.replace(compile_kernel(Path(tmp) / compiled.LIBRARY_NAME), folder / compiled.LIBRARY_NAME)
+    return folder / compiled.LIBRARY_NAME
+
+
+def kernel_library():
+    """The kernel library (kernel_file()), loaded with the layout check of vibromodel.compiled; raises
+    RuntimeError if it cannot be loaded."""
+    folder = kernel_file().parent
     library, reason = compiled.load_library([folder])
     if library is None:
         raise RuntimeError(f"the compiled kernel in {folder} cannot be used: {reason}")

@@ -23,6 +23,7 @@ import re
 import shutil
 import string
 import subprocess
+import threading
 import xml.etree.ElementTree as ET
 import zipfile
 from pathlib import Path
@@ -30,10 +31,11 @@ from pathlib import Path
 from vibromodel.messages import TEXTS
 
 from vibrofmu import paths
-from vibrofmu.fmus import toolchain
+from vibrofmu.fmus import compilers, toolchain
 from vibrofmu.fmus.kernel import check_fidelity_header
 from vibrofmu.fmus.state_fields import state_fields_header
 
+_FMPY = threading.Lock()  # build_native's reference simulation, when native FMUs are built side by side
 FMU_SRC = paths.FMU_SRC  # a checkout's fmu_src/ or the installed package's copy
 NATIVE_SRC = FMU_SRC / "native"
 FMI_SRC = FMU_SRC / "fmi"  # the FMI 2.0 layer shared with the status shim
@@ -369,7 +371,7 @@ def compile_binary(sources: Path, c_files: list[str], out: Path, target: str = "
         exports = [f"-Wl,--version-script={script}"]
     cmd = [*command, f"-I{sources}", toolchain.fmi_include(), "-o", str(out), *(str(sources / f) for f in c_files),
            *exports, "-lm"]
-    proc = subprocess.run(cmd, capture_output=True, text=True)
+    proc = compilers.run(cmd)  # (killed at once when a parallel build stops: fmus.compilers)
     if proc.returncode != 0 or proc.stderr.strip():
         raise RuntimeError(f"compiling {out.name} failed or warned ({' '.join(cmd)}):\n{proc.stderr}")
     return out
@@ -554,7 +556,8 @@ def build_native(pythonfmu_fmu: Path, out_dir: Path, win64: bool | None = None, 
             for path in sorted(sources.iterdir()):
                 z.write(path, f"sources/{path.name}")
         if reference and fmi_version == 2:
-            pack_reference(fmu)
+            with _FMPY:  # one simulation at a time in this process (FMPy keeps process-wide state)
+                pack_reference(fmu)
         normalize_entries(fmu)  # entries 0644, regular files
         return publish(fmu, out_dir / fmu.name)
 
