@@ -41,6 +41,12 @@ def run(cmd: list[str]) -> subprocess.CompletedProcess:
     return subprocess.CompletedProcess(cmd, proc.returncode, out, err)
 
 
+def running() -> int:
+    """How many compilers are running now."""
+    with _lock:
+        return len(_running)
+
+
 def stop() -> None:
     """Kill every compiler running and start no new one (until the current in_parallel ends)."""
     with _lock:
