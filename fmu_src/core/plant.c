@@ -253,7 +253,7 @@ static inline __attribute__((always_inline)) int check_step_with(VkPlant *p, con
     double ceiling = ops->max_step(slots_of(p));
     if (!(isfinite(h) && h > 0.0)) return VK_BAD_STEP;
     if (!isfinite(p->U_input)) return VK_BAD_INPUT;
-    if (h / ceiling > p->max_steps_per_dostep) return VK_TOO_MANY_STEPS;
+    if (vk_too_many_steps(h, ceiling, p->max_steps_per_dostep)) return VK_TOO_MANY_STEPS;
     if (!(isfinite(t) && fabs(t - p->plant_t) <= p->time_tolerance * py_max(1.0, fabs(t)))) return VK_BAD_TIME;
     return VK_OK;
 }

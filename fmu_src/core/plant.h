@@ -35,6 +35,15 @@ enum {
 #define VK_MESSAGE DOP_MESSAGE
 enum { VK_DOP853 = 0, VK_RK4 = 1 };  /* plant.Solver */
 
+/* VK_TOO_MANY_STEPS (and the closed loop's VL_TOO_MANY_STEPS): a doStep of h with steps of at most `ceiling` needs
+   more than `budget` steps -- the count RK4 takes, ceil(h / ceiling * (1 - 1e-12)), is over the budget, so that a
+   ratio equal to the budget but for rounding (0.1 / 1e-7 = 1000000.0000000001) is accepted
+   (vibromodel.settings.too_many_steps, the same expression). */
+static inline int vk_too_many_steps(double h, double ceiling, double budget)
+{
+    return h / ceiling * (1.0 - 1e-12) > budget;
+}
+
 typedef struct {
     /* ---- model and settings (set once by vibromodel.compiled) ---- */
     VkModel model;

@@ -128,7 +128,8 @@ def step_budget(kernel: int) -> int:
 def too_many_steps(h: float, ceiling: float, kernel: int = Kernel.COMPILED) -> str | None:
     """Why a doStep of h with steps of at most `ceiling` is refused up front on `kernel`, or None."""
     budget = step_budget(kernel)
-    if not h / ceiling > budget:
+    if not h / ceiling * (1.0 - 1e-12) > budget:  # the steps RK4 takes, ceil(h / ceiling * (1 - 1e-12)): a ratio
+        # equal to the budget but for rounding (0.1 / 1e-7 = 1000000.0000000001) is accepted (plant.h's vk_too_many_steps)
         return None
     if kernel == Kernel.COMPILED:
         return (f"needs more than {budget} steps of {ceiling:g} (max_step); make smaller communication steps or "

@@ -445,3 +445,26 @@ def test_the_solvers_drive_gain_is_integrates_bit_for_bit(library, theta):
     function = library.vk_rk4_drive_gain_x
     function.restype, function.argtypes = ctypes.c_double, [ctypes.c_double]
     assert bits(function(theta)) == bits(rk4_drive_gains(theta)[0])
+
+
+# ---- the step budget's up-front check at a ratio equal to the budget but for rounding ----
+
+def test_step_budget_accepts_a_ratio_equal_to_it_but_for_rounding():
+    """A doStep of 0.1 with max_step 1e-7 takes exactly 10^6 RK4 steps (RK4's count, ceil(h / max_step (1 -
+    1e-12))), the budget, though 0.1 / 1e-7 rounds to 1000000.0000000001: accepted; one more step's worth is not."""
+    assert 0.1 / 1e-7 > settings_module.MAX_STEPS_PER_DOSTEP  # the rounding this is about
+    assert settings_module.too_many_steps(0.1, 1e-7) is None
+    assert settings_module.too_many_steps(0.1 + 1e-7, 1e-7) is not None  # 10^6 + 1 steps
+
+
+def test_compiled_step_budget_accepts_a_ratio_equal_to_it_but_for_rounding(library):
+    """The kernel's check (plant.h's vk_too_many_steps, the closed loop's too) on a budget of 1000 (the plant's
+    field, set here so that the step is 1000 RK4 steps rather than 10^6): h = 1e-4 over max_step 1e-7 rounds to
+    1000.0000000000001 and is taken in 1000 steps; 1001 steps' worth is refused up front, nothing stepped."""
+    assert 1e-4 / 1e-7 > 1000.0
+    plant = CompiledPlant(Scene(), Settings(solver=plant_module.Solver.RK4, max_step=1e-7), library)
+    plant._plant.max_steps_per_dostep = 1000.0
+    assert library.vk_do_step(plant.address, 0.0, 1e-4) == 0
+    assert plant.n_steps == 1000 and plant.t == 1e-4
+    assert library.vk_do_step(plant.address, 1e-4, 1e-4 + 1e-7) == compiled.VK_TOO_MANY_STEPS
+    assert plant.n_steps == 1000 and plant.t == 1e-4
