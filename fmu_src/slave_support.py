@@ -381,7 +381,8 @@ class StatusSlave(Fmi2Slave):
     def _step_allowed(self, t, h) -> bool:
         """fmi2DoStep only in step mode (not before initialisation, not after fmi2Terminate), and not beyond the
         stop time declared in fmi2SetupExperiment; otherwise fmi2Error naming the call and the state."""
-        if self.phase == TERMINATED:
+        if self.phase not in CALLS["fmi2DoStep"] and self.initialised and self.halted:
+            # the table refuses it after initialisation (terminated): the refusal says why the instance halted
             self._error(f"doStep refused: {self.halted}")
             return False
         if not self._allowed("fmi2DoStep"):
@@ -614,9 +615,10 @@ class StatusSlave(Fmi2Slave):
             self._error(f"{ParameterError(name, value, refusal)}")
 
     def _set_refusal(self, var):
-        """Why FMI 2.0 forbids setting var now, or None (fmi2SetXXX in the co-simulation state machine)."""
-        if self.phase == TERMINATED:
-            return "no variable may be set in the terminated state (FMI 2.0)"
+        """Why FMI 2.0 forbids setting var now, or None (fmi2SetXXX in the co-simulation state machine: the table's
+        states of the setters, which are the same for every type, then the rules per variable)."""
+        if self.phase not in CALLS["fmi2SetReal"]:
+            return f"no variable may be set in the {self.phase} state (FMI 2.0)"
         if var.causality == Fmi2Causality.input:
             return None
         if var.causality == Fmi2Causality.parameter and var.variability == Fmi2Variability.tunable:

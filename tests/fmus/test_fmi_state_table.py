@@ -228,3 +228,43 @@ def test_the_state_scan_finds_a_hand_written_check():
     assert STATE_READ.search("    if (w->mode == FMI2_STEP_MODE) return refuse(w, ...);")
     assert STATE_READ.search("    if (I->s.phase != PHASE_STEP_MODE && ...)")
     assert not STATE_READ.search("    if (L->mode == FMI2_MODE_FATAL) return fmi2Fatal;")  # the error mode
+
+
+# The Python slaves' own comparisons of their phase (slave_support.StatusSlave): the functions that may compare it
+# with a named state, each not a call-permission question (those ask the table: _allowed, CALLS[...]).
+PYTHON_STATE_READS = {
+    "_get_values",  # an output read in initialization mode is computed from the start values (what, not whether)
+}
+PY_STATE_READ = re.compile(r"self\.phase\s*(?:==|!=)")
+
+
+def test_the_python_slaves_ask_the_table_not_the_phase():
+    """Whether a call (doStep, a setter) is allowed is the table's answer in the Python slaves too: no function of
+    slave_support.py compares the phase with a state by hand outside PYTHON_STATE_READS."""
+    text = (paths.FMU_SRC / "slave_support.py").read_text()
+    methods = re.finditer(r"\n    def (\w+)\(.*?(?=\n    def |\n\S|\Z)", text, flags=re.S)  # to the next def
+    reads = {m.group(1) for m in methods if PY_STATE_READ.search(m.group(0))}
+    assert reads == PYTHON_STATE_READS
+    assert PY_STATE_READ.search("        if self.phase == TERMINATED:")  # the scan is not blind
+
+
+def test_the_python_slaves_setters_and_do_step_follow_the_table(monkeypatch):
+    """A table that allowed the setters in the terminated state would let a terminated slave take a parameter's
+    value, and one that allowed doStep in the instantiated state would refuse it only for what the step itself
+    lacks: the slaves read the table (slave_support.CALLS), not a state of their own."""
+    with importable(paths.FMU_SRC):
+        import slave_support
+        from AdaptiveLyapunovController import AdaptiveLyapunovController
+
+        slave = AdaptiveLyapunovController(instance_name="table")
+        logged = []
+        monkeypatch.setattr(slave, "log", lambda message, status=None: logged.append(message))
+        var = next(v for v in slave.vars.values() if v.name == "kernel")  # a parameter
+        slave.phase = slave_support.TERMINATED
+        assert slave._set_refusal(var) == "no variable may be set in the terminated state (FMI 2.0)"
+        monkeypatch.setitem(slave_support.CALLS, "fmi2SetReal", slave_support.PHASES)
+        assert slave._set_refusal(var) is None
+        slave.phase = slave_support.INSTANTIATED
+        assert not slave._step_allowed(0.0, 0.1) and "fmi2DoStep is not allowed in the instantiated state" in logged[-1]
+        monkeypatch.setitem(slave_support.CALLS, "fmi2DoStep", slave_support.PHASES)
+        assert slave._step_allowed(0.0, 0.1)
