@@ -15,6 +15,7 @@
 #include "me_model.h"
 #include "pytext.h"
 #include "rules.h"
+#include "rule_index.h" /* RULE_VR, RULE_WHEN_VR: each rule's parameters by value reference */
 #include "state_checks.h"
 
 #define EXPORT FMI2_Export /* fmi2Functions.h: dllexport on Windows, default visibility elsewhere */
@@ -28,6 +29,7 @@ struct Instance {
     State s;
     int model_exchange; /* instantiated as fmi2ModelExchange (fmi2_me.c) */
     int early_return;   /* FMI 3.0 co-simulation with early return (fmi3_native.c): doStep is model_do_step_early */
+    double call_steps;  /* the solver steps the current fmi3DoStep has taken so far, over its internal doSteps */
 };
 
 /* The serialized FMU state: this header, then the State's bytes. */
@@ -94,6 +96,8 @@ Fmi2Layer *native_layer(Instance *inst) { return &inst->fmi; }
 int native_model_exchange(const Instance *inst) { return inst->model_exchange; }
 void native_set_early_return(Instance *inst, int on) { inst->early_return = on != 0; }
 
+double *native_call_steps(Instance *inst) { return &inst->call_steps; }
+
 /* ---- the FMI state machine: the state table (fmi2_calls.h), asked through fmi2_layer.c ---- */
 
 /* The instance's state in the table: its phase; a Model Exchange instance's running phase is its mode. */
@@ -130,15 +134,12 @@ static void value_text(const State *s, fmi2ValueReference vr, char *out, size_t 
     else snprintf(out, size, "%s", s->value[vr] != 0.0 ? "True" : "False");
 }
 
+_Static_assert(N_RULE_INDEX == N_RULES, "rule_index.h and rules.h were generated from different rule tables");
+
 /* StatusSlave._initialise's first step, parameters.check_parameters: the first parameter (in the table's
    order) out of its range halts the instance, naming it.  rtol is the experiment's tolerance when
-   fmi2SetupExperiment gave one (StatusSlave._parameter_values). */
-static int parameter_index(const char *name)
-{
-    for (size_t i = 0; i < N_VARIABLES; i++)
-        if (VARIABLES[i].causality == C_PARAMETER && strcmp(VARIABLES[i].name, name) == 0) return (int)i;
-    return -1;
-}
+   fmi2SetupExperiment gave one (StatusSlave._parameter_values).  The parameters of rule r are RULE_VR[r] and
+   RULE_WHEN_VR[r] (rule_index.h, generated: the first parameter of that name, -1 when the model has none). */
 
 /* Rule.refusal is None: the value is in the rule's range (or its automatic value). */
 static int obeys(const VibroRule *rule, double number)
@@ -164,17 +165,17 @@ static int check_parameters(Instance *inst)
 {
     for (size_t r = 0; r < N_RULES; r++) {
         const VibroRule *rule = &RULES[r];
-        int vr = parameter_index(rule->name);
+        int vr = RULE_VR[r];
         if (vr < 0) continue;
         if (rule->when != NULL) {
-            int other = parameter_index(rule->when);
+            int other = RULE_WHEN_VR[r];
             int applies = 0;
             for (int k = 0; other >= 0 && k < rule->n_when; k++)
                 if (inst->s.value[other] == rule->when_values[k]) applies = 1;
             if (!applies) continue;
         }
         double number = inst->s.value[vr];
-        int tolerance = strcmp(rule->name, "rtol") == 0 && inst->s.has_tolerance;
+        int tolerance = inst->s.has_tolerance && strcmp(rule->name, "rtol") == 0;
         if (tolerance) number = inst->s.tolerance;
         if (obeys(rule, number)) continue;
         char text[64];
@@ -191,11 +192,11 @@ int native_rule_refusal(const State *s, const char *const names[], size_t n, cha
 {
     for (size_t r = 0; r < N_RULES; r++) {
         const VibroRule *rule = &RULES[r];
-        int listed = 0, vr = parameter_index(rule->name);
+        int listed = 0, vr = RULE_VR[r];
         for (size_t k = 0; k < n; k++) listed |= strcmp(names[k], rule->name) == 0;
         if (!listed || vr < 0) continue;
         if (rule->when != NULL) { /* Rule.applies: the condition's parameter must be among the names */
-            int other = parameter_index(rule->when), applies = 0, named = 0;
+            int other = RULE_WHEN_VR[r], applies = 0, named = 0;
             for (size_t k = 0; k < n; k++) named |= strcmp(names[k], rule->when) == 0;
             for (int k = 0; named && other >= 0 && k < rule->n_when; k++)
                 if (s->value[other] == rule->when_values[k]) applies = 1;

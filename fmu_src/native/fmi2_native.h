@@ -88,6 +88,9 @@ fmi2Status native_allowed(Instance *inst, const char *call, unsigned cs, unsigne
 fmi2Status native_settle(Instance *inst);
 /* FMI 3.0 co-simulation with early return: fmi2DoStep steps with model_do_step_early (me_model.h) */
 void native_set_early_return(Instance *inst, int on);
+/* The solver steps taken so far by the current FMI 3.0 doStep (fmi3_native.c sets 0 before its first internal
+   doStep; model_do_step_early adds its steps and stops at the step budget): the budget bounds the whole call */
+double *native_call_steps(Instance *inst);
 
 /* ---- provided by each model (native_model.c) ---- */
 /* After the generic start values are in value[]: the model's own defaults. */

@@ -747,6 +747,9 @@ EXPORT3 fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunic
         lastSuccessfulTime == NULL)
         return refuse(w, "fmi3DoStep: an output argument is NULL");
     const double t_end = currentCommunicationPoint + communicationStepSize;
+#ifdef HAS_EARLY_RETURN
+    *native_call_steps((Instance *)w->c) = 0.0; /* the step budget counts from here, over every internal doStep */
+#endif
     fmi2Status st = fmi2DoStep(w->c, currentCommunicationPoint, communicationStepSize,
                                noSetFMUStatePriorToCurrentPoint);
     double reached = st <= fmi2Warning ? t_end : currentCommunicationPoint;
@@ -758,9 +761,12 @@ EXPORT3 fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunic
         event = st <= fmi2Warning && me->step_event;
     } else if (w->event_mode_used && st <= fmi2Warning) {
         /* event mode without early return: the step goes on through each event it meets (the same solver steps:
-           model_do_step_early without an event is model_do_step) and eventHandlingNeeded says one happened */
+           model_do_step_early without an event is model_do_step) and eventHandlingNeeded says one happened.  The
+           step budget bounds the whole loop (native_call_steps: model_do_step_early stops with the budget's error
+           when the internal doSteps together spend it); each pass takes a solver step or returns a pending event,
+           so the passes are bounded too. */
         event = (int)me->step_event;
-        for (long n = 0; st <= fmi2Warning && me->reached < t_end && n < 100000000L; n++) {
+        while (st <= fmi2Warning && me->reached < t_end) {
             const double from = me->reached;
             st = fmi2DoStep(w->c, from, t_end - from, noSetFMUStatePriorToCurrentPoint);
             event |= st <= fmi2Warning && me->step_event;

@@ -462,3 +462,39 @@ def test_model_exchange_stops_at_pull_in_with_the_co_simulations_message(native_
     assert match, stopped[0][1]
     assert abs(result["time"][-1] - float(match.group(1))) <= 1e-9
     assert abs(1.0 - 2.0 * result["x"][-1] / (3.0 * scene["R"]) - 1e-3) <= 1e-9
+
+
+@pytest.mark.slow
+def test_fmi3_event_mode_step_budget_bounds_the_whole_do_step(plant_fmi3, tmp_path):
+    """With event mode and no early return, fmi3DoStep goes through each contact event with internal doSteps; the
+    step budget (10^6 solver steps) bounds the whole call, as it bounds a doStep without events.  A doStep of 200
+    over the IMPACTS scene with max_step 2e-4 passes the up-front check (200 / 2e-4 = 10^6 steps, the budget) but
+    takes more: DOP853 (the default solver) steps at max_step (its error-controlled step is far larger here) and
+    cuts a step at each of the 56 contact changes.  Without event mode the call stops with the budget's error; in
+    event mode it stopped there too only per internal doStep (each between two events, far under 10^6 steps), so
+    the call took them all and answered OK."""
+    from fmpy.fmi1 import FMICallException
+    from fmpy.fmi3 import fmi3LogMessageCallback
+
+    md = read_model_description(str(plant_fmi3))
+    folder = extract(str(plant_fmi3), str(tmp_path / "u"))
+    vrs = {v.name: v.valueReference for v in md.modelVariables}
+    outcomes = {}
+    for event_mode in (False, True):
+        messages = []
+        log = fmi3LogMessageCallback(lambda env, status, category, message: messages.append(message.decode()))
+        fmu = FMU3Slave(guid=md.guid, unzipDirectory=folder, modelIdentifier=md.coSimulation.modelIdentifier,
+                        instanceName="budget")
+        fmu.instantiate(eventModeUsed=event_mode, earlyReturnAllowed=False, logMessage=log)
+        names = [name for name in IMPACTS if name in vrs] + ["max_step"]
+        fmu.setFloat64([vrs[n] for n in names], [float(IMPACTS.get(n, 2e-4)) for n in names])
+        fmu.enterInitializationMode(startTime=0.0)
+        fmu.exitInitializationMode()
+        if event_mode:
+            fmu.updateDiscreteStates()
+            fmu.enterStepMode()
+        with pytest.raises(FMICallException):
+            fmu.doStep(0.0, STOP)
+        outcomes[event_mode] = [m for m in messages if "steps reached only" in m]
+        fmu.freeInstance()
+    assert outcomes[False] and outcomes[True], outcomes

@@ -464,7 +464,7 @@ static int step_checks(VkPlant *p, double t, double h)
 {
     if (!(isfinite(h) && h > 0.0)) return VK_BAD_STEP;
     if (!isfinite(p->U_input)) return VK_BAD_INPUT;
-    if (h / vk_step_ceiling(p) > p->max_steps_per_dostep) return VK_TOO_MANY_STEPS;
+    if (vk_too_many_steps(h, vk_step_ceiling(p), p->max_steps_per_dostep)) return VK_TOO_MANY_STEPS;
     if (!(isfinite(t) && fabs(t - p->plant_t) <= p->time_tolerance * fmax(1.0, fabs(t)))) return VK_BAD_TIME;
     return VK_OK;
 }
@@ -496,15 +496,22 @@ void model_do_step_early(Instance *inst, State *s, double t, double h)
     const double t_end = t + h;
     code = vk_set_input(p, p->plant_t, p->U_input);
     if (me->event_pending && p->dop.t != me->event_t) me->event_pending = 0; /* a restart dropped that step */
-    double steps = 0.0;
+    /* the steps of the whole FMI 3.0 doStep so far (its internal doSteps, one per event: fmi3_native.c): the
+       budget bounds the call, not each internal doStep */
+    double *steps = native_call_steps(inst);
     while (!code && p->dop.t < t_end && !(me->event_pending && me->event_t <= t_end)) {
-        if (steps >= p->dop.step_budget) { /* the budget's error, as the doStep reports it */
-            code = vk_advance(p, t_end);
-            break;
+        if (*steps >= p->dop.step_budget) { /* the budget's error, as dop_advance words it; nothing more stepped */
+            char a[64];
+            native_repr(t, a, sizeof a);
+            native_halt(inst, "doStep failed at tau = %s: %.0f steps reached only tau = %.10g of %.10g: make smaller "
+                        "communication steps", a, *steps, p->dop.t, t_end);
+            me->step_event = 0;
+            me->reached = p->plant_t;
+            return;
         }
         const int64_t side = p->dop.side[CONTACT_EVENT];
         code = vk_advance(p, nextafter(p->dop.t, INFINITY));
-        steps += 1.0;
+        *steps += 1.0;
         if (!code && p->dop.side[CONTACT_EVENT] != side) {
             me->event_pending = 1;
             me->event_t = p->dop.t;
