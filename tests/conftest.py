@@ -19,10 +19,37 @@ from vibrofmu.fmus.build import build_closed_loop, build_controller, build_plant
 from vibrofmu.hosts.run import run_fmu
 
 
+# VIBROFMU_TEST_BUILDS=FOLDER (set by .ci/run for its two pytest runs): the FMUs and the kernel are built into
+# FOLDER/<digest>/ instead of the run's temporary folder, so that a second run of the same tree (CI's `tools` tier
+# after the default suite) reuses them rather than building them again. The digest covers every file the builds
+# read (fmu_src/ and the harness, which holds the builders and the native C sources' generators) and the Python
+# that runs them: a change of either is a new folder, never a stale FMU. Unset (a user's run): a fresh build.
+BUILDS_ENV = "VIBROFMU_TEST_BUILDS"
+
+
+def builds_digest() -> str:
+    import hashlib
+    import sys
+
+    from vibrofmu.paths import FMU_SRC, PACKAGE_DIR
+
+    digest = hashlib.sha256(f"{sys.executable}\0{sys.version}\0{os.environ.get('CC', '')}".encode())
+    for root in (FMU_SRC, PACKAGE_DIR):
+        for path in sorted(root.rglob("*")):
+            if path.is_file() and "__pycache__" not in path.parts:
+                digest.update(f"\0{path.relative_to(root.parent)}\0".encode() + path.read_bytes())
+    return digest.hexdigest()[:16]
+
+
 @pytest.fixture(scope="session")
 def shared_dir(tmp_path_factory) -> Path:
-    """A folder every process of this test run sees: the master's base temporary folder under pytest-xdist (each
-    worker's own is a sub-folder of it), else this session's."""
+    """A folder every process of this test run sees: VIBROFMU_TEST_BUILDS/<digest>/ when set (above), else the
+    master's base temporary folder under pytest-xdist (each worker's own is a sub-folder of it), else this
+    session's."""
+    if os.environ.get(BUILDS_ENV):
+        folder = Path(os.environ[BUILDS_ENV]) / builds_digest()
+        folder.mkdir(parents=True, exist_ok=True)
+        return folder
     base = tmp_path_factory.getbasetemp()
     return base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base
 

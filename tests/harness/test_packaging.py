@@ -78,6 +78,10 @@ def test_build_without_a_c_compiler(tmp_path, plant_fmu):
     assert np.array_equal(python_only.outputs["x"], compiled.outputs["x"])
 
 
+# slow tier: a wheel build and a whole `vibrofmu build` (kernel included) of its own, one of the default suite's
+# longest tests; test_wheel_installs_and_builds_anywhere below checks more (the wheel installed into a fresh venv,
+# then build and demo from an unrelated folder), and CI runs it for Python 3.12 and 3.13
+@pytest.mark.slow
 @pytest.mark.fmu  # builds the FMUs
 def test_the_wheel_alone_builds_the_fmus(tmp_path):
     """The wheel's files suffice: unpacked, and imported without this checkout (python -S: no .pth files, so
