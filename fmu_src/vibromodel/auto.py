@@ -55,33 +55,29 @@ def candidates(settings):
     return sorted(rows, key=lambda row: row[0])
 
 
+EXACT_ROWS = tuple(sorted(((cost, rtol) for rtol, cost in EXACT_RUN_COST.items())))  # (cost, rtol), cheapest first
+# choose's walk: (cost per output, registry entry, rtol or None), cheapest first, as candidates()
+CHOICE_ROWS = tuple(sorted([(cost, entry(level), None) for level, cost in LADDER_COST.items()]
+                           + [(cost, entry(Fidelity.EXACT), rtol) for cost, rtol in EXACT_ROWS], key=lambda row: row[0]))
+
+
 def run_cost(level, per_output: float, span: float) -> float:
     """A candidate's modelled cost of a run of `span`: its set-up and its outputs at OUTPUT_INTERVAL, in outputs of
     the exact model at rtol 1e-8."""
-    return SETUP_COST[Fidelity(int(level))] + per_output * span / OUTPUT_INTERVAL
+    return SETUP_COST[level] + per_output * span / OUTPUT_INTERVAL
 
 
-def exact_estimate(scene, rtol: float, span: float, parts: dict | None = None) -> float:
+def exact_estimate(scene, rtol: float, span: float, estimator=None) -> float:
     """The estimate of the exact model's candidate at rtol (DOP853, max_step automatic) without building its plant:
-    the registry's estimator's value (error_estimates.solver_terms on the candidate's solver, rtol and max_step), as
-    the plant publishes it (rounded: error_estimates.attach); nan when it cannot estimate. parts: the scene's
-    error_estimates.response_parts over the span, shared by the candidates."""
-    from .error_estimates import round_estimate, solver_terms
+    the registry's estimator's value (error_estimates.solver_terms, here through its AdaptiveEstimator), as the plant
+    publishes it (rounded: error_estimates.attach); nan when it cannot estimate. estimator: the scene's
+    AdaptiveEstimator over the span, shared by the candidates."""
+    from .error_estimates import AdaptiveEstimator, response_parts, round_estimate
     try:
-        return round_estimate(solver_terms(scene, _ExactCandidate(rtol), span, parts)["solver"])
+        estimator = estimator or AdaptiveEstimator(scene, span, 0.0, response_parts(scene, span))
+        return round_estimate(estimator.terms(rtol)["solver"])
     except (ArithmeticError, ValueError):
         return math.nan
-
-
-class _ExactCandidate:
-    """What solver_terms reads of an exact candidate's settings (candidates: solver 0, max_step 0), without building
-    a Settings (its checks cost more than the estimate)."""
-    __slots__ = ("rtol",)
-    solver = 0
-    max_step = 0.0
-
-    def __init__(self, rtol: float):
-        self.rtol = rtol
 
 
 def describe(settings) -> str:
@@ -102,55 +98,65 @@ def choose(scene, settings, tolerance: float, build, native: bool = False, span:
     estimates' DEFAULT_SPAN). ParameterError naming `tolerance` when none meets it. native: as the native FMU
     chooses (the levels it cannot run passed over, without building them). The exact model's estimates are asked
     lazily, loosest rtol first, and the first that meets the tolerance is the fallback the cheap rungs must beat."""
-    from .error_estimates import DEFAULT_SPAN, response_parts
+    from .error_estimates import DEFAULT_SPAN, AdaptiveEstimator, response_parts
 
     check_tolerance(tolerance)
     span = DEFAULT_SPAN if span is None or not math.isfinite(span) or span <= 0.0 else float(span)
-    parts = response_parts(scene, span)
-    exact_rows = [(cost, rtol) for rtol, cost in sorted(EXACT_RUN_COST.items(), key=lambda item: item[1])]
+    try:
+        estimator = AdaptiveEstimator(scene, span, 0.0, response_parts(scene, span))
+    except (ArithmeticError, ValueError):
+        estimator = None  # every exact candidate's estimate is then nan (exact_estimate)
     estimates = {}
 
     def estimate_at(rtol):
         if rtol not in estimates:
-            estimates[rtol] = exact_estimate(scene, rtol, span, parts)
+            estimates[rtol] = exact_estimate(scene, rtol, span, estimator) if estimator else math.nan
         return estimates[rtol]
 
-    fallback = next(((cost, rtol) for cost, rtol in exact_rows if estimate_at(rtol) <= tolerance), None)
+    fallback = next(((cost, rtol) for cost, rtol in EXACT_ROWS if estimate_at(rtol) <= tolerance), None)
     fallback_cost = run_cost(Fidelity.EXACT, fallback[0], span) if fallback is not None else math.inf
-    rows = sorted([(cost, int(level), None) for level, cost in LADDER_COST.items()]
-                  + [(cost, int(Fidelity.EXACT), rtol) for cost, rtol in exact_rows], key=lambda row: row[0])
-    tried = []
-    for cost, fidelity, rtol in rows:
-        level = entry(fidelity)
+    tried = []  # (message, its values): formatted only for the log line
+    for cost, level, rtol in CHOICE_ROWS:
+        fidelity = int(level.level)
         if native and level.native_refusal is not None:
-            tried.append(text("AUTO_REFUSED", level=fidelity, parameter=NATIVE_NEEDS_PYTHON))
+            tried.append(("AUTO_REFUSED", {"level": fidelity, "parameter": NATIVE_NEEDS_PYTHON}))
             continue
         if rtol is not None:
-            rung = text("AUTO_EXACT_RUNG", level=fidelity, rtol=rtol)
+            rung = ("AUTO_EXACT_RUNG", {"level": fidelity, "rtol": rtol})
             estimate = estimate_at(rtol)
             if not (math.isfinite(estimate) and estimate <= tolerance):
-                tried.append(text("AUTO_ESTIMATE", rung=rung, estimate=estimate))
+                tried.append(("AUTO_ESTIMATE", {"rung": rung, "estimate": estimate}))
                 continue
             candidate = replace(settings, fidelity=fidelity, solver=0, rtol=rtol, max_step=0.0)
         else:
-            rung = text("AUTO_RUNG", level=fidelity)
+            rung = ("AUTO_RUNG", {"level": fidelity})
             if not native and run_cost(fidelity, cost, span) >= fallback_cost:
-                tried.append(text("AUTO_SETUP", rung=rung, fallback=text("AUTO_EXACT_RUNG", level=0,
-                                                                         rtol=fallback[1])))
+                tried.append(("AUTO_SETUP", {"rung": rung, "fallback": ("AUTO_EXACT_RUNG",
+                                                                         {"level": 0, "rtol": fallback[1]})}))
                 continue
             candidate = replace(settings, fidelity=fidelity)
         try:
             plant = build(candidate)
         except ParameterError as refusal:
-            tried.append(text("AUTO_REFUSED", level=fidelity, parameter=refusal.name))
+            tried.append(("AUTO_REFUSED", {"level": fidelity, "parameter": refusal.name}))
             continue
         estimate = plant.error_estimate["estimate"] if plant.error_estimate else math.nan
         if math.isfinite(estimate) and estimate <= tolerance:
-            skipped = text("AUTO_SKIPPED", tried="; ".join(tried)) if tried else ""
-            return plant, candidate, [text("AUTO_CHOSE", rung=rung, cost=cost, estimate=estimate, tolerance=tolerance,
-                                           skipped=skipped)]
-        tried.append(text("AUTO_ESTIMATE", rung=rung, estimate=estimate))
-    raise ParameterError("tolerance", tolerance, text("AUTO_NONE", tried="; ".join(tried)))
+            skipped = text("AUTO_SKIPPED", tried=_listed(tried)) if tried else ""
+            return plant, candidate, [text("AUTO_CHOSE", rung=_formatted(rung), cost=cost, estimate=estimate,
+                                           tolerance=tolerance, skipped=skipped)]
+        tried.append(("AUTO_ESTIMATE", {"rung": rung, "estimate": estimate}))
+    raise ParameterError("tolerance", tolerance, text("AUTO_NONE", tried=_listed(tried)))
+
+
+def _formatted(message) -> str:
+    """A (name, values) message of choose, its values' messages formatted first."""
+    name, values = message
+    return text(name, **{k: _formatted(v) if isinstance(v, tuple) else v for k, v in values.items()})
+
+
+def _listed(tried) -> str:
+    return "; ".join(_formatted(message) for message in tried)
 
 
 def auto_plant(scene, settings, tolerance: float, build, span: float | None = None):

@@ -276,23 +276,10 @@ def solver_terms(scene, settings, span: float, parts: dict | None = None) -> dic
     - RK4, step h: a part errs by (s h)^5 / 120 a per step (RK4's error constant for y' = i s y), adding up likewise:
       a s^5 h^4 / 120 _remembered(s) (at most 2 a). parts: response_parts(scene, span) when already computed."""
     parts = parts or response_parts(scene, span)
+    if not _fixed(settings):
+        return AdaptiveEstimator(scene, span, settings.max_step, parts).terms(settings.rtol)
     components = _components(parts)
     size = abs(parts["x_s"]) + sum(a for a, _ in components)
-    if not _fixed(settings):
-        rtol, _ = _solver_rtol(scene, settings, span)
-        scale_x = 0.01 + size  # integrate.ATOL_PER_RTOL = 0.01
-        scale_v = 0.01 + sum(a * s for a, s in components)
-        h = settings.max_step if settings.max_step > 0.0 else drive_step_ceiling(scene)
-        for a, s in components:
-            if a > 0.0 and s > 0.0:
-                weight = a * math.hypot(1.0 / scale_x, s / scale_v) / math.sqrt(2.0)
-                h = min(h, (rtol / (DOP853_ESTIMATOR * weight)) ** 0.125 / s)
-        accumulated = local = 0.0
-        for a, s in components:
-            accumulated += a * min(2.0, DOP853_LOCAL * (s * h) ** 9 / h * _remembered(s, parts))
-            local += a * DOP853_ESTIMATOR * (s * h) ** 8
-        value = CALIBRATION["adaptive"] * accumulated + CALIBRATION["local"] * local
-        return {"solver": value, "accumulated": accumulated, "local": local, "step": h, "amplitude": size}
     h = settings.max_step or _fixed_default()
     accumulated = 0.0
     for a, s in components:
@@ -300,14 +287,40 @@ def solver_terms(scene, settings, span: float, parts: dict | None = None) -> dic
     return {"solver": CALIBRATION["fixed"] * accumulated, "accumulated": accumulated, "amplitude": size}
 
 
+class AdaptiveEstimator:
+    """solver_terms of adaptive DOP853 on one scene, span and max_step, for any rtol (terms(rtol)): what does not
+    depend on rtol (the response's parts, the norm's scales, each part's weight, the step ceiling, the tolerance
+    factor) computed once, so that fidelity auto asks every rtol for the price of a few operations each."""
+
+    def __init__(self, scene, span: float, max_step: float, parts: dict):
+        self.parts = parts
+        self.components = _components(parts)
+        self.size = abs(parts["x_s"]) + sum(a for a, _ in self.components)
+        scale_x = 0.01 + self.size  # integrate.ATOL_PER_RTOL = 0.01
+        scale_v = 0.01 + sum(a * s for a, s in self.components)
+        self.ceiling = max_step if max_step > 0.0 else drive_step_ceiling(scene)
+        self.weights = [(s, a * math.hypot(1.0 / scale_x, s / scale_v) / math.sqrt(2.0)) for a, s in self.components
+                        if a > 0.0 and s > 0.0]
+        self.remembered = [_remembered(s, parts) for _, s in self.components]
+        self.factor = tolerance_factor(scene, span)
+
+    def terms(self, rtol: float) -> dict:
+        """solver_terms's dict at the requested rtol (the solver's: rtol times the tolerance factor, models.
+        solver_tolerance's value)."""
+        rtol = rtol if self.factor == 1.0 else max(MIN_RTOL, rtol * self.factor)
+        h = self.ceiling
+        for s, weight in self.weights:
+            h = min(h, (rtol / (DOP853_ESTIMATOR * weight)) ** 0.125 / s)
+        accumulated = local = 0.0
+        for (a, s), remembered in zip(self.components, self.remembered):
+            accumulated += a * min(2.0, DOP853_LOCAL * (s * h) ** 9 / h * remembered)
+            local += a * DOP853_ESTIMATOR * (s * h) ** 8
+        value = CALIBRATION["adaptive"] * accumulated + CALIBRATION["local"] * local
+        return {"solver": value, "accumulated": accumulated, "local": local, "step": h, "amplitude": self.size}
+
+
 def _fixed(settings) -> bool:
     return solver_entry(settings.solver).fixed_step
-
-
-def _solver_rtol(scene, settings, span):
-    """(the rtol the plant's solver runs at: models.solver_tolerance's value, without its note, None)."""
-    factor = tolerance_factor(scene, span)
-    return (settings.rtol if factor == 1.0 else max(MIN_RTOL, settings.rtol * factor)), None
 
 
 def _fixed_default():
