@@ -353,8 +353,10 @@ def force_error_parts(model, scene):
     return parts
 
 
-# cos(theta) at TRUNCATION_ANGLES midpoints of the cycle
-TRUNCATION_COSINES = tuple(math.cos(2.0 * math.pi * (i + 0.5) / TRUNCATION_ANGLES) for i in range(TRUNCATION_ANGLES))
+# cos(theta) at the first half of the TRUNCATION_ANGLES midpoints of the cycle: the other half (2 pi - theta) repeats
+# them, so the sums over the cycle are twice the sums over these, and its largest values are among these
+TRUNCATION_COSINES = tuple(math.cos(2.0 * math.pi * (i + 0.5) / TRUNCATION_ANGLES)
+                           for i in range(TRUNCATION_ANGLES // 2))
 
 
 def _force_error_harmonics(model, scene, x_s: float, amplitude: float,
@@ -363,10 +365,11 @@ def _force_error_harmonics(model, scene, x_s: float, amplitude: float,
     force error d = F_exact - F_poly's largest |mean|, |stiffness| 2 mean(d cos theta)/amplitude (its first harmonic,
     the describing function) and |rest| max|d - mean - stiffness amplitude cos theta| (the higher harmonics). d is
     A(x) + w B(x) (force_error_parts), so each harmonic is its A part plus w times its B part: the x samples are
-    evaluated once for every phase of the drive. with_rest False: rest nan (not computed)."""
+    evaluated once for every phase of the drive, and once for theta and 2 pi - theta (the same x). with_rest False:
+    rest nan (not computed)."""
     lo, hi = -1.5 + 1e-9, 1.5 * scene.R * (1.0 - 1e-3)
-    n, cosines, error = TRUNCATION_ANGLES, TRUNCATION_COSINES, force_error_parts(model, scene)
-    parts = [error(min(max(x_s + amplitude * c, lo), hi)) for c in cosines]
+    n, cosines, error = TRUNCATION_ANGLES // 2, TRUNCATION_COSINES, force_error_parts(model, scene)
+    parts = [error(min(max(x_s + amplitude * c, lo), hi)) for c in cosines]  # the cycle's distinct samples
     ac = (scene.beta != 0.0 or scene.gamma != 0.0) and scene.Omega > 0.0
     times = [math.pi / scene.Omega * j / TRUNCATION_TIMES for j in range(TRUNCATION_TIMES)] if ac else [0.0]
     ws = [scene.beta * math.sin(scene.Omega * t) - scene.gamma * math.cos(2.0 * scene.Omega * t) for t in times]
