@@ -164,8 +164,23 @@ def _native_fixture(name):
     return native
 
 
+def _fmi3_fixture(name):
+    """<name>_fmi3: the native FMU as FMI 3.0 (build_native(..., fmi_version=3)), built once per test run (shared
+    by the FMI 3.0 tests of tests/fmus/: one build each instead of one per module)."""
+
+    @pytest.fixture(scope="session", name=f"{name}_fmi3")
+    def fmi3(request, shared_dir):
+        from vibrofmu.fmus.native import build_native
+
+        pythonfmu, folder = request.getfixturevalue(f"{name}_fmu"), shared_dir / f"fmi3_{name}"
+        return built_once(shared_dir, f"fmi3_{name}", lambda: build_native(pythonfmu, folder, fmi_version=3))
+
+    return fmi3
+
+
 FMU_NAMES = ("plant", "controller", "closed_loop")
 native_plant_fmu, native_controller_fmu, native_closed_loop_fmu = map(_native_fixture, FMU_NAMES)
+plant_fmi3, controller_fmi3, closed_loop_fmi3 = map(_fmi3_fixture, FMU_NAMES)
 NATIVE_NAMES = tuple(f"native_{name}" for name in FMU_NAMES)
 native_plant_unzipped, native_controller_unzipped, native_closed_loop_unzipped = map(_unzipped_fixture, NATIVE_NAMES)
 start_native_plant, start_native_controller, start_native_closed_loop = map(_starter_fixture, NATIVE_NAMES)
@@ -181,7 +196,8 @@ start_plant, start_controller, start_closed_loop = map(_starter_fixture, FMU_NAM
 # marked `slow` is marked `fast`: `pytest -m fast -n 2` is the tier that builds no FMU (under a minute).
 # start_<name> and <name>_unzipped ask for <name>_fmu with getfixturevalue: not in the closure, so listed too.
 FMU_FIXTURES = {f"{prefix}{name}{suffix}" for name in (*FMU_NAMES, *NATIVE_NAMES)
-                for prefix, suffix in (("", "_fmu"), ("", "_unzipped"), ("start_", ""))}
+                for prefix, suffix in (("", "_fmu"), ("", "_unzipped"), ("start_", ""))} | {
+                   f"{name}_fmi3" for name in FMU_NAMES}
 
 
 def pytest_collection_modifyitems(config, items):

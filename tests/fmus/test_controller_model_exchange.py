@@ -30,13 +30,6 @@ INPUTS = {"x": 0.3, "v": -0.2, "x_ref": 0.1, "v_ref": 0.05, "a_ref": -0.02}
 STOP, INTERVAL = 50.0, 0.1
 
 
-@pytest.fixture(scope="module")
-def controller_fmi3(controller_fmu, tmp_path_factory):
-    from vibrofmu.fmus.native import build_native
-
-    return build_native(controller_fmu, tmp_path_factory.mktemp("controller_fmi3"), fmi_version=3)
-
-
 def _inputs():
     return np.array([(0.0, *INPUTS.values())], dtype=[("time", float), *((name, float) for name in INPUTS)])
 

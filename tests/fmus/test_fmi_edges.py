@@ -25,13 +25,6 @@ def run(script: str) -> dict:
     return json.loads(proc.stdout.strip().splitlines()[-1])
 
 
-@pytest.fixture(scope="module")
-def plant_fmi3(plant_fmu, tmp_path_factory):
-    from vibrofmu.fmus.native import build_native
-
-    return build_native(plant_fmu, tmp_path_factory.mktemp("fmi3_edges"), fmi_version=3)
-
-
 DIRECTIONAL = """
     import ctypes, json
     from fmpy import extract, read_model_description

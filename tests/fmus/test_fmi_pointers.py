@@ -19,11 +19,8 @@ FMI3 = ["plant", "controller", "closed_loop"]
 
 
 @pytest.fixture(scope="module")
-def fmi3_fmus(request, tmp_path_factory):
-    from vibrofmu.fmus.native import build_native
-
-    return {name: build_native(request.getfixturevalue(f"{name}_fmu"), tmp_path_factory.mktemp(f"fmi3_{name}"),
-                               fmi_version=3) for name in FMI3}
+def fmi3_fmus(request):
+    return {name: request.getfixturevalue(f"{name}_fmi3") for name in FMI3}  # (tests/conftest.py: built once)
 
 
 def check(code, lines, stderr, expected_cases):

@@ -69,11 +69,8 @@ def test_states_of_another_fmu_or_freed_are_refused(request, pair):
     assert case["doStep after the refusals"]["status"] == OK
 
 
-def test_fmi3_states_of_another_fmu_or_freed_are_refused(request, tmp_path):
-    from vibrofmu.fmus.native import build_native
-
-    plant, controller = (build_native(request.getfixturevalue(f"{name}_fmu"), tmp_path / name, fmi_version=3)
-                         for name in ("plant", "controller"))
+def test_fmi3_states_of_another_fmu_or_freed_are_refused(plant_fmi3, controller_fmi3):
+    plant, controller = plant_fmi3, controller_fmi3
     code, lines, stderr = run_probe("foreign_states3", plant, str(controller))
     _check_exit(code, lines, stderr)
     refusals = [line for line in lines if "another FMU's state" in line["case"] or "freed state" in line["case"]]

@@ -29,13 +29,6 @@ STOP = 200.0
 OUT = ["x", "v", "in_contact"]
 
 
-@pytest.fixture(scope="module")
-def plant_fmi3(plant_fmu, tmp_path_factory):
-    from vibrofmu.fmus.native import build_native
-
-    return build_native(plant_fmu, tmp_path_factory.mktemp("fmi3"), fmi_version=3)
-
-
 def _events_and_grid(result, interval):
     """(times of the off-grid rows: the early returns or recorded events, the rows on the output grid, first each)"""
     t = result["time"]
@@ -279,14 +272,12 @@ def test_closed_loop_model_exchange_runs_under_cvode(native_closed_loop_fmu):
 
 @pytest.mark.slow
 @pytest.mark.parametrize("name", ["controller", "closed_loop"])
-def test_fmi3_cosimulation_of_the_other_models(name, request, tmp_path):
+def test_fmi3_cosimulation_of_the_other_models(name, request):
     """The controller and the closed loop as FMI 3.0 Co-Simulation (no early return: no contact events of their own
     located by the layer; event mode accepted): validate silent, the default experiment FMI 2's bits; the closed
     loop's FMI 3 ME under CVode follows its co-simulation on the default experiment (tau 0..200)."""
-    from vibrofmu.fmus.native import build_native
-
     native2 = request.getfixturevalue(f"native_{name}_fmu")
-    fmu3 = build_native(request.getfixturevalue(f"{name}_fmu"), tmp_path, fmi_version=3)
+    fmu3 = request.getfixturevalue(f"{name}_fmi3")
     assert validate_fmu(str(fmu3)) == []
     md = read_model_description(str(fmu3))
     assert md.modelExchange is not None and not md.coSimulation.mightReturnEarlyFromDoStep
