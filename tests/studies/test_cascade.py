@@ -121,3 +121,25 @@ def test_the_contact_loss_orbit_of_the_delta_branch_doubles_and_is_a_flip_saddle
         # the engine's multipliers within the independent map's own accuracy (1e-6 relative, Liouville above)
         engine = np.sort(pt.multipliers.real)
         assert np.allclose(rho, engine, rtol=1e-5, atol=1e-8), (pt.p, rho, engine)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("delta", [0.45, 0.5])
+def test_no_bounded_motion_of_the_delta_scene_is_left_at_the_end_of_its_range(delta):
+    """Past the upper fold (Delta 0.3867) the in-contact orbit is gone and the contact-loss orbits (period T, 2T,
+    ...) are saddles: at Delta = 0.45 and 0.5 every run of the compiled plant from a 10 x 10 grid of starts (x from
+    -2.5 to 2, x' from -2 to 2) ends in pull-in within 400 forcing periods (docs/continuation.md): no stable branch
+    of this family reaches Delta = 0.5. A bounded attractor would keep some run alive."""
+    from vibrofmu import api
+
+    period = 2 * math.pi / GRAZING_FOLD_SCENE.omega
+    survivors = []
+    for x0 in np.linspace(-2.5, 2.0, 10):
+        for v0 in np.linspace(-2.0, 2.0, 10):
+            scene = GRAZING_FOLD_SCENE.with_values(Delta=delta, x_start=float(x0), v_start=float(v0))
+            run = api.simulate(scene, stop_time=400 * period, interval=period)
+            if not run.stopped:
+                survivors.append((x0, v0))
+            else:
+                assert "pull-in" in run.stopped, run.stopped
+    assert survivors == []
