@@ -3,6 +3,7 @@ each result against independent evidence: quadrature of the energy integral, the
 backbone, finite differences of the period map, Floquet theory at a period doubling, the slow flow's folds with
 the averaging's error order, and long FMU runs."""
 import json
+import itertools
 import math
 
 import numpy as np
@@ -179,8 +180,10 @@ def test_verdicts_unchanged_when_the_tolerances_are_halved():
                        rtol=RTOL / 2, tol=NEWTON_TOL / 2)
     (s1, e1, p1), (s2, e2, p2) = _summary(base), _summary(half)
     assert e1 == e2 == ["fold", "grazing", "fold", "grazing"]
-    # the same predictor-corrector path: the same number of orbits, each with the same verdict
-    assert s1 == s2
+    # the same verdicts along the branch: the same sequence of stable / unstable stretches between the same events
+    # (the step controller's path itself may differ: with the compiled period map, whose steps are cut at v = 0,
+    # halving rtol changed one corrector's iteration count and so the later step sizes, 4 orbits more)
+    assert [k for k, _ in itertools.groupby(s1)] == [k for k, _ in itertools.groupby(s2)]
     # located to Brent's 1e-12 of a step on a branch known to ~1e-10 (Newton) : 1e-8 in omega is generous
     assert np.allclose(p1, p2, atol=1e-8)
 
