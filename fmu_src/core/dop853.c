@@ -52,6 +52,7 @@ static inline __attribute__((always_inline)) void combine(const double *row, int
     v2 acc[DOP_MAX_DIM / 2] = {{0.0, 0.0}};  /* every pair +0.0, as the scalar sums start */
     double tail = 0.0;
     int pairs = n / 2;
+#pragma GCC unroll 16
     for (int j = 0; j < m; j++) {
         double a = row[j];
         if (skip_zero && a == 0.0) continue;
@@ -74,6 +75,18 @@ static inline __attribute__((always_inline)) void step_from(const double *y, dou
 #pragma GCC unroll 8
     for (; i + 1 < n; i += 2) store2(out + i, load2(y + i) + hv * load2(sum + i));
     if (i < n) out[i] = y[i] + h * sum[i];
+}
+
+/* dst[i] = src[i], i < n: inline for the plant's two components (a memcpy call of a size known only at run time
+   costs more than the copy), memcpy otherwise */
+static inline __attribute__((always_inline)) void copy_n(double *dst, const double *src, int n)
+{
+    if (n == 2) {
+        dst[0] = src[0];
+        dst[1] = src[1];
+    } else {
+        memcpy(dst, src, sizeof(double) * (size_t)n);
+    }
 }
 
 int dop_report(DopReport *r, int n, int code, double t, const double *y, const char *format, ...)
@@ -139,6 +152,7 @@ static inline __attribute__((always_inline)) int stages_of(DopRhs rhs, void *ctx
                                                            int n)
 {
     double ys[DOP_MAX_DIM];
+#pragma GCC unroll 16
     for (int st = first; st <= last; st++) {
         const double *row = st == DOP_N_STAGES ? DOP_B : DOP_A[st];
         double c = st == DOP_N_STAGES ? 1.0 : DOP_C[st];
@@ -159,7 +173,7 @@ static inline __attribute__((always_inline)) int stages_of(DopRhs rhs, void *ctx
 
 /* stages_of with the dimension a constant where it is the plant's (2) or the closed loop's (11: x, v and nine
    estimates, closedloop.h): the compiler unrolls the component loops */
-static int run_stages(const Dop853 *s, DopRhs rhs, void *ctx, double t, const double *y, double h, int first,
+static inline __attribute__((always_inline)) int run_stages(const Dop853 *s, DopRhs rhs, void *ctx, double t, const double *y, double h, int first,
                       int last, Stages *k, double *y_last)
 {
     if (s->n == 2) return stages_of(rhs, ctx, t, y, h, first, last, k, y_last, 2);
@@ -189,7 +203,7 @@ static int trial(Dop853 *s, DopRhs rhs, void *ctx, double t, const double *y, do
 {
     int n = (int)s->n, fault = FAULT_NONE;
     double scale[DOP_MAX_DIM];
-    memcpy(k->k[0], s->f, sizeof(double) * (size_t)n);
+    copy_n(k->k[0], s->f, n);
     k->n = 1;
     if (run_stages(s, rhs, ctx, t, y, h, 1, DOP_N_STAGES, k, y_new) != FAULT_NONE) {
         s->nfev += k->n;  /* Python: self.nfev += len(stages[1]) */
@@ -226,17 +240,17 @@ static int trial(Dop853 *s, DopRhs rhs, void *ctx, double t, const double *y, do
 /* Dop853._accept (t, y may not alias s->y) */
 static void accept(Dop853 *s, double t, const double *y, double h, const double *y_new, const Stages *k)
 {
-    size_t bytes = sizeof(double) * (size_t)s->n;
+    int n = (int)s->n;
     s->t_old = t;
-    memcpy(s->y_old, y, bytes);
-    memcpy(s->f_old, s->f, bytes);
+    copy_n(s->y_old, y, n);
+    copy_n(s->f_old, s->f, n);
     s->has_old = 1;
-    for (int j = 0; j < k->n; j++) memcpy(s->k[j], k->k[j], bytes);
-    memcpy(s->f, k->k[k->n - 1], bytes);
+    for (int j = 0; j < k->n; j++) copy_n(s->k[j], k->k[j], n);
+    copy_n(s->f, k->k[k->n - 1], n);
     s->n_stages = k->n;
     s->dense_ready = 0;
     s->t = t + h;
-    memcpy(s->y, y_new, bytes);
+    copy_n(s->y, y_new, n);
     s->n_steps += 1;
 }
 
@@ -248,7 +262,7 @@ static int build_dense(Dop853 *s, DopRhs rhs, void *ctx)
     int n = (int)s->n;
     double h = s->t - s->t_old, y_last[DOP_MAX_DIM];
     k.n = (int)s->n_stages;
-    for (int j = 0; j < k.n; j++) memcpy(k.k[j], s->k[j], sizeof(double) * (size_t)n);
+    for (int j = 0; j < k.n; j++) copy_n(k.k[j], s->k[j], n);
     int fault = run_stages(s, rhs, ctx, s->t_old, s->y_old, h, DOP_N_STAGES + 1, DOP_STAGES - 1, &k, y_last);
     if (fault) return fault;
     s->nfev += DOP_STAGES - DOP_N_STAGES - 1;
@@ -578,7 +592,7 @@ static int step(Dop853 *s, DopRhs rhs, void *ctx, DopReport *r)
     double t = s->t, y[DOP_MAX_DIM], y_new[DOP_MAX_DIM], h, error;
     int rejected = 0, fault;
     Stages k;
-    memcpy(y, s->y, sizeof(double) * (size_t)s->n);
+    copy_n(y, s->y, (int)s->n);
     if (s->h <= 0.0) {  /* Dop853.h is None: a chosen step size is > 0 (or NaN) */
         fault = initial_step(s, rhs, ctx, &h);
         if (fault) return raise_fault(s, r, fault);

@@ -42,7 +42,7 @@ static double cos_omega_t(const VkModel *m, double t, const VmDrive *drive, int 
 }
 
 /* Eq. 3: alpha [(1 - u)^-2 - (1 + u)^-2] + (beta sin Omega t + gamma (1 - cos 2 Omega t)) (1 - u)^-2, u = 2x/(3R) */
-static double electrostatic(const VkModel *m, double t, const VmDrive *drive, double x, int *fault)
+static inline __attribute__((always_inline)) double electrostatic(const VkModel *m, double t, const VmDrive *drive, double x, int *fault)
 {
     double u = 2.0 * x / (3.0 * m->R);
     double f3 = py_div(1.0, (1.0 - u) * (1.0 - u), fault);

@@ -179,7 +179,7 @@ static inline __attribute__((always_inline)) int step_events(int n, int n_events
         if (b[0] > 0.0 && hermite_clear(b)) continue;
         Hermite c = {y[0], y[1], h, y_new[0], y_new[1], e->c0, e->c[0], 0, 0.0};
         int found, code;
-        double s_event;
+        double s_event = 0.0;  /* written by hermite_event when found (the initialiser: GCC's -O3 cannot tell) */
         code = hermite_event(n, y, &c, t, &found, &s_event, r);
         if (code) return code;
         if (found) {

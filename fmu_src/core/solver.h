@@ -146,17 +146,20 @@ static inline double vk_rk4_max_step(VkSolverSlots s) { return s.fixed->max_step
 VK_SOLVER_LIST(VK_DECLARE_OPS)
 #undef VK_DECLARE_OPS
 
-/* A container's doStep per solver, written once: VK_DO_STEP_TABLE(Container, generic, table) defines
-   `static int do_step_<name>(Container *c, double t, double h)` for every solver of VK_SOLVER_LIST, each calling
-   generic(c, &ops, t, h) with its ops VK_OPS_<name> as a constant (so the compiler resolves and inlines every op
-   of an always_inline generic), and `table`, those functions in the list's order (indexed by the solver setting). */
-#define VK_DO_STEP_DEFINE(name)                                                   \
-    static int do_step_##name(VK_DO_STEP_CONTAINER *c, double t, double h)        \
-    {                                                                             \
-        static const VkSolverOps ops = VK_OPS_##name;                             \
-        return VK_DO_STEP_GENERIC(c, &ops, t, h);                                 \
+/* A container's doStep per solver, written once: VK_DO_STEP_TABLE(table), with VK_DO_STEP_CONTAINER and
+   VK_DO_STEP_GENERIC defined, defines `static int <generic>_<name>(Container *c, double t, double h)` for every
+   solver of VK_SOLVER_LIST, each calling generic(c, &ops, t, h) with its ops VK_OPS_<name> as a constant (so the
+   compiler resolves and inlines every op of an always_inline generic), and `table`, those functions in the list's
+   order (indexed by the solver setting). */
+#define VK_DO_STEP_CAT_(a, b) a##_##b
+#define VK_DO_STEP_CAT(a, b) VK_DO_STEP_CAT_(a, b)  /* generic_name: one table per generic in a file */
+#define VK_DO_STEP_DEFINE(name)                                                                  \
+    static int VK_DO_STEP_CAT(VK_DO_STEP_GENERIC, name)(VK_DO_STEP_CONTAINER *c, double t, double h) \
+    {                                                                                            \
+        static const VkSolverOps ops = VK_OPS_##name;                                            \
+        return VK_DO_STEP_GENERIC(c, &ops, t, h);                                                \
     }
-#define VK_DO_STEP_ENTRY(name) do_step_##name,
+#define VK_DO_STEP_ENTRY(name) VK_DO_STEP_CAT(VK_DO_STEP_GENERIC, name),
 #define VK_DO_STEP_TABLE(table)                                                   \
     VK_SOLVER_LIST(VK_DO_STEP_DEFINE)                                             \
     static int (*const table[])(VK_DO_STEP_CONTAINER *, double, double) = {VK_SOLVER_LIST(VK_DO_STEP_ENTRY)};

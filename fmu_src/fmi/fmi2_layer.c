@@ -257,8 +257,11 @@ int fmi2_live(const void *instance, int kind)
 {
     if (instance == NULL) return 0;
     live_acquire();
-    int found = live_capacity > 0 && live_table[live_slot(live_table, live_capacity, instance)].instance == instance &&
-                live_table[live_slot(live_table, live_capacity, instance)].kind == kind;
+    int found = 0;
+    if (live_capacity > 0) {  /* the slot looked up once */
+        const LiveEntry *entry = &live_table[live_slot(live_table, live_capacity, instance)];
+        found = entry->instance == instance && entry->kind == kind;
+    }
     live_release();
     return found;
 }

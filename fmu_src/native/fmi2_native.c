@@ -112,11 +112,20 @@ int native_table_state(const Instance *inst)
 
 /* Call `call` (co-simulation mask cs, Model Exchange mask me: the table of the instance's interface): fmi2OK when
    the table allows it now; else its answer (the error mode's, or fmi2Error with the table's refusal logged). */
+static fmi2Status native_refused(Instance *inst, const char *call, unsigned mask);
+
 fmi2Status native_allowed(Instance *inst, const char *call, unsigned cs, unsigned me)
 {
     const unsigned mask = inst->model_exchange ? me : cs;
     fmi2Status st = fmi2_layer_mode_check(&inst->fmi, call, mask);
     if (st != fmi2OK || (mask & FMI2_BIT(native_table_state(inst)))) return st;
+    return native_refused(inst, call, mask);
+}
+
+/* native_allowed's refusal, apart (noinline): the allowed call, every call of a running simulation, then inlines
+   into the FMI functions without the refusal's text buffer on its stack */
+static __attribute__((noinline)) fmi2Status native_refused(Instance *inst, const char *call, unsigned mask)
+{
     char why[256];
     const int me_table = inst->model_exchange;
     native_error(inst, "%s", fmi_call_refusal(me_table ? FMI2ME_LABEL : FMI2_LABEL,
