@@ -386,7 +386,7 @@ EXPORT3 fmi3Status fmi3GetBoolean(fmi3Instance instance, const fmi3ValueReferenc
     fmi3Status worst = fmi3OK;
     for (size_t done = 0; done < nValueReferences; done += CHUNK) {
         size_t n = nValueReferences - done < CHUNK ? nValueReferences - done : CHUNK;
-        fmi2Boolean b[CHUNK];
+        fmi2Boolean b[CHUNK] = {0};  /* false where the FMI 2.0 getter refuses before writing (GCC -O3 warns) */
         fmi3Status st = to3(fmi2GetBoolean(w->c, valueReferences + done, n, b));
         for (size_t i = 0; i < n; i++) values[done + i] = b[i] != 0;
         if (st > worst) worst = st;
