@@ -8,8 +8,11 @@
   communication points, x_ref from the compiled exact plant at rtol 1e-12 (in-process, fast). Counts: the estimate
   bounds the measured error (>= 99 % wanted), within 100x of it (>= 90 % wanted).
 
+- pair_costs(scene, stop, tolerance): one pair as the auto campaign measures it, each cost the least of a few rounds:
+  every candidate's set-up, loop, error and "met", the oracle and auto's choice (the `pair` command: the paper scene).
+
 Command line: python -m vibrofmu.analyses.error_calibration grid FMU | campaign RUNG [n] [seed] [FILE] | auto [n]
-[seed] (RUNG: exact, rk4, polynomial, polynomial-paper, averaged, analytic; prints progress on stderr and JSON on
+[seed] | pair [stop] [tolerance] [rounds] (RUNG: exact, rk4, polynomial, polynomial-paper, averaged, analytic; prints progress on stderr and JSON on
 stdout, or the campaign's to FILE, rewritten every 25 scenes).
 """
 from __future__ import annotations
@@ -320,6 +323,68 @@ def auto_campaign(n: int = 500, seed: int = 0, h: float = 0.1, progress=None) ->
     return {"n": n, "seed": seed, "rows": rows, "summary": auto_summary(rows)}
 
 
+def pair_costs(scene: Scene, stop: float, tolerance: float, rounds: int = 5, h: float = 0.1) -> dict:
+    """One (scene, tolerance) pair measured as the auto campaign measures its pairs, each cost the least of `rounds`
+    interleaved rounds (a millisecond's set-up on a shared machine is noisy): every candidate's set-up (make_plant with
+    its error estimate) and doStep loop in thread CPU on the compiled kernel, its error against DOP853 at rtol 1e-12
+    and whether it met the tolerance; the oracle (the candidate that met it at the least set-up + loop) and auto's
+    choice (auto.choose, its own cost included). A refused candidate is kept with the refusal."""
+    from vibromodel.auto import candidates, choose, describe
+
+    library = campaign_kernel()
+    exact, _ = run_steps(make_plant(scene, Settings(rtol=1e-12), 0.0, stop, library=library), stop, h)
+    table: dict = {}
+    choice = None
+    choice_costs = []
+    for _ in range(rounds):
+        for _, candidate in candidates(Settings()):
+            name = describe(candidate)
+            started = time.thread_time()
+            try:
+                plant = make_plant(scene, candidate, 0.0, stop, library=library)
+            except (ParameterError, IntegrationError) as error:
+                table[name] = {"candidate": name, "refused": str(error)[:200]}
+                continue
+            build = time.thread_time() - started
+            x, run = _timed_run(plant, lambda c=candidate: make_plant(scene, c, 0.0, stop, library=library), stop, h)
+            m = min(len(x), len(exact))
+            error = float(np.max(np.abs(x[:m] - exact[:m]))) if m else math.inf
+            row = table.setdefault(name, {"candidate": name, "build": math.inf, "run": math.inf, "error": error,
+                                          "estimate": plant.error_estimate["estimate"],
+                                          "met": len(x) == len(exact) and error <= tolerance})
+            row["build"], row["run"] = min(row["build"], build), min(row["run"], run)
+        started = time.thread_time()
+        try:
+            _, chosen, _ = choose(scene, Settings(), tolerance, lambda s: make_plant(scene, s, 0.0, stop,
+                                                                                     library=library), span=stop)
+            choice = describe(chosen)
+        except ParameterError:
+            choice = None
+        choice_costs.append(time.thread_time() - started)
+    rows = list(table.values())
+    for row in rows:
+        if "build" in row:
+            row["total"] = row["build"] + row["run"]
+    met = [row for row in rows if row.get("met")]
+    oracle = min(met, key=lambda row: row["total"]) if met else None
+    return {"scene": scene.as_dict(), "stop": stop, "tolerance": tolerance, "rounds": rounds, "candidates": rows,
+            "oracle": oracle["candidate"] if oracle else None, "chosen": choice, "choice_cost": min(choice_costs)}
+
+
+def pair_table(result: dict) -> list[str]:
+    """pair_costs's candidates as a table, milliseconds of thread CPU."""
+    lines = [f"tau in [0, {result['stop']:g}], tolerance {result['tolerance']:g}, least of {result['rounds']} rounds: "
+             f"the oracle {result['oracle']}, auto chose {result['chosen']} (its choice {result['choice_cost'] * 1e3:.2f} ms)",
+             "| candidate | set-up ms | loop ms | set-up + loop ms | error | estimate | met |", "|---|---|---|---|---|---|---|"]
+    for row in result["candidates"]:
+        if "refused" in row:
+            lines.append(f"| {row['candidate']} | refused: {row['refused'][:60]} | | | | | |")
+            continue
+        lines.append(f"| {row['candidate']} | {row['build'] * 1e3:.2f} | {row['run'] * 1e3:.2f} | "
+                     f"{row['total'] * 1e3:.2f} | {row['error']:.2e} | {row['estimate']:.2e} | {row['met']} |")
+    return lines
+
+
 def auto_summary(rows: list[dict]) -> dict:
     """Shares over the pairs: auto met the tolerance (or refused where no candidate met it); its cost within 2x the
     oracle's, over the pairs that have both an oracle and a choice, per cost (run: the doStep loop; total: with the
@@ -477,9 +542,16 @@ def main(argv: list[str]) -> None:
         result = auto_campaign(n, seed, progress=progress)
         print(json.dumps(result, indent=1))
         progress(json.dumps(result["summary"]))
+    elif argv[:1] == ["pair"] and len(argv) in (1, 2, 3, 4):
+        stop = float(argv[1]) if len(argv) > 1 else 200.0
+        tolerance = float(argv[2]) if len(argv) > 2 else 1e-3
+        result = pair_costs(Scene(), stop, tolerance, int(argv[3]) if len(argv) > 3 else 5)
+        print(json.dumps(result, indent=1))
+        progress("\n".join(pair_table(result)))
     else:
         print(f"error: usage: python -m vibrofmu.analyses.error_calibration grid FMU | campaign "
-              f"{{{','.join(RUNGS)}}} [n] [seed] [FILE] | auto [n] [seed]", file=sys.stderr)
+              f"{{{','.join(RUNGS)}}} [n] [seed] [FILE] | auto [n] [seed] | pair [stop] [tolerance] [rounds]",
+              file=sys.stderr)
         raise SystemExit(2)
 
 
