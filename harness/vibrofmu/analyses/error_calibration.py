@@ -543,9 +543,16 @@ def main(argv: list[str]) -> None:
         print(json.dumps(result, indent=1))
         progress(json.dumps(result["summary"]))
     elif argv[:1] == ["pair"] and len(argv) in (1, 2, 3, 4):
-        stop = float(argv[1]) if len(argv) > 1 else 200.0
-        tolerance = float(argv[2]) if len(argv) > 2 else 1e-3
-        result = pair_costs(Scene(), stop, tolerance, int(argv[3]) if len(argv) > 3 else 5)
+        try:
+            stop, tolerance, rounds = float(argv[1]) if len(argv) > 1 else 200.0, float(argv[2]) if len(argv) > 2 \
+                else 1e-3, int(argv[3]) if len(argv) > 3 else 5
+            if not (stop > 0.0 and tolerance > 0.0 and rounds > 0):
+                raise ValueError
+        except ValueError:
+            print(f"error: pair wants a positive stop time, tolerance and number of rounds, not {' '.join(argv[1:])}",
+                  file=sys.stderr)
+            raise SystemExit(2) from None
+        result = pair_costs(Scene(), stop, tolerance, rounds)
         print(json.dumps(result, indent=1))
         progress("\n".join(pair_table(result)))
     else:
