@@ -7,8 +7,8 @@ import pytest
 
 from vibrofmu.fmus import compilers
 
-# A stand-in compiler that would run for a minute: a step that is not stopped makes the test take that minute, and
-# the process it started would still be alive afterwards (both checked below).
+# A stand-in compiler that would run for a minute and then return 0: one that was stopped returns the signal's
+# negative number instead (checked below), and none is left running.
 LONG = [sys.executable, "-c", "import time; time.sleep(60)"]
 
 
@@ -29,16 +29,12 @@ def test_a_failing_step_kills_the_compilers_still_running_and_starts_no_more():
         time.sleep(0.5)  # the long step's compiler is running by then
         raise RuntimeError("compiling X failed")
 
-    begin = time.monotonic()
     with pytest.raises(RuntimeError, match="compiling X failed"):
         compilers.in_parallel([long_step, failing_step, long_step], workers=2)
-    elapsed = time.monotonic() - begin
-    # every compiler that started was killed (a negative return code: a signal): the first long step's, and the
-    # third's if the failing step's thread took it up before the failure was seen (else it was cancelled or raised
-    # Stopped); a minute's sleep did not run out (elapsed far below 60 s: a functional check that the kill
-    # happened, not a speed claim)
+    # every compiler that started was killed (a negative return code: a signal; one whose minute of sleep ran out
+    # returns 0): the first long step's, and the third's if the failing step's thread took it up before the failure
+    # was seen (else it was cancelled or raised Stopped). No clock is read: a loaded machine cannot fail this.
     assert started and all(code < 0 for code in started), started
-    assert elapsed < 30, elapsed
     assert compilers.running() == 0
     # the next build starts afresh
     assert compilers.in_parallel([lambda: compilers.run([sys.executable, "-c", "print(1)"]).returncode] * 2) == [0, 0]
