@@ -24,7 +24,7 @@ from vibrofmu import paths
 from vibrofmu.fmus.archive import normalize_entries, publish, staging
 from vibrofmu.fmus.entry import importable, pythonfmu_entry
 from vibrofmu.fmus.fmu_variables import annotate
-from vibrofmu.fmus.kernel import kernel_file
+from vibrofmu.fmus.kernel import check_fidelity_header, kernel_file
 from vibrofmu.fmus.pythonenv import pack_python_env
 from vibrofmu.fmus.refresult import pack_reference
 from vibrofmu.fmus.shim import install_status_shim
@@ -117,7 +117,10 @@ def build_closed_loop(out_dir: Path | None = None) -> Path:
 def _kernel() -> tuple[Path, ...]:
     """(the compiled kernel,), or () without a C compiler: kernel.kernel_file(), compiled once per source version
     and compiler (its cache) rather than once per FMU."""
-    return () if compiled_parts() else (kernel_file(),)
+    if compiled_parts():
+        return ()
+    check_fidelity_header()  # the registry against core/fidelity.h: a cached kernel does not say
+    return (kernel_file(),)
 
 
 def build_all(out_dir: Path | None = None, win64: bool | None = None) -> list[Path]:

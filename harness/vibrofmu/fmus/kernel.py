@@ -110,8 +110,9 @@ def exclusive(lock_file: Path):
 
 def kernel_file() -> Path:
     """The kernel library's file, compiled once per source version into library_folder() (the FMU builds pack
-    this one file instead of compiling the kernel once per FMU)."""
-    check_fidelity_header()  # (a cached library of the same sources exists only if the header was current)
+    this one file instead of compiling the kernel once per FMU). Only a compile checks the fidelity header against
+    the registry (compile_kernel): the cache key covers fidelity.h, not the registry, so a build calls
+    check_fidelity_header itself (fmus.build._kernel)."""
     folder = library_folder()
     if not (folder / compiled.LIBRARY_NAME).exists():
         folder.mkdir(parents=True, exist_ok=True)
