@@ -33,23 +33,27 @@ and `vibrofmu report` rewrites the text between them (the markers stay). Blocks:
              (`python -m vibrofmu.analyses.error_calibration auto n seed`) in the --from folders (costs are timings).
 - cascade:   a period-doubling cascade followed by `vibrofmu continuation` (its doubling points and the ratios of
              successive intervals against Feigenbaum's delta), from a continuation summary.json with a cascade in
-             the --from folders (not run by the report itself: minutes).
+             the --from folders, else from a fresh run of CASCADE_ARGV (seconds); its CPU time depends on the
+             machine (the block says so; --check compares every other number: MACHINE_NUMBERS).
 - curve_speed: the cost of a fold curve (two-parameter continuation) from a bench.json of `bench --curve` in the
              --from folders (a timing: not run by the report itself, never compared by --check).
 - auto_setup: fidelity auto's set-up and each rung's estimate over its initialisation, from a bench.json (`bench`,
              or `bench --auto-only`; timings, never compared by --check).
 - cusp_order: the exact cusp beside the slow flow's over a family of scenes with a shrinking small parameter, the
              errors and their fitted order, from a cusp_order.json (`python3 -m vibrofmu.analyses.cusp_order OUT`)
-             in the --from folders (not run by the report itself).
+             in the --from folders, else from a fresh run of the study (seconds); its CPU time depends on the
+             machine (the block says so; --check compares every other number: MACHINE_NUMBERS).
 
-Without --from, the oafm, stability and speed blocks come from fresh runs of `vibrofmu oafm`, `stability` and
-`bench` (quick: oafm study to order 3, `bench --quick`). `--check` regenerates every block whose numbers do not
-depend on the machine (accuracy, ssp, ssp_orderings, container, ranges, and oafm and stability from the --from
-summaries or else from fresh full runs of `vibrofmu oafm` and `stability`) and compares them with the documents' text:
-exit 1 naming the block that differs; it prints the blocks it does not compare (machine, speed, peers) and why, and
-those blocks say themselves which of their numbers depend on the machine. `--quick` also skips the container's H = 0.01. `--quick` and `--from` never rewrite the
-documents: they write the documents with their blocks to a folder (--out, default out/report); only a full run
-rewrites them in place.
+Without --from, the oafm, stability, speed, cascade and cusp_order blocks come from fresh runs of `vibrofmu oafm`,
+`stability`, `bench`, the cascade's `continuation` and the cusp study (quick: oafm study to order 3, `bench
+--quick`). `--check` regenerates every block whose numbers do not depend on the machine (accuracy, ssp,
+ssp_orderings, container, ranges, calibration_replay, and oafm, stability, cascade and cusp_order from the --from
+summaries or else from fresh full runs) and compares them with the documents' text, the numbers of MACHINE_NUMBERS
+(CPU times) masked in both: exit 1 naming the block that differs; it prints the blocks it does not compare
+(commands/report.py NOT_CHECKED) and why, and those blocks say themselves which of their numbers depend on the
+machine. `--quick` also skips the container's H = 0.01. `--quick` and `--from` never rewrite the documents: they
+write the documents with their blocks to a folder (--out, default out/report); only a full run rewrites them in
+place.
 """
 from __future__ import annotations
 
@@ -70,6 +74,14 @@ NAMES = ("machine", "accuracy", "ssp", "ssp_orderings", "container", "oafm", "st
 FROM_SUMMARIES = ("oafm", "stability", "speed", "peers", "calibration", "auto", "cascade", "curve_speed", "auto_setup",
                   "cusp_order")  # filled from the --from folders only
 DETERMINISTIC = ("accuracy", "ssp", "ssp_orderings", "container", "ranges", "calibration_replay")
+# the numbers of a compared block that depend on the machine (its CPU time; the block says so): `report --check`
+# masks them in both texts and compares the rest (every pattern matches its block once: tests/docs/test_docs.py)
+MACHINE_NUMBERS = {"cascade": re.compile(r"(?<=^The CPU time \()\d+(?= s for all branches\) depends on the machine)",
+                                         re.M),
+                   "cusp_order": re.compile(r"(?<=^The CPU time \()\d+(?= s\) depends on the machine)", re.M)}
+# the documented cascade (docs/continuation.md), run by the report when no --from folder holds a cascade
+CASCADE_ARGV = ("--param", "omega", "--from", "2.2", "--to", "1.785", "--set", "mu=0.1", "--set", "Delta=2.5", "--set",
+                "R=3", "--set", "beta=0", "--set", "gamma=0", "--max-period", "32")
 SOURCE_FILES = {"oafm": "an oafm summary.json", "stability": "a stability summary.json",  # what a FROM_SUMMARIES
                 "speed": "a bench.json or an oafm/stability summary.json",  # block reads
                 "peers": "a peers.json (bench --peers)",
@@ -111,6 +123,12 @@ def parse_blocks(text: str, where: str = "") -> dict[str, str]:
     return blocks
 
 
+def comparable(name: str, body: str) -> str:
+    """body as `report --check` compares it: stripped, its machine-dependent numbers (MACHINE_NUMBERS) masked."""
+    pattern = MACHINE_NUMBERS.get(name)
+    return (pattern.sub("…", body) if pattern else body).rstrip()
+
+
 def replace_blocks(text: str, bodies: dict[str, str]) -> str:
     def substitute(match):
         name = match["name"]
@@ -139,8 +157,9 @@ def machine_block(start: tuple[float, tuple[float, float, float]] | None = None)
     return (f"Numbers below taken on {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime(when))}: {cpu}, "
             f"{os.cpu_count()} logical CPUs (nproc), load average {load} (1, 5, 15 min) at the start of "
             f"`vibrofmu report`; Python {platform.python_version()}, numpy {numpy.__version__}, "
-            f"scipy {scipy.__version__}. Timings depend on the machine and its load; accuracy numbers do not "
-            "(`vibrofmu report --check` re-computes them and compares).")
+            f"scipy {scipy.__version__}. This record and every timing depend on the machine and its load (so "
+            "`vibrofmu report --check` does not compare this block); accuracy numbers do not (`vibrofmu report "
+            "--check` re-computes them and compares).")
 
 
 def _read(path: str) -> str:
@@ -401,6 +420,12 @@ def calibration_block(sources: list[Path]) -> str | None:
                       "--only calibration --from DIR`):", "", "```", *commands, "```"])
 
 
+AUTO_MACHINE = ("Depend on the machine (so `vibrofmu report --check` does not compare this block): the oracle (the "
+                "candidate measured cheapest among those that meet the tolerance), so every column that compares "
+                "with it, and every measured cost. Auto's choices and its own costs (vibromodel.auto's table), met "
+                "and refused do not.")
+
+
 def auto_block(sources: list[Path]) -> str | None:
     """The auto-against-the-oracle table from the first auto.json in the folders."""
     from vibrofmu.analyses.error_calibration import auto_table
@@ -413,7 +438,7 @@ def auto_block(sources: list[Path]) -> str | None:
             return "\n".join(auto_table(result) + [
                 "", f"Measured {when} (costs: thread CPU time on a shared machine). Regenerate: `python -m "
                 f"vibrofmu.analyses.error_calibration auto {result['n']} {result['seed']} > DIR/auto.json`, then "
-                "`vibrofmu report --only auto --from DIR`."])
+                "`vibrofmu report --only auto --from DIR`.", "", AUTO_MACHINE])
     return None
 
 
@@ -433,7 +458,7 @@ def cascade_block(sources: list[Path]) -> str | None:
     last = max(d["periods"] for d in c["doublings"])  # the last period followed (a doubling on it is not)
     sets += f" --max-period {last}" if last != 8 else ""
     lines = [f"`vibrofmu continuation --param {c['param']} --from {s['from']:g} --to {s['to']:g} {sets}` "
-             f"({s['points']} orbits on the period-T branch, {s['cpu_seconds']:.0f} s CPU for all branches):", "",
+             f"({s['points']} orbits on the period-T branch):", "",
              f"| doubling | {name} | multipliers at the point | interval to the next | ratio of successive "
              "intervals |", "|---|---|---|---|---|"]
     values = [d["value"] for d in c["doublings"]]
@@ -443,7 +468,9 @@ def cascade_block(sources: list[Path]) -> str | None:
         ratio = f"{c['ratios'][k - 1]:.4f}" if 1 <= k <= len(c["ratios"]) else "—"
         lines.append(f"| {d['periods']}T → {d['to_periods']}T | {d['value']:.10f} | {rho} | {interval} | {ratio} |")
     lines += ["", f"Feigenbaum's δ = {FEIGENBAUM_DELTA}: the ratios are "
-                  + ", ".join(f"{r:.4f} ({100 * (r / FEIGENBAUM_DELTA - 1):+.1f} %)" for r in c["ratios"]) + "."]
+                  + ", ".join(f"{r:.4f} ({100 * (r / FEIGENBAUM_DELTA - 1):+.1f} %)" for r in c["ratios"]) + ".",
+              "", f"The CPU time ({s['cpu_seconds']:.0f} s for all branches) depends on the machine; every other "
+                  "number here does not (`vibrofmu report --check` runs the command again and compares them)."]
     return "\n".join(lines)
 
 
@@ -466,8 +493,8 @@ def cusp_order_block(sources: list[Path]) -> str | None:
         f = d["family"]
         lines = [f"`python3 -m vibrofmu.analyses.cusp_order OUT` (μ = {f['mu'].replace(' eps^2', ' ε²')}, the "
                  f"branch at Δ = {f['Delta_start'].replace(' eps^3', ' ε³')}, R = {f['R']:g}, β = γ = 0; the exact "
-                 f"cusp with the period map at rtol {d['tight'][0]:g}, the fold system solved to {d['tight'][1]:g}; "
-                 f"{d['cpu_seconds']:.0f} s CPU):", "",
+                 f"cusp with the period map at rtol {d['tight'][0]:g}, the fold system solved to "
+                 f"{d['tight'][1]:g}):", "",
                  "| ε | exact cusp ω, Δ | slow flow's cusp ω, Δ | error in Δ (relative) | error in ω | exact cusp's "
                  "own error in Δ, ω |", "|---|---|---|---|---|---|"]
         for r in d["rows"]:
@@ -485,7 +512,9 @@ def cusp_order_block(sources: list[Path]) -> str | None:
                          f"on log ε over ε ≤ {d['fit_max']:g}, {o['fit_points']} scenes; derived: {o['expected']}); "
                          f"local orders between successive ε: {local}.")
             lines.append("")
-        return "\n".join(lines).rstrip()
+        lines.append(f"The CPU time ({d['cpu_seconds']:.0f} s) depends on the machine; every other number here does "
+                     "not (`vibrofmu report --check` runs the study again and compares them).")
+        return "\n".join(lines)
     return None
 
 
@@ -505,7 +534,9 @@ def curve_speed_block(sources: list[Path]) -> str | None:
                     + (f" Every point checked afterwards (not timed) against the fold system P(z) = z, "
                        f"det(M − I) = 0 by {c['fold_system']['checked_by']}: |P(z) − z| ≤ "
                        f"{c['fold_system']['max_residual']:.1e}, |det(M − I)| ≤ {c['fold_system']['max_det']:.1e} "
-                       f"over its {c['fold_system']['points']} points." if "fold_system" in c else ""))
+                       f"over its {c['fold_system']['points']} points." if "fold_system" in c else "")
+                    + " Depend on the machine (so `vibrofmu report --check` does not compare this block): the times. "
+                    + ("The points and the residuals do not." if "fold_system" in c else "The points do not."))
     return None
 
 

@@ -11,14 +11,16 @@ from vibrofmu.report import NAMES, REPO_ROOT  # a light module: the standard lib
 
 def options(p):
     p.add_argument("--from", dest="sources", action="append", default=[], metavar="DIR",
-                   help="folder with a bench.json or an oafm/stability summary.json for the oafm, stability and "
-                        "speed blocks (repeatable; default: run oafm, stability and bench now)")
+                   help="folder with the summaries of the blocks made from studies (a bench.json, an oafm, "
+                        "stability or continuation summary.json, a cusp_order.json, ...; repeatable; default: run "
+                        "oafm, stability, bench, the documented cascade's continuation and the cusp study now)")
     p.add_argument("--quick", action="store_true", help="container comparison at H = 0.1, 0.05 only; oafm study to "
                                                         "order 3; bench --quick (default: off: the full runs)")
     p.add_argument("--check", action="store_true",
                    help="re-compute every block that does not depend on the machine (accuracy, ssp, ssp_orderings, "
-                        "container, ranges, and oafm and stability from fresh full runs or the --from summaries) and "
-                        "compare with the documents; write nothing (default: off)")
+                        "container, ranges, calibration_replay, and oafm, stability, cascade and cusp_order from the "
+                        "--from summaries or else fresh full runs; their CPU times are not compared) and compare with "
+                        "the documents; write nothing (default: off)")
     p.add_argument("--out", default=None, metavar="DIR",
                    help="write the documents with the regenerated blocks to DIR (README.md, docs/*.md) instead of "
                         f"rewriting them; --quick and --from always do (default: {QUICK_OUT} with --quick or --from, "
@@ -39,44 +41,51 @@ NOT_CHECKED = {"machine": "where and when the numbers were taken", "speed": "tim
                "calibration": "the rungs' error estimates against their measured errors: an hour of campaigns "
                "(docs/rungs.md names them; then `vibrofmu report --from DIR --only calibration`); the first scenes "
                "of each are compared (calibration_replay)",
-               "cascade": "minutes of continuation, and its CPU time depends on the machine (its doubling points are "
-               "checked against an independent period map by tests/studies/test_cascade.py, slow)",
                "curve_speed": "a fold curve's time: it depends on the machine and its load",
-               "cusp_order": "the cusp study's CPU time depends on the machine; its located cusps and orders are "
-               "checked by tests/studies/test_cusp_order.py (`python3 -m vibrofmu.analyses.cusp_order DIR`, then "
-               "`vibrofmu report --from DIR --only cusp_order`)",
-               "auto": "fidelity auto against the oracle: its costs are timings on a shared machine",
+               "auto": "fidelity auto against the oracle: the oracle and the costs are timings on a shared machine",
                "auto_setup": "fidelity auto's set-up and the estimates' share of the initialisation: times, they "
                "depend on the machine and its load (`vibrofmu bench --auto-only --out DIR`, then `vibrofmu report "
                "--from DIR --only auto_setup`)"}
 # compared by --check too: from the --from summaries, else from fresh full runs of `vibrofmu oafm` and `stability`
-# (about a minute of CPU on 2 cores; the bench is not run: the speed block is not compared)
-FROM_CHECKED = ("oafm", "stability")
+# (about a minute of CPU on 2 cores), the documented cascade's `vibrofmu continuation` (measured 7 s CPU with its
+# plots) and the cusp study (5 s CPU), their CPU times masked (report.MACHINE_NUMBERS); the bench is not run: the
+# speed block is not compared
+FROM_CHECKED = ("oafm", "stability", "cascade", "cusp_order")
+STUDIES = ("oafm", "stability", "bench", "cascade", "cusp_order")  # what a full run runs (without --from)
 
 
 # The studies each generated block reads: a block is rewritten only when every one of them completed (the speed block
 # gathers the three summaries; from two of them it would silently lose the bench's lines).
 BLOCK_STUDIES = {"oafm": {"oafm"}, "stability": {"stability"}, "speed": {"oafm", "stability", "bench"},
-                 "auto_setup": {"bench"}}
+                 "auto_setup": {"bench"}, "cascade": {"cascade"}, "cusp_order": {"cusp_order"}}
 NEEDS_FMUS = ("accuracy", "ssp", "ssp_orderings", "container")  # the blocks that run the FMUs themselves
+STUDIES_WITH_FMUS = ("oafm", "stability", "bench")  # the studies that run the plant FMU (not the continuations)
 
 
 def run_studies(fmu_dir: Path, work_dir: Path, quick: bool, failed: set | None = None,
-                which=("oafm", "stability", "bench")) -> list[Path] | None:
-    """Run the studies `which` of oafm, stability and bench (quick: fewer orders, quick bench) into work_dir; the
-    folders of those that completed (a failure is printed, added to `failed` and skipped)."""
+                which=STUDIES) -> list[Path]:
+    """Run the studies `which` of STUDIES (quick: fewer orders, quick bench; the cascade and the cusp study take
+    seconds and run in full) into work_dir; the folders of those that completed (a failure is printed, added to
+    `failed` and skipped)."""
+    from vibrofmu.commands import continuation
+    from vibrofmu.report import CASCADE_ARGV
+
     plant = str(fmu_dir / paths.PLANT_NAME)
     runs = {"oafm": (oafm.COMMAND, ["--fmu", plant] + (["--study-max-order", "3"] if quick else [])),
             "stability": (stability.COMMAND, ["--fmu", plant]),
-            "bench": (bench.COMMAND, ["--fmu", plant] + (["--quick"] if quick else []))}
+            "bench": (bench.COMMAND, ["--fmu", plant] + (["--quick"] if quick else [])),
+            "cascade": (continuation.COMMAND, list(CASCADE_ARGV)),
+            "cusp_order": (cusp_study, [])}
     folders = []
     for name, (command, argv) in runs.items():
         if name not in which:
             continue
         folder = work_dir / name
-        print(f"report: running vibrofmu {' '.join([name] + argv[2:])} ...", file=sys.stderr, flush=True)
+        said = ("python3 -m vibrofmu.analyses.cusp_order" if command is cusp_study else
+                f"vibrofmu {command.name} {' '.join(argv[2:] if name in STUDIES_WITH_FMUS else argv)}")
+        print(f"report: running {said} ...", file=sys.stderr, flush=True)
         try:
-            code = invoke(command, argv + ["--out", str(folder)])
+            code = command(folder) if command is cusp_study else invoke(command, argv + ["--out", str(folder)])
         except Exception as error:  # a failing study must not lose the other blocks: say which and go on
             # (Ctrl-C is no Exception: it stops the report before any document is rewritten)
             code = f"{type(error).__name__}: {error}"
@@ -91,6 +100,13 @@ def run_studies(fmu_dir: Path, work_dir: Path, quick: bool, failed: set | None =
     return folders
 
 
+def cusp_study(folder: Path) -> int:
+    """`python3 -m vibrofmu.analyses.cusp_order folder` in this process (its exit code)."""
+    from vibrofmu.analyses import cusp_order
+
+    return cusp_order.main([str(folder)])
+
+
 def run(args) -> int:
     import tempfile
 
@@ -98,8 +114,8 @@ def run(args) -> int:
     # the copy packed in its resources (no builder binaries), and the bench's own closed-loop build would fail
     # ("has no binaries/linux64/HertzEAClosedLoop.so")
     import vibrofmu.fmus.build  # noqa: F401
-    from vibrofmu.report import (DETERMINISTIC, FROM_SUMMARIES, SOURCE_FILES, ReportError, documents, generate,
-                                 parse_blocks, replace_blocks, start_record, summary_block)
+    from vibrofmu.report import (DETERMINISTIC, FROM_SUMMARIES, SOURCE_FILES, ReportError, comparable, documents,
+                                 generate, parse_blocks, replace_blocks, start_record, summary_block)
 
     start = start_record()  # the machine block's time and load: before the studies load the machine
     root = Path(args.root)
@@ -139,16 +155,21 @@ def run(args) -> int:
             print(f"error: --from {', '.join(args.sources)}: no summary for the block{'s' * (len(missing) > 1)} "
                   f"asked for ({text})", file=sys.stderr)
             return 2
+    # the studies to run: without --from those of the blocks asked for (a full run: all of STUDIES); with --check
+    # and --from, those of the compared blocks whose summaries no --from folder holds
+    wanted = set().union(*(BLOCK_STUDIES.get(name, set()) for name in names))
+    if args.check and sources:
+        wanted = {name for name in FROM_CHECKED if summary_block(name, sources) is None}
+    elif sources:
+        wanted = set()
+    studies = tuple(study for study in STUDIES if study in wanted)
     fmu_dir = Path(args.fmu_dir or paths.build_dir())
-    if any(name in NEEDS_FMUS for name in names) or (not sources and any(name in BLOCK_STUDIES for name in names)):
-        fmu_dir = built_all(fmu_dir)  # the blocks from summaries alone (--from) run no FMU
+    if any(name in NEEDS_FMUS for name in names) or any(study in STUDIES_WITH_FMUS for study in studies):
+        fmu_dir = built_all(fmu_dir)  # the blocks from summaries alone (--from) and the continuations run no FMU
     failed = set()  # the studies that did not complete
     with tempfile.TemporaryDirectory() as work_dir:
-        if not sources and any(name in FROM_SUMMARIES for name in names):
-            studies = FROM_CHECKED if args.check else ("oafm", "stability", "bench")
-            sources = run_studies(fmu_dir, Path(work_dir), args.quick, failed, studies)
-            if sources is None:
-                return 1
+        if studies:
+            sources = sources + run_studies(fmu_dir, Path(work_dir), args.quick, failed, studies)
             names = [name for name in names if not BLOCK_STUDIES.get(name, set()) & failed]
         bodies = generate(names, fmu_dir, sources, args.quick, Path(work_dir), start)
     missing = [name for name in names if name not in bodies]  # never silent (a failed study said why above)
@@ -159,7 +180,7 @@ def run(args) -> int:
               f"({text})", file=sys.stderr)
     if args.check:
         stale = [f"{doc.relative_to(root)}: {name}" for doc, blocks in found.items() for name, body in blocks.items()
-                 if name in bodies and body.rstrip() != bodies[name].rstrip()]
+                 if name in bodies and comparable(name, body) != comparable(name, bodies[name])]
         if stale:
             print("error: generated numbers differ from the documents (run `vibrofmu report`): " + "; ".join(stale),
                   file=sys.stderr)
