@@ -477,6 +477,10 @@ static int first_zero(Dop853 *s, DopRhs rhs, void *ctx, int i, int *found, doubl
     for (int j = 0; j < DOP_DENSE; j++) {
         G[j] = event_linear(s, i, s->dense[j]);
     }
+    double scale = fabs(e->c0);  /* the magnitudes b and g's evaluation round against (Dop853._first_zero's) */
+    for (int j = 0; j < s->n; j++)
+        if (e->c[j] != 0.0) scale += fabs(e->c[j] * s->y_old[j]);
+    for (int j = 0; j < DOP_DENSE; j++) scale += fabs(G[j]);
     for (int k = 0; k < 8; k++) {
         double sum = 0.0;
         for (int j = 0; j < DOP_DENSE; j++) sum += G[j] * DOP_BERNSTEIN[j][k];
@@ -485,7 +489,10 @@ static int first_zero(Dop853 *s, DopRhs rhs, void *ctx, int i, int *found, doubl
     DenseEvent c = {s, rhs, ctx, i, positive, r};
     double s_a, s_b;
     int at_start;
-    code = bernstein_search(b, DOP_DENSE, positive, beyond_on_dense, &c, found, &s_a, &s_b, &at_start);
+    code = bernstein_search(b, DOP_DENSE, positive, ROOT_EVENT_ROUNDING * scale, beyond_on_dense, &c, found, &s_a,
+                            &s_b, &at_start);
+    if (code == ROOT_EVENT_UNSETTLED)
+        return dop_report(r, s->n, DOP_RAISED, s->t, s->y, "RuntimeError: %s", ROOT_EVENT_UNSETTLED_TEXT);
     if (code || !*found) return code;
     if (at_start) {
         *t_event = fraction_time(s, s_a);

@@ -146,7 +146,11 @@ static int hermite_event(int n, const double *y, Hermite *c, double t, int *foun
     }
     hermite_bernstein(c->c0, c->cx, c->x, c->v, c->h, c->x_new, c->v_new, b);
     if (hermite_clear(b)) return DOP_OK;  /* the search's first verdict, inline */
-    bernstein_search(b, 3, 1, hermite_beyond, c, found, &s_a, &s_b, &at_start);
+    double scale = fabs(c->c0) + fabs(c->cx) * (fabs(c->x) + fabs(c->x_new) + fabs(c->h * c->v) +
+                                                 fabs(c->h * c->v_new));  /* what b and g round against */
+    if (bernstein_search(b, 3, 1, ROOT_EVENT_ROUNDING * scale, hermite_beyond, c, found, &s_a, &s_b, &at_start) ==
+        ROOT_EVENT_UNSETTLED)
+        return dop_report(r, n, DOP_RAISED, t, y, "RuntimeError: %s", ROOT_EVENT_UNSETTLED_TEXT);
     if (!*found) return DOP_OK;
     if (at_start) {
         *s_event = s_a;

@@ -134,11 +134,11 @@ typedef struct {
     double b[ROOT_MAX_DEGREE + 1];
 } Piece;
 
-int bernstein_search(const double *b, int degree, int positive, BeyondFunction beyond, void *context, int *found,
+int bernstein_search(const double *b, int degree, int positive, double tol, BeyondFunction beyond, void *context, int *found,
                      double *s_a, double *s_b, int *at_start)
 {
     Piece stack[ROOT_EVENT_MAX_DEPTH + 2];
-    int top = 1, code, past;
+    int top = 1, code, past, examined = 0;
     *found = 0;
     stack[0].s_a = 0.0;
     stack[0].s_b = 1.0;
@@ -152,7 +152,8 @@ int bernstein_search(const double *b, int degree, int positive, BeyondFunction b
             hi = py_max(hi, piece.b[k]);
         }
         if (positive ? lo > 0.0 : !(hi > 0.0)) continue;  /* the hull of g on the piece is on the start side */
-        int resolved = piece.depth >= ROOT_EVENT_MAX_DEPTH;
+        if (examined++ == ROOT_EVENT_MAX_PIECES) return ROOT_EVENT_UNSETTLED;
+        int resolved = piece.depth >= ROOT_EVENT_MAX_DEPTH || hi - lo <= tol;
         code = beyond(context, piece.s_b, &past);
         if (code) return code;
         if (past && (resolved || bernstein_monotone(piece.b, degree))) {

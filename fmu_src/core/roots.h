@@ -12,7 +12,8 @@ typedef int (*RootFunction)(void *context, double x, double *f);
 
 enum {
     ROOT_SIGN_ERROR = -1,     /* ValueError: f(a) and f(b) must have different signs */
-    ROOT_NO_CONVERGENCE = -2  /* RuntimeError: Failed to converge after *iterations iterations. */
+    ROOT_NO_CONVERGENCE = -2, /* RuntimeError: Failed to converge after *iterations iterations. */
+    ROOT_EVENT_UNSETTLED = -3 /* bernstein_search: RuntimeError: ROOT_EVENT_UNSETTLED_TEXT */
 };
 
 /* 0 and the root, or ROOT_SIGN_ERROR / ROOT_NO_CONVERGENCE, or the code function returned */
@@ -23,6 +24,10 @@ int brentq(RootFunction function, void *context, double xa, double xb, double *r
    middle (integrate._split). */
 #define ROOT_MAX_DEGREE 7
 #define ROOT_EVENT_MAX_DEPTH 40  /* integrate.EVENT_MAX_DEPTH: pieces of 2^-40 of a step are not split */
+#define ROOT_EVENT_ROUNDING 0x1p-46  /* integrate.EVENT_ROUNDING: tol per unit of the magnitudes b rounds against */
+#define ROOT_EVENT_MAX_PIECES 4096  /* integrate.EVENT_MAX_PIECES: pieces one search examines at most */
+#define ROOT_EVENT_UNSETTLED_TEXT "event search gave up after 4096 pieces of the step: the Bernstein hull of the " \
+    "event function and the dense output disagree (the step's values exceed the arithmetic)"
 int bernstein_monotone(const double *b, int degree);
 void bernstein_split(const double *b, int degree, double *left, double *right);
 
@@ -31,11 +36,13 @@ void bernstein_split(const double *b, int degree, double *left, double *right);
 typedef int (*BeyondFunction)(void *context, double s, int *beyond);
 
 /* integrate._bernstein_search: the first piece [*s_a, *s_b] of [0, 1] (left half first) whose end s_b is beyond the
-   event and on which g is monotone (or which is 2^-ROOT_EVENT_MAX_DEPTH long), g given by its Bernstein coefficients
+   event and on which g is monotone (or which is 2^-ROOT_EVENT_MAX_DEPTH long, or on which b spans no more than tol:
+   the rounding of b and of g's evaluation, ROOT_EVENT_ROUNDING times their magnitudes), g given by its Bernstein coefficients
    b[0..degree] on [0, 1]; pieces whose hull lies on the start side (positive: all > 0; else none > 0) are skipped.
    *found = 0 if there is none; else *found = 1 and *at_start = whether s_a is beyond already (then the event is at
-   s_a, else one zero lies in the piece). 0, or the code `beyond` returned. */
-int bernstein_search(const double *b, int degree, int positive, BeyondFunction beyond, void *context, int *found,
+   s_a, else one zero lies in the piece). 0, ROOT_EVENT_UNSETTLED once ROOT_EVENT_MAX_PIECES pieces were examined
+   (g evaluated at their ends) in vain, or the code `beyond` returned. */
+int bernstein_search(const double *b, int degree, int positive, double tol, BeyondFunction beyond, void *context, int *found,
                      double *s_a, double *s_b, int *at_start);
 
 #endif

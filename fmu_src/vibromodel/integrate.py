@@ -93,6 +93,20 @@ ATOL_PER_RTOL = 1e-2  # atol = 1e-2 rtol: the response is O(1e-2), so rtol alone
 # is either proved free of the event by its coefficients or its end is found on the event's far side.
 # Pieces shorter than 2^-EVENT_MAX_DEPTH of the step are not split further (a tangential touch).
 EVENT_MAX_DEPTH = 40
+# Nor is a piece on which g varies by no more than the rounding of its coefficients and of g's evaluation
+# (max(b) - min(b) <= tol, tol = EVENT_ROUNDING * the sum of the magnitudes b is computed from): splitting it cannot
+# tell a touch from rounding, and the interpolant's verdict at the piece's end decides. Without that bound a touch
+# within rounding (a graze of depth ~1e-16) sent the depth-first search through every 2^-40 piece of the region
+# where the hull straddles 0 (964,111 in one step), and a step whose coefficients round by more than g itself
+# (x'' ~ 1e46 from rest) through up to 2^40 pieces. EVENT_ROUNDING = 2^-46 = 64 eps: b is a sum of 9 terms (each
+# rounded once, <= 9 eps of the magnitudes), 40 halvings add <= 40 eps more, the evaluation of g a few eps.
+EVENT_ROUNDING = 2.0 ** -46
+# A search examines (evaluates g at the end of) at most EVENT_MAX_PIECES pieces, then raises RuntimeError
+# (EVENT_UNSETTLED); a safety net: the random contact-loss scenes and the graze sweep examine at most a few dozen
+# (tests/model/test_event_location.py measures it), so no sound step reaches it.
+EVENT_MAX_PIECES = 4096
+EVENT_UNSETTLED = (f"event search gave up after {EVENT_MAX_PIECES} pieces of the step: the Bernstein hull of the "
+                   "event function and the dense output disagree (the step's values exceed the arithmetic)")
 # A step is searched only if g comes within EVENT_SCREEN * (|g(end) - g(start)| + h (|g'(start)| + |g'(end)|))
 # of 0 at one of its ends (or changes side): a step's motion of g stays within half that bound for a
 # parabolic arc, so the screen keeps a factor 4 on it (docs/events.md).
@@ -166,20 +180,25 @@ def _split(b):
     return left, right
 
 
-def _bernstein_search(b, positive, beyond):
+def _bernstein_search(b, positive, beyond, tol):
     """The event search of both integrators (core/roots.c bernstein_search, the same operations): the first piece
     (s_a, s_b) of [0, 1], left half first, whose end s_b is beyond the event (beyond(s): g at the step fraction s
     is past it, seen from the side the step starts on) and on which g, given by its Bernstein coefficients b on
-    [0, 1], is monotone (_monotone) or which is 2^-EVENT_MAX_DEPTH long; pieces whose hull is on the start side
+    [0, 1], is monotone (_monotone) or which is 2^-EVENT_MAX_DEPTH long or on which b spans no more than tol (the
+    rounding of b and of g's evaluation: EVENT_ROUNDING); pieces whose hull is on the start side
     (positive: min(b) > 0; else not max(b) > 0) are skipped. None if there is none, else (s_a, s_b, beyond(s_a)):
     with the last True the event is at s_a (a rounding of the hull's verdict on the piece before), else one zero
-    lies in the piece."""
+    lies in the piece. RuntimeError (EVENT_UNSETTLED) once EVENT_MAX_PIECES pieces were examined in vain."""
     stack = [(0.0, 1.0, 0, b)]
+    examined = 0
     while stack:
         s_a, s_b, depth, b = stack.pop()
         if (min(b) > 0.0) if positive else not (max(b) > 0.0):
             continue  # the hull of g on the piece is on the start side
-        resolved = depth >= EVENT_MAX_DEPTH
+        if examined == EVENT_MAX_PIECES:
+            raise RuntimeError(EVENT_UNSETTLED)
+        examined += 1
+        resolved = depth >= EVENT_MAX_DEPTH or max(b) - min(b) <= tol
         if beyond(s_b) and (resolved or _monotone(b)):
             return s_a, s_b, beyond(s_a)
         if not resolved:
@@ -517,11 +536,15 @@ class Dop853(Integrator):
         _, (fx, _, _) = self._interpolant(self.t_old)
         G = [0.0 + cx * f for f in fx]  # the dense output's coefficients of g - g0
         b = [g0 + _dot(G, [row[k] for row in BERNSTEIN]) for k in range(8)]
+        scale = abs(c0) + abs(cx * self.x_old)  # the magnitudes b and g's evaluation round against
+        for term in G:
+            scale += abs(term)
 
         def time(s):  # the step's ends exactly
             return self.t if s == 1.0 else self.t_old if s == 0.0 else self.t_old + s * h
 
-        piece = _bernstein_search(b, positive, lambda s: beyond(c0 + cx * self.value_at(time(s))[0]))
+        piece = _bernstein_search(b, positive, lambda s: beyond(c0 + cx * self.value_at(time(s))[0]),
+                                  EVENT_ROUNDING * scale)
         if piece is None:
             return None
         s_a, s_b, at_start = piece
@@ -657,7 +680,8 @@ def _hermite_event(event, t, x, v, h, x_new, v_new):
     b = [c0 + cx * x, c0 + cx * (x + h * v / 3.0), c0 + cx * (x_new - h * v_new / 3.0), c0 + cx * x_new]
     if min(b) > 0.0:  # the search's first verdict, without it (the C twin's fast exit of most steps)
         return None
-    piece = _bernstein_search(b, True, lambda s: not g(state(s)[0]) > 0.0)
+    scale = abs(c0) + abs(cx) * (abs(x) + abs(x_new) + abs(h * v) + abs(h * v_new))  # what b and g round against
+    piece = _bernstein_search(b, True, lambda s: not g(state(s)[0]) > 0.0, EVENT_ROUNDING * scale)
     if piece is None:
         return None
     s_a, s_b, at_start = piece

@@ -37,6 +37,9 @@ STATE = {
     "fmi3_cs_mode": [1, 2, 0, 0, 0, 0, 7, 3, 0, 0, 0, 0, 0, 0, 0, *ALL3],
     "fmi3_me_inf": [3, 2, 0, 1, 120, 0, INF_K],
     "fmi2_fresh": [0, 0, 0, 0, 100, 0, 4, 255],
+    # a campaign's timeout (round 8): a patched state whose next step has x'' ~ 1e46, where the event search
+    # walked 2^40 pieces (integrate.EVENT_ROUNDING now bounds it)
+    "fmi2_cs_event_hull": [0x00, 0x02, 0x00, 0x00, 0xF7, 0x00, 0x76, 0x4F, 0x72, 0x65, 0x66, 0x12, 0xA9, 0x42],
 }
 LAYER = {
     "uri": [0, 200, 3, 5, *b"/tmp"],
