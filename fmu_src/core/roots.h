@@ -1,7 +1,7 @@
 /*
  * roots.h -- the event search of every solver: scipy.optimize.brentq(f, xa, xb, xtol=1e-15, rtol=1e-15) (maxiter
  * 100), scipy/optimize/Zeros/brentq.c (Charles Harris) line for line, the root finder of vibromodel/integrate.py's
- * event location; and the one Bernstein-bisection search (integrate._bernstein_search) that brackets the first zero
+ * event location; and the one Bernstein-bisection search (integrate.bernstein_search) that brackets the first zero
  * of an event on a step's interpolant (DOP853's dense output, a fixed step's cubic Hermite): docs/events.md.
  */
 #ifndef VIBRO_ROOTS_H
@@ -35,7 +35,7 @@ void bernstein_split(const double *b, int degree, double *left, double *right);
    starts on) into *beyond; returns 0, or a nonzero code that bernstein_search returns at once */
 typedef int (*BeyondFunction)(void *context, double s, int *beyond);
 
-/* integrate._bernstein_search: the first piece [*s_a, *s_b] of [0, 1] (left half first) whose end s_b is beyond the
+/* integrate.bernstein_search: the first piece [*s_a, *s_b] of [0, 1] (left half first) whose end s_b is beyond the
    event and on which g is monotone (or which is 2^-ROOT_EVENT_MAX_DEPTH long, or on which b spans no more than tol:
    the rounding of b and of g's evaluation, ROOT_EVENT_ROUNDING times their magnitudes), g given by its Bernstein coefficients
    b[0..degree] on [0, 1]; pieces whose hull lies on the start side (positive: all > 0; else none > 0) are skipped.

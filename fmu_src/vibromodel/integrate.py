@@ -180,7 +180,7 @@ def _split(b):
     return left, right
 
 
-def _bernstein_search(b, positive, beyond, tol):
+def bernstein_search(b, positive, beyond, tol):
     """The event search of both integrators (core/roots.c bernstein_search, the same operations): the first piece
     (s_a, s_b) of [0, 1], left half first, whose end s_b is beyond the event (beyond(s): g at the step fraction s
     is past it, seen from the side the step starts on) and on which g, given by its Bernstein coefficients b on
@@ -218,7 +218,7 @@ class Integrator(abc.ABC):
     Stepping: advance(t_target) covers t_target; set_input(t, U) holds a new input from t on.
     Dense output: value_at(t) -> (x, v) and U_at(t) within the last step (a fixed-step solver: at its end only).
     Events (models.Event): a terminal event's zero raises terminal_event(...) (TerminalEvent, the run stops there);
-    a non-terminal one's (the contact kink) ends a step there. The root search is the shared one: _bernstein_search
+    a non-terminal one's (the contact kink) ends a step there. The root search is the shared one: bernstein_search
     on the dense output (Dop853), the Hermite cubic of a step (Rk4, _hermite_event)."""
 
     events: tuple
@@ -543,7 +543,7 @@ class Dop853(Integrator):
         def time(s):  # the step's ends exactly
             return self.t if s == 1.0 else self.t_old if s == 0.0 else self.t_old + s * h
 
-        piece = _bernstein_search(b, positive, lambda s: beyond(c0 + cx * self.value_at(time(s))[0]),
+        piece = bernstein_search(b, positive, lambda s: beyond(c0 + cx * self.value_at(time(s))[0]),
                                   EVENT_ROUNDING * scale)
         if piece is None:
             return None
@@ -681,7 +681,7 @@ def _hermite_event(event, t, x, v, h, x_new, v_new):
     if min(b) > 0.0:  # the search's first verdict, without it (the C twin's fast exit of most steps)
         return None
     scale = abs(c0) + abs(cx) * (abs(x) + abs(x_new) + abs(h * v) + abs(h * v_new))  # what b and g round against
-    piece = _bernstein_search(b, True, lambda s: not g(state(s)[0]) > 0.0, EVENT_ROUNDING * scale)
+    piece = bernstein_search(b, True, lambda s: not g(state(s)[0]) > 0.0, EVENT_ROUNDING * scale)
     if piece is None:
         return None
     s_a, s_b, at_start = piece

@@ -1,4 +1,4 @@
-"""The one event search in both languages (core/roots.c bernstein_search, integrate._bernstein_search): the same
+"""The one event search in both languages (core/roots.c bernstein_search, integrate.bernstein_search): the same
 pieces on the same coefficients, a bound on the pieces it examines, and its constants stated once per language and
 kept equal here. roots.c is compiled alone into a small library and called through ctypes with Python callbacks,
 so the C search sees exactly the `beyond` verdicts the Python one sees."""
@@ -58,7 +58,7 @@ def py_search(b, positive, beyond, tol):
         return beyond(s)
 
     try:
-        return 0, integrate._bernstein_search(list(b), positive, counting, tol), asked
+        return 0, integrate.bernstein_search(list(b), positive, counting, tol), asked
     except RuntimeError as error:
         assert str(error) == integrate.EVENT_UNSETTLED
         return ROOT_EVENT_UNSETTLED, None, asked
@@ -82,7 +82,7 @@ def polynomial_beyond(b, positive):
     """beyond(s) from the polynomial itself (de Casteljau at s): a search whose hull and interpolant agree"""
     def value(s):
         points = list(b)
-        for r in range(1, len(points)):
+        for _ in range(1, len(points)):
             points = [(1 - s) * points[k] + s * points[k + 1] for k in range(len(points) - 1)]
         return points[0]
     return lambda s: (not value(s) > 0.0) if positive else value(s) > 0.0
@@ -135,7 +135,7 @@ def test_graze_searches_stay_far_below_the_bound(monkeypatch):
     from vibromodel.plant import Plant, Settings
 
     counts = []
-    original = integrate._bernstein_search
+    original = integrate.bernstein_search
 
     def counting(b, positive, beyond, tol):
         n = len(counts)
@@ -146,7 +146,7 @@ def test_graze_searches_stay_far_below_the_bound(monkeypatch):
             return beyond(s)
         return original(b, positive, asked, tol)
 
-    monkeypatch.setattr(integrate, "_bernstein_search", counting)
+    monkeypatch.setattr(integrate, "bernstein_search", counting)
     for depth in (10.0 ** -15.5, 1e-12, 1e-6):
         times, _, error = run_plant(Plant(graze_scene(graze_reference(depth)), Settings(rtol=1e-12)), 20.0, 0.5)
         assert error is None and math.isclose(times[-1], 20.0)
