@@ -82,7 +82,7 @@ def run_studies(fmu_dir: Path, work_dir: Path, quick: bool, failed: set | None =
             continue
         folder = work_dir / name
         said = ("python3 -m vibrofmu.analyses.cusp_order" if command is cusp_study else
-                f"vibrofmu {command.name} {' '.join(argv[2:] if name in STUDIES_WITH_FMUS else argv)}")
+                " ".join(["vibrofmu", command.name, *(argv[2:] if name in STUDIES_WITH_FMUS else argv)]))
         print(f"report: running {said} ...", file=sys.stderr, flush=True)
         try:
             code = command(folder) if command is cusp_study else invoke(command, argv + ["--out", str(folder)])
