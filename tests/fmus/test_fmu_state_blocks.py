@@ -49,6 +49,15 @@ def test_forged_model_exchange_blocks_are_refused(request, fixture):
         assert status > OK or (math.isfinite(x) and abs(x) < ELECTRODE), line
     own = next(line for line in lines if line["case"] == "its own state into the ME instance")
     assert (own["deserialize"], own["set"]) == (OK, OK) and own["after"] == [OK, 0.123456789], own
+    # a live ME state (got, or deserialized by an ME instance) set into a CS instance: refused by fmi2SetFMUstate,
+    # which checks the interface of the instance it sets (a state's content is checked once, when it becomes live)
+    across = [line for line in lines if line["case"].endswith("set into a CS instance")]
+    assert len(across) == 2
+    for line in across:
+        assert line["made"] == OK and line["set"] == ERROR, line
+        assert any("fmi2SetFMUstate refused" in text and "Model Exchange state" in text for text in line["log"]), line
+        status, x = line["after"]
+        assert status == OK and math.isfinite(x), line  # the CS instance steps on as it was
 
 
 @pytest.mark.parametrize("pair", [("plant_fmu", "controller_fmu"), ("native_plant_fmu", "native_controller_fmu"),

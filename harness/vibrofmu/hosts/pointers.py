@@ -423,6 +423,20 @@ def scenario_me_block(probe) -> None:
     emit(case="its own state into the ME instance", instance="ME", **dict(zip(("deserialize", "set"),
                                                                                 _restore(probe, me2, data))),
          after=answer(me2, True), log=probe.take_log())
+    # a live state of the ME instance (its own, got; and one it deserialized) set into a CS instance of the same
+    # binary: fmi2SetFMUstate checks the interface of the instance it sets (the content was checked when it became
+    # live)
+    for case, make in (("got", lambda s: f.fmi2GetFMUstate(me, ctypes.byref(s))),
+                       ("deserialized", lambda s: f.fmi2DeSerializeFMUstate(me2, data, len(data), ctypes.byref(s)))):
+        state = ctypes.c_void_p()
+        made = make(state)
+        cs = probe.start()
+        f.fmi2DoStep(cs, 0.0, 0.5, 1)
+        probe.take_log()
+        emit(case=f"an ME state {case} by an ME instance set into a CS instance", instance="CS", made=made,
+             set=f.fmi2SetFMUstate(cs, state), after=answer(cs, False), log=probe.take_log())
+        f.fmi2FreeFMUstate(me, ctypes.byref(state))
+        f.fmi2FreeInstance(cs)
     f.fmi2FreeInstance(me2)
     f.fmi2FreeInstance(me)
 
