@@ -39,6 +39,9 @@ and `vibrofmu report` rewrites the text between them (the markers stay). Blocks:
              --from folders (a timing: not run by the report itself, never compared by --check).
 - auto_setup: fidelity auto's set-up and each rung's estimate over its initialisation, from a bench.json (`bench`,
              or `bench --auto-only`; timings, never compared by --check).
+- fuzz:      a fuzzing campaign of the FMI layers' libFuzzer targets, per target its executions, rates, CPU time,
+             coverage, corpus and findings, from a fuzz.json (`python3 tests/fuzz/run.py --out DIR`) in the --from
+             folders (counts that depend on the machine and the campaign's length: never compared by --check).
 - cusp_order: the exact cusp beside the slow flow's over a family of scenes with a shrinking small parameter, the
              errors and their fitted order, from a cusp_order.json (`python3 -m vibrofmu.analyses.cusp_order OUT`)
              in the --from folders, else from a fresh run of the study (seconds); its CPU time depends on the
@@ -70,9 +73,9 @@ BLOCK = re.compile(r"<!-- report:(?P<name>[a-z_]+) -->\n(?P<body>.*?)<!-- /repor
 OPEN = re.compile(r"<!-- report:([a-z_]+) -->")
 CLOSE = re.compile(r"<!-- /report:([a-z_]+) -->")
 NAMES = ("machine", "accuracy", "ssp", "ssp_orderings", "container", "oafm", "stability", "speed", "ranges", "peers",
-         "calibration", "calibration_replay", "auto", "cascade", "curve_speed", "auto_setup", "cusp_order")
+         "calibration", "calibration_replay", "auto", "cascade", "curve_speed", "auto_setup", "cusp_order", "fuzz")
 FROM_SUMMARIES = ("oafm", "stability", "speed", "peers", "calibration", "auto", "cascade", "curve_speed", "auto_setup",
-                  "cusp_order")  # filled from the --from folders only
+                  "cusp_order", "fuzz")  # filled from the --from folders only
 DETERMINISTIC = ("accuracy", "ssp", "ssp_orderings", "container", "ranges", "calibration_replay")
 # the numbers of a compared block that depend on the machine (its CPU time; the block says so): `report --check`
 # masks them in both texts and compares the rest (every pattern matches its block once: tests/docs/test_docs.py)
@@ -90,7 +93,8 @@ SOURCE_FILES = {"oafm": "an oafm summary.json", "stability": "a stability summar
                 "cascade": "a continuation summary.json with a cascade",
                 "curve_speed": "a bench.json of bench --curve",
                 "auto_setup": "a bench.json with fidelity auto's set-up (bench, bench --auto-only)",
-                "cusp_order": "a cusp_order.json (python3 -m vibrofmu.analyses.cusp_order)"}
+                "cusp_order": "a cusp_order.json (python3 -m vibrofmu.analyses.cusp_order)",
+                "fuzz": "a fuzz.json (python3 tests/fuzz/run.py writes one into its --out folder)"}
 ACCURACY_TAUS = (10.0, 25.0, 50.0, 100.0, 200.0)
 ACCURACY_RTOLS = (1e-4, 1e-6, 1e-8, 1e-10, 1e-12)
 ACCURACY_RK4_STEPS = (0.1, 0.05, 0.025)
@@ -564,6 +568,60 @@ def auto_setup_block(sources: list[Path]) -> str | None:
     return None
 
 
+def _count(n: float) -> str:
+    return f"{n:,.0f}"
+
+
+def fuzz_block(sources: list[Path]) -> str | None:
+    """The fuzzing campaign from the first fuzz.json (tests/fuzz/run.py's summary) in the folders; ReportError when
+    that file is not one (unreadable, not JSON, a field missing or of the wrong type)."""
+    for folder in sources:
+        file = folder / "fuzz.json"
+        if not file.is_file():
+            continue
+        try:
+            f = json.loads(file.read_text())["fuzz"]
+            rows, total_cpu = [], 0.0
+            for r in f["targets"]:
+                cpu = float(r["cpu_seconds"])
+                total_cpu += cpu
+                per_cpu = _count(r["executions"] / cpu) if cpu > 0 else "—"
+                rows.append(f"| {r['target']} | {_count(r['executions'])} | {_count(r['seconds'])} | "
+                            f"{_count(r['exec_per_sec'])} | {_count(cpu)} | {per_cpu} | {_count(r['cov'])} / "
+                            f"{_count(r['ft'])} | {_count(r['corpus'])} | {1 if r['finding'] else 0} |")
+            executions = sum(int(r["executions"]) for r in f["targets"])
+            findings = sum(1 for r in f["targets"] if r["finding"])
+            start, end = f["load_average_at_start"][0], f["load_average_at_end"][0]
+            if f["seconds"] is not None:
+                limit = (f"each target its share of the {_count(f['seconds'])} s budget, {f['jobs']} at a time"
+                         + (f", or {_count(f['runs_limit'])} executions" if f["runs_limit"] is not None else ""))
+            else:
+                limit = f"{_count(f['runs_limit'])} executions per target, {f['jobs']} at a time"
+            head = (f"`{f['command']}` ({f['started_utc']}, sources at {f['sources'] or 'an unknown commit'}, "
+                    f"{f['cpu_count']} CPUs, load average {start:.1f} at its start and {end:.1f} at its end; "
+                    f"built in {_count(f['build_seconds'])} s; {limit}; AddressSanitizer and "
+                    f"UndefinedBehaviorSanitizer, an input over {f['timeout']} s a finding"
+                    + ("; no NULL pointer arguments (--skip-null)" if f["skip_null"] else "") + "):")
+        except (OSError, UnicodeDecodeError, ValueError, KeyError, TypeError, IndexError, AttributeError) as error:
+            what = f"{type(error).__name__}: {error}" if not isinstance(error, KeyError) else f"no field {error}"
+            raise ReportError(f"{file}: not a summary of tests/fuzz/run.py ({what})") from None
+        return "\n".join([
+            head, "",
+            "| target | executions | wall s | exec/s | CPU s | exec per CPU s | coverage (edges / features) | corpus "
+            "| findings |", "|---|---:|---:|---:|---:|---:|---:|---:|---:|", *rows, "",
+            f"{_count(executions)} executions in {_count(total_cpu)} CPU seconds over {len(rows)} targets, "
+            f"{findings} finding{'s' * (findings != 1)}.",
+            "- Depend on the machine and on the campaign's length (so `vibrofmu report --check` does not compare "
+            "this block): every count, rate and coverage number above. A target's executions grow with its share of "
+            "the budget and with the share of a core it gets on a shared machine (CPU seconds, beside the wall "
+            "clock's); its coverage and corpus grow with the executions, and start from the seeds and the committed "
+            "corpus (tests/fuzz/merged). A finding is a bug whatever the machine; 0 findings speaks for these "
+            "executions only, not for the inputs never tried.",
+            "- Regenerate: the command above writes its summary to `<out>/fuzz.json` (`--out`, default "
+            "`build/fuzz`); then `vibrofmu report --from OUT --only fuzz`."])
+    return None
+
+
 # ---------------------------------------------------------------------------------------------- the command
 
 def summary_block(name: str, sources: list[Path]) -> str | None:
@@ -571,7 +629,7 @@ def summary_block(name: str, sources: list[Path]) -> str | None:
     return {"oafm": oafm_block, "stability": stability_block, "speed": speed_block,
             "peers": peers_block, "calibration": calibration_block, "auto": auto_block,
             "cascade": cascade_block, "curve_speed": curve_speed_block,
-            "auto_setup": auto_setup_block, "cusp_order": cusp_order_block}[name](sources)
+            "auto_setup": auto_setup_block, "cusp_order": cusp_order_block, "fuzz": fuzz_block}[name](sources)
 
 
 def generate(names, fmu_dir: Path, sources: list[Path], quick: bool, work_dir: Path, start=None) -> dict[str, str]:

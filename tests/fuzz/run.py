@@ -4,6 +4,10 @@ UndefinedBehaviorSanitizer.
     python3 tests/fuzz/run.py [--seconds 60] [--jobs 2] [--runs N] [--timeout 30] [--out build/fuzz] [TARGET ...]
     python3 tests/fuzz/run.py --merge tests/fuzz/merged [--out build/fuzz] [TARGET ...]
 
+Each run writes <out>/fuzz.json (the command, the machine's CPUs and load, the sources' commit, and per target its
+executions, CPU seconds, coverage, corpus and finding): `vibrofmu report --from <out> --only fuzz` makes
+docs/robustness.md's campaign block of it.
+
 Targets: calls_<Model> and state_<Model> for each native FMU (fuzz_native.c with FUZZ_CALLS / FUZZ_STATE, compiled
 with the model's native sources for FMI 3.0 -- which hold the FMI 2.0 layer too -- and its generated headers,
 vibrofmu.fmus.native.write_sources), and layer (fuzz_layer.c on fmu_src/fmi/fmi2_layer.c).  Each runs from its
@@ -20,11 +24,14 @@ from __future__ import annotations
 import argparse
 import concurrent.futures
 import hashlib
+import json
 import os
 import re
+import shlex
 import shutil
 import subprocess
 import sys
+import tempfile
 import time
 import xml.etree.ElementTree as ET
 from pathlib import Path
@@ -163,16 +170,62 @@ def fuzz(out: Path, target: str, seconds: float | None, runs: int | None, timeou
            "-print_final_stats=1", f"-artifact_prefix={findings}/{target}-", str(corpus),
            *map(str, seeds)]
     start = time.monotonic()
-    proc = subprocess.run(cmd, capture_output=True, text=True, env={**os.environ, "ASAN_OPTIONS": ASAN_OPTIONS,
-                                                                    "UBSAN_OPTIONS": "print_stacktrace=1"})
+    # the target's own CPU time (user + system, from wait4's resource usage): with --jobs > 1 or on a shared machine
+    # the wall-clock seconds tell little about the work done
+    with tempfile.TemporaryFile("w+") as log:
+        proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=log, text=True,
+                                env={**os.environ, "ASAN_OPTIONS": ASAN_OPTIONS, "UBSAN_OPTIONS": "print_stacktrace=1"})
+        _, status, usage = os.wait4(proc.pid, 0)
+        proc.returncode = os.waitstatus_to_exitcode(status)  # reaped here: Popen must not wait for it again
+        log.seek(0)
+        stderr = log.read()
     elapsed = time.monotonic() - start
-    stats = {k: int(v) for k, v in STAT.findall(proc.stderr)}
-    cov = DONE.findall(proc.stderr)
-    result = {"target": target, "seconds": elapsed, "returncode": proc.returncode,
+    stats = {k: int(v) for k, v in STAT.findall(stderr)}
+    cov = DONE.findall(stderr)
+    result = {"target": target, "seconds": elapsed, "cpu_seconds": usage.ru_utime + usage.ru_stime,
+              "returncode": proc.returncode,
               "runs": stats.get("number_of_executed_units", 0), "exec_per_sec": stats.get("average_exec_per_sec", 0),
               "cov": int(cov[-1][1]) if cov else 0, "ft": int(cov[-1][2]) if cov else 0,
-              "corpus": int(cov[-1][3]) if cov else 0, "log": proc.stderr}
+              "corpus": int(cov[-1][3]) if cov else 0, "log": stderr}
     return result
+
+
+SUMMARY = "fuzz.json"  # <out>/fuzz.json: a run's summary (vibrofmu report --from <out> --only fuzz reads it)
+
+
+def sources_commit() -> str | None:
+    """The checkout's commit the targets were built from (with '+changes' when its tracked files differ), or None
+    outside a git checkout."""
+    try:
+        head = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short=12", "HEAD"], capture_output=True,
+                              text=True, check=True).stdout.strip()
+        dirty = subprocess.run(["git", "-C", str(ROOT), "status", "--porcelain", "--untracked-files=no"],
+                               capture_output=True, text=True, check=True).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return None
+    return head + ("+changes" if dirty else "")
+
+
+def write_summary(out: Path, argv: list[str], args, started: tuple[float, tuple[float, float, float], str | None],
+                  built: float, elapsed: float, results: list[dict]) -> Path:
+    """<out>/fuzz.json: the run (its command; started: when, the machine's load then and the sources' commit,
+    taken before the build; the CPUs, the limits) and per target its executions, rates, CPU time, coverage, corpus
+    and whether it found something."""
+    summary = {"fuzz": {
+        "command": shlex.join(["python3", "tests/fuzz/run.py", *argv]),
+        "started_utc": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime(started[0])),
+        "cpu_count": os.cpu_count(), "load_average_at_start": list(started[1]),
+        "load_average_at_end": list(os.getloadavg()), "sources": started[2],
+        "seconds": args.seconds, "runs_limit": args.runs, "jobs": args.jobs, "timeout": args.timeout,
+        "skip_null": args.skip_null, "build_seconds": built, "elapsed_seconds": elapsed,
+        "targets": [{"target": r["target"], "executions": r["runs"], "seconds": r["seconds"],
+                     "cpu_seconds": r["cpu_seconds"], "exec_per_sec": r["exec_per_sec"], "cov": r["cov"],
+                     "ft": r["ft"], "corpus": r["corpus"], "finding": r["returncode"] != 0} for r in results]}}
+    path = out / SUMMARY
+    tmp = path.with_suffix(".tmp")
+    tmp.write_text(json.dumps(summary, indent=1) + "\n")
+    tmp.replace(path)
+    return path
 
 
 def unpack_merged(out: Path, target: str) -> Path | None:
@@ -232,6 +285,7 @@ def main(argv: list[str] | None = None) -> int:
                         help="no NULL pointer arguments (to look past a known NULL-argument finding)")
     parser.add_argument("--merge", type=Path, metavar="DIR",
                         help="no fuzzing: write DIR/<target>.hex, the working corpus minimized (tests/fuzz/merged)")
+    argv = sys.argv[1:] if argv is None else argv
     args = parser.parse_args(argv)
     wanted = args.targets or targets()
     unknown = sorted(set(wanted) - set(targets()))
@@ -239,6 +293,9 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: unknown target(s) {', '.join(unknown)}; known: {', '.join(targets())}", file=sys.stderr)
         return 2
     out = args.out.resolve()
+    # when, the machine's load before the build loads it, and the sources built (a commit made during a long run
+    # is not the campaign's)
+    started = time.time(), os.getloadavg(), sources_commit()
     start = time.monotonic()
     if args.merge is not None:
         for target in wanted:
@@ -254,17 +311,22 @@ def main(argv: list[str] | None = None) -> int:
         results = list(pool.map(lambda t: fuzz(out, t, share, args.runs, args.timeout), wanted))
     failed = 0
     print(f"fuzz: built in {built:.0f} s; {len(wanted)} targets, {args.jobs} at a time")
-    print(f"{'target':40s} {'executions':>12s} {'exec/s':>8s} {'cov':>6s} {'ft':>6s} {'corpus':>7s} {'s':>6s}")
+    print(f"{'target':34s} {'executions':>11s} {'exec/s':>7s} {'CPU s':>7s} {'per CPU s':>9s} {'cov':>5s} {'ft':>6s} "
+          f"{'corpus':>6s} {'s':>6s}")
     for r in results:
-        print(f"{r['target']:40s} {r['runs']:12d} {r['exec_per_sec']:8d} {r['cov']:6d} {r['ft']:6d} "
-              f"{r['corpus']:7d} {r['seconds']:6.0f}{'  FINDING' if r['returncode'] else ''}")
+        per_cpu = r["runs"] / r["cpu_seconds"] if r["cpu_seconds"] > 0 else 0.0
+        print(f"{r['target']:34s} {r['runs']:11d} {r['exec_per_sec']:7d} {r['cpu_seconds']:7.0f} {per_cpu:9.0f} "
+              f"{r['cov']:5d} {r['ft']:6d} {r['corpus']:6d} {r['seconds']:6.0f}{'  FINDING' if r['returncode'] else ''}")
         if r["returncode"] != 0:
             failed += 1
             tail = r["log"].splitlines()
             start_at = next((i for i, line in enumerate(tail) if "ERROR" in line or "FUZZ FINDING" in line
                              or "runtime error" in line), max(0, len(tail) - 40))
             print("\n".join(tail[start_at:start_at + 60]), file=sys.stderr)
-    print(f"fuzz: {failed} finding(s) in {time.monotonic() - start:.0f} s")
+    elapsed = time.monotonic() - start
+    summary = write_summary(out, argv, args, started, built, elapsed, results)
+    print(f"fuzz: {failed} finding(s) in {elapsed:.0f} s; summary in {summary} (vibrofmu report --from {out} --only "
+          "fuzz)")
     return 1 if failed else 0
 
 

@@ -43,6 +43,9 @@ NOT_CHECKED = {"machine": "where and when the numbers were taken", "speed": "tim
                "of each are compared (calibration_replay)",
                "curve_speed": "a fold curve's time: it depends on the machine and its load",
                "auto": "fidelity auto against the oracle: the oracle and the costs are timings on a shared machine",
+               "fuzz": "a fuzzing campaign's executions, rates and coverage: they depend on the machine, its load "
+               "and the campaign's length (`python3 tests/fuzz/run.py --seconds S --out DIR`, then `vibrofmu report "
+               "--from DIR --only fuzz`)",
                "auto_setup": "fidelity auto's set-up and the estimates' share of the initialisation: times, they "
                "depend on the machine and its load (`vibrofmu bench --auto-only --out DIR`, then `vibrofmu report "
                "--from DIR --only auto_setup`)"}
@@ -149,7 +152,11 @@ def run(args) -> int:
             return 2
     names = (DETERMINISTIC + FROM_CHECKED) if args.check else (args.only or NAMES)
     if sources and args.only:  # a block asked for by name whose summary is in no --from folder: say so now
-        missing = [name for name in names if name in FROM_SUMMARIES and summary_block(name, sources) is None]
+        try:
+            missing = [name for name in names if name in FROM_SUMMARIES and summary_block(name, sources) is None]
+        except ReportError as error:  # a summary there but damaged
+            print(f"error: --from {', '.join(args.sources)}: {error}", file=sys.stderr)
+            return 2
         if missing:
             text = "; ".join(f"{name} needs {SOURCE_FILES[name]}" for name in missing)
             print(f"error: --from {', '.join(args.sources)}: no summary for the block{'s' * (len(missing) > 1)} "
@@ -171,7 +178,11 @@ def run(args) -> int:
         if studies:
             sources = sources + run_studies(fmu_dir, Path(work_dir), args.quick, failed, studies)
             names = [name for name in names if not BLOCK_STUDIES.get(name, set()) & failed]
-        bodies = generate(names, fmu_dir, sources, args.quick, Path(work_dir), start)
+        try:
+            bodies = generate(names, fmu_dir, sources, args.quick, Path(work_dir), start)
+        except ReportError as error:  # a damaged summary in a --from folder (fuzz.json): nothing is written
+            print(f"error: {error}", file=sys.stderr)
+            return 2
     missing = [name for name in names if name not in bodies]  # never silent (a failed study said why above)
     if missing:
         where = ("--from " + ", ".join(args.sources)) if args.sources else "the studies' runs"

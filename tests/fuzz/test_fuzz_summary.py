@@ -1,0 +1,86 @@
+"""tests/fuzz/run.py's summary (<out>/fuzz.json) and the report block made of it (`vibrofmu report --from OUT
+--only fuzz`): the block renders every target's numbers from run.py's own writer, says that its counts depend on the
+machine and the campaign's length, and a missing or damaged summary is one line `error: ...` and exit 2. Synthetic
+results: nothing is built or fuzzed here."""
+import argparse
+import json
+import os
+import sys
+from pathlib import Path
+
+import pytest
+
+from vibrofmu import report
+from vibrofmu.cli import main
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))
+import run  # noqa: E402  (tests/fuzz/run.py)
+
+ROOT = HERE.parents[1]
+
+
+def synthetic(out: Path, findings=()) -> Path:
+    """<out>/fuzz.json as run.main writes it, for two targets with made-up numbers."""
+    args = argparse.Namespace(seconds=600.0, runs=None, jobs=1, timeout=30, skip_null=False)
+    results = [{"target": "calls_HertzEAOscillator", "runs": 123456, "seconds": 300.4, "cpu_seconds": 40.0,
+                "exec_per_sec": 411, "cov": 2263, "ft": 11182, "corpus": 2314, "returncode": 0},
+               {"target": "layer", "runs": 2500000, "seconds": 299.6, "cpu_seconds": 25.0, "exec_per_sec": 8345,
+                "cov": 283, "ft": 1191, "corpus": 399, "returncode": 0}]
+    for r in results:
+        if r["target"] in findings:
+            r["returncode"] = 1
+    out.mkdir(parents=True, exist_ok=True)
+    return run.write_summary(out, ["--seconds", "600", "--jobs", "1", "--out", str(out)], args,
+                             (1796126400.0, (3.25, 2.0, 1.0), "0123456789ab"), 21.7, 625.0, results)
+
+
+def test_the_block_renders_run_py_s_summary(tmp_path):
+    path = synthetic(tmp_path / "campaign")
+    assert path == tmp_path / "campaign" / "fuzz.json"
+    body = report.summary_block("fuzz", [tmp_path / "nothing", tmp_path / "campaign"])
+    lines = body.splitlines()
+    assert lines[0].startswith(f"`python3 tests/fuzz/run.py --seconds 600 --jobs 1 --out {tmp_path / 'campaign'}` "
+                               f"(2026-12-01 12:00 UTC, sources at 0123456789ab, {os.cpu_count()} CPUs, ")
+    assert "load average 3.2 at its start" in lines[0] and "built in 22 s" in lines[0]
+    assert "each target its share of the 600 s budget, 1 at a time" in lines[0]
+    # executions, wall s, exec/s, CPU s, executions per CPU second (123,456 / 40), edges / features, corpus, findings
+    assert "| calls_HertzEAOscillator | 123,456 | 300 | 411 | 40 | 3,086 | 2,263 / 11,182 | 2,314 | 0 |" in lines
+    assert "| layer | 2,500,000 | 300 | 8,345 | 25 | 100,000 | 283 / 1,191 | 399 | 0 |" in lines
+    assert "2,623,456 executions in 65 CPU seconds over 2 targets, 0 findings." in lines
+    assert "depend on the machine and on the campaign's length" in body.lower()
+    assert "vibrofmu report --check" in body  # and why --check leaves it out
+
+
+def test_a_finding_is_counted(tmp_path):
+    synthetic(tmp_path, findings=("layer",))
+    body = report.summary_block("fuzz", [tmp_path])
+    assert "| layer | 2,500,000 | 300 | 8,345 | 25 | 100,000 | 283 / 1,191 | 399 | 1 |" in body.splitlines()
+    assert ", 1 finding." in body
+
+
+def test_report_from_a_campaign_writes_the_block(tmp_path, capsys, monkeypatch):
+    synthetic(tmp_path / "campaign")
+    monkeypatch.chdir(tmp_path)
+    assert main(["report", "--from", str(tmp_path / "campaign"), "--only", "fuzz", "--out", "docs_out"]) == 0, \
+        capsys.readouterr().err
+    written = report.parse_blocks((tmp_path / "docs_out" / "docs" / "robustness.md").read_text())
+    assert written["fuzz"].rstrip() == report.summary_block("fuzz", [tmp_path / "campaign"]).rstrip()
+    assert "wrote docs_out/docs/robustness.md: fuzz" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("damage,words", [
+    (lambda path: path.unlink(), "no summary for the block asked for (fuzz needs a fuzz.json"),
+    (lambda path: path.write_text('{"fuzz": {"command": "x"'), "not a summary of tests/fuzz/run.py (JSONDecodeError"),
+    (lambda path: path.write_text("[1, 2]"), "not a summary of tests/fuzz/run.py (TypeError"),
+    (lambda path: path.write_text(json.dumps({"fuzz": {k: v for k, v in json.loads(path.read_text())["fuzz"].items()
+                                                       if k != "targets"}})), "(no field 'targets')"),
+    (lambda path: path.write_bytes(b"\xff\xfe\x00garbage"), "not a summary of tests/fuzz/run.py (UnicodeDecodeError"),
+], ids=["missing", "truncated", "not-an-object", "no-targets", "not-text"])
+def test_a_missing_or_damaged_summary_is_one_line(tmp_path, capsys, monkeypatch, damage, words):
+    damage(synthetic(tmp_path / "campaign"))
+    monkeypatch.chdir(tmp_path)
+    assert main(["report", "--from", str(tmp_path / "campaign"), "--only", "fuzz", "--out", "docs_out"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: --from ") and words in err and len(err.splitlines()) == 1, err
+    assert not (tmp_path / "docs_out").exists()  # nothing written
