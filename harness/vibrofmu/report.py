@@ -572,6 +572,9 @@ def _count(n: float) -> str:
     return f"{n:,.0f}"
 
 
+FUZZ_GOAL = 10**7  # the executions per target a campaign aims at
+
+
 def fuzz_block(sources: list[Path]) -> str | None:
     """The fuzzing campaign from the first fuzz.json (tests/fuzz/run.py's summary) in the folders; ReportError when
     that file is not one (unreadable, not JSON, a field missing or of the wrong type)."""
@@ -591,6 +594,9 @@ def fuzz_block(sources: list[Path]) -> str | None:
                             f"{_count(r['ft'])} | {_count(r['corpus'])} | {1 if r['finding'] else 0} |")
             executions = sum(int(r["executions"]) for r in f["targets"])
             findings = sum(1 for r in f["targets"] if r["finding"])
+            # the CPU time 10^7 executions would take each target short of them, at its rate in this run
+            short = [FUZZ_GOAL * float(r["cpu_seconds"]) / r["executions"] for r in f["targets"]
+                     if r["executions"] < FUZZ_GOAL and r["executions"] > 0 and r["cpu_seconds"] > 0]
             start, end = f["load_average_at_start"][0], f["load_average_at_end"][0]
             if f["seconds"] is not None:
                 limit = (f"each target its share of the {_count(f['seconds'])} s budget, {f['jobs']} at a time"
@@ -610,9 +616,12 @@ def fuzz_block(sources: list[Path]) -> str | None:
             "| target | executions | wall s | exec/s | CPU s | exec per CPU s | coverage (edges / features) | corpus "
             "| findings |", "|---|---:|---:|---:|---:|---:|---:|---:|---:|", *rows, "",
             f"{_count(executions)} executions in {_count(total_cpu)} CPU seconds over {len(rows)} targets, "
-            f"{findings} finding{'s' * (findings != 1)}.",
-            "- Depend on the machine and on the campaign's length (so `vibrofmu report --check` does not compare "
-            "this block): every count, rate and coverage number above. A target's executions grow with its share of "
+            f"{findings} finding{'s' * (findings != 1)}."
+            + (f" At each target's executions per CPU second here, 10⁷ executions take {_count(min(short))} to "
+               f"{_count(max(short))} CPU seconds a target ({_count(sum(short))} for the {len(short)} targets short "
+               "of them)." if short else " Every target reached 10⁷ executions."),
+            "- Depend on the machine (so `vibrofmu report --check` does not compare this block) and on the "
+            "campaign's length: every count, rate and coverage number above. A target's executions grow with its share of "
             "the budget and with the share of a core it gets on a shared machine (CPU seconds, beside the wall "
             "clock's); its coverage and corpus grow with the executions, and start from the seeds and the committed "
             "corpus (tests/fuzz/merged). A finding is a bug whatever the machine; 0 findings speaks for these "

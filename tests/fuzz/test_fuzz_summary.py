@@ -47,9 +47,12 @@ def test_the_block_renders_run_py_s_summary(tmp_path):
     # executions, wall s, exec/s, CPU s, executions per CPU second (123,456 / 40), edges / features, corpus, findings
     assert "| calls_HertzEAOscillator | 123,456 | 300 | 411 | 40 | 3,086 | 2,263 / 11,182 | 2,314 | 0 |" in lines
     assert "| layer | 2,500,000 | 300 | 8,345 | 25 | 100,000 | 283 / 1,191 | 399 | 0 |" in lines
-    assert "2,623,456 executions in 65 CPU seconds over 2 targets, 0 findings." in lines
-    assert "depend on the machine and on the campaign's length" in body.lower()
-    assert "vibrofmu report --check" in body  # and why --check leaves it out
+    # 10^7 / 3,086.4 and 10^7 / 100,000 executions per CPU second
+    assert ("2,623,456 executions in 65 CPU seconds over 2 targets, 0 findings. At each target's executions per CPU "
+            "second here, 10⁷ executions take 100 to 3,240 CPU seconds a target (3,340 for the 2 targets short of "
+            "them).") in lines
+    assert ("depend on the machine (so `vibrofmu report --check` does not compare this block) and on the campaign's "
+            "length" in body.lower())
 
 
 def test_a_finding_is_counted(tmp_path):
@@ -84,3 +87,14 @@ def test_a_missing_or_damaged_summary_is_one_line(tmp_path, capsys, monkeypatch,
     err = capsys.readouterr().err
     assert err.startswith("error: --from ") and words in err and len(err.splitlines()) == 1, err
     assert not (tmp_path / "docs_out").exists()  # nothing written
+
+
+def test_targets_at_the_goal_need_no_estimate(tmp_path):
+    path = synthetic(tmp_path)
+    data = json.loads(path.read_text())
+    for r in data["fuzz"]["targets"]:
+        r["executions"] = 10**7
+    path.write_text(json.dumps(data))
+    body = report.summary_block("fuzz", [tmp_path])
+    assert "20,000,000 executions in 65 CPU seconds over 2 targets, 0 findings. Every target reached 10⁷ executions." \
+        in body.splitlines()
