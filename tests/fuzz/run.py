@@ -245,11 +245,13 @@ def unpack_merged(out: Path, target: str) -> Path | None:
 
 
 def merge(out: Path, target: str, dest: Path) -> int:
-    """dest/<target>.hex: a smallest-first subset of the working corpus <out>/corpus/<target>/ that covers every
-    edge it covers beyond the seeds (libFuzzer's -merge=1 on edges alone, -use_counters=0: with hit counts it keeps
-    about twice as many), one input a line in hex (a text file rather than hundreds of binary ones).  The committed
-    tests/fuzz/merged/ is this, so that a short run starts from the coverage a campaign reached.  The number of
-    inputs kept."""
+    """dest/<target>.hex: a smallest-first subset of the working corpus <out>/corpus/<target>/ and of the committed
+    tests/fuzz/merged/<target>.hex that covers every edge they cover beyond the seeds (libFuzzer's -merge=1 on edges
+    alone, -use_counters=0: with hit counts it keeps about twice as many), one input a line in hex (a text file rather
+    than hundreds of binary ones).  The committed tests/fuzz/merged/ is this, so that a short run starts from the
+    coverage the campaigns reached; the committed inputs take part because a run reads them but writes only what it
+    adds to the working corpus (without them a merge kept only what the last run's working corpus covers).  The
+    number of inputs kept."""
     seeds = HERE / "corpus" / target
     work = out / "merge" / target
     if work.exists():
@@ -257,9 +259,10 @@ def merge(out: Path, target: str, dest: Path) -> int:
     work.mkdir(parents=True)
     for seed in seeds.iterdir():  # the seeds first: only what they miss is added
         shutil.copy(seed, work / seed.name)
+    committed = unpack_merged(out, target)
     proc = subprocess.run([str(out / "bin" / target), "-merge=1", "-use_counters=0", "-timeout=60", str(work),
-                           str(out / "corpus" / target)], capture_output=True, text=True,
-                          env={**os.environ, "ASAN_OPTIONS": ASAN_OPTIONS})
+                           *([str(committed)] if committed is not None else []), str(out / "corpus" / target)],
+                          capture_output=True, text=True, env={**os.environ, "ASAN_OPTIONS": ASAN_OPTIONS})
     if proc.returncode != 0:
         print(f"error: merging {target}\n{proc.stderr[-3000:]}", file=sys.stderr)
         sys.exit(1)
