@@ -36,6 +36,7 @@ naming the estimate and the rung to use; a rung that cannot estimate (non-finite
 from __future__ import annotations
 
 import math
+import operator
 
 import numpy as np
 
@@ -331,24 +332,46 @@ TRUNCATION_ANGLES = 16  # the cycle's samples of the force error's harmonic bala
 TRUNCATION_TIMES = 5  # the AC drive's phases sampled over its period pi/Omega (the electrostatic force's)
 
 
-def force_error_parts(model, scene):
+def force_error_samples(model, scene):
     """F_exact - F_poly of Eq. 3 against Eq. 7 (`model`: models.PolynomialModel, its a0..a5 and G3), the difference
-    of their accelerations at v = 0, U = 0: a function of x -> (A, B), the difference being A + w B at the AC drive's
-    value w = beta sin(Omega t) - gamma cos(2 Omega t). Both share Delta cos(omega t); A = 1 - H(x) + alpha (F3 - F2)
-    + gamma F3 + sum a_k x^k, B = F3 - G3(x) (tests/model/test_error_estimate_theory.py checks A + w B against the
-    models' accel)."""
+    of their accelerations at v = 0, U = 0, at a list of x: xs -> ([A], [B]), the difference at each x being A + w B
+    at the AC drive's value w = beta sin(Omega t) - gamma cos(2 Omega t). Both share Delta cos(omega t); A = 1 - H(x)
+    + alpha (F3 - F2) + gamma F3 + sum a_k x^k, B = F3 - G3(x) (tests/model/test_error_estimate_theory.py checks
+    A + w B against the models' accel). One loop over the samples: the estimate's most frequent work. With
+    (center, amplitude, lo, hi), the samples are at x = center + amplitude c for c in xs, clipped to [lo, hi] as
+    min(max(x, lo), hi) does it (a NaN stays NaN)."""
     a0, a1, a2, a3, a4, a5 = model.a
     g0, g1, g2, g3, g4, g5 = model.g3
     alpha, gamma, three_r = scene.alpha, scene.gamma, 3.0 * scene.R
     sqrt = math.sqrt
 
+    def samples(xs, cycle=None) -> tuple[list, list]:
+        statics, electrostatics = [], []
+        if cycle is not None:
+            center, amplitude, lo, hi = cycle
+        for x in xs:
+            if cycle is not None:
+                x = center + amplitude * x
+                x = lo if lo > x else x
+                x = hi if hi < x else x
+            s = 1.0 + 2.0 * x / 3.0
+            u = 2.0 * x / three_r
+            f3 = 1.0 / ((1.0 - u) * (1.0 - u))
+            statics.append(1.0 - (s * sqrt(s) if s > 0.0 else 0.0) + alpha * (f3 - 1.0 / ((1.0 + u) * (1.0 + u)))
+                           + gamma * f3 + (a0 + x * (a1 + x * (a2 + x * (a3 + x * (a4 + x * a5))))))
+            electrostatics.append(f3 - (g0 + x * (g1 + x * (g2 + x * (g3 + x * (g4 + x * g5))))))
+        return statics, electrostatics
+
+    return samples
+
+
+def force_error_parts(model, scene):
+    """force_error_samples at one x: x -> (A, B)."""
+    samples = force_error_samples(model, scene)
+
     def parts(x: float) -> tuple[float, float]:
-        s = 1.0 + 2.0 * x / 3.0
-        u = 2.0 * x / three_r
-        f3 = 1.0 / ((1.0 - u) * (1.0 - u))
-        static = (1.0 - (s * sqrt(s) if s > 0.0 else 0.0) + alpha * (f3 - 1.0 / ((1.0 + u) * (1.0 + u))) + gamma * f3
-                  + (a0 + x * (a1 + x * (a2 + x * (a3 + x * (a4 + x * a5))))))
-        return static, f3 - (g0 + x * (g1 + x * (g2 + x * (g3 + x * (g4 + x * g5)))))
+        (a,), (b,) = samples((x,))
+        return a, b
 
     return parts
 
@@ -359,35 +382,49 @@ TRUNCATION_COSINES = tuple(math.cos(2.0 * math.pi * (i + 0.5) / TRUNCATION_ANGLE
                            for i in range(TRUNCATION_ANGLES // 2))
 
 
-def _force_error_harmonics(model, scene, x_s: float, amplitude: float,
-                           with_rest: bool = True) -> tuple[float, float, float]:
+def drive_ends(scene) -> tuple[float, float]:
+    """The least and the greatest AC drive w = beta sin(Omega t) - gamma cos(2 Omega t) over TRUNCATION_TIMES phases
+    of its period pi/Omega (0 without an AC drive): |a + w b| is convex in w, so its largest over the drive's phases
+    is at one of these."""
+    beta, gamma, omega, sin, cos = scene.beta, scene.gamma, scene.Omega, math.sin, math.cos
+    ac = (beta != 0.0 or gamma != 0.0) and omega > 0.0
+    times = [math.pi / omega * j / TRUNCATION_TIMES for j in range(TRUNCATION_TIMES)] if ac else [0.0]
+    ws = [beta * sin(omega * t) - gamma * cos(2.0 * omega * t) for t in times]
+    return min(ws), max(ws)
+
+
+def _force_error_harmonics(model, scene, x_s: float, amplitude: float, with_rest: bool = True, ends=None,
+                           samples=None) -> tuple[float, float, float]:
     """Over x = x_s + amplitude cos(theta), theta at TRUNCATION_ANGLES midpoints, and the AC drive's phases: the
     force error d = F_exact - F_poly's largest |mean|, |stiffness| 2 mean(d cos theta)/amplitude (its first harmonic,
     the describing function) and |rest| max|d - mean - stiffness amplitude cos theta| (the higher harmonics). d is
-    A(x) + w B(x) (force_error_parts), so each harmonic is its A part plus w times its B part: the x samples are
+    A(x) + w B(x) (force_error_samples), so each harmonic is its A part plus w times its B part: the x samples are
     evaluated once for every phase of the drive, and once for theta and 2 pi - theta (the same x). with_rest False:
-    rest nan (not computed)."""
+    the stiffness alone (mean and rest nan, not computed). ends: drive_ends(scene), samples: force_error_samples(model, scene), when already at
+    hand (truncation_terms asks two amplitudes of one scene)."""
     lo, hi = -1.5 + 1e-9, 1.5 * scene.R * (1.0 - 1e-3)
-    n, cosines, error = TRUNCATION_ANGLES // 2, TRUNCATION_COSINES, force_error_parts(model, scene)
-    parts = [error(min(max(x_s + amplitude * c, lo), hi)) for c in cosines]  # the cycle's distinct samples
-    ac = (scene.beta != 0.0 or scene.gamma != 0.0) and scene.Omega > 0.0
-    times = [math.pi / scene.Omega * j / TRUNCATION_TIMES for j in range(TRUNCATION_TIMES)] if ac else [0.0]
-    ws = [scene.beta * math.sin(scene.Omega * t) - scene.gamma * math.cos(2.0 * scene.Omega * t) for t in times]
-    # |a + w b| is convex in w: its largest over the drive's phases is at the least or the greatest w
-    ends = (min(ws), max(ws))
-    mean_a = sum(a for a, _ in parts) / n
-    mean_b = sum(b for _, b in parts) / n
+    n, cosines = TRUNCATION_ANGLES // 2, TRUNCATION_COSINES
+    samples = samples or force_error_samples(model, scene)
+    a_parts, b_parts = samples(cosines, (x_s, amplitude, lo, hi))  # the cycle's distinct x, clipped to the gap
+    low, high = ends or drive_ends(scene)
     scale = 2.0 / n / amplitude if amplitude > 0.0 else 0.0
-    k_a = scale * sum(a * c for (a, _), c in zip(parts, cosines))
-    k_b = scale * sum(b * c for (_, b), c in zip(parts, cosines))
-    mean = max(abs(mean_a + w * mean_b) for w in ends)
-    stiffness = max(abs(k_a + w * k_b) for w in ends)
+    k_a = scale * sum(map(operator.mul, a_parts, cosines))
+    k_b = scale * sum(map(operator.mul, b_parts, cosines))
+    stiffness = max(abs(k_a + low * k_b), abs(k_a + high * k_b))
     if not with_rest:
-        return mean, stiffness, math.nan
+        return math.nan, stiffness, math.nan
+    mean_a = sum(a_parts) / n
+    mean_b = sum(b_parts) / n
+    mean = max(abs(mean_a + low * mean_b), abs(mean_a + high * mean_b))
     rest = 0.0
-    for (a, b), c in zip(parts, cosines):
+    for a, b, c in zip(a_parts, b_parts, cosines):  # rest = max(rest, |ra + low rb|, |ra + high rb|), as max does it
         ra, rb = a - mean_a - k_a * amplitude * c, b - mean_b - k_b * amplitude * c
-        rest = max(rest, abs(ra + ends[0] * rb), abs(ra + ends[1] * rb))
+        value = abs(ra + low * rb)
+        if value > rest:
+            rest = value
+        value = abs(ra + high * rb)
+        if value > rest:
+            rest = value
     return mean, stiffness, rest
 
 
@@ -405,11 +442,13 @@ def truncation_terms(scene, model, span: float, parts: dict | None = None) -> di
     f = sum(a for a, _ in forced)
     free = parts["free"]
     amplitude = f + free
-    mean, stiffness, rest = _force_error_harmonics(model, scene, parts["x_s"], amplitude)
+    ends, samples = drive_ends(scene), force_error_samples(model, scene)
+    mean, stiffness, rest = _force_error_harmonics(model, scene, parts["x_s"], amplitude, ends=ends, samples=samples)
     memory = parts["memory"]
     if free > 0.0 and mu > 0.0 and stiffness > 0.0:
         half = f + 0.5 * free
-        smaller = _force_error_harmonics(model, scene, parts["x_s"], half, with_rest=False)[1]
+        smaller = _force_error_harmonics(model, scene, parts["x_s"], half, with_rest=False, ends=ends,
+                                         samples=samples)[1]
         k = math.log(stiffness / smaller) / math.log(amplitude / half) if smaller > 0.0 else 0.0
         memory = min(memory, 2.0 / (max(k, 1.0) * mu))
     drift = free * min(2.0, stiffness / (2.0 * p) * memory)

@@ -94,22 +94,68 @@ def test_estimates_cost_little_beside_the_plant_set_up(monkeypatch):
     TRUNCATION_ANGLES times (half its samples over the cycle, the other half the same x, at two amplitudes; the drive's
     phases reuse them)."""
     calls = 0
-    wrapped = error_estimates.force_error_parts
+    wrapped = error_estimates.force_error_samples
 
     def counting(model, scene):
         inner = wrapped(model, scene)
 
-        def parts(x):
+        def samples(xs, cycle=None):
             nonlocal calls
-            calls += 1
-            return inner(x)
-        return parts
+            calls += len(xs)
+            return inner(xs, cycle)
+        return samples
 
-    monkeypatch.setattr(error_estimates, "force_error_parts", counting)
+    monkeypatch.setattr(error_estimates, "force_error_samples", counting)
     error_estimates.exact_estimate(Scene(), Settings(), None, None, STOP)
     assert calls == 0
     error_estimates.polynomial_estimate(Scene(), Settings(fidelity=1), REGISTRY[1].model(Scene()), None, STOP)
     assert 0 < calls <= error_estimates.TRUNCATION_ANGLES  # theta and 2 pi - theta share their x
+
+
+def _plain_harmonics(model, scene, x_s, amplitude):
+    """The force error's harmonics written plainly (one force_error_parts call per x, min/max to clip it to the gap,
+    sums over generators, the drive's phases from their times): the reference of _force_error_harmonics, which reuses
+    one sampler, the drive's two extreme values and a single loop for speed."""
+    lo, hi = -1.5 + 1e-9, 1.5 * scene.R * (1.0 - 1e-3)
+    n, cosines, error = error_estimates.TRUNCATION_ANGLES // 2, error_estimates.TRUNCATION_COSINES, \
+        error_estimates.force_error_parts(model, scene)
+    parts = [error(min(max(x_s + amplitude * c, lo), hi)) for c in cosines]
+    ac = (scene.beta != 0.0 or scene.gamma != 0.0) and scene.Omega > 0.0
+    times = [math.pi / scene.Omega * j / error_estimates.TRUNCATION_TIMES
+             for j in range(error_estimates.TRUNCATION_TIMES)] if ac else [0.0]
+    ends = [min(ws := [scene.beta * math.sin(scene.Omega * t) - scene.gamma * math.cos(2.0 * scene.Omega * t)
+                       for t in times]), max(ws)]
+    mean_a, mean_b = sum(a for a, _ in parts) / n, sum(b for _, b in parts) / n
+    scale = 2.0 / n / amplitude if amplitude > 0.0 else 0.0
+    k_a = scale * sum(a * c for (a, _), c in zip(parts, cosines))
+    k_b = scale * sum(b * c for (_, b), c in zip(parts, cosines))
+    rest = 0.0
+    for (a, b), c in zip(parts, cosines):
+        ra, rb = a - mean_a - k_a * amplitude * c, b - mean_b - k_b * amplitude * c
+        rest = max(rest, abs(ra + ends[0] * rb), abs(ra + ends[1] * rb))
+    return (max(abs(mean_a + w * mean_b) for w in ends), max(abs(k_a + w * k_b) for w in ends), rest)
+
+
+def test_the_harmonic_balance_gives_the_bits_of_its_plain_form():
+    """_force_error_harmonics (the polynomial's estimate's most frequent work, made faster) against _plain_harmonics:
+    the same operations in the same order, so the same bits, over 60 random scenes (the calibration campaign's
+    ranges; both polynomial models, the response's amplitude and half of it, and an amplitude that reaches beyond the
+    gap, where the clipping decides); the stiffness alone where the rest is not asked."""
+    rng = np.random.default_rng(5)
+    for _ in range(60):  # each scene's two polynomial models cost ~2 ms to build
+        scene = Scene(mu=10 ** rng.uniform(-3, -0.3), Delta=10 ** rng.uniform(-4, -1.5), omega=rng.uniform(0.85, 1.15),
+                      Omega=rng.uniform(0.2, 10.0), alpha=10 ** rng.uniform(-4, -1.5), beta=10 ** rng.uniform(-4, -1.2),
+                      gamma=10 ** rng.uniform(-4, -2), R=rng.uniform(0.3, 1.0), x_start=rng.uniform(-0.2, 0.2))
+        span = rng.uniform(20.0, 600.0)
+        parts = error_estimates.response_parts(scene, span)
+        amplitude = parts["free"] + sum(a for a, _ in parts["forced"])
+        for fidelity in (1, 2):
+            model = REGISTRY[fidelity].model(scene)
+            for a in (amplitude, 0.5 * amplitude, 2.0 * scene.R):
+                fast = error_estimates._force_error_harmonics(model, scene, parts["x_s"], a)
+                assert [v.hex() for v in fast] == [v.hex() for v in _plain_harmonics(model, scene, parts["x_s"], a)]
+                stiffness = error_estimates._force_error_harmonics(model, scene, parts["x_s"], a, with_rest=False)[1]
+                assert stiffness.hex() == fast[1].hex()
 
 
 # the paper's; strong electrostatics, a narrow gap; no AC drive and a gap wider than the contact (x < -1.5: lost)
