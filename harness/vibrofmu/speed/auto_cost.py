@@ -4,8 +4,9 @@ tolerance): on the paper scene,
 - the plant FMU's set-up (instantiate, setupExperiment, initialisation: fmi2ExitInitializationMode builds the plant)
   under FMPy with fidelity auto at a few tolerances, beside the set-up of each fixed rung: auto's set-up must stay
   within AUTO_SETUP_LIMIT seconds;
-- each fixed rung's error estimate (its registry entry's estimator, what error_estimates.attach calls) against the
-  whole make_plant that builds the rung with it: the share must stay within ESTIMATE_SHARE_LIMIT.
+- each fixed rung's error estimate (its registry entry's estimator, what error_estimates.attach calls), timed in
+  the same round right after the rung's FMU set-up, against that set-up's fmi2ExitInitializationMode: the median of
+  the per-round shares must stay within ESTIMATE_SHARE_LIMIT (and against the bare make_plant, for reference).
 
 Both in interleaved rounds after a warm-up round (the first FMPy instance of a process pays for loading; the
 first fit or table pays for imports): every round runs every item once, so that a slow phase of a shared machine
@@ -60,12 +61,29 @@ def fmu_setup(fmu: Path, unzip_dir: str, start: dict, log: FmuLog) -> tuple[floa
     return seconds, initialisation, {"fidelity_chosen": int(chosen), "error_estimate": float(estimate)}
 
 
+def _estimate_alone(level) -> tuple[float, float]:
+    """(seconds of the bare make_plant of fidelity `level` on the paper scene over [0, STOP], seconds of its
+    registry entry's estimator alone on the plant it built, as error_estimates.attach calls it)."""
+    e = fidelities.entry(level)
+    library = (kernel_library(), "the bench's kernel")
+    started = time.perf_counter()
+    plant = make_plant(Scene(), Settings(fidelity=int(e.level)), 0.0, STOP, library=library)
+    total = time.perf_counter() - started
+    inner = getattr(plant, "python", plant)
+    started = time.perf_counter()
+    e.error_estimate(plant.scene, plant.settings, getattr(inner, "model", None) or e.model(plant.scene),
+                     getattr(inner, "solution", None), STOP)
+    return total, time.perf_counter() - started
+
+
 def setup_record(fmu: Path, rounds: int) -> dict:
-    """Auto's set-up at AUTO_TOLERANCES beside every fixed rung's, through the plant FMU under FMPy."""
+    """Auto's set-up at AUTO_TOLERANCES beside every fixed rung's, through the plant FMU under FMPy; after each fixed
+    rung's FMU set-up, in the same round, its estimate alone (_estimate_alone: estimate_record pairs the two)."""
     items = {f"fidelity {int(level)}": {"fidelity": int(level)} for level in fidelities.REGISTRY}
     items.update({f"auto, tolerance {t:g}": {"fidelity": AUTO, "tolerance": t} for t in AUTO_TOLERANCES})
     runs = {name: [] for name in items}
     inits = {name: [] for name in items}
+    alone = {name: [] for name in items}
     outputs = {}
     log = FmuLog()
     with tempfile.TemporaryDirectory(prefix="vibrofmu-auto-cost-") as tmp:
@@ -75,14 +93,20 @@ def setup_record(fmu: Path, rounds: int) -> dict:
             order = names[r % len(names):] + names[:r % len(names)]  # no item always first
             for name in order:
                 seconds, initialisation, outputs[name] = fmu_setup(fmu, unzip_dir, items[name], log)
+                estimate = _estimate_alone(items[name]["fidelity"]) if items[name]["fidelity"] != AUTO else None
                 if r:
                     runs[name].append(seconds)
                     inits[name].append(initialisation)
+                    if estimate is not None:
+                        alone[name].append(estimate)
     rows = []
     for name, start in items.items():
         row = {"item": name, "start_values": start, "seconds_median": statistics.median(runs[name]),
                "seconds_runs": runs[name], "initialisation_seconds_median": statistics.median(inits[name]),
-               **outputs[name]}
+               "initialisation_seconds_runs": inits[name], **outputs[name]}
+        if alone[name]:
+            row["make_plant_seconds_runs"] = [total for total, _ in alone[name]]
+            row["estimate_seconds_runs"] = [estimate for _, estimate in alone[name]]
         if start["fidelity"] == AUTO:
             fixed = runs[f"fidelity {outputs[name]['fidelity_chosen']}"]
             row["over_chosen_rung_setup"] = statistics.median(a / b for a, b in zip(runs[name], fixed))
@@ -91,46 +115,32 @@ def setup_record(fmu: Path, rounds: int) -> dict:
     return {"rows": rows, "rounds": rounds, "stop_time": STOP,
             "note": "wall time of instantiate + setupExperiment + initialisation of the pythonfmu plant FMU under "
                     "FMPy (an extracted copy), median over interleaved rounds after a warm-up round; auto: "
-                    "over_chosen_rung_setup is the median per-round ratio to the set-up of the fixed rung it chose"}
+                    "over_chosen_rung_setup is the median per-round ratio to the set-up of the fixed rung it chose; "
+                    "a fixed rung's estimate alone (make_plant, then its estimator) right after its FMU set-up"}
 
 
 def estimate_record(rounds: int, setup: dict) -> dict:
-    """Per fixed rung: the whole make_plant (the compiled kernel where it applies, as in the FMU) and the estimator
-    alone on the plant it built, side by side in each round; the estimator's median over the FMU's
-    fmi2ExitInitializationMode of that rung (setup: setup_record's), the share the acceptance reads."""
-    fmu_init = {row["start_values"]["fidelity"]: row["initialisation_seconds_median"] for row in setup["rows"]
-                if row["start_values"]["fidelity"] != AUTO}
-    scene, library = Scene(), (kernel_library(), "the bench's kernel")
-    levels = list(fidelities.REGISTRY.values())
-    runs = {int(e.level): [] for e in levels}
-    for r in range(rounds + 1):
-        for e in levels[r % len(levels):] + levels[:r % len(levels)]:
-            started = time.perf_counter()
-            plant = make_plant(scene, Settings(fidelity=int(e.level)), 0.0, STOP, library=library)
-            total = time.perf_counter() - started
-            inner = getattr(plant, "python", plant)
-            started = time.perf_counter()
-            e.error_estimate(plant.scene, plant.settings, getattr(inner, "model", None) or e.model(plant.scene),
-                             getattr(inner, "solution", None), STOP)
-            estimate = time.perf_counter() - started
-            if r:
-                runs[int(e.level)].append((total, estimate))
+    """Per fixed rung: its estimator's time (setup_record's, right after the rung's FMU set-up in each round) over
+    that round's fmi2ExitInitializationMode of the FMU, the median of these per-round shares the acceptance reads;
+    and over the bare make_plant it ran on (the plant's set-up with its estimate, without the FMU's checks, logging
+    and FMI calls)."""
     rows = []
-    for e in levels:
-        pairs = runs[int(e.level)]
-        estimate = statistics.median(s for _, s in pairs)
-        share = estimate / fmu_init[int(e.level)]
-        rows.append({"fidelity": int(e.level), "rung": e.key, "estimate_seconds_median": estimate,
-                     "fmu_initialisation_seconds_median": fmu_init[int(e.level)], "share": share,
-                     "make_plant_seconds_median": statistics.median(t for t, _ in pairs),
-                     "share_of_make_plant": statistics.median(est / total for total, est in pairs),
+    for e in fidelities.REGISTRY.values():
+        row = next(r for r in setup["rows"] if r["start_values"] == {"fidelity": int(e.level)})
+        estimates, inits, totals = row["estimate_seconds_runs"], row["initialisation_seconds_runs"], \
+            row["make_plant_seconds_runs"]
+        share = statistics.median(est / init for est, init in zip(estimates, inits))
+        rows.append({"fidelity": int(e.level), "rung": e.key, "estimate_seconds_median": statistics.median(estimates),
+                     "fmu_initialisation_seconds_median": statistics.median(inits), "share": share,
+                     "make_plant_seconds_median": statistics.median(totals),
+                     "share_of_make_plant": statistics.median(est / total for est, total in zip(estimates, totals)),
                      "limit": ESTIMATE_SHARE_LIMIT, "met": share <= ESTIMATE_SHARE_LIMIT})
     return {"rows": rows, "rounds": rounds,
             "note": "estimate: the registry entry's estimator alone on the plant make_plant built, timed right after "
-                    "it (median over rounds); share: over the median of the pythonfmu FMU's fmi2ExitInitializationMode "
-                    "of that rung (setup); share_of_make_plant: over the bare make_plant in this process (the "
-                    "plant's set-up with its estimate, without the FMU's checks, logging and FMI calls), median of "
-                    "the per-round ratios"}
+                    "the rung's FMU set-up in each round; share: the median over the rounds of the estimate over that "
+                    "round's fmi2ExitInitializationMode of the pythonfmu FMU of that rung; share_of_make_plant: over "
+                    "the bare make_plant in this process (the plant's set-up with its estimate, without the FMU's "
+                    "checks, logging and FMI calls), median of the per-round ratios"}
 
 
 def ladder_costs(ladder: dict | None) -> list[dict]:
@@ -160,8 +170,8 @@ def auto_lines(record: dict) -> list[str]:
         lines.append(line)
     for row in record["estimate"]["rows"]:
         lines.append(f"    estimate / initialisation, fidelity {row['fidelity']} ({row['rung']}): {row['share']:.3f} "
-                     f"({1e3 * row['estimate_seconds_median']:.3f} ms of the FMU's "
-                     f"{1e3 * row['fmu_initialisation_seconds_median']:.2f} ms; limit {row['limit']:g}: "
+                     f"(median of the rounds' shares; medians: {1e3 * row['estimate_seconds_median']:.3f} ms of the "
+                     f"FMU's {1e3 * row['fmu_initialisation_seconds_median']:.2f} ms; limit {row['limit']:g}: "
                      f"{'met' if row['met'] else 'NOT met'}); of the bare make_plant "
                      f"({1e3 * row['make_plant_seconds_median']:.2f} ms): {row['share_of_make_plant']:.3f}")
     for row in record["costs"]:
