@@ -109,7 +109,7 @@ class HertzEAOscillator(fast_path.FastPathSwitch, StatusSlave):
         if is_auto(settings.fidelity):  # the choice's settings replace fidelity, solver, rtol and max_step
             span = None if self.stop_time is None else float(self.stop_time) - float(self.start_time)
             return auto_plant(scene, replace(settings, fidelity=int(Fidelity.EXACT)), float(self.tolerance), build,
-                              span=span)
+                              span=span, t0=float(self.start_time), cache_dirs=self._cache_dirs())
         return build(settings)
 
     def _library(self):

@@ -5,15 +5,19 @@
 The candidates, cheapest first by their cost per output relative to the exact model at rtol 1e-8 (LADDER_COST: the
 speed ladder's measured ratios; EXACT_RUN_COST: the exact model's per rtol, measured by the auto campaign): the
 averaged slow flow, the OAFM analytic solution, then DOP853 on the exact model from the loosest rtol (1e-4) to the
-tightest (1e-12). A run also pays its rung's set-up (SETUP_COST: the slow flow's table, the OAFM fit, the exact
-model's ~a millisecond), which on runs of a few thousand outputs is most of the cheap rungs' cost. So the chooser
-first estimates the exact model at each rtol (a closed form of the scene: no plant is built), takes the loosest that
-meets the tolerance as the fallback, and builds an averaged or analytic rung only when its set-up plus its run
-(at the ladder's output interval 0.1 over the run's span) is modelled cheaper than the fallback's whole run: then
-a rung built and rejected costs at most the fallback's own cost. Their estimate needs their set-up (the slow-flow
-solution, the OAFM residual): the plant built to estimate is the plant the run uses. Only the chosen exact
-candidate is built. A rung that refuses the scene (a ParameterError) is passed over; none meets: refused, naming the
-tolerance.
+tightest (1e-12). A run also pays its rung's set-up and, for the averaged rung, its table (setup_cost): the exact
+model's ~a millisecond (SETUP_COST); the slow flow's fixed set-up (SETUP_COST) and its table per unit of tau over the
+whole run (TABLE_COST: tabulated to slowflow.WINDOW at set-up, beyond it by the doSteps, at the same cost per tau);
+the OAFM fit per unit of its fit span (FIT_COST: fitted, or read from a cache that holds it). On the paper scene the
+table alone (21 outputs of the exact model per tau, 2.1 per output at interval 0.1) costs more than the exact model's
+run at any rtol, and the fit more than a run of 10^4 outputs: see docs/rungs.md. So the chooser first estimates the
+exact model at each rtol (a closed form of the scene: no plant is built), takes the loosest that meets the tolerance
+as the fallback, and builds an averaged or analytic rung only when its modelled cost (set-up, table and outputs at
+the interval OUTPUT_INTERVAL over the run's span) is below the fallback's whole run: then a rung built and rejected
+costs about the fallback's own cost at most. Their estimate needs their set-up (the slow-flow solution, the OAFM
+residual): the plant built to estimate is the plant the run uses. Only the chosen exact candidate is built. A rung
+that refuses the scene (a ParameterError; the analytic rung's fit span is asked before it is built) is passed over;
+none meets: refused, naming the tolerance.
 
 The native FMU (no Python: no averaged or analytic rung) walks the same list, generated into its rules.h
 (harness/vibrofmu/fmus/native.py: auto_rows), passing over the levels it cannot run; its estimates of the exact
@@ -33,17 +37,25 @@ DEFAULT_TOLERANCE = 1e-6  # max|x - x_exact| in x's units (the paper scene's amp
 # median over its rounds of the thread-CPU ratio (`vibrofmu bench`, docs/numerics.md's speed block; the bench prints
 # this table beside the ratios it measures, `auto_costs` in bench.json).
 LADDER_COST = {Fidelity.AVERAGED: 0.284, Fidelity.ANALYTIC: 0.362}
-# The exact model's cost per output at each candidate rtol relative to rtol 1e-8, and each level's set-up (make_plant
-# with its error estimate) in outputs of the exact model's loop at rtol 1e-8: medians over the 500 pairs of the auto
-# campaign (`python -m vibrofmu.analyses.error_calibration auto 500 7`: its candidates' thread CPU on the compiled
-# kernel, the doStep loop at interval 0.1; its report block prints the medians it measured beside these). The
-# averaged set-up's 90th percentile is 2.4x its median, the analytic one's 2.8x.
+# The exact model's cost per output at each candidate rtol relative to rtol 1e-8, and its set-up (make_plant with its
+# error estimate) in outputs of the exact model's loop at rtol 1e-8: medians over the 500 pairs of the auto campaign
+# (`python -m vibrofmu.analyses.error_calibration auto 500 7`: its candidates' thread CPU on the compiled kernel, the
+# doStep loop at interval 0.1; its report block prints the medians it measured beside these).
 # The odd decades are the geometric mean of their neighbours' (not measured alone; the campaign's block prints the
 # measured medians of all): a ladder of one decade, so that the estimate's over-estimate (10-100x, docs/rungs.md's
 # calibration) costs a step of ~1.2x, not of ~1.5x.
 EXACT_RUN_COST = {1e-4: 0.69, 1e-5: 0.7, 1e-6: 0.71, 1e-7: 0.84, 1e-8: 1.0, 1e-9: 1.23, 1e-10: 1.52, 1e-11: 1.83, 1e-12: 2.21}
 EXACT_RTOLS = tuple(EXACT_RUN_COST)
-SETUP_COST = {Fidelity.EXACT: 250.0, Fidelity.AVERAGED: 10700.0, Fidelity.ANALYTIC: 370000.0}
+# The averaged and analytic rungs' set-up in the same unit: medians over the paper scene and 24 random scenes
+# (`python -m vibrofmu.analyses.error_calibration costs 24 0`, thread CPU on the compiled kernel, least of 3; its
+# per-scene values spread ~3x about the median). The slow flow: 7,700 fixed (its model, the slow state's start, the
+# first table's grid refinement, the estimate) and 21 per unit of tau of table (set-up at stop 1000 minus at 200,
+# per tau: median 21.4; the doSteps' extensions beyond WINDOW, lookups included, 23.4); the paper scene 12,100 and
+# 20.9. The OAFM fit per unit of its fit span: 1,900 fitted (the paper scene 2,700), 320 read from the cache (the
+# paper scene 300).
+SETUP_COST = {Fidelity.EXACT: 250.0, Fidelity.AVERAGED: 7700.0, Fidelity.ANALYTIC: 0.0}
+TABLE_COST = 21.0
+FIT_COST = {"fitted": 1900.0, "cached": 320.0}
 OUTPUT_INTERVAL = 0.1  # the outputs a run is costed by (FMI 2 tells no communication step at initialisation)
 
 
@@ -61,10 +73,35 @@ CHOICE_ROWS = tuple(sorted([(cost, entry(level), None) for level, cost in LADDER
                            + [(cost, entry(Fidelity.EXACT), rtol) for cost, rtol in EXACT_ROWS], key=lambda row: row[0]))
 
 
-def run_cost(level, per_output: float, span: float) -> float:
-    """A candidate's modelled cost of a run of `span`: its set-up and its outputs at OUTPUT_INTERVAL, in outputs of
+def setup_cost(level, span: float, fit_span: float | None = None, cached: bool = False) -> float:
+    """A candidate's modelled cost of a run of `span` beside its outputs, in outputs of the exact model at rtol 1e-8:
+    the exact model's set-up; the slow flow's fixed set-up and its table over the run (at least slowflow.CHUNK, its
+    first table); the OAFM fit over fit_span (analytic.covering's tau_end), fitted or read from the cache."""
+    level = Fidelity(int(level))
+    if level == Fidelity.AVERAGED:
+        from .slowflow import CHUNK  # fidelity 3's module: imported only where its cost is asked
+        return SETUP_COST[level] + TABLE_COST * max(span, CHUNK)
+    if level == Fidelity.ANALYTIC:
+        return SETUP_COST[level] + FIT_COST["cached" if cached else "fitted"] * (span if fit_span is None else fit_span)
+    return SETUP_COST[level]
+
+
+def run_cost(level, per_output: float, span: float, fit_span: float | None = None, cached: bool = False) -> float:
+    """A candidate's modelled cost of a run of `span`: setup_cost and its outputs at OUTPUT_INTERVAL, in outputs of
     the exact model at rtol 1e-8."""
-    return SETUP_COST[level] + per_output * span / OUTPUT_INTERVAL
+    return setup_cost(level, span, fit_span, cached) + per_output * span / OUTPUT_INTERVAL
+
+
+def fit_plan(scene, settings, span: float, t0: float = 0.0, cache_dirs: tuple = ()) -> tuple[float, bool]:
+    """(the analytic rung's fit span over a run of `span` from t0, whether a cache holds that fit: one of cache_dirs
+    or the user's cache, as analytic.cached_solve looks); ParameterError where the rung refuses the span
+    (analytic.covering, strict: the plant's own check)."""
+    from pathlib import Path
+
+    from .analytic import cache_key, covering, user_cache_dir
+    oafm = covering(scene, settings.oafm, span, strict=True)
+    name = cache_key(scene, oafm, t0) + ".json"
+    return oafm.tau_end, any((Path(d) / name).is_file() for d in (*cache_dirs, user_cache_dir()))
 
 
 def exact_estimate(scene, rtol: float, span: float, estimator=None) -> float:
@@ -92,12 +129,14 @@ def check_tolerance(tolerance: float) -> None:
         raise ParameterError("tolerance", tolerance, "must be a positive bound on max|x - x_exact|")
 
 
-def choose(scene, settings, tolerance: float, build, native: bool = False, span: float | None = None):
+def choose(scene, settings, tolerance: float, build, native: bool = False, span: float | None = None,
+           t0: float = 0.0, cache_dirs: tuple = ()):
     """(the plant of the cheapest candidate whose estimate meets `tolerance`, its settings, the log lines of the
     choice). build(settings) -> plant (make_plant with the run's arguments); span: the run's length (None: the
-    estimates' DEFAULT_SPAN). ParameterError naming `tolerance` when none meets it. native: as the native FMU
-    chooses (the levels it cannot run passed over, without building them). The exact model's estimates are asked
-    lazily, loosest rtol first, and the first that meets the tolerance is the fallback the cheap rungs must beat."""
+    estimates' DEFAULT_SPAN); t0, cache_dirs: the run's start and the OAFM caches build reads (fit_plan). ParameterError
+    naming `tolerance` when none meets it. native: as the native FMU chooses (the levels it cannot run passed over,
+    without building them). The exact model's estimates are asked lazily, loosest rtol first, and the first that
+    meets the tolerance is the fallback the cheap rungs must beat."""
     from .error_estimates import DEFAULT_SPAN, AdaptiveEstimator, response_parts
 
     check_tolerance(tolerance)
@@ -130,7 +169,15 @@ def choose(scene, settings, tolerance: float, build, native: bool = False, span:
             candidate = replace(settings, fidelity=fidelity, solver=0, rtol=rtol, max_step=0.0)
         else:
             rung = ("AUTO_RUNG", {"level": fidelity})
-            if not native and run_cost(fidelity, cost, span) >= fallback_cost:
+            fit_span, cached = None, True  # the analytic rung's: cached first, its least cost
+            if not native and level.level == Fidelity.ANALYTIC and run_cost(fidelity, cost, span, span, True) < \
+                    fallback_cost:  # worth asking its fit span and the cache (a file's existence)
+                try:
+                    fit_span, cached = fit_plan(scene, settings, span, t0, cache_dirs)
+                except ParameterError as refusal:
+                    tried.append(("AUTO_REFUSED", {"level": fidelity, "parameter": refusal.name}))
+                    continue
+            if not native and run_cost(fidelity, cost, span, fit_span, cached) >= fallback_cost:
                 tried.append(("AUTO_SETUP", {"rung": rung, "fallback": ("AUTO_EXACT_RUNG",
                                                                          {"level": 0, "rtol": fallback[1]})}))
                 continue
@@ -159,9 +206,10 @@ def _listed(tried) -> str:
     return "; ".join(_formatted(message) for message in tried)
 
 
-def auto_plant(scene, settings, tolerance: float, build, span: float | None = None):
+def auto_plant(scene, settings, tolerance: float, build, span: float | None = None, t0: float = 0.0,
+               cache_dirs: tuple = ()):
     """The plant fidelity auto runs (choose), its notes opened by the choice's log line (the FMU logs it, fmi2OK)."""
-    plant, chosen, log = choose(scene, settings, tolerance, build, span=span)
+    plant, chosen, log = choose(scene, settings, tolerance, build, span=span, t0=t0, cache_dirs=cache_dirs)
     plant.notes[:0] = log
     return plant
 

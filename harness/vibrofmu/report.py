@@ -31,6 +31,10 @@ and `vibrofmu report` rewrites the text between them (the markers stay). Blocks:
              --from folders (deterministic given the files; not run by the report itself: an hour of campaigns).
 - auto:      fidelity auto's choice against the oracle over random (scene, tolerance) pairs, from an auto.json
              (`python -m vibrofmu.analyses.error_calibration auto n seed`) in the --from folders (costs are timings).
+- auto_costs: the averaged and analytic rungs' set-up and table costs that fidelity auto prices, measured, beside
+             its constants, from a costs.json (`python -m vibrofmu.analyses.error_calibration costs n seed`), and the
+             paper scene's candidates from pair_*.json files (`... error_calibration pair stop tolerance rounds`) in
+             the --from folders (timings, never compared by --check).
 - cascade:   a period-doubling cascade followed by `vibrofmu continuation` (its doubling points and the ratios of
              successive intervals against Feigenbaum's delta), from a continuation summary.json with a cascade in
              the --from folders, else from a fresh run of CASCADE_ARGV (seconds); its CPU time depends on the
@@ -73,9 +77,10 @@ BLOCK = re.compile(r"<!-- report:(?P<name>[a-z_]+) -->\n(?P<body>.*?)<!-- /repor
 OPEN = re.compile(r"<!-- report:([a-z_]+) -->")
 CLOSE = re.compile(r"<!-- /report:([a-z_]+) -->")
 NAMES = ("machine", "accuracy", "ssp", "ssp_orderings", "container", "oafm", "stability", "speed", "ranges", "peers",
-         "calibration", "calibration_replay", "auto", "cascade", "curve_speed", "auto_setup", "cusp_order", "fuzz")
-FROM_SUMMARIES = ("oafm", "stability", "speed", "peers", "calibration", "auto", "cascade", "curve_speed", "auto_setup",
-                  "cusp_order", "fuzz")  # filled from the --from folders only
+         "calibration", "calibration_replay", "auto", "auto_costs", "cascade", "curve_speed", "auto_setup",
+         "cusp_order", "fuzz")
+FROM_SUMMARIES = ("oafm", "stability", "speed", "peers", "calibration", "auto", "auto_costs", "cascade", "curve_speed",
+                  "auto_setup", "cusp_order", "fuzz")  # filled from the --from folders only
 DETERMINISTIC = ("accuracy", "ssp", "ssp_orderings", "container", "ranges", "calibration_replay")
 # the numbers of a compared block that depend on the machine (its CPU time; the block says so): `report --check`
 # masks them in both texts and compares the rest (every pattern matches its block once: tests/docs/test_docs.py)
@@ -90,6 +95,7 @@ SOURCE_FILES = {"oafm": "an oafm summary.json", "stability": "a stability summar
                 "peers": "a peers.json (bench --peers)",
                 "calibration": "calibration_RUNG.json files (python -m vibrofmu.analyses.error_calibration campaign)",
                 "auto": "an auto.json (python -m vibrofmu.analyses.error_calibration auto)",
+                "auto_costs": "a costs.json (python -m vibrofmu.analyses.error_calibration costs) and pair_*.json",
                 "cascade": "a continuation summary.json with a cascade",
                 "curve_speed": "a bench.json of bench --curve",
                 "auto_setup": "a bench.json with fidelity auto's set-up (bench, bench --auto-only)",
@@ -446,6 +452,32 @@ def auto_block(sources: list[Path]) -> str | None:
     return None
 
 
+def auto_costs_block(sources: list[Path]) -> str | None:
+    """auto's set-up and table constants beside the medians of the first costs.json in the folders, then the
+    candidates of every pair_*.json there (the paper scene at one stop time and tolerance)."""
+    from vibrofmu.analyses.error_calibration import costs_table, pair_table
+
+    for folder in sources:
+        file = folder / "costs.json"
+        if file.is_file():
+            result = json.loads(file.read_text())
+            when = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime(file.stat().st_mtime))
+            lines = costs_table(result) + ["", f"Measured {when} (thread CPU time on a shared machine: the "
+                                           f"timings vary between runs, their ratios less). Regenerate: `python -m "
+                                           f"vibrofmu.analyses.error_calibration costs {result['n']} {result['seed']} "
+                                           "> DIR/costs.json`."]
+            pairs = sorted(folder.glob("pair_*.json"), key=lambda f: json.loads(f.read_text())["stop"])
+            for pair in pairs:
+                data = json.loads(pair.read_text())
+                lines += ["", f"`python -m vibrofmu.analyses.error_calibration pair {data['stop']:g} "
+                          f"{data['tolerance']:g} {data['rounds']} > DIR/{pair.name}` (the paper scene; "
+                          "milliseconds of thread CPU):", ""]
+                head, *table = pair_table(data)
+                lines += [head, "", *table]
+            return "\n".join(lines + ["", "Then `vibrofmu report --only auto_costs --from DIR`."])
+    return None
+
+
 FEIGENBAUM_DELTA = 4.669201609  # the limit of the ratios for maps with a quadratic maximum
 
 
@@ -637,6 +669,7 @@ def summary_block(name: str, sources: list[Path]) -> str | None:
     """The body of the FROM_SUMMARIES block `name` from the summaries in `sources` (None: none there)."""
     return {"oafm": oafm_block, "stability": stability_block, "speed": speed_block,
             "peers": peers_block, "calibration": calibration_block, "auto": auto_block,
+            "auto_costs": auto_costs_block,
             "cascade": cascade_block, "curve_speed": curve_speed_block,
             "auto_setup": auto_setup_block, "cusp_order": cusp_order_block, "fuzz": fuzz_block}[name](sources)
 

@@ -10,15 +10,19 @@
 
 - pair_costs(scene, stop, tolerance): one pair as the auto campaign measures it, each cost the least of a few rounds:
   every candidate's set-up, loop, error and "met", the oracle and auto's choice (the `pair` command: the paper scene).
+- rung_costs(n, seed): the averaged and analytic rungs' set-up and table costs that vibromodel.auto prices, measured
+  on the paper scene and n random scenes (the `costs` command; auto's constants are its medians).
 
 Command line: python -m vibrofmu.analyses.error_calibration grid FMU | campaign RUNG [n] [seed] [FILE] | auto [n]
-[seed] | pair [stop] [tolerance] [rounds] (RUNG: exact, rk4, polynomial, polynomial-paper, averaged, analytic; prints progress on stderr and JSON on
+[seed] | pair [stop] [tolerance] [rounds] | costs [n] [seed] (RUNG: exact, rk4, polynomial, polynomial-paper, averaged, analytic; prints progress on stderr and JSON on
 stdout, or the campaign's to FILE, rewritten every 25 scenes).
 """
 from __future__ import annotations
 
+import contextlib
 import json
 import math
+import os
 import sys
 import tempfile
 import time
@@ -302,7 +306,7 @@ def auto_campaign(n: int = 500, seed: int = 0, h: float = 0.1, progress=None) ->
             error = float(np.max(np.abs(x[:m] - exact[:m]))) if m else math.inf
             table.append({**row, "run": run_cost, "total": build_cost + run_cost, "error": error,
                           "estimate": plant.error_estimate["estimate"],
-                          "met": len(x) == len(exact) and error <= tolerance})
+                          "met": len(x) == len(exact) and error <= tolerance, "fitted": _fitted(plant)})
         met = [c for c in table if c.get("met")]
         mine = next((c for c in table if c["key"] == choice), None)
         row = {**info, "tolerance": tolerance, "stop": stop, "exact_stopped": exact_stop is not None,
@@ -369,6 +373,123 @@ def pair_costs(scene: Scene, stop: float, tolerance: float, rounds: int = 5, h: 
     oracle = min(met, key=lambda row: row["total"]) if met else None
     return {"scene": scene.as_dict(), "stop": stop, "tolerance": tolerance, "rounds": rounds, "candidates": rows,
             "oracle": oracle["candidate"] if oracle else None, "chosen": choice, "choice_cost": min(choice_costs)}
+
+
+def _least_thread_time(work, rounds: int):
+    """(the least thread CPU time of `rounds` calls of work(), the last call's result)."""
+    best, result = math.inf, None
+    for _ in range(rounds):
+        started = time.thread_time()
+        result = work()
+        best = min(best, time.thread_time() - started)
+    return best, result
+
+
+@contextlib.contextmanager
+def _fresh_oafm_cache():
+    """The user's OAFM cache (analytic.user_cache_dir) an empty temporary folder for the block's duration."""
+    previous = os.environ.get("VIBROFMU_CACHE_DIR")
+    with tempfile.TemporaryDirectory() as cache:
+        os.environ["VIBROFMU_CACHE_DIR"] = cache
+        try:
+            yield
+        finally:
+            if previous is None:
+                del os.environ["VIBROFMU_CACHE_DIR"]
+            else:
+                os.environ["VIBROFMU_CACHE_DIR"] = previous
+
+
+COST_KEYS = ("averaged_fixed", "averaged_table_per_tau", "averaged_extension_per_tau", "analytic_fitted_per_tau",
+             "analytic_cached_per_tau")
+
+
+def rung_costs(n: int = 24, seed: int = 0, rounds: int = 3, h: float = 0.1) -> dict:
+    """What vibromodel.auto's cost model prices, measured on the paper scene and n random scenes (random_scene), each
+    cost the least of `rounds` in thread CPU on the compiled kernel, in the model's unit: one output of the scene's
+    exact model at rtol 1e-8 (its doStep loop over [0, slowflow.CHUNK] at interval h, per output):
+    - averaged: its set-up (make_plant with its estimate) at stop times CHUNK and WINDOW, whose difference is the
+      table of WINDOW - CHUNK more tau ("averaged_table_per_tau"), the rest of the set-up at CHUNK the fixed part
+      ("averaged_fixed"); and the table its doSteps extend beyond WINDOW, a run of WINDOW + 3 CHUNK, per tau beyond
+      WINDOW, its lookups included ("averaged_extension_per_tau");
+    - analytic: its set-up per unit of its fit span (analytic.covering's tau_end at stop time CHUNK), fitted in an
+      empty cache ("analytic_fitted_per_tau", after a first fit that pays SciPy's imports) and then read from the
+      cache it wrote ("analytic_cached_per_tau").
+    A rung that refuses a scene leaves that scene out of its medians."""
+    from vibromodel.analytic import OafmSettings, covering
+    from vibromodel.slowflow import CHUNK, WINDOW
+
+    library, rng, rows = campaign_kernel(), np.random.default_rng(seed), []
+    scenes = [("paper", Scene())] + [(info["kind"], scene) for scene, _, info in
+                                     (random_scene(rng) for _ in range(n))]
+    outputs, long_stop = int(round(CHUNK / h)), WINDOW + 3 * CHUNK
+
+    def looped(settings, stop):
+        plant = make_plant(scene, settings, 0.0, stop, library=library)
+        started = time.thread_time()
+        plant.run(h, int(round(stop / h)))
+        return time.thread_time() - started
+
+    def built(fidelity, stop):
+        return _least_thread_time(lambda: make_plant(scene, Settings(fidelity=fidelity), 0.0, stop,
+                                                     library=library), rounds)
+
+    with _fresh_oafm_cache():
+        make_plant(Scene(), Settings(fidelity=4), 0.0, CHUNK, library=library)  # SciPy's imports, paid once
+    for kind, scene in scenes:
+        row = {"kind": kind, "scene": scene.as_dict()}
+        try:
+            unit = min(looped(Settings(rtol=1e-8), CHUNK) for _ in range(rounds)) / outputs
+        except (ParameterError, IntegrationError) as error:
+            rows.append({**row, "exact_refused": str(error)[:120]})
+            continue
+        row["exact_output_seconds"] = unit
+        try:
+            (short, plant), (long, _) = built(3, CHUNK), built(3, WINDOW)
+            per_tau = (long - short) / (WINDOW - CHUNK)
+            extension = min(looped(Settings(fidelity=3), long_stop) for _ in range(rounds))
+            row.update(averaged_spacing=plant.python.solution.spacing, averaged_table_per_tau=per_tau / unit,
+                       averaged_fixed=(short - CHUNK * per_tau) / unit,
+                       averaged_extension_per_tau=extension / (long_stop - WINDOW) / unit)
+        except (ParameterError, IntegrationError) as error:
+            row["averaged_refused"] = str(error)[:120]
+        try:
+            span = covering(scene, OafmSettings(), CHUNK, strict=True).tau_end
+            with _fresh_oafm_cache():
+                fitted, _ = _least_thread_time(lambda: make_plant(scene, Settings(fidelity=4), 0.0, CHUNK,
+                                                                  library=library), 1)
+                cached, _ = built(4, CHUNK)
+            row.update(analytic_fit_span=span, analytic_fitted_per_tau=fitted / span / unit,
+                       analytic_cached_per_tau=cached / span / unit)
+        except (ParameterError, IntegrationError) as error:
+            row["analytic_refused"] = str(error)[:120]
+        rows.append(row)
+    medians = {k: float(np.median([r[k] for r in rows if k in r])) for k in COST_KEYS if any(k in r for r in rows)}
+    return {"n": n, "seed": seed, "rounds": rounds, "rows": rows, "medians": medians,
+            "paper": {k: rows[0].get(k) for k in COST_KEYS}}
+
+
+def costs_table(result: dict) -> list[str]:
+    """rung_costs's medians beside vibromodel.auto's constants (outputs of the exact model at rtol 1e-8)."""
+    from vibromodel.auto import FIT_COST, SETUP_COST, TABLE_COST
+
+    mine = {"averaged_fixed": SETUP_COST[Fidelity.AVERAGED], "averaged_table_per_tau": TABLE_COST,
+            "averaged_extension_per_tau": TABLE_COST, "analytic_fitted_per_tau": FIT_COST["fitted"],
+            "analytic_cached_per_tau": FIT_COST["cached"]}
+    labels = {"averaged_fixed": "fidelity 3: fixed set-up", "averaged_table_per_tau":
+              "fidelity 3: table per τ, at set-up (stop 1000 against 200)", "averaged_extension_per_tau":
+              "fidelity 3: table per τ, the doSteps' beyond the set-up window (lookups included)",
+              "analytic_fitted_per_tau": "fidelity 4: fit per τ of its fit span, fitted",
+              "analytic_cached_per_tau": "fidelity 4: fit per τ of its fit span, read from the cache"}
+    counted = {k: sum(k in r for r in result["rows"]) for k in COST_KEYS}
+    lines = [f"| cost (outputs of the exact model at rtol 10⁻⁸) | auto's | median over {result['n'] + 1} scenes "
+             "(scenes measured) | the paper scene |", "|---|---|---|---|"]
+    for key in COST_KEYS:
+        if key in result["medians"]:
+            paper = result["paper"].get(key)
+            lines.append(f"| {labels[key]} | {mine[key]:,.0f} | {result['medians'][key]:,.1f} ({counted[key]}) | "
+                         f"{'refused' if paper is None else f'{paper:,.1f}'} |")
+    return lines
 
 
 def pair_table(result: dict) -> list[str]:
@@ -481,17 +602,28 @@ def auto_table(result: dict) -> list[str]:
     if costs:
         lines += ["", "The costs auto ranks by (vibromodel.auto) beside this campaign's medians over its pairs (the "
                   "doStep loop per output relative to the exact model's at rtol 10⁻⁸; the set-up in outputs of "
-                  "that loop):", "", "| candidate | loop per output: auto's, measured | set-up: auto's, measured |",
+                  "that loop, auto's as it models each pair's: its span, the analytic rung's fit span, fitted or "
+                  "read from the cache as the campaign's build was):", "",
+                  "| candidate | loop per output: auto's, measured | set-up: auto's, measured |",
                   "|---|---|---|"]
         lines += [f"| {name} | {mine:.3g}, {loop:.3g} | {setup_mine:.3g}, {setup:.3g} |"
                   for name, (mine, loop, setup_mine, setup) in costs.items()]
     return lines
 
 
+def _fitted(plant) -> bool:
+    """Whether an analytic plant fitted its solution (not read from a cache): its OAFM note says "(fitted)"."""
+    notes = list(getattr(plant, "notes", ())) + list(getattr(getattr(plant, "python", None), "notes", ()))
+    return any(note.startswith("OAFM") and note.endswith("(fitted)") for note in notes)
+
+
 def measured_costs(result: dict) -> dict:
-    """candidate -> (auto's cost per output, the campaign's median, auto's set-up cost, the campaign's median): per
-    pair, each candidate's loop and build against the loop per output of the exact model at rtol 1e-8."""
-    from vibromodel.auto import SETUP_COST, candidates, describe
+    """candidate -> (auto's cost per output, the campaign's median, auto's modelled set-up, the campaign's median):
+    per pair, each candidate's loop and build against the loop per output of the exact model at rtol 1e-8, and the
+    set-up auto.setup_cost models for that pair (its span; the analytic rung's fit span, analytic.covering, fitted
+    or cached as the campaign's build was); medians over the pairs."""
+    from vibromodel.analytic import OafmSettings, covering
+    from vibromodel.auto import candidates, describe, setup_cost
     from vibromodel.fidelities import Fidelity
 
     samples: dict = {}
@@ -502,14 +634,24 @@ def measured_costs(result: dict) -> dict:
             continue
         unit /= r["stop"] / 0.1  # the campaign's communication step
         for c in table.values():
-            if "run" in c:
-                samples.setdefault(c["candidate"], []).append((c["run"] / (r["stop"] / 0.1) / unit, c["build"] / unit))
+            if "run" not in c:
+                continue
+            level = Fidelity(int(c["key"][0]))
+            fit_span = None
+            if level == Fidelity.ANALYTIC:
+                try:
+                    fit_span = covering(Scene(**r["scene"]), OafmSettings(), r["stop"]).tau_end
+                except ParameterError:
+                    continue
+            modelled = setup_cost(level, r["stop"], fit_span, cached=not c.get("fitted", True))
+            samples.setdefault(c["candidate"], []).append((c["run"] / (r["stop"] / 0.1) / unit, c["build"] / unit,
+                                                           modelled))
     out = {}
     for cost, candidate in candidates(Settings()):
         name = describe(candidate)
         if name in samples:
             values = np.array(samples[name])
-            out[name] = (cost, float(np.median(values[:, 0])), SETUP_COST[Fidelity(int(candidate.fidelity))],
+            out[name] = (cost, float(np.median(values[:, 0])), float(np.median(values[:, 2])),
                          float(np.median(values[:, 1])))
     return out
 
@@ -542,6 +684,18 @@ def main(argv: list[str]) -> None:
         result = auto_campaign(n, seed, progress=progress)
         print(json.dumps(result, indent=1))
         progress(json.dumps(result["summary"]))
+    elif argv[:1] == ["costs"] and len(argv) in (1, 2, 3):
+        try:
+            n, seed = int(argv[1]) if len(argv) > 1 else 24, int(argv[2]) if len(argv) > 2 else 0
+            if n < 0 or seed < 0:
+                raise ValueError
+        except ValueError:
+            print(f"error: costs wants a number of scenes and a seed (non-negative integers), not "
+                  f"{' '.join(argv[1:])}", file=sys.stderr)
+            raise SystemExit(2) from None
+        result = rung_costs(n, seed)
+        print(json.dumps(result, indent=1))
+        progress(json.dumps({"medians": result["medians"], "paper": result["paper"]}))
     elif argv[:1] == ["pair"] and len(argv) in (1, 2, 3, 4):
         try:
             stop, tolerance, rounds = float(argv[1]) if len(argv) > 1 else 200.0, float(argv[2]) if len(argv) > 2 \
@@ -557,7 +711,8 @@ def main(argv: list[str]) -> None:
         progress("\n".join(pair_table(result)))
     else:
         print(f"error: usage: python -m vibrofmu.analyses.error_calibration grid FMU | campaign "
-              f"{{{','.join(RUNGS)}}} [n] [seed] [FILE] | auto [n] [seed] | pair [stop] [tolerance] [rounds]",
+              f"{{{','.join(RUNGS)}}} [n] [seed] [FILE] | auto [n] [seed] | pair [stop] [tolerance] [rounds] | "
+              f"costs [n] [seed]",
               file=sys.stderr)
         raise SystemExit(2)
 
