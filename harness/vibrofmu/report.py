@@ -474,7 +474,10 @@ def auto_costs_block(sources: list[Path]) -> str | None:
                           "milliseconds of thread CPU):", ""]
                 head, *table = pair_table(data)
                 lines += [head, "", *table]
-            return "\n".join(lines + ["", "Then `vibrofmu report --only auto_costs --from DIR`."])
+            return "\n".join(lines + ["", "Then `vibrofmu report --only auto_costs --from DIR`.", "",
+                                       "Depend on the machine (so `vibrofmu report --check` does not compare this "
+                                       "block): every time and cost, measured and auto's (its constants are "
+                                       "measured medians). The candidates' errors, estimates and \"met\" do not."])
     return None
 
 

@@ -202,3 +202,34 @@ def test_the_cost_model_ranks_the_paper_scene_s_rungs_as_their_counted_work_does
     assert sorted(counted, key=counted.get) == sorted(modelled, key=modelled.get)
     assert min(counted, key=counted.get) == 1e-4
     assert TABLE_COST * OUTPUT_INTERVAL + LADDER_COST[Fidelity.AVERAGED] > max(EXACT_RUN_COST.values())
+
+
+def test_the_auto_costs_block_prints_auto_s_constants_beside_the_measured_medians(tmp_path):
+    """report's auto_costs block from a costs.json (error_calibration.rung_costs's form) and a pair_*.json: each of
+    auto's constants in its row beside the median it is compared with, the paper scene's value, and the pair's
+    candidates after its command line; the block says its times depend on the machine."""
+    import json
+
+    from vibrofmu.analyses.error_calibration import COST_KEYS
+    from vibrofmu.report import auto_costs_block
+    from vibromodel.auto import FIT_COST, SETUP_COST, TABLE_COST
+
+    medians = {key: 10.0 + i for i, key in enumerate(COST_KEYS)}
+    rows = [{"kind": "paper", **{key: 100.0 + i for i, key in enumerate(COST_KEYS)}}, {"kind": "long"}]
+    (tmp_path / "costs.json").write_text(json.dumps({"n": 1, "seed": 3, "rounds": 3, "rows": rows,
+                                                     "medians": medians, "paper": rows[0]}))
+    pair = {"scene": {}, "stop": 200.0, "tolerance": 1e-3, "rounds": 9, "oracle": "fidelity 0 at rtol 1e-05",
+            "chosen": "fidelity 0 at rtol 0.0001", "choice_cost": 6e-4,
+            "candidates": [{"candidate": "fidelity 3", "build": 0.011, "run": 4e-4, "total": 0.0114,
+                            "error": 3.8e-4, "estimate": 4.2e-3, "met": True},
+                           {"candidate": "fidelity 4", "refused": "parameter stopTime = 3000.0: ..."}]}
+    (tmp_path / "pair_200.json").write_text(json.dumps(pair))
+    block = auto_costs_block([tmp_path])
+    assert f"| fidelity 3: fixed set-up | {SETUP_COST[Fidelity.AVERAGED]:,.0f} | 10.0 (1) | 100.0 |" in block
+    assert f"| fidelity 3: table per τ, at set-up (stop 1000 against 200) | {TABLE_COST:,.0f} | 11.0 (1) |" in block
+    assert f"| fidelity 4: fit per τ of its fit span, fitted | {FIT_COST['fitted']:,.0f} | 13.0 (1) |" in block
+    assert "`python -m vibrofmu.analyses.error_calibration costs 1 3 > DIR/costs.json`" in block
+    assert "`python -m vibrofmu.analyses.error_calibration pair 200 0.001 9 > DIR/pair_200.json`" in block
+    assert "| fidelity 3 | 11.00 | 0.40 | 11.40 | 3.80e-04 | 4.20e-03 | True |" in block
+    assert "| fidelity 4 | refused: parameter stopTime = 3000.0: ... | | | | | |" in block
+    assert "depend on the machine (so `vibrofmu report --check` does not compare this block)" in block.lower()

@@ -46,6 +46,9 @@ NOT_CHECKED = {"machine": "where and when the numbers were taken", "speed": "tim
                "fuzz": "a fuzzing campaign's executions, rates and coverage: they depend on the machine, its load "
                "and the campaign's length (`python3 tests/fuzz/run.py --seconds S --out DIR`, then `vibrofmu report "
                "--from DIR --only fuzz`)",
+               "auto_costs": "the cheap rungs' set-up, table and fit costs and the paper scene's candidates: times, "
+               "they depend on the machine and its load (`python -m vibrofmu.analyses.error_calibration costs` and "
+               "`pair`, then `vibrofmu report --from DIR --only auto_costs`)",
                "auto_setup": "fidelity auto's set-up and the estimates' share of the initialisation: times, they "
                "depend on the machine and its load (`vibrofmu bench --auto-only --out DIR`, then `vibrofmu report "
                "--from DIR --only auto_setup`)"}
