@@ -184,7 +184,7 @@ static double remembered(double sv, const Parts *r)
     return distance * r->memory <= 1.0 ? r->memory : 1.0 / distance;
 }
 
-/* error_estimates._force_error_harmonics: (mean, stiffness, rest) of the polynomial's force error */
+/* error_estimates.force_error_harmonics: (mean, stiffness, rest) of the polynomial's force error */
 static int force_error_harmonics(const VkModel *exact, const VkModel *poly, const State *s, double x_s, double amplitude,
                                  double out[3])
 {

@@ -393,7 +393,7 @@ def drive_ends(scene) -> tuple[float, float]:
     return min(ws), max(ws)
 
 
-def _force_error_harmonics(model, scene, x_s: float, amplitude: float, with_rest: bool = True, ends=None,
+def force_error_harmonics(model, scene, x_s: float, amplitude: float, with_rest: bool = True, ends=None,
                            samples=None) -> tuple[float, float, float]:
     """Over x = x_s + amplitude cos(theta), theta at TRUNCATION_ANGLES midpoints, and the AC drive's phases: the
     force error d = F_exact - F_poly's largest |mean|, |stiffness| 2 mean(d cos theta)/amplitude (its first harmonic,
@@ -443,11 +443,11 @@ def truncation_terms(scene, model, span: float, parts: dict | None = None) -> di
     free = parts["free"]
     amplitude = f + free
     ends, samples = drive_ends(scene), force_error_samples(model, scene)
-    mean, stiffness, rest = _force_error_harmonics(model, scene, parts["x_s"], amplitude, ends=ends, samples=samples)
+    mean, stiffness, rest = force_error_harmonics(model, scene, parts["x_s"], amplitude, ends=ends, samples=samples)
     memory = parts["memory"]
     if free > 0.0 and mu > 0.0 and stiffness > 0.0:
         half = f + 0.5 * free
-        smaller = _force_error_harmonics(model, scene, parts["x_s"], half, with_rest=False, ends=ends,
+        smaller = force_error_harmonics(model, scene, parts["x_s"], half, with_rest=False, ends=ends,
                                          samples=samples)[1]
         k = math.log(stiffness / smaller) / math.log(amplitude / half) if smaller > 0.0 else 0.0
         memory = min(memory, 2.0 / (max(k, 1.0) * mu))

@@ -114,7 +114,7 @@ def test_estimates_cost_little_beside_the_plant_set_up(monkeypatch):
 
 def _plain_harmonics(model, scene, x_s, amplitude):
     """The force error's harmonics written plainly (one force_error_parts call per x, min/max to clip it to the gap,
-    sums over generators, the drive's phases from their times): the reference of _force_error_harmonics, which reuses
+    sums over generators, the drive's phases from their times): the reference of force_error_harmonics, which reuses
     one sampler, the drive's two extreme values and a single loop for speed."""
     lo, hi = -1.5 + 1e-9, 1.5 * scene.R * (1.0 - 1e-3)
     n, cosines, error = error_estimates.TRUNCATION_ANGLES // 2, error_estimates.TRUNCATION_COSINES, \
@@ -137,7 +137,7 @@ def _plain_harmonics(model, scene, x_s, amplitude):
 
 
 def test_the_harmonic_balance_gives_the_bits_of_its_plain_form():
-    """_force_error_harmonics (the polynomial's estimate's most frequent work, made faster) against _plain_harmonics:
+    """force_error_harmonics (the polynomial's estimate's most frequent work, made faster) against _plain_harmonics:
     the same operations in the same order, so the same bits, over 60 random scenes (the calibration campaign's
     ranges; both polynomial models, the response's amplitude and half of it, and an amplitude that reaches beyond the
     gap, where the clipping decides); the stiffness alone where the rest is not asked."""
@@ -152,9 +152,9 @@ def test_the_harmonic_balance_gives_the_bits_of_its_plain_form():
         for fidelity in (1, 2):
             model = REGISTRY[fidelity].model(scene)
             for a in (amplitude, 0.5 * amplitude, 2.0 * scene.R):
-                fast = error_estimates._force_error_harmonics(model, scene, parts["x_s"], a)
+                fast = error_estimates.force_error_harmonics(model, scene, parts["x_s"], a)
                 assert [v.hex() for v in fast] == [v.hex() for v in _plain_harmonics(model, scene, parts["x_s"], a)]
-                stiffness = error_estimates._force_error_harmonics(model, scene, parts["x_s"], a, with_rest=False)[1]
+                stiffness = error_estimates.force_error_harmonics(model, scene, parts["x_s"], a, with_rest=False)[1]
                 assert stiffness.hex() == fast[1].hex()
 
 
