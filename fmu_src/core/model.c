@@ -41,6 +41,15 @@ static double cos_omega_t(const VkModel *m, double t, const VmDrive *drive, int 
     return drive ? drive->cos_omega_t : py_cos(m->omega * t, fault);
 }
 
+int vm_drive_at(const VkModel *m, double t, VmDrive *drive)
+{
+    int fault = FAULT_NONE;
+    drive->cos_omega_t = m->load_forcing ? cos_omega_t(m, t, NULL, &fault) : 0.0;
+    drive->sin_Omega_t = m->ac ? sin_Omega_t(m, t, NULL, &fault) : 0.0;
+    drive->cos_2Omega_t = m->ac ? cos_2Omega_t(m, t, NULL, &fault) : 0.0;
+    return fault == FAULT_NONE;
+}
+
 /* Eq. 3: alpha [(1 - u)^-2 - (1 + u)^-2] + (beta sin Omega t + gamma (1 - cos 2 Omega t)) (1 - u)^-2, u = 2x/(3R) */
 static inline __attribute__((always_inline)) double electrostatic(const VkModel *m, double t, const VmDrive *drive, double x, int *fault)
 {
@@ -71,7 +80,7 @@ static double horner(const double *c, double x)
 }
 
 /* Eq. 3 with U: x'' = 1 + Delta cos(omega t) + F_em(t, x) - H(x) - mu x' + U (ExactModel accel) */
-static double exact_accel(const VkModel *m, double t, const VmDrive *drive, double x, double v, double U, int *fault)
+static inline __attribute__((always_inline)) double exact_accel(const VkModel *m, double t, const VmDrive *drive, double x, double v, double U, int *fault)
 {
     double a = 1.0 + U - m->mu * v;
     a -= vm_hertz(x);
@@ -82,7 +91,7 @@ static double exact_accel(const VkModel *m, double t, const VmDrive *drive, doub
 }
 
 /* Eq. 7 with U (PolynomialModel accel) */
-static double polynomial_accel(const VkModel *m, double t, const VmDrive *drive, double x, double v, double U,
+static inline __attribute__((always_inline)) double polynomial_accel(const VkModel *m, double t, const VmDrive *drive, double x, double v, double U,
                                int *fault)
 {
     const double *c = m->poly, *g3 = m->g3;
@@ -98,7 +107,10 @@ static double polynomial_accel(const VkModel *m, double t, const VmDrive *drive,
     return acc;
 }
 
-double vm_accel_driven(const VkModel *m, double t, const VmDrive *drive, double x, double v, double U, int *fault)
+/* Inline (always_inline, across files under -flto; an external definition all the same, model.h declaring it
+   plainly): the plant's right-hand side calls it once per stage (plant.c) */
+inline __attribute__((always_inline)) double vm_accel_driven(const VkModel *m, double t, const VmDrive *drive, double x,
+                                                             double v, double U, int *fault)
 {
     *fault = FAULT_NONE;
     return m->polynomial ? polynomial_accel(m, t, drive, x, v, U, fault) : exact_accel(m, t, drive, x, v, U, fault);

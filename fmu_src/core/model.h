@@ -37,6 +37,10 @@ double vm_accel(const VkModel *m, double t, double x, double v, double U, int *f
 typedef struct {
     double cos_omega_t, sin_Omega_t, cos_2Omega_t;
 } VmDrive;
+/* The drive's time functions at t that the model's terms read (cos omega t with load forcing; sin Omega t and
+   cos 2 Omega t with the AC drive; the others 0), each the bits vm_accel computes: 1, or 0 (drive unusable) when one
+   of them faults -- vm_accel then says which fault comes first */
+int vm_drive_at(const VkModel *m, double t, VmDrive *drive);
 /* vm_accel with the drive's time functions given (drive == NULL: computed, as vm_accel) */
 double vm_accel_driven(const VkModel *m, double t, const VmDrive *drive, double x, double v, double U, int *fault);
 /* (F_contact, F_electrostatic) as they enter the model's equation (model.forces); returns a fault */

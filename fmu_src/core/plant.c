@@ -58,10 +58,29 @@ static inline VkSolverSlots slots_of(VkPlant *p)
     return slots;
 }
 
+/* The context the plant hands its solver for one call (restart, advance, value_at): the plant, and the drive's time
+   functions at the last time its right-hand side saw, keyed by that time's bits. A DOP853 step evaluates the
+   right-hand side twice at t + h (its last stage, and the first-same-as-last stage that starts the next step): the
+   drive's sines and cosines -- most of a call's work -- are computed once for both, the same bits (vm_drive_at). */
+typedef struct {
+    const VkPlant *p;
+    uint64_t t_bits;  /* the time of `drive` */
+    int has_drive;    /* drive holds the time functions at t_bits (computed without a fault) */
+    VmDrive drive;
+} PlantCall;
+
+static inline PlantCall plant_call(const VkPlant *p)
+{
+    PlantCall call;  /* t_bits and drive are read only once has_drive is set */
+    call.p = p;
+    call.has_drive = 0;
+    return call;
+}
+
 static void plant_frequencies_of(void *context, double *freq);
 static int plant_rhs(void *context, double t, const double *y, double *f);
 static int plant_rhs_phased(void *context, double t, const double *phases, const double *y, double *f);
-/* The plant's right-hand side for the solvers: plain, and with the drive's phasors */
+/* The plant's right-hand side for the solvers (context: a PlantCall): plain, and with the drive's phasors */
 static const VkRhs PLANT_RHS = {plant_rhs, plant_rhs_phased, 3, plant_frequencies_of};
 
 /* The solver of the settings */
@@ -77,20 +96,38 @@ static int raise_fault(VkPlant *p, int fault)
     return set_error(p, VK_RAISED, t, y[0], y[1], "%s", text);
 }
 
-/* The solvers' right-hand side: (x, v)' = (v, x'') at the held input U */
-static int plant_rhs(void *context, double t, const double *y, double *f)
+/* plant_rhs where the drive faults: vm_accel, which raises the fault it meets first, as without the cache (apart:
+   noinline, off the common path) */
+static __attribute__((noinline)) int plant_rhs_faulting(const VkPlant *p, double t, const double *y, double *f)
 {
-    const VkPlant *p = context;
     int fault;
     f[0] = y[1];
     f[1] = vm_accel(&p->model, t, y[0], y[1], p->U, &fault);
     return fault;
 }
 
+/* The solvers' right-hand side: (x, v)' = (v, x'') at the held input U */
+static int plant_rhs(void *context, double t, const double *y, double *f)
+{
+    PlantCall *call = context;
+    const VkPlant *p = call->p;
+    uint64_t bits;
+    memcpy(&bits, &t, sizeof bits);
+    if (!call->has_drive || bits != call->t_bits) {
+        call->t_bits = bits;
+        call->has_drive = vm_drive_at(&p->model, t, &call->drive);
+        if (!call->has_drive) return plant_rhs_faulting(p, t, y, f);
+    }
+    int fault;
+    f[0] = y[1];
+    f[1] = vm_accel_driven(&p->model, t, &call->drive, y[0], y[1], p->U, &fault);
+    return fault;
+}
+
 /* plant_rhs with the drive's phasors given: (cos, sin) of omega t, Omega t, 2 Omega t (plant_frequencies) */
 static int plant_rhs_phased(void *context, double t, const double *phases, const double *y, double *f)
 {
-    const VkPlant *p = context;
+    const VkPlant *p = ((const PlantCall *)context)->p;
     const VmDrive drive = {phases[0], phases[3], phases[4]};
     int fault;
     f[0] = y[1];
@@ -110,7 +147,7 @@ static void plant_frequencies(const VkModel *m, double *freq)
 
 static void plant_frequencies_of(void *context, double *freq)
 {
-    plant_frequencies(&((const VkPlant *)context)->model, freq);
+    plant_frequencies(&((const PlantCall *)context)->p->model, freq);
 }
 
 double vk_accel(const VkPlant *p, double t, double x, double v, double U)
@@ -184,7 +221,8 @@ static inline __attribute__((always_inline)) int restart_with(VkPlant *p, const 
     double y[2] = {x, v};
     DopReport r;
     p->U = U;
-    int code = ops->restart(slots_of(p), &PLANT_RHS, p, t, y, &r);
+    PlantCall call = plant_call(p);
+    int code = ops->restart(slots_of(p), &PLANT_RHS, &call, t, y, &r);
     return code ? solver_error(p, code, &r) : VK_OK;
 }
 
@@ -193,7 +231,8 @@ static inline __attribute__((always_inline)) int value_at_with(VkPlant *p, const
 {
     double y[DOP_MAX_DIM];
     DopReport r;
-    int code = ops->value_at(slots_of(p), &PLANT_RHS, p, t, y, &r);
+    PlantCall call = plant_call(p);
+    int code = ops->value_at(slots_of(p), &PLANT_RHS, &call, t, y, &r);
     if (code) {  /* solver_error returns code: said here, so the compiler sees *x and *v written when 0 is returned */
         solver_error(p, code, &r);
         return code;
@@ -221,7 +260,8 @@ static inline __attribute__((always_inline)) int set_input_with(VkPlant *p, cons
 static inline __attribute__((always_inline)) int advance_with(VkPlant *p, const VkSolverOps *ops, double t_target)
 {
     DopReport r;
-    int code = ops->advance(slots_of(p), &PLANT_RHS, p, t_target, &r);
+    PlantCall call = plant_call(p);
+    int code = ops->advance(slots_of(p), &PLANT_RHS, &call, t_target, &r);
     return code ? solver_error(p, code, &r) : VK_OK;
 }
 
