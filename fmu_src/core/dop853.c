@@ -168,9 +168,10 @@ UNROLL(16)
         double ts = t + c * h;
         int m = st < k->n ? st : k->n;
         double sum[DOP_MAX_DIM];  /* integrate._tableau_dot for every component at once: each sum in the same order */
-        /* integrate._tableau_dot: with extra states (n > 2) the zero coefficients (38 of 120) are skipped; the
-           plant's two components keep every term (the test would cost about what it saves) */
-        combine(row, m, k, n, n != 2, sum);
+        /* integrate._tableau_dot: the zero coefficients (38 of 120) are skipped -- for the plant's two components
+           free of tests, the stage loops unrolled with the tableau's constants (1 % fewer instructions per
+           output of the native FMU than every term: 2274 -> 2251 on the paper scene at rtol 1e-4) */
+        combine(row, m, k, n, 1, sum);
         step_from(y, h, sum, n, ys);
         int fault = rhs(ctx, ts, ys, k->k[k->n]);  /* the derivative straight into its stage row */
         if (fault) return fault;

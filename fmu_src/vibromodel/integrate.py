@@ -141,9 +141,9 @@ def _dot(coefficients, values):
 def _tableau_dot(coefficients, values):
     """_dot without the terms whose coefficient is zero (38 of DOP853's 120 stage coefficients, rows of A and B):
     the same value whenever the skipped values are finite, as the sum starts at +0.0 and so is never -0.0, and
-    c * k = +-0.0 then leaves it unchanged. Used by the stages of systems with extra states (the closed loop), as
-    the C twin (core/dop853.c stages_of) skips the same terms there; the plant's stages and the error and
-    dense-output sums keep _dot (skipping there costs the C loop more than it saves)."""
+    c * k = +-0.0 then leaves it unchanged. Used by every stage (the plant's and the closed loop's), as the C twin
+    (core/dop853.c stages_of) skips the same terms; the error and dense-output sums keep _dot, every term, so that
+    a stage that is not finite makes the error estimate (and the dense output) non-finite, as it must."""
     total = 0.0
     for c, k in zip(coefficients, values):
         if c != 0.0:
@@ -399,7 +399,7 @@ class Dop853(Integrator):
         accel, rates = self.accel, self.rates
         kx, kv, kU = stages
         U = U0
-        dot = _dot if rates is None else _tableau_dot  # the C twin's choice (core/dop853.c stages_of: n > 2)
+        dot = _tableau_dot  # the C twin's (core/dop853.c stages_of)
         for row, c in nodes:
             ts = t + c * h
             xs = x + h * dot(row, kx)
