@@ -444,13 +444,18 @@ static fmi2Status get_values(Instance *I, const fmi2ValueReference vr[], size_t 
         }                                                                                                 \
         return CHECK(worst);                                                                              \
     }
-#define AS_REAL(v) (v)
 #define AS_INTEGER(v) ((fmi2Integer)(v))
 #define AS_BOOLEAN(v) ((v) != 0.0)
 #define NO_CHECK(st) (st)
 #define FINITE_CHECK(st) fmi2_layer_finite_reals(&I->fmi, (st), vr, nvr, value)
 
-GETTER(Real, fmi2Real, T_REAL, AS_REAL, FINITE_CHECK)
+/* fmi2GetReal: GETTER's, the values read straight into the caller's array (fmi2Real is double: no staging array,
+   no copy; get_values reads any number of them) */
+EXPORT fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Real value[])
+{
+    INST(c); ALLOWED(fmi2GetReal); ARRAYS(fmi2GetReal, nvr, vr, value);
+    return FINITE_CHECK(get_values(I, vr, nvr, "Real", T_REAL, "fmi2GetReal", value));
+}
 GETTER(Integer, fmi2Integer, T_INTEGER, AS_INTEGER, NO_CHECK)
 GETTER(Boolean, fmi2Boolean, T_BOOLEAN, AS_BOOLEAN, NO_CHECK)
 
@@ -580,7 +585,8 @@ EXPORT fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolea
     }
     ALLOWED(fmi2DoStep);
     if (I->s.has_stop) {
-        const double stop = I->s.stop_time, end = stop + STOP_TIME_TOLERANCE * fmax(1.0, fabs(stop));
+        const double stop = I->s.stop_time, magnitude = fabs(stop);  /* fmax(1.0, |stop|), without the call */
+        const double end = stop + STOP_TIME_TOLERANCE * (magnitude > 1.0 ? magnitude : 1.0);
         if (isfinite(t) && isfinite(h) && t <= end && end < t + h) {
             char a[64], b[64], e[64], f[64];
             native_repr(h, a, sizeof a);
