@@ -179,6 +179,47 @@ def test_a_half_built_default_fmu_is_rebuilt_not_used(tmp_path, monkeypatch, cap
     assert built == [tmp_path]
 
 
+def test_a_default_fmu_older_than_its_sources_is_rebuilt(tmp_path, monkeypatch, capsys):
+    """A default FMU built before a file of fmu_src/ changed (a stale build) is rebuilt; a change under native/
+    (not in the pythonfmu FMU) and an FMU the user named leave it as it is."""
+    from vibrofmu.commands import common
+    from vibrofmu.fmus import build
+
+    sources = tmp_path / "fmu_src"
+    for name in ("core/plant.c", "native/fmi2_native.c", "vibromodel/__pycache__/plant.cpython-311.pyc"):
+        (sources / name).parent.mkdir(parents=True, exist_ok=True)
+        (sources / name).write_text("")
+    default = _zip(tmp_path / "build" / common.PLANT_NAME, normalized=True)
+    named = _zip(tmp_path / "named" / "plant.fmu", normalized=True)
+    built = []
+
+    def fake_build_plant(out_dir):
+        built.append(out_dir)
+        return _zip(Path(out_dir) / common.PLANT_NAME, normalized=True)
+
+    def age(path, seconds):  # modified `seconds` after the sources were written
+        stamp = (sources / "core/plant.c").stat().st_mtime + seconds
+        os.utime(path, (stamp, stamp))
+
+    monkeypatch.setattr(build, "build_plant", fake_build_plant)
+    monkeypatch.setattr(common, "say_compiled_parts", lambda natives=False: None)
+    monkeypatch.setattr(common, "checked_fmu", lambda path, model=None, **checks: path)
+    monkeypatch.setattr(common.paths, "build_dir", lambda: tmp_path / "build")
+    monkeypatch.setattr(common.paths, "FMU_SRC", sources)
+    for path in (default, named):
+        age(path, 10.0)
+    age(sources / "native/fmi2_native.c", 20.0)  # native/ is not in the pythonfmu FMU
+    age(sources / "vibromodel/__pycache__/plant.cpython-311.pyc", 20.0)  # nor are caches
+    assert common.built_plant(default) == default and built == []
+    age(sources / "core/plant.c", 20.0)
+    assert common.built_plant(named) == named and built == []  # the user named it: used as it is
+    assert common.built_plant(default) == default and built == [tmp_path / "build"]
+    assert f"(older than {sources / 'core/plant.c'})" in capsys.readouterr().err
+    age(default, 30.0)  # the rebuilt FMU is newer than every source: used as it is
+    common.built_plant(default)
+    assert built == [tmp_path / "build"]
+
+
 if __name__ == "__main__":
     import tempfile
 

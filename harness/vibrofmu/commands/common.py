@@ -280,12 +280,15 @@ def plant_fmu(given: str | None) -> Path:
 
 def built_plant(path: Path) -> Path:
     """`path` (from plant_fmu), built first when it is the missing default (or the default an interrupted build of
-    an earlier version left half-done: archive.finished; an FMU the user named is used as it is)."""
+    an earlier version left half-done: archive.finished; or the default older than a file of fmu_src/, so that
+    what a command measures or runs is the checkout's model; an FMU the user named is used as it is)."""
     default = path.resolve() == (paths.build_dir() / PLANT_NAME).resolve()
-    if not path.exists() or (default and not _finished(path)):
+    newer = _newer_source(path) if default and path.exists() else None
+    if not path.exists() or (default and not _finished(path)) or newer is not None:
         from vibrofmu.fmus.build import build_plant
 
-        print(f"building {path} ...{_half_done(path)}", file=sys.stderr)
+        why = f" (older than {newer})" if newer is not None and _finished(path) else _half_done(path)
+        print(f"building {path} ...{why}", file=sys.stderr)
         say_compiled_parts()
         build_plant(path.parent)
     return checked_fmu(path, PLANT_MODEL, fmi2_cs=True)
@@ -295,6 +298,19 @@ def _finished(path: Path) -> bool:
     from vibrofmu.fmus.archive import finished
 
     return finished(path)
+
+
+def _newer_source(path: Path) -> Path | None:
+    """A file of fmu_src/ that the pythonfmu FMUs are built from (all but native/: the slaves, the model, the core,
+    the FMI layer, the shim) changed after `path` was written, or None: about a hundred stat calls."""
+    built = path.stat().st_mtime
+    for source in sorted(paths.FMU_SRC.rglob("*")):
+        relative = source.relative_to(paths.FMU_SRC).parts
+        if relative[0] == "native" or "__pycache__" in relative or not source.is_file():
+            continue
+        if source.stat().st_mtime > built:
+            return source
+    return None
 
 
 def _half_done(path: Path) -> str:
