@@ -280,47 +280,39 @@ def plant_fmu(given: str | None) -> Path:
 
 def built_plant(path: Path) -> Path:
     """`path` (from plant_fmu), built first when it is the missing default (or the default an interrupted build of
-    an earlier version left half-done: archive.finished; or the default older than a file of fmu_src/, so that
-    what a command measures or runs is the checkout's model; an FMU the user named is used as it is)."""
+    an earlier version left half-done: archive.finished; or the default built from other sources: archive.current,
+    so that what a command measures or runs is the checkout's model; an FMU the user named is used as it is)."""
     default = path.resolve() == (paths.build_dir() / PLANT_NAME).resolve()
-    newer = _newer_source(path) if default and path.exists() else None
-    if not path.exists() or (default and not _finished(path)) or newer is not None:
+    if not path.exists() or (default and not _current(path)):
         from vibrofmu.fmus.build import build_plant
 
-        why = f" (older than {newer})" if newer is not None and _finished(path) else _half_done(path)
-        print(f"building {path} ...{why}", file=sys.stderr)
+        print(f"building {path} ...{_half_done(path)}", file=sys.stderr)
         say_compiled_parts()
         build_plant(path.parent)
     return checked_fmu(path, PLANT_MODEL, fmi2_cs=True)
 
 
-def _finished(path: Path) -> bool:
-    from vibrofmu.fmus.archive import finished
+def _current(path: Path) -> bool:
+    from vibrofmu.fmus.archive import current
 
-    return finished(path)
-
-
-def _newer_source(path: Path) -> Path | None:
-    """A file of fmu_src/ that the pythonfmu FMUs are built from (all but native/: the slaves, the model, the core,
-    the FMI layer, the shim) changed after `path` was written, or None: about a hundred stat calls."""
-    built = path.stat().st_mtime
-    for source in sorted(paths.FMU_SRC.rglob("*")):
-        relative = source.relative_to(paths.FMU_SRC).parts
-        if relative[0] == "native" or "__pycache__" in relative or not source.is_file():
-            continue
-        if source.stat().st_mtime > built:
-            return source
-    return None
+    return current(path)
 
 
 def _half_done(path: Path) -> str:
-    """The note of a default FMU rebuilt because the one there is incomplete, or ""."""
-    return f" ({path} is incomplete: an interrupted build)" if path.exists() and not _finished(path) else ""
+    """The note of a default FMU rebuilt because the one there is incomplete or of other sources, or ""."""
+    from vibrofmu.fmus.archive import finished
+
+    if not path.exists() or _current(path):
+        return ""
+    if not finished(path):
+        return f" ({path} is incomplete: an interrupted build)"
+    return f" ({path} was built from other sources)"
 
 
 def built_all(fmu_dir: Path, names=(PLANT_NAME, CONTROLLER_NAME, CLOSED_LOOP_NAME)) -> Path:
-    """`fmu_dir`, after building the three FMUs into it when one of `names` is missing there (or half-done)."""
-    if not all((fmu_dir / name).exists() and _finished(fmu_dir / name) for name in names):
+    """`fmu_dir`, after building the three FMUs into it when one of `names` is missing there, half-done or built from
+    other sources (archive.current)."""
+    if not all((fmu_dir / name).exists() and _current(fmu_dir / name) for name in names):
         from vibrofmu.fmus.build import build_all
 
         half = "".join(dict.fromkeys(_half_done(fmu_dir / name) for name in names))

@@ -10,10 +10,15 @@ Every archive the project builds (the FMUs, the SSPs, the container FMU) is asse
 destination folder (`staging`) and moved to its final name by `publish` (os.replace: atomic on one file system), so
 an interrupted build leaves the previous file or none, never half of one. `finished` tells an archive whose build
 ran to its end (normalize_entries is its last step) from one a build of an earlier version left half-done.
+`publish` also writes the digest of the sources the archive was built from (`sources_stamp`: fmu_src and the build
+code) as the zip's comment; `current` tells an archive of these sources from one an older checkout built, which the
+commands rebuild rather than run (an FMU of older sources may not even load against this vibromodel).
 """
 from __future__ import annotations
 
 import contextlib
+import functools
+import hashlib
 import os
 import shutil
 import tempfile
@@ -91,9 +96,40 @@ def staging(destination: Path):
         shutil.rmtree(folder, ignore_errors=True)
 
 
+STAMP_PREFIX = b"vibrofmu sources sha256 "
+STAMPED_SUFFIXES = (".py", ".c", ".h", ".xml", ".toml", ".json", ".txt")
+
+
+@functools.lru_cache(maxsize=1)
+def sources_stamp() -> bytes:
+    """STAMP_PREFIX + the SHA-256 of every source an archive is built from: fmu_src (the model, the C core, the FMI
+    layers, the native models) and the build code (this package), each file's path and bytes, in sorted order."""
+    from vibrofmu import paths
+
+    digest = hashlib.sha256()
+    for root in (paths.FMU_SRC, Path(__file__).resolve().parent):
+        for path in sorted(p for p in root.rglob("*") if p.suffix in STAMPED_SUFFIXES and p.is_file()
+                           and "__pycache__" not in p.parts):
+            digest.update(f"{root.name}/{path.relative_to(root).as_posix()}\0".encode())
+            digest.update(path.read_bytes())
+            digest.update(b"\0")
+    return STAMP_PREFIX + digest.hexdigest().encode()
+
+
+def stamp(path: Path) -> bytes | None:
+    """The zip comment of `path` (its sources_stamp when a build published it), None if it is no readable zip."""
+    try:
+        with zipfile.ZipFile(path) as archive:
+            return archive.comment
+    except (OSError, zipfile.BadZipFile):
+        return None
+
+
 def publish(staged: Path, final: Path) -> Path:
-    """Move the finished archive `staged` (in a staging folder of final's folder) to `final`, replacing the
-    previous file at once (os.replace); returns final."""
+    """Write sources_stamp as the finished archive's comment, then move `staged` (in a staging folder of final's
+    folder) to `final`, replacing the previous file at once (os.replace); returns final."""
+    with zipfile.ZipFile(staged, "a") as archive:
+        archive.comment = sources_stamp()
     os.replace(staged, final)
     return Path(final)
 
@@ -107,3 +143,8 @@ def finished(path: Path) -> bool:
     except (OSError, zipfile.BadZipFile):
         return False
     return bool(infos) and all(i.create_system == UNIX and i.external_attr == entry_attributes(i) for i in infos)
+
+
+def current(path: Path) -> bool:
+    """True when `path` is finished and was built from the sources as they are now (its stamp is sources_stamp)."""
+    return finished(path) and stamp(path) == sources_stamp()
