@@ -156,23 +156,37 @@ def test_finished_tells_a_half_built_archive(tmp_path):
     assert not archive.finished(tmp_path / "missing.fmu")
 
 
-def test_a_half_built_default_fmu_is_rebuilt_not_used(tmp_path, monkeypatch, capsys):
+def _published(out_dir: Path, name: str) -> Path:
+    """A build's last steps: normalized in a staging folder, then published (stamped) as out_dir/name."""
+    with archive.staging(out_dir) as stage:
+        return archive.publish(_zip(stage / name, normalized=True), Path(out_dir) / name)
+
+
+def _fake_plant_builds(monkeypatch, build_dir: Path) -> list:
+    """built_plant's collaborators replaced: build_plant publishes a stand-in FMU and records its folder in the list
+    returned; build_dir is the default build folder."""
     from vibrofmu.commands import common
     from vibrofmu.fmus import build
 
-    half = _zip(tmp_path / common.PLANT_NAME, normalized=False)
-    named = _zip(tmp_path / "named" / "plant.fmu", normalized=False)  # not the default: the user named it
     built = []
 
-    def fake_build_plant(out_dir):  # a build's last steps: normalized, then published (stamped)
+    def fake_build_plant(out_dir):
         built.append(out_dir)
-        with archive.staging(out_dir) as stage:
-            return archive.publish(_zip(stage / common.PLANT_NAME, normalized=True), Path(out_dir) / common.PLANT_NAME)
+        return _published(out_dir, common.PLANT_NAME)
 
     monkeypatch.setattr(build, "build_plant", fake_build_plant)
     monkeypatch.setattr(common, "say_compiled_parts", lambda natives=False: None)
     monkeypatch.setattr(common, "checked_fmu", lambda path, model=None, **checks: path)
-    monkeypatch.setattr(common.paths, "build_dir", lambda: tmp_path)
+    monkeypatch.setattr(common.paths, "build_dir", lambda: build_dir)
+    return built
+
+
+def test_a_half_built_default_fmu_is_rebuilt_not_used(tmp_path, monkeypatch, capsys):
+    from vibrofmu.commands import common
+
+    half = _zip(tmp_path / common.PLANT_NAME, normalized=False)
+    named = _zip(tmp_path / "named" / "plant.fmu", normalized=False)  # not the default: the user named it
+    built = _fake_plant_builds(monkeypatch, tmp_path)
     assert common.built_plant(named) == named and built == []  # used as it is
     assert common.built_plant(half) == half
     assert built == [tmp_path] and archive.finished(half)
@@ -185,7 +199,6 @@ def test_a_default_plant_fmu_of_changed_sources_is_rebuilt(tmp_path, monkeypatch
     """A default plant FMU built before a file of fmu_src/ changed (a stale build) is rebuilt; a cache file and an
     FMU the user named leave it as it is; the rebuilt one is used as it is."""
     from vibrofmu.commands import common
-    from vibrofmu.fmus import build
 
     sources = tmp_path / "fmu_src"
     for name in ("core/plant.c", "vibromodel/__pycache__/plant.cpython-311.pyc"):
@@ -193,19 +206,10 @@ def test_a_default_plant_fmu_of_changed_sources_is_rebuilt(tmp_path, monkeypatch
         (sources / name).write_text("")
     monkeypatch.setattr(paths, "FMU_SRC", sources)
     archive.sources_stamp.cache_clear()
-    built = []
-
-    def fake_build_plant(out_dir):
-        built.append(out_dir)
-        with archive.staging(out_dir) as stage:
-            return archive.publish(_zip(stage / common.PLANT_NAME, normalized=True), Path(out_dir) / common.PLANT_NAME)
-
-    monkeypatch.setattr(build, "build_plant", fake_build_plant)
-    monkeypatch.setattr(common, "say_compiled_parts", lambda natives=False: None)
-    monkeypatch.setattr(common, "checked_fmu", lambda path, model=None, **checks: path)
-    monkeypatch.setattr(common.paths, "build_dir", lambda: tmp_path / "build")
+    built = _fake_plant_builds(monkeypatch, tmp_path / "build")
     try:
-        default = fake_build_plant(tmp_path / "build")
+        default = _published(tmp_path / "build", common.PLANT_NAME)
+        built.append(tmp_path / "build")
         named = tmp_path / "named" / "plant.fmu"
         named.parent.mkdir()
         named.write_bytes(default.read_bytes())
@@ -226,8 +230,7 @@ def test_a_default_plant_fmu_of_changed_sources_is_rebuilt(tmp_path, monkeypatch
 def test_publish_stamps_the_sources_and_current_tells_an_older_build(tmp_path, monkeypatch):
     """A finished archive of other sources (an older checkout's build/: its stamp differs, or it has none) is not
     current; publish gives the stamp of the sources as they are; a change of any source changes the stamp."""
-    with archive.staging(tmp_path) as stage:
-        final = archive.publish(_zip(stage / "A.fmu", normalized=True), tmp_path / "A.fmu")
+    final = _published(tmp_path, "A.fmu")
     assert archive.stamp(final) == archive.sources_stamp() and archive.current(final)
     assert archive.finished(_zip(tmp_path / "old.fmu", normalized=True))
     assert not archive.current(tmp_path / "old.fmu")  # finished, no stamp: built before stamps or elsewhere
@@ -257,14 +260,12 @@ def test_a_default_fmu_of_other_sources_is_rebuilt_not_used(tmp_path, monkeypatc
     def fake_build_all(out_dir):
         built.append(out_dir)
         for name in (common.PLANT_NAME, common.CONTROLLER_NAME, common.CLOSED_LOOP_NAME):
-            with archive.staging(out_dir) as stage:
-                archive.publish(_zip(stage / name, normalized=True), Path(out_dir) / name)
+            _published(out_dir, name)
 
     monkeypatch.setattr(build, "build_all", fake_build_all)
     monkeypatch.setattr(common, "say_compiled_parts", lambda natives=False: None)
     for name in (common.CONTROLLER_NAME, common.CLOSED_LOOP_NAME):
-        with archive.staging(tmp_path) as stage:
-            archive.publish(_zip(stage / name, normalized=True), tmp_path / name)
+        _published(tmp_path, name)
     assert common.built_all(tmp_path) == tmp_path and built == [tmp_path]
     assert f"{old} was built from other sources" in capsys.readouterr().err
     common.built_all(tmp_path)  # all current now: used as they are
