@@ -285,6 +285,9 @@ def test_the_delta_branch_reaches_its_end_with_both_folds_and_the_grazing():
      "it is the branch's parameter"),
     (["--param", "omega", "--from", "0.9", "--to", "1", "--param2", "Delta"], "serve --follow"),
     (["--param", "R", "--from", "0.9", "--to", "1"], "invalid choice"),
+    # no complex pair of multipliers reaches the unit circle at mu >= 0: refused before any branch is computed
+    (["--param", "omega", "--from", "0.9", "--to", "1", "--follow", "neimark-sacker", "--param2", "Delta",
+      "--to2", "0.2"], "no Neimark-Sacker point to follow"),
 ])
 def test_bad_input_is_one_line_and_exit_2(argv, fragment, tmp_path, capsys):
     assert main(["continuation", *argv, "--out", str(tmp_path / "out")]) == 2

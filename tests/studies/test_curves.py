@@ -19,9 +19,11 @@ INDEPENDENT_RTOL = 1e-12
 FOLD_SYSTEM_TOL = 1e-8  # |P(z) - z| and |det(M - I)| of the independent fold system at each curve point
 
 
-def independent_map(scene: Scene, z0):
+def independent_map(scene: Scene, z0, restart: bool = True):
     """P(z0) and M of the periodic model x'' + mu x' + H(x) - 1 - F_em,mean(x) = Delta cos(omega tau) over one
-    period, by Radau, restarted at each contact crossing (x = -3/2, where H'' is singular)."""
+    period, by Radau, restarted at each contact crossing (x = -3/2, where H'' is singular); restart=False: in
+    one piece, for an orbit that touches the edge tangentially (a grazing orbit: a terminal crossing event would
+    fire again and again there; the field is C^1 and the solver's error control shortens its steps at the edge)."""
     mu, Delta, omega = scene.mu, scene.Delta, scene.omega
     alpha, gamma, R = scene.alpha, scene.gamma, scene.R
 
@@ -44,7 +46,8 @@ def independent_map(scene: Scene, z0):
     T = 2.0 * math.pi / omega
     t, y = 0.0, np.concatenate([np.asarray(z0, dtype=float), np.eye(2).ravel()])
     while True:
-        sol = solve_ivp(rhs, (t, T), y, method="Radau", rtol=INDEPENDENT_RTOL, atol=1e-14, events=edge)
+        sol = solve_ivp(rhs, (t, T), y, method="Radau", rtol=INDEPENDENT_RTOL, atol=1e-14,
+                        events=edge if restart else None)
         assert sol.status >= 0, sol.message
         t, y = sol.t[-1], sol.y[:, -1]
         if sol.status == 0:
@@ -122,3 +125,110 @@ def test_a_cusp_is_kept_only_where_the_parameters_turn():
         _at(0.6367693204547975, 0.12980426729861164, (-2.541298092542524, 1.8856453156377457)))
     # monotone but by far less than the step: a turning below the resolution, kept
     assert curves.parameters_turn(_at(0.0, 0.0, (0.0, 0.0)), _at(1e-9, 1e-9, (0.5, 0.0)), _at(2e-9, 2e-9, (1.0, 0.0)))
+
+
+# ----- grazing curves: P(z) = z and x_min = -3/2, and the grazing-fold where they meet the fold curve ----------
+
+# the plain map's error ~1e-13 |z| per period (DOP853 at rtol 1e-13 on the state alone): far below GRAZING_TOL
+PLAIN_RTOL = 1e-13
+GRAZING_TOL = 1e-8  # |P(z) - z| and |x_min + 3/2| of the plain system at a re-solved point
+PLAIN_FD = 1e-7  # forward differences of the plain map: error ~ 1e-13 / 1e-7 + 1e-7 |P''| ~ 1e-6, a Newton ratio ~1e-6
+
+
+def plain_orbit(scene: Scene, z0) -> tuple[np.ndarray, float]:
+    """(P(z0), x_min over the period) of x'' + mu x' + H(x) - 1 - F_em,mean(x) = Delta cos(omega tau) in the
+    original time tau, the state alone (no variational equations), by SciPy's DOP853 in one piece; x_min is the
+    least of x at the turning points v = 0 (integration events, located on the 7th-order dense output) and at
+    both ends. Not restarted at the contact edge (unlike independent_map): these orbits touch it tangentially,
+    where a terminal crossing event fires again and again; the field is C^1 there (H'' ~ s^(-1/2) integrable)
+    and the solver's error control shortens its steps at the edge."""
+    mu, Delta, omega = scene.mu, scene.Delta, scene.omega
+    alpha, gamma, R = scene.alpha, scene.gamma, scene.R
+
+    def rhs(t, y):
+        return [y[1], Delta * math.cos(omega * t) - mu * y[1] - forces.hertz(y[0]) + 1.0
+                + forces.electrostatic_mean(y[0], alpha, gamma, R)]
+
+    def turning(t, y):
+        return y[1]
+
+    sol = solve_ivp(rhs, (0.0, 2.0 * math.pi / omega), np.asarray(z0, dtype=float), method="DOP853",
+                    rtol=PLAIN_RTOL, atol=1e-15, events=turning)
+    assert sol.status == 0, sol.message
+    end = sol.y[:, -1]
+    return end, min(float(z0[0]), float(end[0]), *(float(x) for x in sol.y_events[0][:, 0]))
+
+
+def plain_grazing_newton(scene: Scene, z0, omega: float, max_iter: int = 20):
+    """Newton on (P(z) - z, x_min + 3/2) = 0 in (x0, v0, omega) at the scene's Delta, the plain map's forward
+    differences for the Jacobian: (x0, v0, omega, the residual, the Jacobian at the solution)."""
+    def F(y):
+        end, x_min = plain_orbit(scene.with_values(omega=y[2]), y[:2])
+        return np.array([end[0] - y[0], end[1] - y[1], x_min + 1.5])
+
+    y = np.array([z0[0], z0[1], omega], dtype=float)
+    for _ in range(max_iter):
+        f = F(y)
+        J = np.column_stack([(F(y + PLAIN_FD * e) - f) / PLAIN_FD for e in np.eye(3)])
+        if np.max(np.abs(f)) <= 1e-11:
+            return y, f, J
+        y = y - np.linalg.solve(J, f)
+    raise AssertionError(f"plain Newton did not converge: residual {np.max(np.abs(f)):.3g}")
+
+
+@pytest.fixture(scope="module")
+def grazing_curve():
+    # the branch at Delta = 0.1 from omega 0.9 over the fold at 0.933 back along the unstable middle branch,
+    # which loses contact (grazing) at omega ~ 0.9235; the grazing curve from there down in Delta meets the
+    # fold curve at the grazing-fold (Delta ~ 0.067) and turns back up along the stable upper branch
+    branch = cont.branch(FOLD_SCENE, "omega", 0.9, 0.95, points=10, double=False)
+    assert [pt.event for pt in branch.events()].count("grazing") == 1
+    return curves.curves_from_branch(branch, "grazing", "Delta", 0.1, 0.06, points=20, max_points=40)
+
+
+@pytest.mark.long
+def test_every_grazing_curve_point_is_re_solved_by_a_plain_newton(grazing_curve):
+    (curve,) = grazing_curve.curves
+    assert {pt.kind for pt in curve.points} == {"grazing"}
+    assert max(abs(pt.g) for pt in curve.points) <= curves.TOL  # the engine's own grazing residual
+    picked = curve.points[:: max(1, len(curve.points) // 4)]
+    assert len(picked) >= 4
+    for pt in picked:
+        scene = FOLD_SCENE.with_values(omega=pt.p1, Delta=pt.p2)
+        end, x_min = plain_orbit(scene, pt.z0)
+        assert np.max(np.abs(end - pt.z0)) <= GRAZING_TOL, (pt.p1, pt.p2)
+        assert abs(x_min + 1.5) <= GRAZING_TOL, (pt.p1, pt.p2)
+        # from a start 1e-3 off in the state and 1e-4 in omega, at the same Delta
+        y, f, J = plain_grazing_newton(scene, pt.z0 + np.array([1e-3, -1e-3]), pt.p1 + 1e-4)
+        assert np.max(np.abs(f)) <= GRAZING_TOL
+        # both points solve the system to GRAZING_TOL (the curve's under this plain map, above): they are one root
+        # if they lie within |J^-1| (2 GRAZING_TOL) of each other, to first order
+        bound = 2 * GRAZING_TOL * np.linalg.norm(np.linalg.inv(J), 2)
+        assert np.linalg.norm(y - np.array([*pt.z0, pt.p1])) <= bound, (pt.p1, pt.p2)
+
+
+@pytest.mark.long
+def test_the_grazing_curve_meets_the_fold_curve_at_a_grazing_fold(grazing_curve):
+    (curve,) = grazing_curve.curves
+    located = [pt for pt in curve.points if pt.event == "grazing-fold"]
+    assert len(located) == 1
+    pt = located[0]
+    # on either side of it the orbit's stability differs: det(M - I) = (1 - rho1)(1 - rho2) changes sign
+    index = curve.points.index(pt)
+    assert curve.points[index - 1].fold_test * curve.points[index + 1].fold_test < 0.0
+    # the located orbit solves the independent fold system (Radau, variational equations) and touches the edge
+    scene = FOLD_SCENE.with_values(omega=pt.p1, Delta=pt.p2)
+    end, M = independent_map(scene, pt.z0, restart=False)
+    assert np.max(np.abs(end - pt.z0)) <= FOLD_SYSTEM_TOL
+    assert abs(np.linalg.det(M - np.eye(2))) <= FOLD_SYSTEM_TOL
+    assert abs(plain_orbit(scene, pt.z0)[1] + 1.5) <= GRAZING_TOL
+    # the fold curves of a branch above it (Delta = 0.07: its contact-loss fold at omega ~ 0.940) find it as the zero
+    # of x_min + 3/2 along the fold, with no grazing curve given
+    branch = cont.branch(FOLD_SCENE.with_values(Delta=0.07), "omega", 0.93, 0.965, points=10, double=False)
+    assert [q.event for q in branch.events()].count("fold") == 2
+    fold = curves.curves_from_branch(branch, "fold", "Delta", 0.07, 0.066, points=20, max_points=30)
+    on_fold = [q for c in fold.curves for q in c.points if q.event == "grazing-fold"]
+    assert len(on_fold) == 1
+    # one point located on two curves (by Brent on det(M - I) along grazing curves started from different
+    # orbits): both to the curves' tolerance 1e-10 over a conditioning ~ 1 .. 100 of the located point
+    assert abs(on_fold[0].p1 - pt.p1) <= 1e-8 and abs(on_fold[0].p2 - pt.p2) <= 1e-8

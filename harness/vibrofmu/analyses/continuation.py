@@ -258,12 +258,15 @@ def continue_from(problem: Problem, start: Point, p_stop: float, *, scale: float
             point, iterations = cont.correct(u + h * t, t)
             t_new = cont.tangent(point, t)
             accepted = iterations <= 5 and np.dot(t, t_new) >= math.cos(0.2)
-        except (ShootingError, np.linalg.LinAlgError):
-            accepted, iterations = False, None
+            failure = ""
+        except (ShootingError, np.linalg.LinAlgError) as error:
+            accepted, iterations, failure = False, None, str(error)
         if not accepted:
             h *= 0.5
             if h < min_step:
-                reason = f"step below {min_step:g} at {problem.param} = {last.p:.10g}"
+                reason = (f"pull-in beyond {problem.param} = {last.p:.10g} (every shorter step met an electrode)"
+                          if failure.startswith("pull-in") else f"step below {min_step:g} at {problem.param} = "
+                                                                f"{last.p:.10g}")
                 break
             continue
         point.tangent = t_new

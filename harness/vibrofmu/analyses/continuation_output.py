@@ -58,7 +58,8 @@ def plot_branch(path: Path, result: cont.Branch, title: str) -> None:
     """Amplitude (x_max - x_min)/2, x_min and the Floquet multipliers' moduli against the parameter: stable
     solid, unstable dashed, events marked (one marker per kind, in the legend), doubled branches in their own
     colour, the contact edge x = -3/2 drawn on the x_min panel, the unit circle |rho| = 1 on the multiplier
-    panel, a branch stopped short marked by a red cross. PNG, and PDF beside it."""
+    panel, a branch stopped short marked by a red cross, one that ends at pull-in (every step beyond its last orbit
+    met an electrode) by a red triangle pointing down. PNG, and PDF beside it."""
     fig, axes = plt.subplots(3, 1, figsize=(8, 9.5), sharex=True, layout="constrained",
                              gridspec_kw={"height_ratios": [3, 2, 2]})
     seen = set()
@@ -90,7 +91,15 @@ def plot_branch(path: Path, result: cont.Branch, title: str) -> None:
                              label=pt.event if show else None)
                 axes[1].plot(pt.p, pt.x_min, marker, color=c, ms=7, mfc="none", mew=1.6)
                 axes[2].plot(pt.p, np.max(np.abs(pt.multipliers)), marker, color=c, ms=7, mfc="none", mew=1.6)
-        if br.stop_reason and not br.stop_reason.startswith(("reached", "left")):
+        if br.stop_reason.startswith("pull-in"):  # an end of the branch, not a sample: the next orbit meets an electrode
+            last = pts[-1]
+            label = "pull-in beyond the branch's end"
+            show = label not in seen
+            seen.add(label)
+            axes[0].plot(last.p, (last.x_max - last.x_min) / 2, "v", color="k", ms=10, mfc="tab:red",
+                         label=label if show else None, zorder=5)
+            axes[1].plot(last.p, last.x_min, "v", color="k", ms=10, mfc="tab:red", zorder=5)
+        elif br.stop_reason and not br.stop_reason.startswith(("reached", "left")):
             last = pts[-1]
             label = "branch stopped short (point budget or step)"
             show = label not in seen
@@ -281,17 +290,21 @@ def chart(scene: Scene, deltas, points: int, progress: Callable[[str], None] | N
             "holds_threshold_in_mu": HOLDS}
 
 
-def write_chart(out: Path, data: dict) -> None:
+def write_chart(out: Path, data: dict, curves: two.Curves | None = None) -> None:
+    """chart.parquet, chart.json, chart.png (and chart.pdf); `curves` (continued in (omega, Delta)) drawn too."""
     flat = [{k: (json.dumps(v) if isinstance(v, list) else v) for k, v in row.items()} for row in data["rows"]]
     write_parquet(pa.Table.from_pylist(flat), out / "chart.parquet")
     write_json(out / "chart.json", data)
-    plot_chart(out / "chart.png", data)
+    plot_chart(out / "chart.png", data, curves)
 
 
 VERDICT_COLORS = {"holds": "#d9f2d9", "quantitatively off": "#fff2cc", "qualitatively wrong": "#f8d7da"}
 
 
-def plot_chart(path: Path, data: dict) -> None:
+def plot_chart(path: Path, data: dict, curves: two.Curves | None = None) -> None:
+    """The (omega, Delta) plane: rows shaded by verdict, the slow flow's folds and cusp, each row's exact events,
+    and with `curves` (continued in (omega, Delta), --follow) the continued curves and their codimension-two points
+    (the exact cusp among them). PNG, and PDF beside it."""
     fig, ax = plt.subplots(figsize=(8, 6.5), layout="constrained")
     rows = data["rows"]
     deltas = [r["Delta"] for r in rows]
@@ -316,6 +329,8 @@ def plot_chart(path: Path, data: dict) -> None:
         ys = [r["Delta"] for r in rows for _ in r[key]]
         if xs:
             ax.plot(xs, ys, marker, color=color, mfc="none", mew=1.5, ms=6, label=label)
+    if curves is not None and curves.params == ("omega", "Delta"):
+        _draw_curves(ax, curves, set(), label="continued {kind} curve")
     ax.set_yscale("log")
     ax.set_xlabel(r"forcing frequency $\omega$")
     ax.set_ylabel(r"forcing amplitude $\Delta$")
@@ -325,6 +340,7 @@ def plot_chart(path: Path, data: dict) -> None:
                          f"doubling beside the slow flow's folds (mu = {s['mu']:g}, R = {s['R']:g})",
                          fig.get_figwidth(), 11), fontsize=11)
     legend_below(fig, [ax], columns=3)
+    fig.savefig(path.with_suffix(".pdf"))  # vector, beside the PNG (save_plot closes the figure)
     save_plot(fig, path)
 
 
@@ -345,8 +361,8 @@ def agreement_table(data: dict) -> list[str]:
 
 # ----- two-parameter curves (--follow) ------------------------------------------------------------------------
 
-CURVE_STYLE = {"fold": ("-", "tab:red"), "period-doubling": ("--", "tab:purple")}
-CODIM2_MARKERS = {"cusp": ("*", "k")}
+CURVE_STYLE = {"fold": ("-", "tab:red"), "period-doubling": ("--", "tab:purple"), "grazing": ("-.", "tab:orange")}
+CODIM2_MARKERS = {"cusp": ("*", "k"), "grazing-fold": ("P", "tab:brown")}
 
 
 def write_curves(out: Path, curves: two.Curves, scene: Scene, title: str) -> None:
@@ -367,23 +383,8 @@ def plot_curves(path: Path, curves: two.Curves, scene: Scene, title: str) -> Non
     cusp beside the exact one. PNG and PDF."""
     p1, p2 = curves.params
     fig, ax = plt.subplots(figsize=(7.5, 6), layout="constrained")
-    seen = set()
-    for curve in curves.curves:
-        style, color = CURVE_STYLE[curve.kind]
-        label = f"{curve.kind} curve" if curve.kind not in seen else None
-        seen.add(curve.kind)
-        ax.plot([pt.p1 for pt in curve.points], [pt.p2 for pt in curve.points], style, color=color, lw=1.5,
-                label=label)
-        for pt in curve.points:
-            if pt.event:
-                marker, c = CODIM2_MARKERS.get(pt.event, ("o", "k"))
-                ax.plot(pt.p1, pt.p2, marker, color=c, ms=12, label=pt.event if pt.event not in seen else None)
-                seen.add(pt.event)
-        if curve.stop_reason and "stopped at" in curve.stop_reason:
-            last = curve.points[-1]
-            ax.plot(last.p1, last.p2, "X", color="tab:red", ms=9,
-                    label="curve stopped (point budget)" if "stop" not in seen else None)
-            seen.add("stop")
+    seen: set = set()
+    _draw_curves(ax, curves, seen)
     if (p1, p2) == ("omega", "Delta") and any(pt.event == "cusp" for c in curves.curves for pt in c.points):
         slow = slow_flow_cusp_point(scene)
         if slow is not None:
@@ -395,6 +396,27 @@ def plot_curves(path: Path, curves: two.Curves, scene: Scene, title: str) -> Non
     legend_below(fig, [ax], columns=2)
     fig.savefig(path.with_suffix(".pdf"))  # vector, beside the PNG (save_plot closes the figure)
     save_plot(fig, path)
+
+
+def _draw_curves(ax, curves: two.Curves, seen: set, label: str = "{kind} curve") -> None:
+    """Each curve in its kind's style, its codimension-two points (one marker per kind, in the legend) and a curve
+    stopped by its point budget marked at its end."""
+    for curve in curves.curves:
+        style, color = CURVE_STYLE[curve.kind]
+        ax.plot([pt.p1 for pt in curve.points], [pt.p2 for pt in curve.points], style, color=color, lw=1.5,
+                label=label.format(kind=curve.kind) if curve.kind not in seen else None)
+        seen.add(curve.kind)
+        for pt in curve.points:
+            if pt.event:
+                marker, c = CODIM2_MARKERS.get(pt.event, ("o", "k"))
+                ax.plot(pt.p1, pt.p2, marker, color=c, ms=12, mfc="none" if pt.event == "grazing-fold" else c,
+                        mew=1.8, label=pt.event if pt.event not in seen else None, zorder=5)
+                seen.add(pt.event)
+        if curve.stop_reason and "stopped at" in curve.stop_reason:
+            last = curve.points[-1]
+            ax.plot(last.p1, last.p2, "X", color="tab:red", ms=9,
+                    label="curve stopped (point budget)" if "stop" not in seen else None)
+            seen.add("stop")
 
 
 def curves_summary(curves: two.Curves) -> list[dict]:

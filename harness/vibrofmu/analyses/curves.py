@@ -1,5 +1,5 @@
-"""Two-parameter continuation of fold and period-doubling points of the periodic orbits (docs/continuation.md,
-Two-parameter curves), on the shooting formulation of shooting.py.
+"""Two-parameter continuation of fold, period-doubling and grazing points of the periodic orbits
+(docs/continuation.md, Two-parameter curves), on the shooting formulation of shooting.py.
 
 A fold (a Floquet multiplier +1) or a period doubling (-1) of the orbit z = P(z; p1, p2) is one equation more
 than an orbit: the minimally augmented system (Govaerts, Numerical Methods for Bifurcations of Dynamical
@@ -27,6 +27,14 @@ changes sign. The Jacobian's row g_z gives it for free: g_z w = -v^T (dM/dz w) w
 bordered system), so a sign change of g_z w between two points is located by Brent on the arclength; at the
 cusp both parameters turn (the curve's tangent lies in the state): a located point where they do not is dropped
 (parameters_turn).
+
+Grazing (the orbit touching the contact edge x = -3/2 at its lowest turning point) is one equation more than an
+orbit too, g = x_min(z; p1, p2) + 3/2 with x_min the minimum over the orbit's turning points (v = 0, located as
+integration events). Its gradient is dx_min/dy by the same forward differences (4 maps; x_min is differentiable:
+at a nondegenerate minimum dx_min/dy = dx(s*)/dy, s* the turning phase). Codimension two on both a fold and a
+grazing curve: the grazing-fold, a fold whose orbit touches the contact edge, where the two curves meet -- on a
+fold curve a sign change of x_min + 3/2, on a grazing curve a sign change of det(M - I), each located by Brent on
+the arclength.
 """
 from __future__ import annotations
 
@@ -42,8 +50,9 @@ from vibromodel.parameters import Scene
 
 from vibrofmu.analyses import shooting as sh
 
-KINDS = ("fold", "period-doubling")  # what a curve follows: the sign of the multiplier that sits at 1
-SIGN = {"fold": -1.0, "period-doubling": 1.0}  # A = M + SIGN I
+KINDS = ("fold", "period-doubling", "grazing")  # what a curve follows
+SIGN = {"fold": -1.0, "period-doubling": 1.0}  # A = M + SIGN I: the sign of the multiplier that sits at 1
+CONTACT_EDGE = -1.5  # continuation.CONTACT_EDGE: 1 + 2x/3 = 0
 # forward-difference step of M, relative to max(1, |y|): the period map's error ~ rtol 1e-11 |M| over the step
 # 1e-6 gives dM/dy to ~1e-5, and the truncation ~ 1e-6 |M''|: the chord Newton converges with ratio ~1e-5
 FD_STEP = 1e-6
@@ -52,6 +61,12 @@ TURN = 0.2  # largest accepted turning of the tangent per step (rad), as for a b
 # parameters_turn: over a step through a cusp the parameters move by O(step^2), measured <= 1e-6 of the state's move
 # where they did not visibly turn (eps = 1/32 of cusp_order: noise); through the false one by 0.12 of it
 TURN_SLOPE = 0.01
+# chord iterations for a located point: 1e-4 (a predictor's residual) to TOL at the linear rate ~0.25 measured at a
+# grazing orbit on a fold curve (locate) takes ~13; 40 leaves room for a slower rate
+LOCATE_ITERATIONS = 40
+# how far along the grazing curve (in fold-curve steps) a grazing-fold is looked for from the fold curve's crossing
+# of x_min = -3/2: the two curves cross at the point, so it lies within about one step of that grazing orbit
+GRAZING_FOLD_SEARCH = (0.25, 1.0, 4.0)
 
 
 @dataclass
@@ -70,8 +85,10 @@ class CurvePoint:
     x_max: float
     residual: float  # |P(z) - z|_inf
     g: float  # the bordered test function
-    quadratic: float  # g_z w (proportional to the fold's quadratic coefficient; its sign change is the cusp)
+    quadratic: float  # g_z w (proportional to the fold's quadratic coefficient; its sign change is the cusp); NaN
+    # on a grazing curve
     event: str = ""
+    fold_test: float = math.nan  # det(M - I) = (1 - rho1)(1 - rho2): its sign change on a grazing curve is a grazing-fold
     tangent: np.ndarray | None = field(default=None, repr=False)
 
 
@@ -91,7 +108,8 @@ class Augmented:
         if kind not in KINDS:
             raise ValueError(f"curve kind {kind!r}: supported {', '.join(KINDS)}")
         self.scene, self.kind, self.params, self.scales = scene, kind, (param1, param2), scales
-        self.periods, self.rtol, self.sign = periods, rtol, SIGN[kind]
+        self.periods, self.rtol, self.sign = periods, rtol, SIGN.get(kind, 0.0)
+        self.grazing = kind == "grazing"
         self.border: tuple[np.ndarray, np.ndarray] | None = None
 
     def at(self, p1: float, p2: float) -> Scene:
@@ -116,19 +134,27 @@ class Augmented:
         """(g, w, v) of the bordered system (shooting.bordered_test)."""
         return sh.bordered_test(self.A(monodromy), *self.border)
 
+    def condition(self, pmap: sh.PeriodMap) -> float:
+        """The defining condition at the orbit of `pmap`: x_min + 3/2 (grazing) or the bordered test function."""
+        if self.grazing:
+            return pmap.x_min - CONTACT_EDGE
+        return self.bordered(pmap.monodromy)[0]
+
     def residual(self, u: np.ndarray) -> tuple[np.ndarray, sh.PeriodMap]:
         z, p1, p2 = self.unscale(u)
         pmap = self.map(z, p1, p2)
-        g, _, _ = self.bordered(pmap.monodromy)
-        return np.append(pmap.end - z, g), pmap
+        return np.append(pmap.end - z, self.condition(pmap)), pmap
 
     def jacobian(self, u: np.ndarray) -> tuple[np.ndarray, float, tuple]:
-        """The 3 x 4 Jacobian of (P - z, g) in u (module doc), g_z w (the cusp's test function) and the residual
-        at u (from the same period map: the corrector's first iteration needs no map of its own)."""
+        """The 3 x 4 Jacobian of (P - z, g) in u (module doc), g_z w (the cusp's test function; NaN for grazing)
+        and the residual at u (from the same period map: the corrector's first iteration needs no map of its own)."""
         z, p1, p2 = self.unscale(u)
         base = self.map(z, p1, p2)
-        self.set_border(base.monodromy)
-        g, w, v = self.bordered(base.monodromy)
+        if self.grazing:
+            g, w, v = base.x_min - CONTACT_EDGE, None, None
+        else:
+            self.set_border(base.monodromy)
+            g, w, v = self.bordered(base.monodromy)
         J = np.zeros((3, 4))
         J[:2, :2] = base.monodromy - np.eye(2)
         J[:2, 2] = base.d_param * self.scales[0]
@@ -138,15 +164,21 @@ class Augmented:
             yk = y.copy()
             yk[k] += step
             shifted = self.map(yk[:2], yk[2], yk[3])
-            dM = (shifted.monodromy - base.monodromy) / step
-            J[2, k] = -float(v @ dM @ w) * (1.0 if k < 2 else self.scales[k - 2])
+            scale = 1.0 if k < 2 else self.scales[k - 2]
+            if self.grazing:
+                J[2, k] = (shifted.x_min - base.x_min) / step * scale
+            else:
+                J[2, k] = -float(v @ ((shifted.monodromy - base.monodromy) / step) @ w) * scale
             if k == 3:  # dP/dp2 by the same forward difference (a chord Jacobian and the tangent need ~1e-5)
                 J[:2, 3] = (shifted.end - base.end) / step * self.scales[1]
-        return J, float(J[2, :2] @ w), (np.append(base.end - z, g), base)
+        quadratic = math.nan if self.grazing else float(J[2, :2] @ w)
+        return J, quadratic, (np.append(base.end - z, g), base)
 
     def quadratic(self, u: np.ndarray, base: sh.PeriodMap) -> float:
         """g_z w at u (the cusp's test function: module doc), dM/dz by forward differences (2 maps); the
-        bordering vectors are the point's own."""
+        bordering vectors are the point's own. NaN on a grazing curve (no maps)."""
+        if self.grazing:
+            return math.nan
         z, p1, p2 = self.unscale(u)
         self.set_border(base.monodromy)
         _, w, v = self.bordered(base.monodromy)
@@ -165,7 +197,8 @@ class Augmented:
         return CurvePoint(kind=self.kind, p1=float(p1), p2=float(p2), z0=np.array(z, dtype=float),
                           periods=self.periods, period=sh.TWO_PI * self.periods / s.omega,
                           multipliers=sh.multipliers(pmap.monodromy), x_min=pmap.x_min, x_max=pmap.x_max,
-                          residual=float(np.max(np.abs(pmap.end - z))), g=g, quadratic=quadratic)
+                          residual=float(np.max(np.abs(pmap.end - z))), g=g, quadratic=quadratic,
+                          fold_test=float(np.linalg.det(pmap.monodromy - np.eye(2))))
 
 
 def null_vector(J: np.ndarray, previous: np.ndarray | None) -> np.ndarray:
@@ -194,33 +227,76 @@ def correct(system: Augmented, u_pred: np.ndarray, normal: np.ndarray, max_iter:
                            f"{u[2] * system.scales[0]:.8g}, {system.params[1]} = {u[3] * system.scales[1]:.8g}")
 
 
-def solve(system: Augmented, u_pred: np.ndarray, normal: np.ndarray, previous: np.ndarray | None
-          ) -> tuple[np.ndarray, CurvePoint, np.ndarray, int]:
+def solve(system: Augmented, u_pred: np.ndarray, normal: np.ndarray, previous: np.ndarray | None,
+          max_iter: int = 8) -> tuple[np.ndarray, CurvePoint, np.ndarray, int]:
     """A point of the curve on the hyperplane through u_pred with `normal`: (u, point, tangent, iterations).
     The tangent is the null vector of the Jacobian at the predictor (O(h) off the point's own: a predictor
     direction); the quadratic coefficient is the point's own (Augmented.quadratic), so the cusp is exact."""
-    u, pmap, J, iterations = correct(system, u_pred, normal)
-    g, _, _ = system.bordered(pmap.monodromy)
-    point = system.point(u, pmap, g, system.quadratic(u, pmap))
+    u, pmap, J, iterations = correct(system, u_pred, normal, max_iter)
+    point = system.point(u, pmap, system.condition(pmap), system.quadratic(u, pmap))
     point.tangent = null_vector(J, previous if previous is not None else normal)
     return u, point, point.tangent, iterations
 
 
-def locate_cusp(system: Augmented, u0: np.ndarray, t0: np.ndarray, h: float) -> CurvePoint:
-    """Brent on the arclength in (0, h) for the zero of g_z w (module doc)."""
+def locate(system: Augmented, u0: np.ndarray, t0: np.ndarray, h: float, test: Callable[[CurvePoint], float],
+           event: str) -> tuple[float, CurvePoint]:
+    """Brent on the arclength in (0, h) for the zero of test(point) (each value a point of the curve on the
+    hyperplane at that arclength): (the arclength, the located point, marked `event`, with its own tangent).
+    Up to LOCATE_ITERATIONS chord iterations per point: at a grazing orbit the fold system's dM/dy jumps (H'' is
+    singular at the contact edge, an integrable singularity that adds a finite amount to dM/dy once the orbit
+    enters the contact), so the chord Newton on a fold curve converges only linearly there (ratio ~0.25 measured
+    at the grazing-fold of the mu = 0.05 fold curve, ~0.06 a step away)."""
     cache: dict[float, CurvePoint] = {}
 
     def point(hh):
         if hh not in cache:
-            cache[hh] = solve(system, u0 + hh * t0, t0, t0)[1]
+            cache[hh] = solve(system, u0 + hh * t0, t0, t0, LOCATE_ITERATIONS)[1]
         return cache[hh]
 
-    hh = brentq(lambda x: point(x).quadratic, 0.0, h, xtol=1e-12 * h, rtol=1e-12)
+    hh = brentq(lambda x: test(point(x)), 0.0, h, xtol=1e-12 * h, rtol=1e-12)
     located = point(hh)
-    located.event = "cusp"
+    located.event = event
     J, _, _ = system.jacobian(np.array([*located.z0, located.p1 / system.scales[0], located.p2 / system.scales[1]]))
     located.tangent = null_vector(J, t0)  # its own: both parameter components vanish at a cusp
-    return located
+    return hh, located
+
+
+def grazing_fold_on_fold_curve(system: Augmented, u0: np.ndarray, t0: np.ndarray, h: float, before: float,
+                               after: float) -> tuple[float, CurvePoint]:
+    """The grazing-fold between two points of a fold curve (x_min + 3/2 = before, after of opposite signs), located
+    on the grazing curve that crosses the fold curve there (the fold system itself is not smooth at a grazing orbit:
+    locate's doc): a grazing orbit on the fold curve's step (the hyperplane of the linear estimate, normal t0), then
+    Brent on det(M - I) along that grazing curve's tangent, bracketed within GRAZING_FOLD_SEARCH steps h of it.
+    Returns (the arclength estimate on the fold curve, the point marked 'grazing-fold' as a fold curve point)."""
+    grazing = Augmented(system.scene, "grazing", *system.params, system.scales, system.periods, system.rtol)
+    s = h * before / (before - after)
+    u, _, J, _ = correct(grazing, u0 + s * t0, t0, LOCATE_ITERATIONS)
+    tg = null_vector(J, None)
+    start = solve(grazing, u, tg, tg)[1].fold_test
+    for reach in GRAZING_FOLD_SEARCH:
+        for sign in (1.0, -1.0):
+            if solve(grazing, u + sign * reach * h * tg, tg, tg)[1].fold_test * start < 0.0:
+                _, located = locate(grazing, u, sign * tg, reach * h, lambda pt: pt.fold_test, "grazing-fold")
+                pmap = system.map(located.z0, located.p1, located.p2)
+                system.set_border(pmap.monodromy)
+                located.kind, located.g, located.quadratic = system.kind, system.condition(pmap), math.nan
+                return s, located
+    raise ValueError("no grazing-fold bracketed along the grazing curve")
+
+
+def locate_cusp(system: Augmented, u0: np.ndarray, t0: np.ndarray, h: float) -> CurvePoint:
+    """Brent on the arclength in (0, h) for the zero of g_z w (module doc)."""
+    return locate(system, u0, t0, h, lambda pt: pt.quadratic, "cusp")[1]
+
+
+def grazing_fold_test(kind: str) -> Callable[[CurvePoint], float] | None:
+    """The test function of the grazing-fold on a curve of `kind` (module doc): x_min + 3/2 on a fold curve,
+    det(M - I) on a grazing curve; None on a period-doubling curve."""
+    if kind == "fold":
+        return lambda pt: pt.x_min - CONTACT_EDGE
+    if kind == "grazing":
+        return lambda pt: pt.fold_test
+    return None
 
 
 def follow(system: Augmented, start: CurvePoint, direction: float, p2_bounds: tuple[float, float], *,
@@ -252,13 +328,24 @@ def follow(system: Augmented, start: CurvePoint, direction: float, p2_bounds: tu
                          f"{last.p2:.8g}"
                 break
             continue
+        found = []
         if system.kind == "fold" and last.quadratic * point.quadratic < 0.0:
             try:
-                located = locate_cusp(system, u, t, h)
+                hh, located = locate(system, u, t, h, lambda pt: pt.quadratic, "cusp")
                 if parameters_turn(last, located, point):
-                    points.append(located)
+                    found.append((hh, located))
             except (sh.ShootingError, ValueError):
                 pass
+        test = grazing_fold_test(system.kind)
+        if test is not None and test(last) * test(point) < 0.0:
+            try:
+                if system.kind == "grazing":
+                    found.append(locate(system, u, t, h, test, "grazing-fold"))
+                else:
+                    found.append(grazing_fold_on_fold_curve(system, u, t, h, test(last), test(point)))
+            except (sh.ShootingError, ValueError, np.linalg.LinAlgError):  # not bracketed: keep going, unmarked
+                pass
+        points += [pt for _, pt in sorted(found, key=lambda item: item[0])]
         points.append(point)
         if progress is not None:
             progress(point)
@@ -307,8 +394,7 @@ def start_point(system: Augmented, z0, p1: float, p2: float) -> CurvePoint:
     normal = np.array([0.0, 0.0, 0.0, 1.0])  # p2 fixed
     u, pmap, _, _ = correct(system, u, normal)
     J, quadratic, _ = system.jacobian(u)
-    g, _, _ = system.bordered(pmap.monodromy)
-    return system.point(u, pmap, g, quadratic)
+    return system.point(u, pmap, system.condition(pmap), quadratic)
 
 
 @dataclass
@@ -404,7 +490,7 @@ def rows(curves: Curves) -> list[dict]:
                         "v0": float(pt.z0[1]), "period": pt.period, "x_min": pt.x_min, "x_max": pt.x_max,
                         "event": pt.event, "rho1_re": float(pt.multipliers[0].real),
                         "rho2_re": float(pt.multipliers[1].real), "residual": pt.residual, "g": pt.g,
-                        "quadratic": pt.quadratic})
+                        "quadratic": pt.quadratic, "det_m_minus_i": pt.fold_test})
     return out
 
 

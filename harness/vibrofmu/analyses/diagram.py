@@ -514,8 +514,10 @@ def plot(d: Diagram, path, title: str = "") -> None:
         ys = np.concatenate([p.x for p in points])
         ax.scatter(xs, ys, s=1.5, color=COLOURS[direction], alpha=0.6, linewidths=0, label=f"sweep {direction}")
         pulled = [p.value for p in points if p.pull_in]
-        if pulled:  # pull-in: no samples; marked on the axis
-            ax.plot(pulled, [0.0] * len(pulled), "x", color=COLOURS[direction], ms=2.5, label=f"pull-in ({direction})")
+        if pulled:  # pull-in: no samples, the run ended; an end mark on the lower frame, not a point at x = 0
+            ax.plot(pulled, [0.0] * len(pulled), "v", transform=ax.get_xaxis_transform(), clip_on=False,
+                    color=COLOURS[direction], mec="k", mew=0.5, ms=6,
+                    label=f"pull-in, run ended ({direction})")
     ax.axhline(-1.5, color="grey", lw=0.6, ls=":", label="contact loss $x = -3/2$")
     ax.set_ylabel("$x(kT)$ (stroboscopic, forcing phase 0)")
     ax.legend(loc="best", markerscale=4, fontsize=8)

@@ -9,7 +9,11 @@ from vibrofmu.commands.common import (FMU_HELP, SET_HELP, Command, Unused, UserE
 PARAMETERS = ("omega", "Delta", "mu", "alpha", "gamma")  # analyses.continuation.PARAMETERS (checked by a test)
 BENCH_SCENE = {"mu": 0.05, "Delta": 0.1, "R": 3.0}  # the benchmark's branch: omega 0.6 -> 1.2, two folds, grazing
 BENCH_POINTS = 200
-FOLLOW = ("fold", "period-doubling", "all")  # analyses.curves.KINDS, and both
+FOLLOW = ("fold", "period-doubling", "grazing", "neimark-sacker", "all")  # analyses.curves.KINDS, all of them, and NS
+# (refused: NO_NEIMARK_SACKER)
+NO_NEIMARK_SACKER = ("--follow neimark-sacker: there is no Neimark-Sacker point to follow: a complex pair of "
+                     "multipliers has |rho|^2 = det M = exp(-mu T) < 1 for every mu >= 0, so it never reaches the "
+                     "unit circle (docs/continuation.md, Events)")
 BENCH_STEP_POINTS = 50  # step sized for 50 points on a straight branch: the 200 then reach past both folds and grazings
 
 
@@ -44,7 +48,8 @@ def options(p):
                         f"{', '.join(f'{k}={v:g}' for k, v in BENCH_SCENE.items())}, omega 0.6 -> 1.2 (bench.json)")
     p.add_argument("--follow", choices=FOLLOW,
                    help="continue every point of this kind on the branch in two parameters (--param and --param2): "
-                        "curves.parquet, curves.png; 'all' follows folds and period doublings (default: none)")
+                        "curves.parquet, curves.png; 'all' follows folds, period doublings and grazings; "
+                        "neimark-sacker is refused: none exists at mu >= 0 (default: none)")
     p.add_argument("--param2", choices=PARAMETERS, help="the second parameter of --follow (no default: required with --follow)")
     p.add_argument("--to2", type=float, metavar="VALUE", help="the curves run up to this value of --param2 (no default: required with --follow)")
     p.add_argument("--from2", type=float, metavar="VALUE",
@@ -84,6 +89,8 @@ def run(args) -> int:
         if not (lo < hi and n == int(n) and n >= 2):
             raise UserError(f"--chart {lo:g} {hi:g} {n:g}: need DELTA_LO < DELTA_HI and an integer N >= 2")
     scene = _scene(args)
+    if args.follow == "neimark-sacker":
+        raise UserError(NO_NEIMARK_SACKER)
     if args.follow:
         if args.param2 is None or args.to2 is None:
             raise UserError("--follow needs --param2 NAME --to2 VALUE")
@@ -157,6 +164,8 @@ def run(args) -> int:
     for name, br in [("branch", result)] + [(f"doubled branch {i}", b) for i, b in enumerate(result.doubled, 1)]:
         if br.stop_reason.startswith("stopped at"):
             print(f"warning: {name} {br.stop_reason} before {args.param} = {args.stop:g}; raise --points")
+        elif br.stop_reason.startswith("pull-in"):
+            print(f"warning: {name} ends at {br.stop_reason}")
     if "cascade" in summary:
         print("cascade: " + ", ".join(f"{d['periods']}T -> {d['to_periods']}T at {args.param} = {d['value']:.10g}"
                                       for d in summary["cascade"]["doublings"])
@@ -179,15 +188,6 @@ def run(args) -> int:
         print(f"bench: {bench['points']} points in {bench['seconds']:.1f} s wall clock, {bench['cpu_seconds']:.1f} s "
               f"CPU ({1e3 * bench['seconds_per_point']:.0f} ms per point; load average "
               f"{bench['load_average_1min']:.1f} on {bench['cpu_count']} cores; target {bench['target']})")
-    if args.chart:
-        import numpy as np
-
-        lo, hi, n = args.chart
-        data = output.chart(scene, np.geomspace(lo, hi, int(n)), args.points, progress=say)
-        output.write_chart(out, data)
-        summary["chart"] = {"rows": data["rows"], "slow_flow_cusp_Delta": data["slow_flow_cusp_Delta"]}
-        for line in output.agreement_table(data):
-            print(line)
     if args.follow:
         from vibrofmu.analyses import curves as two
 
@@ -208,10 +208,22 @@ def run(args) -> int:
         summary["curves"] = output.curves_summary(merged)
         for line in output.curves_lines(merged):
             print(line)
+    if args.chart:
+        import numpy as np
+
+        lo, hi, n = args.chart
+        data = output.chart(scene, np.geomspace(lo, hi, int(n)), args.points, progress=say)
+        output.write_chart(out, data, merged if args.follow and args.param2 == "Delta" else None)
+        if args.follow and args.param2 != "Delta":
+            print(f"note: chart.png is the (omega, Delta) plane: the curves in (omega, {args.param2}) are in "
+                  "curves.png only")
+        summary["chart"] = {"rows": data["rows"], "slow_flow_cusp_Delta": data["slow_flow_cusp_Delta"]}
+        for line in output.agreement_table(data):
+            print(line)
     export.write_json(out / "summary.json", summary)
     print(f"wrote {out}/branch.parquet, branch.png, branch.pdf, summary.json" + (", confirmations.json" if args.confirm else "")
           + (", curves.parquet, curves.png, curves.pdf" if args.follow else "")
-          + (", bench.json" if args.bench else "") + (", chart.png, chart.parquet, chart.json" if args.chart else ""))
+          + (", bench.json" if args.bench else "") + (", chart.png, chart.pdf, chart.parquet, chart.json" if args.chart else ""))
     return status
 
 
