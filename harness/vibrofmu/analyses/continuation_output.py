@@ -321,7 +321,8 @@ def plot_chart(path: Path, data: dict, curves: two.Curves | None = None) -> None
     ax.plot(xs, ys, ".", color="tab:blue", ms=4, label="slow-flow folds")  # dots: the count changes along Delta
     cusp = slow_flow_cusp_point(Scene(**data["scene"]))
     if data["slow_flow_cusp_Delta"] and cusp is not None and cusp["Delta"] == data["slow_flow_cusp_Delta"]:
-        ax.plot(cusp["omega"], cusp["Delta"], "^", color="tab:blue", ms=8, label="slow-flow cusp")
+        ax.plot(cusp["omega"], cusp["Delta"], "^", color="tab:blue", mec="w", ms=8, label="slow-flow cusp",
+                zorder=6)  # above the exact cusp's star, which lies close to it
     for key, marker, color, label in (("exact_folds", "s", "tab:red", "exact folds"),
                                       ("grazing", "o", "tab:orange", "exact grazing (contact first lost)"),
                                       ("period_doubling", "D", "tab:purple", "exact period doubling")):
@@ -337,7 +338,7 @@ def plot_chart(path: Path, data: dict, curves: two.Curves | None = None) -> None
     ax.grid(True, alpha=0.3, which="both")
     s = data["scene"]
     fig.suptitle(wrapped(f"where the averaged (slow-flow) predictions hold: exact folds, grazing and period "
-                         f"doubling beside the slow flow's folds (mu = {s['mu']:g}, R = {s['R']:g})",
+                         f"doubling beside the slow flow's folds ($\\mu$ = {s['mu']:g}, $R$ = {s['R']:g})",
                          fig.get_figwidth(), 11), fontsize=11)
     legend_below(fig, [ax], columns=3)
     fig.savefig(path.with_suffix(".pdf"))  # vector, beside the PNG (save_plot closes the figure)
@@ -388,7 +389,8 @@ def plot_curves(path: Path, curves: two.Curves, scene: Scene, title: str) -> Non
     if (p1, p2) == ("omega", "Delta") and any(pt.event == "cusp" for c in curves.curves for pt in c.points):
         slow = slow_flow_cusp_point(scene)
         if slow is not None:
-            ax.plot(slow["omega"], slow["Delta"], "^", color="tab:blue", ms=9, label="slow flow's cusp (averaging)")
+            ax.plot(slow["omega"], slow["Delta"], "^", color="tab:blue", ms=9, mec="w",
+                    label="slow flow's cusp (averaging)", zorder=6)
     ax.set_xlabel(parameter_label(p1))
     ax.set_ylabel(parameter_label(p2))
     ax.grid(True, alpha=0.3)
