@@ -520,7 +520,10 @@ def plot(d: Diagram, path, title: str = "") -> None:
                     label=f"pull-in, run ended ({direction})")
     ax.axhline(-1.5, color="grey", lw=0.6, ls=":", label="contact loss $x = -3/2$")
     ax.set_ylabel("$x(kT)$ (stroboscopic, forcing phase 0)")
-    ax.legend(loc="best", markerscale=4, fontsize=8)
+    legend = ax.legend(loc="best", markerscale=4, fontsize=8)  # the sample dots are tiny: scaled up in the legend
+    for handle, text in zip(legend.legend_handles, legend.get_texts()):
+        if text.get_text().startswith("pull-in") and hasattr(handle, "set_markersize"):
+            handle.set_markersize(6)  # the end marks are drawn at their size already
     ax.set_title(title or f"bifurcation diagram in {export.symbol(d.name)}")
     if with_exponents:
         ax2 = axes[1, 0]
