@@ -366,3 +366,23 @@ def test_a_branch_that_cannot_start_says_where_and_exits_1(tmp_path, capsys):
                  "--out", str(tmp_path)]) == 1
     err = capsys.readouterr().err.strip()
     assert err.startswith("error: continuation in Delta from 0.5: pull-in") and "--set R=3" in err and "\n" not in err
+
+
+@pytest.mark.parametrize("reason, mark, other", [
+    ("pull-in beyond omega = 0.62 (every shorter step met an electrode)", "pull-in beyond the branch's end",
+     "branch stopped short (point budget or step)"),
+    ("stopped at 5 points at omega = 0.62", "branch stopped short (point budget or step)",
+     "pull-in beyond the branch's end"),
+])
+def test_branch_plot_marks_how_a_branch_ends(reason, mark, other, tmp_path, monkeypatch):
+    # pull-in ends a branch (no orbit beyond it): its own end mark, not the point budget's cross (nor a sample)
+    from vibrofmu.analyses import continuation_output as output
+
+    result = cont.branch(Scene(mu=0.05, Delta=0.1, R=3.0, beta=0.0, gamma=0.0), "omega", 0.6, 0.62, points=4,
+                         double=False)
+    result.stop_reason = reason
+    figures = []
+    monkeypatch.setattr(output, "save_plot", lambda fig, path: figures.append(fig))
+    output.plot_branch(tmp_path / "branch.png", result, "ends")
+    labels = {text.get_text() for legend in figures[0].legends for text in legend.get_texts()}
+    assert mark in labels and other not in labels
