@@ -20,12 +20,14 @@ from vibrofmu.commands.common import HelpFormatter
 
 
 def stand_in_fmu(path: Path) -> Path:
-    """A finished archive (vibrofmu.fmus.archive.finished) standing in for an FMU: no build is started for it."""
-    from vibrofmu.fmus.archive import normalize_entries
+    """A finished archive of these sources (vibrofmu.fmus.archive.current: normalized, then published with the
+    sources' stamp) standing in for an FMU: no build is started for it."""
+    from vibrofmu.fmus.archive import normalize_entries, publish, staging
 
-    with zipfile.ZipFile(path, "w") as z:
-        z.writestr("modelDescription.xml", "<fmiModelDescription/>")
-    return normalize_entries(path)
+    with staging(path.parent) as stage:
+        with zipfile.ZipFile(stage / path.name, "w") as z:
+            z.writestr("modelDescription.xml", "<fmiModelDescription/>")
+        return publish(normalize_entries(stage / path.name), path)
 
 
 def stand_in_fmus(folder: Path) -> Path:
