@@ -56,10 +56,20 @@ def independent_map(scene: Scene, z0, restart: bool = True):
 
 
 @pytest.fixture(scope="module")
-def fold_curve():
-    branch = cont.branch(FOLD_SCENE, "omega", 0.9, 0.95, points=10, double=False)
-    assert [pt.event for pt in branch.events()].count("fold") == 1
-    return curves.curves_from_branch(branch, "fold", "Delta", 0.12, 0.08, points=20, max_points=5)
+def fold_branch():
+    """The branch at Delta = 0.1 from omega 0.9 to 0.95 (one fold, one grazing), shared by the curve fixtures."""
+    return cont.branch(FOLD_SCENE, "omega", 0.9, 0.95, points=10, double=False)
+
+
+def curves_of_the_one(branch, kind, to2, from2, max_points):
+    """The curves of `kind` continued in Delta from the branch's one point of that kind."""
+    assert [pt.event for pt in branch.events()].count(kind) == 1
+    return curves.curves_from_branch(branch, kind, "Delta", to2, from2, points=20, max_points=max_points)
+
+
+@pytest.fixture(scope="module")
+def fold_curve(fold_branch):
+    return curves_of_the_one(fold_branch, "fold", 0.12, 0.08, max_points=5)
 
 
 @pytest.mark.long
@@ -177,13 +187,11 @@ def plain_grazing_newton(scene: Scene, z0, omega: float, max_iter: int = 20):
 
 
 @pytest.fixture(scope="module")
-def grazing_curve():
+def grazing_curve(fold_branch):
     # the branch at Delta = 0.1 from omega 0.9 over the fold at 0.933 back along the unstable middle branch,
     # which loses contact (grazing) at omega ~ 0.9235; the grazing curve from there down in Delta meets the
     # fold curve at the grazing-fold (Delta ~ 0.067) and turns back up along the stable upper branch
-    branch = cont.branch(FOLD_SCENE, "omega", 0.9, 0.95, points=10, double=False)
-    assert [pt.event for pt in branch.events()].count("grazing") == 1
-    return curves.curves_from_branch(branch, "grazing", "Delta", 0.1, 0.06, points=20, max_points=40)
+    return curves_of_the_one(fold_branch, "grazing", 0.1, 0.06, max_points=40)
 
 
 @pytest.mark.long
