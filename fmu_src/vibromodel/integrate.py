@@ -102,8 +102,9 @@ EVENT_MAX_DEPTH = 40
 # rounded once, <= 9 eps of the magnitudes), 40 halvings add <= 40 eps more, the evaluation of g a few eps.
 EVENT_ROUNDING = 2.0 ** -46
 # A search examines (evaluates g at the end of) at most EVENT_MAX_PIECES pieces, then raises RuntimeError
-# (EVENT_UNSETTLED); a safety net: the random contact-loss scenes and the graze sweep examine at most a few dozen
-# (tests/model/test_event_location.py measures it), so no sound step reaches it.
+# (EVENT_UNSETTLED); a safety net: the random contact-loss scenes and the graze sweep examine at most 17 pieces per
+# search (tests/core/test_event_search_twins.py checks a graze stays two orders below the bound), so no sound step
+# reaches it.
 EVENT_MAX_PIECES = 4096
 EVENT_UNSETTLED = (f"event search gave up after {EVENT_MAX_PIECES} pieces of the step: the Bernstein hull of the "
                    "event function and the dense output disagree (the step's values exceed the arithmetic)")
