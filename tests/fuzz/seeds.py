@@ -30,7 +30,7 @@ CALLS = {
 }
 # state: how (bit 0 FMI 3, bit 1 ME), steps, number of patches - 1, then patches (kind, offset u16, argument)
 NAN_K, INF_K = 18, 19  # fuzz_input.h INTERESTING[]: NAN, INFINITY
-STATE = {
+STATE: dict[str, list[int] | bytes] = {
     "fmi2_cs_nan": [0, 2, 0, 1, 88, 0, NAN_K, *ALL2],
     "fmi2_me_x": [2, 2, 0, 1, 80, 0, 8, *ALL2],
     "fmi2_cs_flip": [0, 3, 1, 3, 0x40, 1, 5, 2, 0x20, 1, 21, 1],
@@ -40,6 +40,11 @@ STATE = {
     # a campaign's timeout (round 8): a patched state whose next step has x'' ~ 1e46, where the event search
     # walked 2^40 pieces (integrate.EVENT_ROUNDING now bounds it)
     "fmi2_cs_event_hull": [0x00, 0x02, 0x00, 0x00, 0xF7, 0x00, 0x76, 0x4F, 0x72, 0x65, 0x66, 0x12, 0xA9, 0x42],
+    # a campaign's crash (round 9): an FMI 3 state restored before initialisation (model.built = 0) with patched
+    # model bytes, then an event indicator read through fmi3GetFloat64: the indicators read the unbuilt model's
+    # solver dimension (5.9e17) and indexed past its arrays (model_me_indicators now reads no unbuilt model)
+    "fmi3_cs_unbuilt": bytes.fromhex("1d0806060606060606060606067a060606060606060606060606f6f600f606060606060606f6f600"
+                                     "f68f4b30089cff60706000b47a8f4b30089cff066050656060"),
 }
 LAYER = {
     "uri": [0, 200, 3, 5, *b"/tmp"],
@@ -48,7 +53,7 @@ LAYER = {
 }
 
 
-def write(folder: Path, programs: dict[str, list[int]]) -> None:
+def write(folder: Path, programs: dict[str, list[int] | bytes]) -> None:
     folder.mkdir(parents=True, exist_ok=True)
     for name, program in programs.items():
         data = bytes(program)

@@ -301,6 +301,11 @@ int model_me_derivatives(Instance *inst, State *s, double *dx)
 
 void model_me_indicators(const State *s, double *z)
 {
+    if (!s->model.built) { /* as the plant's: an unbuilt model's bytes mean nothing, a fresh one's indicators */
+        z[0] = vm_contact_indentation(0.0);
+        z[1] = z[2] = 1.0;
+        return;
+    }
     const VlLoop *l = &s->model.loop;
     double y[VL_DIM];
     if (s->model.me.mode != ME_OFF) memcpy(y, s->model.me.x, sizeof y);
