@@ -82,6 +82,9 @@ def test_every_fold_curve_point_solves_an_independent_fold_system(fold_curve):
         end, M = independent_map(FOLD_SCENE.with_values(omega=pt.p1, Delta=pt.p2), pt.z0)
         assert np.max(np.abs(end - pt.z0)) <= FOLD_SYSTEM_TOL, (pt.p1, pt.p2)
         assert abs(np.linalg.det(M - np.eye(2))) <= FOLD_SYSTEM_TOL, (pt.p1, pt.p2)
+    # no fold-flip can lie on it: with rho1 = 1, det(M + I) = 2 (1 + rho2) = 2 (1 + det M) and det M = exp(-mu T) > 0
+    assert min(pt.flip_test for pt in curve.points) > 2.0
+    assert not any(pt.event == "fold-flip" for pt in curve.points)
 
 
 @pytest.mark.long
@@ -240,3 +243,111 @@ def test_the_grazing_curve_meets_the_fold_curve_at_a_grazing_fold(grazing_curve)
     # one point located on two curves (by Brent on det(M - I) along grazing curves started from different
     # orbits): both to the curves' tolerance 1e-10 over a conditioning ~ 1 .. 100 of the located point
     assert abs(on_fold[0].p1 - pt.p1) <= 1e-8 and abs(on_fold[0].p2 - pt.p2) <= 1e-8
+
+
+# ----- codimension two beyond the cusp: fold-flip and grazing-flip ------------------------------------------------
+
+class FoldFlipMap(curves.Augmented):
+    """A planar map with a fold-flip, standing in for the period map (which has none: det M = exp(-mu n T) > 0, so
+    multipliers +1 and -1 never meet): P(x, y) = (x + p1 - x^2 + y^2 / 10, (x - 1 - p2) y + y^3). Its fixed points
+    (+-sqrt(p1), 0) have the multipliers 1 - 2x and x - 1 - p2: the fold curve is p1 = 0 (x = 0), where
+    det(M + I) = 2 (x - p2) changes sign at p2 = 0; the flip curve is p2 = x, p1 = x^2, where det(M - I) = 4 x
+    changes sign at x = 0. Both meet at the fold-flip (p1, p2) = (0, 0), z = 0 (multipliers 1 and -1). x_min stays
+    far from the contact edge (no grazing event)."""
+
+    def at(self, p1, p2):
+        return self.scene  # the map's parameters are not the scene's
+
+    def map(self, z, p1, p2, param=None):
+        from vibrofmu.analyses import shooting as sh
+
+        x, y = float(z[0]), float(z[1])
+        end = np.array([x + p1 - x * x + 0.1 * y * y, (x - 1.0 - p2) * y + y ** 3])
+        M = np.array([[1.0 - 2.0 * x, 0.2 * y], [y, x - 1.0 - p2 + 3.0 * y * y]])
+        return sh.PeriodMap(omega=1.0, z0=np.array([x, y]), end=end, monodromy=M, d_param=np.array([1.0, 0.0]),
+                            segments=[], extrema=np.array([0.0]), contact_crossings=0)
+
+
+def _toy_curve(kind, z0, p1, p2, direction):
+    system = FoldFlipMap(Scene(), kind, "omega", "Delta", (1.0, 1.0))
+    start = curves.start_point(system, z0, p1, p2)
+    points, _, _ = curves.follow(system, start, direction, (-0.3, 0.3), max_step=0.05, max_points=40)
+    return system, points
+
+
+@pytest.mark.parametrize("kind, z0, p1, p2, direction", [("fold", (0.01, 0.0), 0.001, -0.3, 1.0),
+                                                         ("period-doubling", (0.3, 0.0), 0.09, 0.3, -1.0)])
+def test_a_fold_flip_is_located_on_the_fold_curve_and_on_the_flip_curve(kind, z0, p1, p2, direction):
+    system, points = _toy_curve(kind, z0, p1, p2, direction)
+    located = [pt for pt in points if pt.event]
+    assert [pt.event for pt in located] == ["fold-flip"]
+    pt = located[0]
+    # error bound: the point solves the augmented system to curves.TOL (|F|_inf <= 1e-10 per equation, 4 with
+    # the hyperplane), Brent's bracket on the test function adds ~1e-12 of a step; to first order the error in
+    # u = (x, y, p1, p2) is below |K^-1|_2 sqrt(4) TOL, K the exact 4 x 4 Jacobian at the fold-flip (the curve's
+    # tangent, p2 on the fold curve, x on the flip curve, as the last row; g's row by the bordered system)
+    tangent = np.array([0.0, 0.0, 0.0, 1.0]) if kind == "fold" else np.array([1.0, 0.0, 0.0, 1.0]) / math.sqrt(2)
+    M = np.diag([1.0, -1.0])
+    A = M + curves.SIGN[kind] * np.eye(2)
+    g, w, v = curves.sh.bordered_test(A, *curves.sh.border_of(A))
+    dM = {0: np.array([[-2.0, 0.0], [0.0, 1.0]]), 1: np.array([[0.0, 0.2], [1.0, 0.0]]), 2: np.zeros((2, 2)),
+          3: np.array([[0.0, 0.0], [0.0, -1.0]])}  # dM/dx, dM/dy, dM/dp1, dM/dp2 at the origin
+    K = np.zeros((4, 4))
+    K[:2, :2] = M - np.eye(2)
+    K[:2, 2] = [1.0, 0.0]
+    K[2] = [-float(v @ dM[k] @ w) for k in range(4)]
+    K[3] = tangent
+    bound = np.linalg.norm(np.linalg.inv(K), 2) * 2.0 * curves.TOL
+    assert np.linalg.norm([pt.z0[0], pt.z0[1], pt.p1, pt.p2]) <= bound, (pt.z0, pt.p1, pt.p2, bound)
+    # the test functions on either side have opposite signs, and at the point both determinants vanish
+    index = points.index(pt)
+    test = pt.flip_test if kind == "fold" else pt.fold_test
+    assert abs(pt.flip_test) <= 4 * bound and abs(pt.fold_test) <= 4 * bound  # |d det / du| <= 4 near the origin
+    before, after = points[index - 1], points[index + 1]
+    sides = [(q.flip_test if kind == "fold" else q.fold_test) for q in (before, after)]
+    assert sides[0] * sides[1] < 0.0 and abs(test) < min(abs(s) for s in sides)
+
+
+CHAOS_SCENE = Scene(mu=0.1, Delta=2.5, R=3.0, beta=0.0, gamma=0.0)  # docs/continuation.md's doubling cascade scene
+FD_STEP = 1e-5  # central differences of the plain map for its monodromy (the tolerance below)
+# |det(M + I)| of that monodromy at a located grazing-flip: each entry of M is off by the plain map's error eps over
+# the step (eps ~ 1e-12: its |P(z) - z| at the located points, engine tolerance included) plus the truncation
+# h^2 |P'''| / 6 ~ 1e-10 |P'''|: ~1e-7 per entry for |P'''| <= 1e3; det(M + I) = (M11 + 1)(M22 + 1) - M12 M21 moves
+# by at most (|M + I|_1 + |M + I|_inf) 1e-7 ~ 1e-6 for entries O(1)
+FD_DET_TOL = 1e-6
+
+
+def plain_monodromy(scene: Scene, z0) -> np.ndarray:
+    """M = dP/dz by central differences of plain_orbit (DOP853 at rtol 1e-13 on the state alone, no variational
+    equations): an estimate that shares nothing with the engine's."""
+    return np.column_stack([(plain_orbit(scene, z0 + FD_STEP * e)[0] - plain_orbit(scene, z0 - FD_STEP * e)[0])
+                            / (2 * FD_STEP) for e in np.eye(2)])
+
+
+@pytest.mark.slow
+def test_the_flip_curve_of_the_doubling_scene_meets_grazing_at_two_grazing_flips():
+    # the period doubling of the documented cascade scene (omega ~ 2.051 at Delta = 2.5) continued in Delta: the
+    # flip orbit loses contact at Delta ~ 4.75 going up, and again at Delta ~ 1.98 (omega ~ 1.54) after the curve
+    # turns at Delta ~ 1.68; each crossing of x_min = -3/2 is a grazing-flip, located on the grazing curve through it
+    branch = cont.branch(CHAOS_SCENE, "omega", 2.2, 2.0, points=10, double=False)
+    assert [pt.event for pt in branch.events()] == ["period-doubling"]
+    found = curves.curves_from_branch(branch, "period-doubling", "Delta", 5.0, 1.6, points=40)
+    (curve,) = found.curves
+    located = [pt for pt in curve.points if pt.event]
+    assert [pt.event for pt in located] == ["grazing-flip", "grazing-flip"]
+    for pt in located:
+        index = curve.points.index(pt)
+        before, after = curve.points[index - 1], curve.points[index + 1]
+        assert (before.x_min - cont.CONTACT_EDGE) * (after.x_min - cont.CONTACT_EDGE) < 0.0
+        scene = CHAOS_SCENE.with_values(omega=pt.p1, Delta=pt.p2)
+        end, x_min = plain_orbit(scene, pt.z0)
+        assert np.max(np.abs(end - pt.z0)) <= GRAZING_TOL and abs(x_min + 1.5) <= GRAZING_TOL, (pt.p1, pt.p2)
+        M = plain_monodromy(scene, pt.z0)
+        assert abs(np.linalg.det(M + np.eye(2))) <= FD_DET_TOL, (pt.p1, pt.p2)
+        # and by the Radau variational equations (no finite differences), in one piece through the grazing
+        end, M = independent_map(scene, pt.z0, restart=False)
+        assert abs(np.linalg.det(M + np.eye(2))) <= FOLD_SYSTEM_TOL, (pt.p1, pt.p2)
+        # the other multiplier is -det M = -exp(-mu T) (Liouville): no fold-flip there, det(M - I) = 2 (1 + det M)
+        assert np.linalg.det(M - np.eye(2)) > 2.0
+    # no fold-flip anywhere on the flip curve: det(M - I) = 2 (1 + det M) > 2 at every point
+    assert min(pt.fold_test for pt in curve.points) > 2.0

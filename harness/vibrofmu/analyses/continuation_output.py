@@ -363,7 +363,9 @@ def agreement_table(data: dict) -> list[str]:
 # ----- two-parameter curves (--follow) ------------------------------------------------------------------------
 
 CURVE_STYLE = {"fold": ("-", "tab:red"), "period-doubling": ("--", "tab:purple"), "grazing": ("-.", "tab:orange")}
-CODIM2_MARKERS = {"cusp": ("*", "k"), "grazing-fold": ("P", "tab:brown")}
+# one marker per codimension-two point (curves.CODIM2; a grazing one hollow: the curve is seen through it)
+CODIM2_MARKERS = {"cusp": ("*", "k"), "grazing-fold": ("P", "tab:brown"), "grazing-flip": ("D", "tab:green"),
+                  "fold-flip": ("s", "tab:cyan")}
 
 
 def write_curves(out: Path, curves: two.Curves, scene: Scene, title: str) -> None:
@@ -411,7 +413,7 @@ def _draw_curves(ax, curves: two.Curves, seen: set, label: str = "{kind} curve")
         for pt in curve.points:
             if pt.event:
                 marker, c = CODIM2_MARKERS.get(pt.event, ("o", "k"))
-                ax.plot(pt.p1, pt.p2, marker, color=c, ms=12, mfc="none" if pt.event == "grazing-fold" else c,
+                ax.plot(pt.p1, pt.p2, marker, color=c, ms=12, mfc="none" if pt.event.startswith("grazing-") else c,
                         mew=1.8, label=pt.event if pt.event not in seen else None, zorder=5)
                 seen.add(pt.event)
         if curve.stop_reason and "stopped at" in curve.stop_reason:

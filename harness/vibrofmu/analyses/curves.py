@@ -89,6 +89,7 @@ class CurvePoint:
     # on a grazing curve
     event: str = ""
     fold_test: float = math.nan  # det(M - I) = (1 - rho1)(1 - rho2): its sign change on a grazing curve is a grazing-fold
+    flip_test: float = math.nan  # det(M + I) = (1 + rho1)(1 + rho2): ... a grazing-flip
     tangent: np.ndarray | None = field(default=None, repr=False)
 
 
@@ -198,7 +199,8 @@ class Augmented:
                           periods=self.periods, period=sh.TWO_PI * self.periods / s.omega,
                           multipliers=sh.multipliers(pmap.monodromy), x_min=pmap.x_min, x_max=pmap.x_max,
                           residual=float(np.max(np.abs(pmap.end - z))), g=g, quadratic=quadratic,
-                          fold_test=float(np.linalg.det(pmap.monodromy - np.eye(2))))
+                          fold_test=float(np.linalg.det(pmap.monodromy - np.eye(2))),
+                          flip_test=float(np.linalg.det(pmap.monodromy + np.eye(2))))
 
 
 def null_vector(J: np.ndarray, previous: np.ndarray | None) -> np.ndarray:
@@ -261,27 +263,29 @@ def locate(system: Augmented, u0: np.ndarray, t0: np.ndarray, h: float, test: Ca
     return hh, located
 
 
-def grazing_fold_on_fold_curve(system: Augmented, u0: np.ndarray, t0: np.ndarray, h: float, before: float,
-                               after: float) -> tuple[float, CurvePoint]:
-    """The grazing-fold between two points of a fold curve (x_min + 3/2 = before, after of opposite signs), located
-    on the grazing curve that crosses the fold curve there (the fold system itself is not smooth at a grazing orbit:
-    locate's doc): a grazing orbit on the fold curve's step (the hyperplane of the linear estimate, normal t0), then
-    Brent on det(M - I) along that grazing curve's tangent, bracketed within GRAZING_FOLD_SEARCH steps h of it.
-    Returns (the arclength estimate on the fold curve, the point marked 'grazing-fold' as a fold curve point)."""
+def grazing_event_on_curve(system: Augmented, u0: np.ndarray, t0: np.ndarray, h: float, before: float,
+                           after: float, event: str) -> tuple[float, CurvePoint]:
+    """The grazing-fold (grazing-flip) between two points of a fold (period-doubling) curve, x_min + 3/2 = before,
+    after of opposite signs, located on the grazing curve that crosses this curve there (the fold or flip system
+    itself is not smooth at a grazing orbit: locate's doc): a grazing orbit on this curve's step (the hyperplane of
+    the linear estimate, normal t0), then Brent on det(M - I) (det(M + I)) along that grazing curve's tangent,
+    bracketed within GRAZING_FOLD_SEARCH steps h of it. Returns (the arclength estimate on this curve, the point
+    marked `event` as a point of this curve)."""
+    test = GRAZING_TESTS[event]
     grazing = Augmented(system.scene, "grazing", *system.params, system.scales, system.periods, system.rtol)
     s = h * before / (before - after)
     u, _, J, _ = correct(grazing, u0 + s * t0, t0, LOCATE_ITERATIONS)
     tg = null_vector(J, None)
-    start = solve(grazing, u, tg, tg)[1].fold_test
+    start = test(solve(grazing, u, tg, tg)[1])
     for reach in GRAZING_FOLD_SEARCH:
         for sign in (1.0, -1.0):
-            if solve(grazing, u + sign * reach * h * tg, tg, tg)[1].fold_test * start < 0.0:
-                _, located = locate(grazing, u, sign * tg, reach * h, lambda pt: pt.fold_test, "grazing-fold")
+            if test(solve(grazing, u + sign * reach * h * tg, tg, tg)[1]) * start < 0.0:
+                _, located = locate(grazing, u, sign * tg, reach * h, test, event)
                 pmap = system.map(located.z0, located.p1, located.p2)
                 system.set_border(pmap.monodromy)
                 located.kind, located.g, located.quadratic = system.kind, system.condition(pmap), math.nan
                 return s, located
-    raise ValueError("no grazing-fold bracketed along the grazing curve")
+    raise ValueError(f"no {event} bracketed along the grazing curve")
 
 
 def locate_cusp(system: Augmented, u0: np.ndarray, t0: np.ndarray, h: float) -> CurvePoint:
@@ -289,14 +293,28 @@ def locate_cusp(system: Augmented, u0: np.ndarray, t0: np.ndarray, h: float) -> 
     return locate(system, u0, t0, h, lambda pt: pt.quadratic, "cusp")[1]
 
 
-def grazing_fold_test(kind: str) -> Callable[[CurvePoint], float] | None:
-    """The test function of the grazing-fold on a curve of `kind` (module doc): x_min + 3/2 on a fold curve,
-    det(M - I) on a grazing curve; None on a period-doubling curve."""
-    if kind == "fold":
-        return lambda pt: pt.x_min - CONTACT_EDGE
-    if kind == "grazing":
-        return lambda pt: pt.fold_test
-    return None
+def _x_min_test(pt: CurvePoint) -> float:
+    return pt.x_min - CONTACT_EDGE
+
+
+def _fold_test(pt: CurvePoint) -> float:
+    return pt.fold_test
+
+
+def _flip_test(pt: CurvePoint) -> float:
+    return pt.flip_test
+
+
+# on a grazing curve: the test function of each grazing event (its sign change there is the event)
+GRAZING_TESTS = {"grazing-fold": _fold_test, "grazing-flip": _flip_test}
+# the codimension-two points looked for on a curve of each kind besides the cusp (module doc): (event, the test
+# function whose sign change between two points of the curve is that event). A fold-flip (multipliers +1 and -1 at
+# once) cannot occur here -- rho1 rho2 = det M = exp(-mu n T) > 0 (Liouville), so on a fold curve
+# det(M + I) = 2 (1 + det M) >= 2 and on a flip curve det(M - I) = 2 (1 + det M) >= 2 -- but it is looked for all
+# the same: the sign test costs nothing (M is at hand) and documents the bound (tests check it along the curves)
+CODIM2 = {"fold": (("grazing-fold", _x_min_test), ("fold-flip", _flip_test)),
+          "period-doubling": (("grazing-flip", _x_min_test), ("fold-flip", _fold_test)),
+          "grazing": (("grazing-fold", _fold_test), ("grazing-flip", _flip_test))}
 
 
 def follow(system: Augmented, start: CurvePoint, direction: float, p2_bounds: tuple[float, float], *,
@@ -336,13 +354,14 @@ def follow(system: Augmented, start: CurvePoint, direction: float, p2_bounds: tu
                     found.append((hh, located))
             except (sh.ShootingError, ValueError):
                 pass
-        test = grazing_fold_test(system.kind)
-        if test is not None and test(last) * test(point) < 0.0:
+        for event, test in CODIM2[system.kind]:
+            if not test(last) * test(point) < 0.0:
+                continue
             try:
-                if system.kind == "grazing":
-                    found.append(locate(system, u, t, h, test, "grazing-fold"))
+                if event.startswith("grazing-") and system.kind != "grazing":  # on the grazing curve through it
+                    found.append(grazing_event_on_curve(system, u, t, h, test(last), test(point), event))
                 else:
-                    found.append(grazing_fold_on_fold_curve(system, u, t, h, test(last), test(point)))
+                    found.append(locate(system, u, t, h, test, event))
             except (sh.ShootingError, ValueError, np.linalg.LinAlgError):  # not bracketed: keep going, unmarked
                 pass
         points += [pt for _, pt in sorted(found, key=lambda item: item[0])]
@@ -490,7 +509,8 @@ def rows(curves: Curves) -> list[dict]:
                         "v0": float(pt.z0[1]), "period": pt.period, "x_min": pt.x_min, "x_max": pt.x_max,
                         "event": pt.event, "rho1_re": float(pt.multipliers[0].real),
                         "rho2_re": float(pt.multipliers[1].real), "residual": pt.residual, "g": pt.g,
-                        "quadratic": pt.quadratic, "det_m_minus_i": pt.fold_test})
+                        "quadratic": pt.quadratic, "det_m_minus_i": pt.fold_test,
+                        "det_m_plus_i": pt.flip_test})
     return out
 
 

@@ -204,7 +204,10 @@ def run(args) -> int:
                 print(f"error: {kind} curves in ({args.param}, {args.param2}): {error}", file=sys.stderr)
                 status = 1
         merged = two.merge(found, (args.param, args.param2))
-        output.write_curves(out, merged, scene, title)
+        fixed = export.scene_text({k: v for k, v in scene.as_dict().items()
+                                   if k not in ("x_start", "v_start", args.param, args.param2)})
+        output.write_curves(out, merged, scene, f"{', '.join(kinds)} curves continued in "
+                                                f"({export.symbol(args.param)}, {export.symbol(args.param2)}) ({fixed})")
         summary["curves"] = output.curves_summary(merged)
         for line in output.curves_lines(merged):
             print(line)
