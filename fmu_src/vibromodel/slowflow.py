@@ -242,6 +242,45 @@ class SlowFlowSolution:
                                  g * (a1 + s * (2 * a2 + 3 * s * a3)), g * (b1 + s * (2 * b2 + 3 * s * b3)),
                                  g * g * (2 * a2 + 6 * s * a3), g * g * (2 * b2 + 6 * s * b3))
 
+    def states(self, t: np.ndarray, cells: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """state() at an array of times inside the table (from its first kept cell to t_end), as arrays: the
+        error estimate's samples of the whole run at once. cells: np.asarray(self.cells) when already at hand."""
+        cells = np.asarray(self.cells) if cells is None else cells
+        t = np.asarray(t, dtype=float)
+        u = (t - self.t0) / self.spacing
+        i = np.minimum(np.trunc(u), self.first + len(cells) - 1)
+        s = u - i
+        index = i.astype(np.int64) - self.first
+        if index.size and not (index.min() >= 0 and np.all(t <= self.t_end)):
+            raise ValueError(f"the slow-flow table holds tau in [{self.t0 + self.first * self.spacing!r}, "
+                             f"{self.t_end!r}] only")
+        a0, a1, a2, a3, b0, b1, b2, b3 = cells[index].T
+        g = 1.0 / self.spacing
+        return self._reconstruct_arrays(t, a0 + s * (a1 + s * (a2 + s * a3)), b0 + s * (b1 + s * (b2 + s * b3)),
+                                        g * (a1 + s * (2 * a2 + 3 * s * a3)), g * (b1 + s * (2 * b2 + 3 * s * b3)),
+                                        g * g * (2 * a2 + 6 * s * a3), g * g * (2 * b2 + 6 * s * b3))
+
+    def _reconstruct_arrays(self, t, A, B, dA, dB, ddA, ddB):
+        """_reconstruct on arrays (numpy's sin and cos)."""
+        w = self.omega
+        c, sn = np.cos(w * t), np.sin(w * t)
+        p, q = A * c + B * sn, A * sn - B * c
+        dp, dq = dA * c + dB * sn - w * q, dA * sn - dB * c + w * p
+        ddp = ddA * c + ddB * sn - 2 * w * (dA * sn - dB * c) - w * w * p
+        ddq = ddA * sn - ddB * c + 2 * w * (dA * c + dB * sn) - w * w * q
+        h, m = self.harmonic, self.mean_shift
+        x = self.x_e + p + h * (p * p - q * q) - m * (A * A + B * B)
+        v = dp + 2 * h * (p * dp - q * dq) - 2 * m * (A * dA + B * dB)
+        a = ddp + 2 * h * (dp * dp + p * ddp - dq * dq - q * ddq) - 2 * m * (dA * dA + A * ddA + dB * dB + B * ddB)
+        if self.ac:
+            P, Q, W = self.psi_sin, self.psi_cos, self.Omega
+            s1, c1 = np.sin(W * t), np.cos(W * t)
+            s2, c2 = 2.0 * s1 * c1, c1 * c1 - s1 * s1
+            x = x + P * s1 + Q * c2
+            v = v + W * (P * c1 - 2.0 * Q * s2)
+            a = a - W * W * (P * s1 + 4.0 * Q * c2)
+        return x, v, a
+
     def _reconstruct(self, t, A, B, dA, dB, ddA, ddB):
         """x = x_e + p + y2 + psi and its exact first and second derivatives, from A, B and theirs.
 
