@@ -351,3 +351,12 @@ def test_the_flip_curve_of_the_doubling_scene_meets_grazing_at_two_grazing_flips
         assert np.linalg.det(M - np.eye(2)) > 2.0
     # no fold-flip anywhere on the flip curve: det(M - I) = 2 (1 + det M) > 2 at every point
     assert min(pt.fold_test for pt in curve.points) > 2.0
+    # the grazing curve from the grazing of the branch at Delta = 5 finds the upper one as the zero of det(M + I)
+    # along it, with no flip curve given: one point located on two curves to the curves' tolerance 1e-10 over a
+    # conditioning ~ 1 .. 100
+    above = cont.branch(CHAOS_SCENE.with_values(Delta=5.0), "omega", 2.4, 2.13, points=10, double=False)
+    grazing = curves.curves_from_branch(above, "grazing", "Delta", 5.0, 4.5, points=40)
+    on_grazing = [q for c in grazing.curves for q in c.points if q.event == "grazing-flip"]
+    assert len(on_grazing) == 1
+    upper = max(located, key=lambda q: q.p2)
+    assert abs(on_grazing[0].p1 - upper.p1) <= 1e-8 and abs(on_grazing[0].p2 - upper.p2) <= 1e-8

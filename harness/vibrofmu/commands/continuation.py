@@ -206,7 +206,7 @@ def run(args) -> int:
         merged = two.merge(found, (args.param, args.param2))
         fixed = export.scene_text({k: v for k, v in scene.as_dict().items()
                                    if k not in ("x_start", "v_start", args.param, args.param2)})
-        output.write_curves(out, merged, scene, f"{', '.join(kinds)} curves continued in "
+        output.write_curves(out, merged, scene, f"{', '.join(k for k in kinds if any(c.kind == k for c in merged.curves))} curves continued in "
                                                 f"({export.symbol(args.param)}, {export.symbol(args.param2)}) ({fixed})")
         summary["curves"] = output.curves_summary(merged)
         for line in output.curves_lines(merged):
