@@ -360,3 +360,60 @@ def test_the_flip_curve_of_the_doubling_scene_meets_grazing_at_two_grazing_flips
     assert len(on_grazing) == 1
     upper = max(located, key=lambda q: q.p2)
     assert abs(on_grazing[0].p1 - upper.p1) <= 1e-8 and abs(on_grazing[0].p2 - upper.p2) <= 1e-8
+
+
+# ----- pull-in ahead: a curve creeping towards an electrode ------------------------------------------------------
+
+def test_the_saddle_gaps_balance_the_electrode_pull_against_the_load():
+    # written out here (not through forces): out of contact below, g = -1 - (alpha + gamma)/(2 - l)^2 + alpha/l^2
+    # with l the lower gap; in contact above, g = (1 + 2x/3)^(3/2) - 1 - (alpha + gamma)/u^2 + alpha/(2 - u)^2 with u
+    # the upper gap, x = 3R/2 (1 - u); each term O(1) at the root, so Brent's rounding leaves ~1e-15 of them
+    scene = FOLD_SCENE.with_values(omega=0.64)
+    alpha, gamma, R = scene.alpha, scene.gamma, scene.R
+    upper, lower = cont.saddle_gaps(scene)
+    assert R * (1.0 - lower) > 1.0  # the lower saddle lies out of contact, the upper one in contact
+    assert abs(alpha / lower**2 - 1.0 - (alpha + gamma) / (2.0 - lower) ** 2) <= 1e-12
+    x = 1.5 * R * (1.0 - upper)
+    assert abs((1.0 + 2.0 * x / 3.0) ** 1.5 - 1.0 - (alpha + gamma) / upper**2 + alpha / (2.0 - upper) ** 2) <= 1e-12
+    # no bias, no drive: nothing pulls towards either electrode, no saddle
+    assert cont.saddle_gaps(scene.with_values(alpha=0.0, gamma=0.0)) == (None, None)
+
+
+def test_a_budget_stop_is_pull_in_ahead_only_against_an_electrode():
+    from types import SimpleNamespace
+
+    scene = FOLD_SCENE.with_values(omega=0.64)
+    lower = cont.saddle_gaps(scene)[1]
+    x_of_gap = -1.5 * scene.R * (1.0 - cont.CREEP_FACTOR * lower)  # the lowest point at CREEP_FACTOR x the saddle gap
+    reason = "stopped at 5 points at omega = 0.64"
+    assert cont.budget_reason(reason, scene, SimpleNamespace(x_min=x_of_gap + 1e-9, x_max=1.0)) == reason
+    assert cont.budget_reason(reason, scene, SimpleNamespace(x_min=x_of_gap - 1e-9, x_max=1.0)).startswith(
+        "pull-in ahead: " + reason)
+    assert cont.budget_reason("left the range", scene, SimpleNamespace(x_min=x_of_gap - 1e-9, x_max=1.0)) == \
+        "left the range"
+
+
+def test_the_fold_curve_creeping_towards_the_lower_electrode_ends_as_pull_in_ahead():
+    # a point of the mu = 0.05, R = 3 fold curve from the branch at Delta = 0.1 (its lower fold's piece going up in
+    # Delta), where it creeps towards the lower electrode (x_min -4.3398, gap 0.0356: 1.12 x the saddle's) and
+    # used to stop on its point budget unmarked
+    system = curves.Augmented(FOLD_SCENE, "fold", "omega", "Delta", (0.6, 0.18))
+    start = curves.start_point(system, (-2.496664457140037, 1.9084762832938378), 0.6425656943867719,
+                               0.12970845946241527)
+    points, why, _ = curves.follow(system, start, 1.0, (0.02, 0.2), max_step=1.5 / 40, max_points=4)
+    assert len(points) == 4 and why.startswith("pull-in ahead: stopped at 4 points")
+    assert "lower electrode" in why
+    # drawn as an end, not as a cap: the pull-in mark in the legend, no cross
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from vibrofmu.analyses import continuation_output as output
+
+    fig, ax = plt.subplots()
+    output._draw_curves(ax, curves.Curves([curves.Curve("fold", 0, points, why, [(points[-1], why)])],
+                                          ("omega", "Delta")), set())
+    labels = [line.get_label() for line in ax.get_lines()]
+    plt.close(fig)
+    assert "curve ends creeping towards pull-in" in labels and "curve stopped (point budget)" not in labels

@@ -37,7 +37,7 @@ import numpy as np
 from scipy.optimize import brentq
 
 from vibromodel import forces
-from vibromodel.parameters import Scene
+from vibromodel.parameters import PULL_IN_GAP, Scene
 
 from vibrofmu.analyses import shooting as sh
 from vibrofmu.analyses.shooting import NEWTON_TOL, RTOL, TWO_PI, PeriodicModel, ShootingError, piecewise_x
@@ -173,6 +173,62 @@ class Continuation:
         return point
 
 
+# ----- pull-in ahead: a branch creeping towards an electrode -------------------------------------------------
+
+# A branch or curve that stops on its point budget with an orbit's turning point within this factor of the gap of
+# the electrode's saddle (saddle_gaps) is creeping towards pull-in: there the electrode's pull, ~ alpha / gap^2,
+# is at least 1 / CREEP_FACTOR^2 = a quarter of its value at the saddle, where it equals the restoring force, so the
+# force on the orbit's lowest (highest) point changes by O(1) of itself over the gap; and no turning point can lie
+# much beyond the saddle (x'' >= 0 there needs the pull below the load plus the drive), so the orbits pile up
+# against it and the steps shrink (measured: the mu = 0.05, R = 3 fold curve creeps with its lowest gap 1.11 x the
+# saddle's). The factor is a margin, not a bifurcation: the stop reason names both gaps.
+CREEP_FACTOR = 2.0
+
+
+def saddle_gaps(scene: Scene) -> tuple[float | None, float | None]:
+    """(upper, lower): the electrode gap 1 -+ 2x/(3R) of the unstable equilibrium next to each electrode -- the
+    root of the periodic model's restoring force g(x) = H(x) - 1 - F_em,mean(x) nearest the electrode, where the
+    electrode's mean pull balances the load and the contact force; beyond it an orbit at rest falls onto the
+    electrode. None on a side without one (no pull towards that electrode: alpha + gamma = 0 above, alpha = 0
+    below). Scanned outward from the pull-in gap on a geometric grid, refined by Brent to rounding."""
+    g = sh.PeriodicModel(scene).restoring()[0]
+    reach = 1.5 * scene.R
+    found = []
+    for side in (1.0, -1.0):  # upper electrode at x = +3R/2, lower at -3R/2
+        def force(gap, side=side):
+            return g(side * reach * (1.0 - gap))
+
+        gaps = np.geomspace(PULL_IN_GAP, 1.0, 400)
+        values = [force(gap) for gap in gaps]
+        root = None
+        for k in range(len(gaps) - 1):
+            if values[k] * values[k + 1] < 0.0:
+                root = brentq(force, gaps[k], gaps[k + 1], xtol=1e-15, rtol=4 * np.finfo(float).eps)
+                break
+        found.append(root)
+    return found[0], found[1]
+
+
+def pull_in_ahead(scene: Scene, x_min: float, x_max: float) -> str:
+    """'' or why an orbit with these extremes sits against an electrode (CREEP_FACTOR): its gap and the saddle's."""
+    upper, lower = saddle_gaps(scene)
+    c = 2.0 / (3.0 * scene.R)
+    for name, saddle, gap in (("upper", upper, 1.0 - c * x_max), ("lower", lower, 1.0 + c * x_min)):
+        if saddle is not None and gap <= CREEP_FACTOR * saddle:
+            return (f"its {'highest' if name == 'upper' else 'lowest'} point at a gap {gap:.4g} of the {name} "
+                    f"electrode, within {CREEP_FACTOR:g} x the gap {saddle:.4g} of the electrode's saddle")
+    return ""
+
+
+def budget_reason(reason: str, scene: Scene, last) -> str:
+    """A point-budget stop reason ('stopped at ...') turned into 'pull-in ahead: ...' when the last orbit is
+    creeping towards an electrode (pull_in_ahead); any other reason unchanged."""
+    if not reason.startswith("stopped at"):
+        return reason
+    why = pull_in_ahead(scene, last.x_min, last.x_max)
+    return f"pull-in ahead: {reason}, {why}" if why else reason
+
+
 def _test_value(point: Point, name: str) -> float:
     return point.tests()[name]
 
@@ -252,7 +308,8 @@ def continue_from(problem: Problem, start: Point, p_stop: float, *, scale: float
             reason = "left the parameter range"
             break
         if len(points) >= max_points:
-            reason = f"stopped at {len(points)} points at {problem.param} = {last.p:.8g}"
+            reason = budget_reason(f"stopped at {len(points)} points at {problem.param} = {last.p:.8g}",
+                                   problem.at(last.p), last)
             break
         try:
             point, iterations = cont.correct(u + h * t, t)

@@ -416,11 +416,15 @@ def _draw_curves(ax, curves: two.Curves, seen: set, label: str = "{kind} curve")
                 ax.plot(pt.p1, pt.p2, marker, color=c, ms=12, mfc="none" if pt.event.startswith("grazing-") else c,
                         mew=1.8, label=pt.event if pt.event not in seen else None, zorder=5)
                 seen.add(pt.event)
-        if curve.stop_reason and "stopped at" in curve.stop_reason:
-            last = curve.points[-1]
-            ax.plot(last.p1, last.p2, "X", color="tab:red", ms=9,
-                    label="curve stopped (point budget)" if "stop" not in seen else None)
-            seen.add("stop")
+        for last, why in curve.ends or [(curve.points[-1], curve.stop_reason)]:
+            if why.startswith("pull-in"):  # creeping towards an electrode: an end, drawn as the branch's pull-in
+                ax.plot(last.p1, last.p2, "v", color="k", ms=10, mfc="tab:red", zorder=5,
+                        label="curve ends creeping towards pull-in" if "pull-in" not in seen else None)
+                seen.add("pull-in")
+            elif "stopped at" in why:
+                ax.plot(last.p1, last.p2, "X", color="tab:red", ms=9,
+                        label="curve stopped (point budget)" if "stop" not in seen else None)
+                seen.add("stop")
 
 
 def curves_summary(curves: two.Curves) -> list[dict]:

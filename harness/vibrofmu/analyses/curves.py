@@ -49,6 +49,7 @@ from scipy.optimize import brentq
 from vibromodel.parameters import Scene
 
 from vibrofmu.analyses import shooting as sh
+from vibrofmu.analyses.continuation import budget_reason
 
 KINDS = ("fold", "period-doubling", "grazing")  # what a curve follows
 SIGN = {"fold": -1.0, "period-doubling": 1.0}  # A = M + SIGN I: the sign of the multiplier that sits at 1
@@ -99,6 +100,7 @@ class Curve:
     index: int
     points: list
     stop_reason: str = ""
+    ends: list = field(default_factory=list)  # (the last point, why it stopped) of each piece continued
 
 
 class Augmented:
@@ -378,6 +380,10 @@ def follow(system: Augmented, start: CurvePoint, direction: float, p2_bounds: tu
             reason = f"left the range of {system.params[1]}"
             break
         h = min(max_step, 1.5 * h) if iterations <= 2 else min(max_step, h)
+    if reason.startswith("stopped at"):  # the point budget: say where, and whether an electrode is ahead
+        last = points[-1]
+        reason = budget_reason(f"{reason} at {system.params[0]} = {last.p1:.8g}, {system.params[1]} = "
+                               f"{last.p2:.8g}", system.at(last.p1, last.p2), last)
     return points, reason, joined
 
 
@@ -486,7 +492,8 @@ def curves_from_branch(branch, kind: str, param2: str, p2_to: float, p2_from: fl
                 ordered += pts[1:]  # from the same start, which ends the reversed first piece
             else:
                 ordered += pts
-        found.append(Curve(kind, len(found), ordered, "; ".join(why for *_, why in pieces)))
+        found.append(Curve(kind, len(found), ordered, "; ".join(why for *_, why in pieces),
+                           [(pts[-1], why) for _, _, pts, why in pieces]))
     return Curves(found, (param1, param2), time.perf_counter() - t0, time.process_time() - c0)
 
 
@@ -495,7 +502,7 @@ def merge(found: list, params: tuple) -> Curves:
     out = Curves([], params, sum(c.seconds for c in found), sum(c.cpu_seconds for c in found))
     for group in found:
         for curve in group.curves:
-            out.curves.append(Curve(curve.kind, len(out.curves), curve.points, curve.stop_reason))
+            out.curves.append(Curve(curve.kind, len(out.curves), curve.points, curve.stop_reason, curve.ends))
     return out
 
 
