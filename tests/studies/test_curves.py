@@ -412,7 +412,7 @@ def test_the_fold_curve_creeping_towards_the_lower_electrode_ends_as_pull_in_ahe
     from vibrofmu.analyses import continuation_output as output
 
     fig, ax = plt.subplots()
-    output._draw_curves(ax, curves.Curves([curves.Curve("fold", 0, points, why, [(points[-1], why)])],
+    output.draw_curves(ax, curves.Curves([curves.Curve("fold", 0, points, why, [(points[-1], why)])],
                                           ("omega", "Delta")), set())
     labels = [line.get_label() for line in ax.get_lines()]
     plt.close(fig)

@@ -331,7 +331,7 @@ def plot_chart(path: Path, data: dict, curves: two.Curves | None = None) -> None
         if xs:
             ax.plot(xs, ys, marker, color=color, mfc="none", mew=1.5, ms=6, label=label)
     if curves is not None and curves.params == ("omega", "Delta"):
-        _draw_curves(ax, curves, set(), label="continued {kind} curve")
+        draw_curves(ax, curves, set(), label="continued {kind} curve")
     ax.set_yscale("log")
     ax.set_xlabel(r"forcing frequency $\omega$")
     ax.set_ylabel(r"forcing amplitude $\Delta$")
@@ -387,7 +387,7 @@ def plot_curves(path: Path, curves: two.Curves, scene: Scene, title: str) -> Non
     p1, p2 = curves.params
     fig, ax = plt.subplots(figsize=(7.5, 6), layout="constrained")
     seen: set = set()
-    _draw_curves(ax, curves, seen)
+    draw_curves(ax, curves, seen)
     if (p1, p2) == ("omega", "Delta") and any(pt.event == "cusp" for c in curves.curves for pt in c.points):
         slow = slow_flow_cusp_point(scene)
         if slow is not None:
@@ -402,7 +402,7 @@ def plot_curves(path: Path, curves: two.Curves, scene: Scene, title: str) -> Non
     save_plot(fig, path)
 
 
-def _draw_curves(ax, curves: two.Curves, seen: set, label: str = "{kind} curve") -> None:
+def draw_curves(ax, curves: two.Curves, seen: set, label: str = "{kind} curve") -> None:
     """Each curve in its kind's style, its codimension-two points (one marker per kind, in the legend) and a curve
     stopped by its point budget marked at its end."""
     for curve in curves.curves:
