@@ -20,6 +20,10 @@
 #define MIN_FACTOR 0.2
 #define MAX_FACTOR 10.0
 #define ERROR_EXPONENT (-1.0 / 8.0)
+/* integrate.py's PI controller (the comment at PI_BETA) */
+#define PI_BETA 0.04
+#define PI_ALPHA (1.0 / 8.0 - 0.75 * PI_BETA)
+#define PI_ERROR_FLOOR 1e-4
 /* integrate.EVENT_SCREEN (event location: docs/events.md; the search itself: roots.c) */
 #define EVENT_SCREEN 2.0
 /* UNROLL(n): unroll the next loop n times (the stage sums below). The fuzz build (tests/fuzz/run.py) defines
@@ -603,6 +607,15 @@ static double step_factor(double error)
     return SAFETY * vk_python_pow(error, ERROR_EXPONENT, &fault);
 }
 
+/* integrate._pi_factor: SAFETY error**-PI_ALPHA max(err_old, PI_ERROR_FLOOR)**PI_BETA, error positive and finite,
+   err_old finite (a restored state's doubles are finite: state checks), so pow cannot fault */
+static double pi_factor(double error, double err_old)
+{
+    int fault = FAULT_NONE;
+    return SAFETY * vk_python_pow(error, -PI_ALPHA, &fault) * vk_python_pow(py_max(err_old, PI_ERROR_FLOOR), PI_BETA,
+                                                                            &fault);
+}
+
 /* Dop853._step: one accepted step (the step size adapted on the way), then its events */
 static int step(Dop853 *s, DopRhs rhs, void *ctx, DopReport *r)
 {
@@ -626,8 +639,9 @@ static int step(Dop853 *s, DopRhs rhs, void *ctx, DopReport *r)
         fault = trial(s, rhs, ctx, t, y, h, &k, y_new, &error);
         if (fault) return raise_fault(s, r, fault);
         if (error < 1.0) {
-            double factor = error == 0.0 ? MAX_FACTOR : py_min(MAX_FACTOR, step_factor(error));
+            double factor = error == 0.0 ? MAX_FACTOR : py_min(MAX_FACTOR, pi_factor(error, s->err_old));
             s->h = h * (rejected ? py_min(1.0, factor) : factor);
+            s->err_old = error;
             break;
         }
         if (!isfinite(error)) h *= MIN_FACTOR;

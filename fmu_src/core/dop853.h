@@ -64,6 +64,7 @@ typedef struct {
     DopEvent events[DOP_MAX_EVENTS];
     /* ---- state ---- */
     double t, h;                               /* h <= 0: first step not chosen yet */
+    double err_old;                            /* the last accepted step's error norm (PI controller; 0: none) */
     double y[DOP_MAX_DIM], f[DOP_MAX_DIM];
     double t_old, y_old[DOP_MAX_DIM], f_old[DOP_MAX_DIM];  /* the last step, valid when has_old */
     double k[DOP_STAGES][DOP_MAX_DIM];         /* the last step's stages: k[stage][component], n_stages */

@@ -78,6 +78,20 @@ EXTRA_STAGES = tuple(zip(A_EXTRA, C_EXTRA))  # the three stages of the dense out
 
 SAFETY, MIN_FACTOR, MAX_FACTOR = 0.9, 0.2, 10.0
 ERROR_EXPONENT = -1.0 / 8.0  # error estimator of order 7
+# After an accepted step the next step size comes from a PI controller (Gustafsson; Hairer, Norsett & Wanner I,
+# II.4, and Hairer's dopri5.f): h_new = h SAFETY err^-PI_ALPHA max(err_old, PI_ERROR_FLOOR)^PI_BETA, err_old the last
+# accepted step's error norm, with PI_ALPHA = 1/8 - 0.75 PI_BETA (the I controller's exponent -1/8 moved onto the last
+# error), PI_BETA = 0.04 (Hairer's value). The plain I controller (SciPy's: err^(-1/8) alone) read each step's error
+# as if it held for the next one; here the error of a step depends on the drive's phase over it (the drive terms
+# dominate the local error of the paper scene: its norm swings tenfold between neighbouring steps of the same size),
+# and the controller grew the step after every low reading into a rejection: on the paper scene over tau in
+# [0, 200] without the drive's ceiling, 863 trials for 675 steps at rtol 1e-9 (271 for 213 at 1e-5). With the PI
+# controller 752 for 739 (239 for 231): 11,240 RHS calls instead of 12,380 (3,563 instead of 3,893), the error of x
+# against the reference 2.7e-11 instead of 2.2e-10 (5.3e-7 and 4.9e-7 at 1e-5). A rejected trial's retry and
+# _shorten keep the I rule.
+PI_BETA = 0.04
+PI_ALPHA = 1.0 / 8.0 - 0.75 * PI_BETA
+PI_ERROR_FLOOR = 1e-4  # Hairer's: the error of a step far below its tolerance counts as 1e-4
 # Error norm of a trial step: Hairer's combination h e5^2 / sqrt(e5^2 + 0.01 e3^2) estimates the 8th-order error as
 # the 5th-order estimate e5 times e5 / (0.1 e3) = O(h^2), which holds where the solution is smooth over a disk of
 # radius ~h around the step. Near a kink of the right-hand side (a non-terminal event: the contact force's g^(3/2)
@@ -277,6 +291,7 @@ class Dop853(Integrator):
         self.n_steps = 0
         self._restart(t0, x0, v0, U)
         self.h = None  # chosen on the first step
+        self.err_old = 0.0  # the last accepted step's error norm (the PI controller's memory; 0: none yet)
 
     @classmethod
     def from_settings(cls, accel, events, t0, x0, v0, U, settings, max_step, *, rates=None, phased=None,
@@ -340,8 +355,9 @@ class Dop853(Integrator):
                     f"step size collapsed to {h:.3g} at tau = {t:.10g}, x = {x:.10g} (stiff or singular)", t, x, v)
             x_new, v_new, stages, error = self._trial(t, x, v, h)
             if error < 1.0:
-                factor = MAX_FACTOR if error == 0.0 else min(MAX_FACTOR, SAFETY * error**ERROR_EXPONENT)
+                factor = MAX_FACTOR if error == 0.0 else min(MAX_FACTOR, _pi_factor(error, self.err_old))
                 self.h = h * (min(1.0, factor) if rejected else factor)
+                self.err_old = error
                 break
             if not math.isfinite(error):
                 h *= MIN_FACTOR
@@ -596,6 +612,12 @@ class Dop853(Integrator):
             dy = y_new - y_old
             dense[i] = [dy, h * f_old - dy, 2.0 * dy - h * (f_new + f_old)] + [h * _dot(row, k) for row in D]
         return dense
+
+
+def _pi_factor(error, err_old):
+    """The PI controller's step factor after an accepted step of error norm `error` (> 0, finite) that followed one
+    of error norm err_old (comment at PI_BETA; core/dop853.c pi_factor)."""
+    return SAFETY * error**-PI_ALPHA * max(err_old, PI_ERROR_FLOOR)**PI_BETA
 
 
 def _evaluate(coefficients, s):

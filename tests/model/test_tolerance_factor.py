@@ -79,9 +79,13 @@ def test_the_pure_python_and_the_compiled_plant_agree_bit_for_bit_with_the_facto
 
 
 # The grazing campaign (vibrofmu.analyses.domains.graze_campaign, seed 0) runs that were over the bound with the
-# rtol asked: (index, measured error / bound with the rtol asked, with the factor). Measured with the factor: at most
-# 0.22 of the bound.
+# rtol asked under DOP853's I step controller: (index, measured error / bound with the rtol asked then). Measured with
+# the factor: at most 0.22 of the bound. Under the PI controller (integrate.PI_BETA) with the factor 0.063, 0.147 and
+# 0.024 of the bound for runs 3, 56 and 127, with the rtol asked 0.515, 0.792 and 0.487: the controller's lower
+# accepted errors brought them within the bound, and the factor still cuts their error 5.4 ... 20 times.
 WORST_RUNS = {3: 2.26, 127: 1.72, 56: 1.28}
+# What the factor must at least cut these runs' error by: a third of the smallest cut measured (5.4, run 56)
+FACTOR_CUT = 3.0
 
 
 @pytest.fixture(scope="module")
@@ -96,7 +100,8 @@ def test_the_factor_brings_the_campaigns_worst_long_runs_within_100_rtol_max_x(i
     """Error of x at the communication points (every tau = 1) against the plant at rtol 1e-12 with steps of at most 0.3
     rad of the fastest drive (its own error at rtol 1e-12 is ~1e-4 of the bound at rtol 1e-8: error proportional to
     the tolerance, measured), over the bound 100 rtol max|x| of the issue. With the factor: within it; with the factor
-    switched off (a reference memory of inf gives factor 1): over it, as measured before the rule."""
+    switched off (a reference memory of inf gives factor 1): at least FACTOR_CUT times larger (over the bound before
+    the PI step controller, as measured before the rule)."""
     scene, stop, rtol = campaign_scenes[index]
 
     def error(settings):
@@ -106,6 +111,7 @@ def test_the_factor_brings_the_campaigns_worst_long_runs_within_100_rtol_max_x(i
 
     reference = error(Settings(rtol=1e-12, max_step=0.3 / fastest_drive(scene)))
     bound = 100.0 * rtol * np.max(np.abs(reference))
-    assert np.max(np.abs(error(Settings(rtol=rtol)) - reference)) <= bound
+    with_factor = np.max(np.abs(error(Settings(rtol=rtol)) - reference))
+    assert with_factor <= bound
     monkeypatch.setattr(models, "ERROR_MEMORY_REFERENCE", math.inf)
-    assert np.max(np.abs(error(Settings(rtol=rtol)) - reference)) > bound
+    assert np.max(np.abs(error(Settings(rtol=rtol)) - reference)) > FACTOR_CUT * with_factor

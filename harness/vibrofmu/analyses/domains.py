@@ -217,6 +217,90 @@ def graze_campaign(n: int = 100, seed: int = 0, h: float = 1.0) -> dict:
         "rhs_calls_rtol_as_asked": sum(r["as_asked"]["rhs_calls"] for r in rows)}}
 
 
+# -- the drive's step ceiling: how far a step may turn the fastest drive -------------------------------------------
+
+TURNS = (2.25, 3.0, 3.5, 4.0, 5.0, math.inf)  # candidate models.DRIVE_STEP_TURN values (inf: no ceiling)
+
+
+def fast_drive_scene(rng: np.random.Generator) -> Scene:
+    """A contact-loss scene (campaigns.random_contact_loss_scene) whose drives run fast: omega and Omega
+    log-uniform in [0.3, 100], mu in [0.01, 0.2]; the electrostatic drives up to 0.05, the load up to 0.2."""
+    from vibrofmu.analyses.campaigns import random_contact_loss_scene
+
+    base = random_contact_loss_scene(rng)
+    return base.with_values(mu=float(rng.uniform(0.01, 0.2)), Delta=float(rng.uniform(0.0, 0.2)),
+                            omega=float(10.0 ** rng.uniform(math.log10(0.3), 2.0)),
+                            Omega=float(10.0 ** rng.uniform(math.log10(0.3), 2.0)))
+
+
+def _contact_exits(x: np.ndarray) -> int:
+    """Changes between in contact (x > -3/2) and out of it along the output grid."""
+    out = x <= -1.5
+    return int(np.count_nonzero(out[1:] != out[:-1]))
+
+
+def turn_campaign(n: int = 100, seed: int = 0, turns=TURNS, kinds=("contact loss", "fast drive", "graze")) -> dict:
+    """The drive's step ceiling at several turns K (max_step = K / the fastest drive term switched on,
+    models.drive_step_ceiling with DRIVE_STEP_TURN = K), n runs of each kind, every run at every K:
+    - "contact loss": campaigns.random_contact_loss_scene (the mass leaves the contact and hits it again; drives
+      up to 3, 2 Omega up to 6), rtol log-uniform in [1e-10, 1e-3], tau in [0, 10], outputs every 0.1, against
+      reference.reference_solution (solve_ivp, contact phases integrated apart) at rtol min(1e-12, rtol / 1000);
+    - "fast drive": fast_drive_scene (omega and Omega up to 100), the same way;
+    - "graze": graze_scene (long lightly damped runs, Omega up to 10, tau up to 5,000), outputs every 1, against the
+      plant at rtol 1e-12 with steps of at most 0.3 rad of the fastest drive (graze_campaign's reference).
+    Per run and K: the error max|x - x_ref| over the bound 100 rtol max|x_ref|, whether the run stopped where the
+    reference did (pull-in), the RHS calls, and whether the contact changes along the output grid are the reference's
+    (an impact lost or invented by a long step would change their count)."""
+    from vibromodel.models import DRIVE_STEP_TURN, drive_step_ceiling
+
+    from vibrofmu.analyses.campaigns import random_contact_loss_scene
+    from vibrofmu.analyses.reference import reference_solution
+
+    library, rng, rows = campaign_kernel(), np.random.default_rng(seed), []
+    for kind in kinds:
+        for _ in range(n):
+            if kind == "graze":
+                scene, stop, rtol = graze_scene(rng)
+                h = 1.0
+                reference, ref_stop = run_steps(make_plant(scene, Settings(rtol=1e-12, max_step=0.3 / fastest_drive(scene)),
+                                                           0.0, stop, library=library), stop, h)
+            else:
+                scene = random_contact_loss_scene(rng) if kind == "contact loss" else fast_drive_scene(rng)
+                stop, h, rtol = 10.0, 0.1, float(10.0 ** rng.uniform(-10.0, -3.0))
+                solution = reference_solution(scene, 0, stop, rtol=min(1e-12, rtol / 1000.0), atol=min(1e-14, rtol / 1e5))
+                times = h * np.arange(1, int(round(stop / h)) + 1)
+                inside = times <= solution.t_end
+                reference = solution(times[inside])[0]
+                ref_stop = None if solution.stop_event is None else solution.stop_event
+            row = {"kind": kind, "scene": scene.as_dict(), "stop": stop, "rtol": rtol, "reference_stop": ref_stop}
+            scale = 100.0 * rtol * max(float(np.max(np.abs(reference))), 1e-300) if len(reference) else math.nan
+            ceiling = drive_step_ceiling(scene)
+            for turn in turns:
+                max_step = min(1000.0, ceiling * (turn / DRIVE_STEP_TURN)) if math.isfinite(ceiling) else 1000.0
+                plant = make_plant(scene, Settings(rtol=rtol, max_step=max_step), 0.0, stop, library=library)
+                x, stopped = run_steps(plant, stop, h)
+                k = min(len(x), len(reference))
+                row[repr(turn)] = {
+                    "error_over_bound": float(np.max(np.abs(x[:k] - reference[:k]))) / scale if k else math.nan,
+                    "agrees_on_stop": (stopped is None) == (ref_stop is None), "rhs_calls": plant.nfev,
+                    "contact_changes": _contact_exits(x[:k]), "reference_contact_changes": _contact_exits(reference[:k])}
+            rows.append(row)
+    summary = {}
+    for kind in kinds:
+        mine = [r for r in rows if r["kind"] == kind]
+        for turn in turns:
+            cells = [r[repr(turn)] for r in mine]
+            summary[f"{kind}, turn {turn:g}"] = {
+                "runs": len(cells),
+                "within_100_rtol_max_x": sum(c["error_over_bound"] <= 1.0 and c["agrees_on_stop"] for c in cells),
+                "worst_error_over_bound": max((c["error_over_bound"] for c in cells), default=None),
+                "stops_disagreeing": sum(not c["agrees_on_stop"] for c in cells),
+                "contact_changes_differing": sum(c["contact_changes"] != c["reference_contact_changes"] for c in cells),
+                "contact_changes": sum(c["contact_changes"] for c in cells),
+                "rhs_calls": sum(c["rhs_calls"] for c in cells)}
+    return {"rows": rows, "summary": summary}
+
+
 @contextlib.contextmanager
 def _tolerance_factor_off():
     """Plants made inside run their solver at the rtol asked (models.tolerance_factor = 1): the campaign's measure of
@@ -236,6 +320,9 @@ def main(argv: list[str]) -> None:
         result = rung_grid()
     elif argv and argv[0] == "extremes":
         result = extreme_grid(Path(argv[1]))
+    elif argv and argv[0] == "turns":
+        result = turn_campaign(*(int(a) for a in argv[1:3]))
+        result = {"summary": result["summary"]} if "--summary" in argv else result
     else:
         result = graze_campaign(*(int(a) for a in argv[1:3]))
     print(json.dumps(result, indent=1, default=str))
