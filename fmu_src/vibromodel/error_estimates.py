@@ -446,8 +446,62 @@ def exact_estimate(scene, settings, model, solution, span: float) -> dict:
     return _result(terms["solver"], terms["amplitude"], terms)
 
 
-def polynomial_estimate(scene, settings, model, solution, span: float) -> dict:
-    """Fidelities 1 and 2: the solver's error and the polynomial's truncation (truncation_terms)."""
+# The compiled kernel's twin of polynomial_estimate (core/estimate.c): compiled.load_library registers the kernel it
+# loads (use_kernel), and the estimate then runs in C, with the same bits (tests/model/test_error_estimate_theory.py
+# compares them over random scenes); without a kernel, or where the Python code would raise, it runs in Python.
+_KERNEL = None
+# core/estimate.h's layouts: in[] (PE_INPUTS doubles), constants[] (PC_CONSTANTS), out[] (PO_OUTPUTS)
+_PE_INPUTS, _PC_CONSTANTS, _PO_OUTPUTS, _PC_MAX_COSINES = 29, 25, 10, 16
+_SOLVER_KEYS = {False: ("solver", "accumulated", "local", "step", "amplitude"),
+                True: ("solver", "accumulated", None, None, "amplitude")}
+_TRUNCATION_KEYS = ("truncation", "mean", "stiffness", "harmonics", "amplitude")
+
+
+def use_kernel(library) -> None:
+    """Run fidelities 1 and 2's estimate on this kernel library (compiled.load_library's; None: in Python)."""
+    global _KERNEL
+    if library is None:
+        _KERNEL = None
+        return
+    import ctypes
+    import sys
+
+    doubles = ctypes.c_double * _PE_INPUTS
+    function = library.vk_polynomial_estimate
+    function.restype = ctypes.c_int
+    function.argtypes = [doubles, ctypes.c_double * _PC_CONSTANTS, ctypes.c_int, ctypes.c_double * _PO_OUTPUTS]
+    constants = (ctypes.c_double * _PC_CONSTANTS)(
+        DOP853_ESTIMATOR, DOP853_LOCAL, CALIBRATION["adaptive"], CALIBRATION["local"], CALIBRATION["fixed"],
+        CALIBRATION["truncation"], MIN_RTOL, TRUNCATION_TIMES, len(TRUNCATION_COSINES), *TRUNCATION_COSINES,
+        *[0.0] * (_PC_MAX_COSINES - len(TRUNCATION_COSINES)))
+    # Python's sum() of floats is compensated (Neumaier) from 3.12 on; the C adds alike
+    _KERNEL = (function, doubles, constants, int(sys.version_info >= (3, 12)), ctypes.c_double * _PO_OUTPUTS)
+
+
+def _kernel_polynomial_estimate(kernel, scene, settings, model, span: float) -> dict | None:
+    """polynomial_estimate's terms from the kernel, or None where the Python code raises (it runs then)."""
+    function, doubles, constants, compensated, outputs = kernel
+    fixed = _fixed(settings)
+    step = (settings.max_step or _fixed_default()) if fixed else 0.0
+    ceiling = 0.0 if fixed else settings.max_step if settings.max_step > 0.0 else drive_step_ceiling(scene)
+    factor = 1.0 if fixed else tolerance_factor(scene, span)
+    values = doubles(scene.alpha, scene.gamma, scene.R, scene.mu, scene.Delta, scene.omega, scene.beta, scene.Omega,
+                     scene.x_start, scene.v_start, span, settings.rtol, float(fixed), step, ceiling, factor,
+                     forces.linear_stiffness(scene.alpha, scene.gamma, scene.R), *model.a, *model.g3)
+    out = outputs()
+    if function(values, constants, compensated, out):
+        return None
+    terms = {key: value for key, value in zip(_SOLVER_KEYS[fixed], out[:5]) if key is not None}
+    terms.update(zip(_TRUNCATION_KEYS, out[5:]))
+    return terms
+
+
+def polynomial_estimate(scene, settings, model, solution, span: float, kernel: bool = True) -> dict:
+    """Fidelities 1 and 2: the solver's error and the polynomial's truncation (truncation_terms); on the compiled
+    kernel where one is registered (use_kernel) and kernel is True."""
+    terms = _kernel_polynomial_estimate(_KERNEL, scene, settings, model, span) if kernel and _KERNEL else None
+    if terms is not None:
+        return _result(terms["solver"] + CALIBRATION["truncation"] * terms["truncation"], terms["amplitude"], terms)
     parts = response_parts(scene, span)
     terms = {**solver_terms(scene, settings, span, parts), **truncation_terms(scene, model, span, parts)}
     value = terms["solver"] + CALIBRATION["truncation"] * terms["truncation"]

