@@ -478,9 +478,17 @@ def use_kernel(library) -> None:
     _KERNEL = (function, doubles, constants, int(sys.version_info >= (3, 12)), ctypes.c_double * _PO_OUTPUTS)
 
 
-def _kernel_polynomial_estimate(kernel, scene, settings, model, span: float) -> dict | None:
-    """polynomial_estimate's terms from the kernel, or None where the Python code raises (it runs then)."""
-    function, doubles, constants, compensated, outputs = kernel
+def kernel_loaded() -> bool:
+    """Whether a kernel is registered (use_kernel): polynomial_estimate then runs on it."""
+    return _KERNEL is not None
+
+
+def kernel_polynomial_terms(scene, settings, model, span: float) -> dict | None:
+    """polynomial_estimate's terms from the registered kernel, or None without one or where the Python code raises
+    (it runs then)."""
+    if _KERNEL is None:
+        return None
+    function, doubles, constants, compensated, outputs = _KERNEL
     fixed = _fixed(settings)
     step = (settings.max_step or _fixed_default()) if fixed else 0.0
     ceiling = 0.0 if fixed else settings.max_step if settings.max_step > 0.0 else drive_step_ceiling(scene)
@@ -499,7 +507,7 @@ def _kernel_polynomial_estimate(kernel, scene, settings, model, span: float) -> 
 def polynomial_estimate(scene, settings, model, solution, span: float, kernel: bool = True) -> dict:
     """Fidelities 1 and 2: the solver's error and the polynomial's truncation (truncation_terms); on the compiled
     kernel where one is registered (use_kernel) and kernel is True."""
-    terms = _kernel_polynomial_estimate(_KERNEL, scene, settings, model, span) if kernel and _KERNEL else None
+    terms = kernel_polynomial_terms(scene, settings, model, span) if kernel else None
     if terms is not None:
         return _result(terms["solver"] + CALIBRATION["truncation"] * terms["truncation"], terms["amplitude"], terms)
     parts = response_parts(scene, span)
