@@ -457,8 +457,9 @@ _SOLVER_KEYS = {False: ("solver", "accumulated", "local", "step", "amplitude"),
 _TRUNCATION_KEYS = ("truncation", "mean", "stiffness", "harmonics", "amplitude")
 
 
-def use_kernel(library) -> None:
-    """Run fidelities 1 and 2's estimate on this kernel library (compiled.load_library's; None: in Python)."""
+def use_kernel(library, compensated: bool | None = None) -> None:
+    """Run fidelities 1 and 2's estimate on this kernel library (compiled.load_library's; None: in Python).
+    compensated: whether the C adds as sum() does from Python 3.12 on (default: as this Python's sum() does)."""
     global _KERNEL
     if library is None:
         _KERNEL = None
@@ -475,7 +476,8 @@ def use_kernel(library) -> None:
         CALIBRATION["truncation"], MIN_RTOL, TRUNCATION_TIMES, len(TRUNCATION_COSINES), *TRUNCATION_COSINES,
         *[0.0] * (_PC_MAX_COSINES - len(TRUNCATION_COSINES)))
     # Python's sum() of floats is compensated (Neumaier) from 3.12 on; the C adds alike
-    _KERNEL = (function, doubles, constants, int(sys.version_info >= (3, 12)), ctypes.c_double * _PO_OUTPUTS)
+    compensated = sys.version_info >= (3, 12) if compensated is None else compensated
+    _KERNEL = (function, doubles, constants, int(compensated), ctypes.c_double * _PO_OUTPUTS)
 
 
 def kernel_loaded() -> bool:

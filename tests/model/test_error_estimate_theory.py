@@ -158,6 +158,46 @@ def test_the_kernel_s_polynomial_estimate_gives_the_bits_of_python_s(library):
     assert on_kernel >= 0.7 * compared  # the kernel computed most of them (not handed back)
 
 
+def _sum_from_python_3_12(values, start=0):
+    """sum() of floats as CPython adds them from 3.12 on (builtin_sum_impl: start + the first, then Neumaier's
+    compensated addition, the compensation added at the end where it is finite and not 0)."""
+    values = iter(values)
+    first = next(values, None)
+    if first is None:
+        return start
+    total, compensation = start + first, 0.0
+    for x in values:
+        t = total + x
+        compensation += (total - t) + x if abs(total) >= abs(x) else (x - t) + total
+        total = t
+    return total + compensation if compensation and math.isfinite(compensation) else total
+
+
+def test_the_kernel_s_estimate_adds_as_python_3_12_does_when_told(library, monkeypatch):
+    """The kernel's compensated sums (what it does under Python 3.12 and later, whose sum() of floats is Neumaier's)
+    against polynomial_estimate in Python with that sum() (_sum_from_python_3_12, in place of this Python's): the
+    same bits over 12 random scenes, both solvers (the plain and the compensated sums differ in the last bits of
+    about half of such estimates, so this tests the flag's path, which CI's Python 3.11 does not take)."""
+    try:
+        error_estimates.use_kernel(library[0], compensated=True)
+        monkeypatch.setattr(error_estimates, "sum", _sum_from_python_3_12, raising=False)
+        rng = np.random.default_rng(4)
+        for _ in range(12):
+            scene = Scene(mu=10 ** rng.uniform(-3, -0.3), Delta=10 ** rng.uniform(-4, -1.5),
+                          omega=rng.uniform(0.85, 1.15), Omega=rng.uniform(0.2, 10.0),
+                          alpha=10 ** rng.uniform(-4, -1.5), beta=10 ** rng.uniform(-4, -1.2),
+                          gamma=10 ** rng.uniform(-4, -2), R=rng.uniform(0.3, 1.0), x_start=rng.uniform(-0.6, 0.6))
+            span = rng.uniform(20.0, 600.0)
+            for fidelity in (1, 2):
+                model = REGISTRY[fidelity].model(scene)
+                for settings in (Settings(fidelity=fidelity), Settings(fidelity=fidelity, solver=1)):
+                    assert error_estimates.kernel_polynomial_terms(scene, settings, model, span) is not None
+                    assert repr(error_estimates.polynomial_estimate(scene, settings, model, None, span)) == repr(
+                        error_estimates.polynomial_estimate(scene, settings, model, None, span, kernel=False))
+    finally:
+        error_estimates.use_kernel(library[0])
+
+
 def _plain_harmonics(model, scene, x_s, amplitude):
     """The force error's harmonics written plainly (one force_error_parts call per x, min/max to clip it to the gap,
     sums over generators, the drive's phases from their times): the reference of force_error_harmonics, which reuses
