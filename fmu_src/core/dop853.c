@@ -607,13 +607,14 @@ static double step_factor(double error)
     return SAFETY * vk_python_pow(error, ERROR_EXPONENT, &fault);
 }
 
-/* integrate._pi_factor: SAFETY error**-PI_ALPHA max(err_old, PI_ERROR_FLOOR)**PI_BETA, error positive and finite,
-   err_old finite (a restored state's doubles are finite: state checks), so pow cannot fault */
+/* integrate._pi_factor: SAFETY error**-PI_ALPHA max(err_old, PI_ERROR_FLOOR)**PI_BETA (1 for the memory term when
+   err_old <= 0: none), error positive and finite, err_old finite (a restored state's doubles are finite: state
+   checks), so pow cannot fault */
 static double pi_factor(double error, double err_old)
 {
     int fault = FAULT_NONE;
-    return SAFETY * vk_python_pow(error, -PI_ALPHA, &fault) * vk_python_pow(py_max(err_old, PI_ERROR_FLOOR), PI_BETA,
-                                                                            &fault);
+    double memory = err_old > 0.0 ? vk_python_pow(py_max(err_old, PI_ERROR_FLOOR), PI_BETA, &fault) : 1.0;
+    return SAFETY * vk_python_pow(error, -PI_ALPHA, &fault) * memory;
 }
 
 /* Dop853._step: one accepted step (the step size adapted on the way), then its events */

@@ -10,7 +10,7 @@
    the scene in s->value into *m (other fields untouched). */
 void native_plant_model(VkModel *m, const State *s, int fidelity);
 /* models.DRIVE_STEP_TURN (tests/model/test_rung_domains.py checks that they are equal) */
-#define NATIVE_DRIVE_STEP_TURN 2.25
+#define NATIVE_DRIVE_STEP_TURN 4.0
 /* models.drive_step_ceiling: the adaptive solver's step ceiling when max_step = 0, NATIVE_DRIVE_STEP_TURN over the
    fastest forcing term switched on (omega if Delta != 0, Omega if beta != 0, 2 Omega if gamma != 0) and `extra` (a
    closed loop's reference); INFINITY when none. */

@@ -78,19 +78,26 @@ def drive_frequencies(s: Scene) -> tuple[float, float, float]:
 
 # The adaptive solver's default step ceiling (max_step = 0): a step turns the fastest forcing term the scene switches
 # on by at most DRIVE_STEP_TURN radians (issue 25: at Omega = 9.3, rtol 1e-3, lightly damped, DOP853 stepped over
-# the drive and erred by 310 rtol max|x|; max_step = 3/(2 Omega) brought it to 0.3). Why 2.25: in docs/events.md's
-# sample of 11,000 accepted trial steps of random campaign scenes (fixed h, away from the contact kink) the true local
-# error stayed below 1.5 tolerances for h omega_max <= 1.8 and reached 5.4 and 17.6 at 2.0 and 2.2 (sporadic from
-# 2 to 5), all far below the 100 tolerances of the acceptance; a drive term alone is estimated conservatively far
-# beyond (DOP853's quadrature of e^(i nu t) errs by 4e-6 of it at nu h = 3 where E5/E3 read 6.9e-5). 1.8 was tried
-# first: it cut a third of the paper scene's steps (ceiling 0.45), and its step grid then moved with the last bit of
-# any input (one ulp of x_start moved x by 1.4e-10 at tau = 148; the win64 DLL under wine differed from linux64 by
-# 1.5e-10, where the test's bound is 1e-12). At 2.25 the paper scene's largest accepted step (h omega_max = 2.243)
-# is not cut; only rejected trials are. Cost on the paper scene (2 Omega = 4: ceiling 0.5625) over [0, 200],
-# communication step 0.1, compiled kernel: rtol 1e-8: 8795 RHS calls instead of 8759 (+0.4 %), x within 2.8e-10;
-# rtol 1e-6: 5357 instead of 4847 (+10.5 %); rtol 1e-4: 5357 instead of 3257 (+64 %); rtol 1e-10: unchanged, same
-# bits. max_step > 0 overrides it (max_step = 1000, the rule's top, is in effect no ceiling).
-DRIVE_STEP_TURN = 2.25
+# the drive and erred by 310 rtol max|x|; max_step = 3/(2 Omega) brought it to 0.3). The error control alone lets a
+# step turn a small drive term by any angle when the rest of the motion is smooth: its error per step is then below
+# the tolerance, but not random, and over a lightly damped run the steps' errors add up.
+# Why 4 (0.64 of the fastest drive's period per step): `python -m vibrofmu.analyses.domains turns N SEED`
+# (domains.turn_campaign: every run at several turns) with DOP853's PI step controller, error over the bound 100 rtol
+# max|x| of the acceptance, at the turns 2.25 / 4 / none: 200 contact-loss scenes (seed 0) worst 0.051 at each, every
+# contact change along the output grid the reference's; 200 of them with drives up to omega, Omega = 100: 0.42 /
+# 0.34 / 0.34; long lightly damped grazing runs (Omega up to 10, tau up to 5,000) 60 of seed 0: 0.047 / 0.24 / 0.23,
+# 100 of seed 2: 0.066 / 0.11 / 0.096; every run within at every turn. Where the ceiling decides, in rtol max|x|: the
+# Omega = 9.3 test scene at rtol 1e-3 (tests/model/test_rung_domains.py) 2.3e-7 / 1.5e-5 / 1.89; the contact-loss
+# campaign's worst run (tests/model/test_event_location.py) 0.017 / 0.30 / 0.30; the error grows with the turn, at 4
+# still orders below the bound. The per-step estimate is not a bound on such steps (docs/events.md: in a sample of
+# 11,000 trial steps the true local error reached 17.6 tolerances at h omega_max = 2.2, 1.3 ... 2.9 from 2.5 to 5:
+# sporadic, not ordered by the turn). The turn was 2.25 before (the paper scene's largest accepted step at rtol 1e-8,
+# h omega_max = 2.243, not cut; 1.8 before it made the step grid move with the last bit of any input): at loose
+# tolerances it, not rtol, set the paper scene's steps (357 steps over [0, 200] from rtol 1e-4 to 1e-6, error 1.8e-9
+# whatever the rtol asked). At 4 the ceiling (1.0 on the paper scene) cuts no step of it at rtol <= 1e-7 and binds
+# at looser ones: rtol 1e-4 204 steps (3,062 RHS calls instead of 5,357), error 1.8e-7; without any ceiling 179 steps,
+# 2.9e-6. max_step > 0 overrides it (max_step = 1000, the rule's top, is in effect no ceiling).
+DRIVE_STEP_TURN = 4.0
 
 
 def drive_step_ceiling(s: Scene, extra: float = 0.0) -> float:

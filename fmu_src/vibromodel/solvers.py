@@ -85,7 +85,7 @@ def _resolve(path: str):
 SOLVERS: dict[str, SolverEntry] = {entry.key: entry for entry in (
     SolverEntry("dop853", "adaptive", 0, "ADAPTIVE", "DOP853", "adaptive", "adaptive DOP853",
                 (("rtol", "relative tolerance of the error control"),
-                 ("max_step", "step ceiling; 0 = 2.25/(the fastest forcing frequency switched on)")),
+                 ("max_step", "step ceiling; 0 = 4/(the fastest forcing frequency switched on)")),
                 "adaptive", ".integrate:Dop853"),
     SolverEntry("rk4", "rk4", 1, "RK4", "RK4", "RK4", "fixed-step RK4",
                 (("max_step", f"the step; 0 = {FIXED_DEFAULT_STEP:g}"),),

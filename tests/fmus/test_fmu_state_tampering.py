@@ -201,7 +201,7 @@ def model_change(path, value):
 @pytest.mark.parametrize("which,path,value", [
     ("plant_kernel1", ("integrator", "x"), lambda x: math.nan),
     ("plant_kernel1", ("integrator", "nfev"), lambda n: -1),
-    # the drive's step ceiling, 2.25/(2 Omega) = 0.5625 on the default scene (finite since issue 25), in the model;
+    # the drive's step ceiling, 4/(2 Omega) = 1 on the default scene (finite since issue 25), in the model;
     # inf where the fresh model holds a finite constant is refused (snapshot: every float finite unless fresh's is not)
     ("plant_kernel1", ("integrator", "max_step"), lambda m: math.inf),
     ("plant_kernel1", ("plant", "t"), lambda t: "0.6"),

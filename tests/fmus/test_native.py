@@ -513,9 +513,10 @@ def _wine_and_linux(c_host, unpacked, outputs, parameters, tmp_path):
 
 @pytest.mark.parametrize("parameters,bound", [
     # issue 14's bound at the default settings: Windows' libm (sin, cos, pow of mingw-w64's runtime) need not round
-    # as glibc's does, and since issue 25 the adaptive step is clamped at the drive's ceiling 2.25/(2 Omega): whether
-    # a step is clamped can turn on the last bit, and then the two step grids differ by a step, a difference of two
-    # local errors far below rtol. Measured 2.1e-13 (x) and 7.7e-13 (v); 3.8e-14 before the ceiling.
+    # as glibc's does, and the adaptive step is clamped at the drive's ceiling (2.25/(2 Omega) from issue 25, 4/(2 Omega)
+    # since the turn study): whether a step is clamped can turn on the last bit, and then the two step grids differ by a
+    # step, a difference of two local errors far below rtol. Measured 2.1e-13 (x) and 7.7e-13 (v) at 2.25; 3.8e-14
+    # before the ceiling (at 4 the ceiling clamps no step of the default experiment).
     ({}, 1e-12),
     # issue 23's bound, at the accuracy headline's rtol 1e-10 (README): the clamp decides no step there (the
     # proposed steps stay below the ceiling); measured 3.8e-15 (x), 6.4e-15 (v).

@@ -195,10 +195,12 @@ WORST_CAMPAIGN_RTOL = 1.2296129547570618e-06
 def test_worst_campaign_run_is_the_unresolved_drive(library):
     """The run within issue 15's 100 rtol max|x| of the reference (solve_ivp at rtol 1e-12, itself converged there:
     rtol 1e-13 changes it by 2e-6 rtol max|x|), twice: with max_step resolving the 2 Omega drive (3 rad per step; the
-    two failing steps had 5.2 and 6.9), measured 0.10; and at max_step = 0 (automatic), measured 4.7 since the
-    kink-aware error norm: the run passes within g = 0.1 of the contact kink near tau = 1, the stricter norm there
-    changes the later step sequence and the two failing steps are no longer taken. The second is a regression check
-    of this scene, not a guarantee: estimates too low by such factors remain possible on other long smooth steps."""
+    two failing steps had 5.2 and 6.9), measured 0.10 (0.121 with the PI step controller); and at max_step = 0
+    (automatic), measured 4.7 since the kink-aware error norm: the run passes within g = 0.1 of the contact kink near
+    tau = 1, the stricter norm there changes the later step sequence and the two failing steps are no longer taken
+    (with the PI step controller 0.017 at the ceiling's former 2.25 rad, 0.30 at its 4 rad, which binds no step here,
+    as without a ceiling: models.DRIVE_STEP_TURN). The second is a regression check of this scene, not a guarantee: estimates too low by
+    such factors remain possible on other long smooth steps."""
     scene, rtol = WORST_CAMPAIGN_SCENE, WORST_CAMPAIGN_RTOL
     reference = reference_solution(scene, 0, 10.0, rtol=1e-12, atol=1e-14)
     for max_step in (3.0 / (2.0 * scene.Omega), 0.0):

@@ -178,9 +178,10 @@ def test_the_native_ceiling_constant_is_the_models():
 def test_the_drive_ceiling_brings_a_lightly_damped_driven_run_within_its_tolerance(library):
     """Omega = 9.3 (beta on), mu = 0.02, a resonant load, rtol 1e-3 over tau = 1000: without the ceiling (max_step =
     1000, the rule's top) the error against a tight reference (rtol 1e-12, steps of 0.5/(2 Omega)) exceeds 1
-    rtol max|x|; with max_step = 0 (the ceiling) it is within 1 rtol max|x|. Measured: 1.44 and 2.3e-7 (6.9 without
-    the ceiling under the I step controller that DOP853 had before its PI controller, integrate.PI_BETA: its step
-    after a low error reading overshot into rejections, and the accepted errors sat higher).
+    rtol max|x|; with max_step = 0 (the ceiling) it is within 1 rtol max|x|. Measured: 1.89 and 1.5e-5 (the ceiling's
+    4 rad; 2.3e-7 at its former 2.25 rad); 6.9 without the ceiling under the I step controller that DOP853 had before
+    its PI controller (integrate.PI_BETA: its step after a low error reading overshot into rejections, and the accepted
+    errors sat higher).
     mu = 0.02 >= 2/150 keeps the solver at the rtol asked (models.tolerance_factor = 1): at mu = 0.002 the factor
     0.15 alone brings the run without the ceiling from 22 to 2.1, which would hide what the ceiling does (the
     factor's own test is test_the_tolerance_factor_brings_long_lightly_damped_runs_within_their_bound)."""

@@ -36,9 +36,9 @@ def test_settings_rule_and_cli_read_the_registry():
 
 
 @pytest.mark.parametrize("value, cls, scene, step", [
-    (0, Dop853, Scene(), 2.25 / 4.0),  # max_step = 0: 2.25 rad of the fastest drive, gamma cos(2 Omega t), Omega = 2
+    (0, Dop853, Scene(), 4.0 / 4.0),  # max_step = 0: 4 rad of the fastest drive, gamma cos(2 Omega t), Omega = 2
     (0, Dop853, Scene(Delta=0.0, beta=0.0, gamma=0.0), float("inf")),  # no drive: no ceiling
-    (0, Dop853, Scene(Delta=0.1, omega=30.0), 2.25 / 30.0),  # the load's omega = 30 is the fastest
+    (0, Dop853, Scene(Delta=0.1, omega=30.0), 4.0 / 30.0),  # the load's omega = 30 is the fastest
     (1, Rk4, Scene(), 0.01)])
 def test_a_plant_gets_the_integrator_of_its_entry(value, cls, scene, step):
     plant = Plant(scene, Settings(solver=value, kernel=1))

@@ -84,7 +84,7 @@ MODEL_ERROR_NOTE = ("fidelities 3 and 4 are approximations of Eq. 3: their error
 # The FMU's adaptive cases and the compiled floor run without the drive's step ceiling (max_step = 1000, the rule's
 # top: no step of the default experiment is that long), as solve_ivp does: each work-precision line is then the
 # error control's own (tolerance proportionality), and the FMU and SciPy are compared on the same terms. With the
-# default max_step = 0 the ceiling 2.25/(fastest forcing) holds loose tolerances to its error (README, accuracy).
+# default max_step = 0 the ceiling 4/(fastest forcing) holds loose tolerances to its error (README, accuracy).
 NO_CEILING = 1000.0
 
 
