@@ -317,11 +317,20 @@ FD_STEP = 1e-5  # central differences of the plain map for its monodromy (the to
 FD_DET_TOL = 1e-6
 
 
-def plain_monodromy(scene: Scene, z0) -> np.ndarray:
+def plain_monodromy(scene: Scene, z0, step: float = FD_STEP) -> np.ndarray:
     """M = dP/dz by central differences of plain_orbit (DOP853 at rtol 1e-13 on the state alone, no variational
     equations): an estimate that shares nothing with the engine's."""
-    return np.column_stack([(plain_orbit(scene, z0 + FD_STEP * e)[0] - plain_orbit(scene, z0 - FD_STEP * e)[0])
-                            / (2 * FD_STEP) for e in np.eye(2)])
+    return np.column_stack([(plain_orbit(scene, z0 + step * e)[0] - plain_orbit(scene, z0 - step * e)[0])
+                            / (2 * step) for e in np.eye(2)])
+
+
+# the period-2T orbits of the doubling scene cross the contact edge four times, twice nearly tangentially, in the
+# plain map's one piece (not restarted), where its error control meets H'' ~ s^(-1/2): its error there is
+# eps ~ 1e-10 (measured: central differences at 1e-6 and 1e-5 scatter by 1e-5 .. 4e-4 in det(M + I), as eps / h
+# predicts), so the step is 1e-4: eps / h ~ 1e-6 per entry plus h^2 |d3P| / 6 ~ 1e-8 |d3P|; det(M2 M1 + I) of the
+# product of two such factors (entries O(1)) moves by at most ~4e-6
+FD2_STEP = 1e-4
+FD2_DET_TOL = 5e-6
 
 
 @pytest.mark.slow
@@ -417,3 +426,37 @@ def test_the_fold_curve_creeping_towards_the_lower_electrode_ends_as_pull_in_ahe
     labels = [line.get_label() for line in ax.get_lines()]
     plt.close(fig)
     assert "curve ends creeping towards pull-in" in labels and "curve stopped (point budget)" not in labels
+
+
+@pytest.mark.slow
+def test_the_doubled_branch_flip_curve_solves_an_independent_period_two_flip_system():
+    # the cascade of the doubling scene: the period-2T branch's own doubling (to 4T, omega ~ 1.862 at Delta = 2.5)
+    # continued in Delta; its points are fixed points of P^2 with a multiplier -1 of dP^2/dz, not of P
+    result = cont.branch(CHAOS_SCENE, "omega", 2.2, 1.785, points=40, max_period=2)
+    (doubled,) = result.doubled
+    assert [pt.event for pt in doubled.events()].count("period-doubling") == 1
+    found = curves.curves_from_branch(doubled, "period-doubling", "Delta", 2.7, 2.5, points=40,
+                                      scale1=abs(2.2 - 1.785))
+    (curve,) = found.curves
+    assert {pt.periods for pt in curve.points} == {2} and len(curve.points) >= 5
+    for pt in curve.points[:: max(1, len(curve.points) // 4)]:
+        # by the plain map (DOP853 at rtol 1e-13 on the state alone, one piece; Radau's restarts at the edge crawl
+        # here: the 2T orbits pass the edge nearly tangentially), P^2 = P o P and its monodromy M(z1) M(z0) by
+        # central differences (FD2_DET_TOL)
+        scene = CHAOS_SCENE.with_values(omega=pt.p1, Delta=pt.p2)
+        z1 = plain_orbit(scene, pt.z0)[0]
+        z2 = plain_orbit(scene, z1)[0]
+        assert np.max(np.abs(z2 - pt.z0)) <= GRAZING_TOL, (pt.p1, pt.p2)
+        M = plain_monodromy(scene, z1, FD2_STEP) @ plain_monodromy(scene, pt.z0, FD2_STEP)
+        assert abs(np.linalg.det(M + np.eye(2))) <= FD2_DET_TOL, (pt.p1, pt.p2)
+        assert np.max(np.abs(z1 - pt.z0)) > 1e-3  # truly of period 2T
+    # going down in Delta the curve stalls where a local maximum of its orbit touches the contact edge from the
+    # free side (a grazing the lowest point does not see): the stop reason says so
+    down = curves.curves_from_branch(doubled, "period-doubling", "Delta", 2.5, 2.3, points=40,
+                                     scale1=abs(2.2 - 1.785))
+    (curve,) = down.curves
+    assert "grazes the contact edge" in curve.stop_reason
+    last = curve.points[-1]
+    scene = CHAOS_SCENE.with_values(omega=last.p1, Delta=last.p2)
+    turning = cont.n_period_map(scene, "omega", last.z0, 2, dense=True).extrema
+    assert np.min(np.abs(turning - cont.CONTACT_EDGE)) <= curves.GRAZING_NEAR

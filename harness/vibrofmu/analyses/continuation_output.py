@@ -407,9 +407,13 @@ def draw_curves(ax, curves: two.Curves, seen: set, label: str = "{kind} curve") 
     stopped by its point budget marked at its end."""
     for curve in curves.curves:
         style, color = CURVE_STYLE[curve.kind]
-        ax.plot([pt.p1 for pt in curve.points], [pt.p2 for pt in curve.points], style, color=color, lw=1.5,
-                label=label.format(kind=curve.kind) if curve.kind not in seen else None)
-        seen.add(curve.kind)
+        periods = curve.points[0].periods if curve.points else 1
+        name = curve.kind if periods == 1 else f"{curve.kind} (period-{periods}T orbits)"
+        if periods > 1:  # a doubled branch's curve: dotted, thinner
+            style = ":"
+        ax.plot([pt.p1 for pt in curve.points], [pt.p2 for pt in curve.points], style, color=color,
+                lw=1.5 if periods == 1 else 1.2, label=label.format(kind=name) if name not in seen else None)
+        seen.add(name)
         for pt in curve.points:
             if pt.event:
                 marker, c = CODIM2_MARKERS.get(pt.event, ("o", "k"))
@@ -429,7 +433,8 @@ def draw_curves(ax, curves: two.Curves, seen: set, label: str = "{kind} curve") 
 
 def curves_summary(curves: two.Curves) -> list[dict]:
     p1, p2 = curves.params
-    return [{"kind": c.kind, "curve": c.index, "points": len(c.points), "stop_reason": c.stop_reason,
+    return [{"kind": c.kind, "curve": c.index, "periods": c.points[0].periods if c.points else 1,
+             "points": len(c.points), "stop_reason": c.stop_reason,
              "events": [{"event": pt.event, p1: pt.p1, p2: pt.p2, "x0": float(pt.z0[0]), "v0": float(pt.z0[1])}
                         for pt in c.points if pt.event]} for c in curves.curves]
 
@@ -438,6 +443,8 @@ def curves_lines(curves: two.Curves) -> list[str]:
     p1, p2 = curves.params
     lines = []
     for c in curves.curves:
-        lines.append(f"{c.kind} curve {c.index}: {len(c.points)} points ({c.stop_reason})")
+        periods = c.points[0].periods if c.points else 1
+        of = f" of period-{periods}T orbits" if periods > 1 else ""
+        lines.append(f"{c.kind} curve {c.index}{of}: {len(c.points)} points ({c.stop_reason})")
         lines += [f"  {pt.event} at {p1} = {pt.p1:.10g}, {p2} = {pt.p2:.10g}" for pt in c.points if pt.event]
     return lines

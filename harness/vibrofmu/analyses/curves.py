@@ -345,7 +345,7 @@ def follow(system: Augmented, start: CurvePoint, direction: float, p2_bounds: tu
             h *= 0.5
             if h < min_step:
                 reason = f"step below {min_step:g} at {system.params[0]} = {last.p1:.8g}, {system.params[1]} = " \
-                         f"{last.p2:.8g}"
+                         f"{last.p2:.8g}" + grazing_turn(system, last)
                 break
             continue
         found = []
@@ -385,6 +385,29 @@ def follow(system: Augmented, start: CurvePoint, direction: float, p2_bounds: tu
         reason = budget_reason(f"{reason} at {system.params[0]} = {last.p1:.8g}, {system.params[1]} = "
                                f"{last.p2:.8g}", system.at(last.p1, last.p2), last)
     return points, reason, joined
+
+
+# a turning point this close to the contact edge makes a stalled curve a stall at a grazing (grazing_turn): the
+# corrector's own tolerance 1e-10 in the state times a conditioning up to 1e4 near the kink
+GRAZING_NEAR = 1e-6
+
+
+def grazing_turn(system: Augmented, last: CurvePoint) -> str:
+    """'' or why a fold or flip curve stalled at `last`: a turning point of its orbit (any, not only the lowest,
+    which x_min and the grazing-fold/flip test see) on the contact edge, where the fold or flip system has a kink
+    (locate's doc). From the dense map (scipy's DOP853: every turning point)."""
+    if system.grazing:
+        return ""
+    s = system.at(last.p1, last.p2)
+    try:
+        pmap = sh.period_map(sh.PeriodicModel(s), last.z0, s.omega, system.rtol, system.params[0], system.periods)
+    except sh.ShootingError:
+        return ""
+    near = [x for x in pmap.extrema if abs(x - CONTACT_EDGE) <= GRAZING_NEAR]
+    if not near:
+        return ""
+    return (f": a turning point of the orbit at x = {near[0]:.10g} grazes the contact edge (the {system.kind} "
+            f"system has a kink there{'' if near[0] <= last.x_min + GRAZING_NEAR else '; not the lowest one, which the grazing events follow'})")
 
 
 def parameters_turn(before: CurvePoint, at: CurvePoint, after: CurvePoint) -> bool:
@@ -431,12 +454,14 @@ class Curves:
 
 
 def curves_from_branch(branch, kind: str, param2: str, p2_to: float, p2_from: float | None = None, *,
-                       points: int = 200, max_points: int | None = None,
+                       points: int = 200, max_points: int | None = None, scale1: float | None = None,
                        progress: Callable[[str], None] | None = None) -> Curves:
-    """Every `kind` event of the one-parameter `branch` (continuation.Branch, its main branch) continued in
-    (branch param, param2) both ways, inside [p2_from, p2_to] (p2_from defaults to the branch's value of param2);
-    a curve that comes back to another event of the branch stops there (one curve through both). The step is
-    sized like a branch's: 1.5 / points of the scaled arclength (each parameter scaled by its range)."""
+    """Every `kind` event of the one-parameter `branch` (continuation.Branch: its own points, of period n T for
+    a doubled branch, whose curves are then of the n T orbits) continued in (branch param, param2) both ways,
+    inside [p2_from, p2_to] (p2_from defaults to the branch's value of param2); a curve that comes back to another
+    event of the branch stops there (one curve through both). The step is sized like a branch's: 1.5 / points of
+    the scaled arclength (each parameter scaled by its range; param's by scale1 if given, e.g. the range of the
+    period-T branch for a doubled branch that spans less of it)."""
     t0, c0 = time.perf_counter(), time.process_time()
     problem = branch.problem
     param1 = problem.param
@@ -444,7 +469,7 @@ def curves_from_branch(branch, kind: str, param2: str, p2_to: float, p2_from: fl
     p2_from = p2_here if p2_from is None else p2_from
     lo2, hi2 = min(p2_from, p2_to), max(p2_from, p2_to)
     values = [pt.p for pt in branch.points]
-    scales = (max(values) - min(values) or 1.0, (hi2 - lo2) or abs(p2_here) or 1.0)
+    scales = (scale1 or max(values) - min(values) or 1.0, (hi2 - lo2) or abs(p2_here) or 1.0)
     system = Augmented(problem.scene, kind, param1, param2, scales, problem.periods, problem.rtol)
     events = [pt for pt in branch.points if pt.event == kind]
     starts = []
@@ -512,7 +537,8 @@ def rows(curves: Curves) -> list[dict]:
     out = []
     for curve in curves.curves:
         for pt in curve.points:
-            out.append({"kind": pt.kind, "curve": curve.index, p1: pt.p1, p2: pt.p2, "x0": float(pt.z0[0]),
+            out.append({"kind": pt.kind, "curve": curve.index, "periods": pt.periods, p1: pt.p1, p2: pt.p2,
+                        "x0": float(pt.z0[0]),
                         "v0": float(pt.z0[1]), "period": pt.period, "x_min": pt.x_min, "x_max": pt.x_max,
                         "event": pt.event, "rho1_re": float(pt.multipliers[0].real),
                         "rho2_re": float(pt.multipliers[1].real), "residual": pt.residual, "g": pt.g,

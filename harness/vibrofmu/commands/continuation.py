@@ -193,16 +193,21 @@ def run(args) -> int:
 
         kinds = two.KINDS if args.follow == "all" else (args.follow,)
         found = []
+        scale1 = abs(args.stop - args.start)
         for kind in kinds:
-            if not any(pt.event == kind for pt in result.points):
-                print(f"no {kind} on the branch: no {kind} curve")
+            if not any(pt.event == kind for br in [result, *result.doubled] for pt in br.points):
+                print(f"no {kind} on the branches: no {kind} curve")
                 continue
-            try:
-                found.append(two.curves_from_branch(result, kind, args.param2, args.to2, args.from2,
-                                                    points=args.points, progress=say))
-            except ShootingError as error:
-                print(f"error: {kind} curves in ({args.param}, {args.param2}): {error}", file=sys.stderr)
-                status = 1
+            for name, br in [("branch", result)] + [(f"doubled branch {i}", b) for i, b in enumerate(result.doubled, 1)]:
+                if not any(pt.event == kind for pt in br.points):
+                    continue
+                try:  # a doubled branch's curves are of its orbits (period 2T, 4T, ...), stepped on the T range
+                    found.append(two.curves_from_branch(br, kind, args.param2, args.to2, args.from2,
+                                                        points=args.points, scale1=scale1, progress=say))
+                except ShootingError as error:
+                    print(f"error: {kind} curves of the {name} in ({args.param}, {args.param2}): {error}",
+                          file=sys.stderr)
+                    status = 1
         merged = two.merge(found, (args.param, args.param2))
         fixed = export.scene_text({k: v for k, v in scene.as_dict().items()
                                    if k not in ("x_start", "v_start", args.param, args.param2)})
