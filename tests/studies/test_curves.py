@@ -425,7 +425,7 @@ def test_the_fold_curve_creeping_towards_the_lower_electrode_ends_as_pull_in_ahe
                                           ("omega", "Delta")), set())
     labels = [line.get_label() for line in ax.get_lines()]
     plt.close(fig)
-    assert "curve ends creeping towards pull-in" in labels and "curve stopped (point budget)" not in labels
+    assert "curve ends creeping towards pull-in" in labels and "curve stopped (point budget or step)" not in labels
 
 
 @pytest.mark.slow

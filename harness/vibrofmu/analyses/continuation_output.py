@@ -363,6 +363,8 @@ def agreement_table(data: dict) -> list[str]:
 # ----- two-parameter curves (--follow) ------------------------------------------------------------------------
 
 CURVE_STYLE = {"fold": ("-", "tab:red"), "period-doubling": ("--", "tab:purple"), "grazing": ("-.", "tab:orange")}
+# the curves of a doubled branch's orbits: a dash pattern per period (the colour stays the kind's)
+DOUBLED_DASHES = {2: ":", 4: (0, (6, 2, 1, 2, 1, 2)), 8: (0, (1, 4))}
 # one marker per codimension-two point (curves.CODIM2; a grazing one hollow: the curve is seen through it)
 CODIM2_MARKERS = {"cusp": ("*", "k"), "grazing-fold": ("P", "tab:brown"), "grazing-flip": ("D", "tab:green"),
                   "fold-flip": ("s", "tab:cyan")}
@@ -409,10 +411,10 @@ def draw_curves(ax, curves: two.Curves, seen: set, label: str = "{kind} curve") 
         style, color = CURVE_STYLE[curve.kind]
         periods = curve.points[0].periods if curve.points else 1
         name = curve.kind if periods == 1 else f"{curve.kind} (period-{periods}T orbits)"
-        if periods > 1:  # a doubled branch's curve: dotted, thinner
-            style = ":"
-        ax.plot([pt.p1 for pt in curve.points], [pt.p2 for pt in curve.points], style, color=color,
-                lw=1.5 if periods == 1 else 1.2, label=label.format(kind=name) if name not in seen else None)
+        if periods > 1:  # a doubled branch's curve: in its kind's colour, a dash pattern per period, thinner
+            style = DOUBLED_DASHES.get(periods, ":")
+        ax.plot([pt.p1 for pt in curve.points], [pt.p2 for pt in curve.points], color=color,
+                ls=style, lw=1.5 if periods == 1 else 1.2, label=label.format(kind=name) if name not in seen else None)
         seen.add(name)
         for pt in curve.points:
             if pt.event:
@@ -425,9 +427,9 @@ def draw_curves(ax, curves: two.Curves, seen: set, label: str = "{kind} curve") 
                 ax.plot(last.p1, last.p2, "v", color="k", ms=10, mfc="tab:red", zorder=5,
                         label="curve ends creeping towards pull-in" if "pull-in" not in seen else None)
                 seen.add("pull-in")
-            elif "stopped at" in why:
+            elif "stopped at" in why or why.startswith("step below"):
                 ax.plot(last.p1, last.p2, "X", color="tab:red", ms=9,
-                        label="curve stopped (point budget)" if "stop" not in seen else None)
+                        label="curve stopped (point budget or step)" if "stop" not in seen else None)
                 seen.add("stop")
 
 
