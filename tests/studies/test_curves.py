@@ -460,3 +460,19 @@ def test_the_doubled_branch_flip_curve_solves_an_independent_period_two_flip_sys
     scene = CHAOS_SCENE.with_values(omega=last.p1, Delta=last.p2)
     turning = cont.n_period_map(scene, "omega", last.z0, 2, dense=True).extrema
     assert np.min(np.abs(turning - cont.CONTACT_EDGE)) <= curves.GRAZING_NEAR
+
+
+@pytest.mark.slow
+def test_follow_continues_the_curves_of_the_doubled_branches_too(tmp_path, capsys):
+    import pyarrow.parquet as pq
+
+    from vibrofmu.cli import main
+
+    code = main(["continuation", "--param", "omega", "--from", "2.2", "--to", "1.785", "--points", "20",
+                 "--max-period", "2", "--set", "mu=0.1", "--set", "Delta=2.5", "--set", "R=3", "--set", "beta=0",
+                 "--set", "gamma=0", "--follow", "period-doubling", "--param2", "Delta", "--to2", "2.6",
+                 "--out", str(tmp_path)])
+    assert code == 0
+    table = pq.read_table(tmp_path / "curves.parquet").to_pydict()
+    assert set(zip(table["kind"], table["periods"])) == {("period-doubling", 1), ("period-doubling", 2)}
+    assert "period-doubling curve 1 of period-2T orbits" in capsys.readouterr().out
