@@ -30,7 +30,9 @@ and `vibrofmu report` rewrites the text between them (the markers stay). Blocks:
              calibration_RUNG.json files (`python -m vibrofmu.analyses.error_calibration campaign RUNG n seed`) in the
              --from folders (deterministic given the files; not run by the report itself: an hour of campaigns).
 - auto:      fidelity auto's choice against the oracle over random (scene, tolerance) pairs, from an auto.json
-             (`python -m vibrofmu.analyses.error_calibration auto n seed`) in the --from folders (costs are timings).
+             (`python -m vibrofmu.analyses.error_calibration auto n seed`) in the --from folders (costs are timings);
+             --check compares its counts and choices (AUTO_COMPARED) with a replay of the documented campaign's pairs
+             (error_calibration.auto_replay: auto's choices and their runs, seconds; AUTO_REPLAY in a --from folder).
 - auto_costs: the averaged and analytic rungs' set-up and table costs that fidelity auto prices, measured, beside
              its constants, from a costs.json (`python -m vibrofmu.analyses.error_calibration costs n seed`), and the
              paper scene's candidates from pair_*.json files (`... error_calibration pair stop tolerance rounds`) in
@@ -40,7 +42,8 @@ and `vibrofmu report` rewrites the text between them (the markers stay). Blocks:
              the --from folders, else from a fresh run of CASCADE_ARGV (seconds); its CPU time depends on the
              machine (the block says so; --check compares every other number: MACHINE_NUMBERS).
 - curve_speed: the cost of a fold curve (two-parameter continuation) from a bench.json of `bench --curve` in the
-             --from folders (a timing: not run by the report itself, never compared by --check).
+             --from folders (not run by a full report); --check runs `bench --curve` unless a --from folder holds
+             one and compares its points and residuals, the times and run record masked (CURVE_MACHINE).
 - auto_setup: fidelity auto's set-up and each rung's estimate over its initialisation, from a bench.json (`bench`,
              or `bench --auto-only`; timings, never compared by --check).
 - fuzz:      a fuzzing campaign of the FMI layers' libFuzzer targets, per target its executions, rates, CPU time,
@@ -54,9 +57,9 @@ and `vibrofmu report` rewrites the text between them (the markers stay). Blocks:
 Without --from, the oafm, stability, speed, cascade and cusp_order blocks come from fresh runs of `vibrofmu oafm`,
 `stability`, `bench`, the cascade's `continuation` and the cusp study (quick: oafm study to order 3, `bench
 --quick`). `--check` regenerates every block whose numbers do not depend on the machine (accuracy, ssp,
-ssp_orderings, container, ranges, calibration_replay, and oafm, stability, cascade and cusp_order from the --from
-summaries or else from fresh full runs) and compares them with the documents' text, the numbers of MACHINE_NUMBERS
-(CPU times) masked in both: exit 1 naming the block that differs; it prints the blocks it does not compare
+ssp_orderings, container, ranges, calibration_replay, and oafm, stability, cascade, cusp_order, curve_speed and auto
+from the --from summaries or else from fresh runs) and compares them with the documents' text, what depends on the
+machine masked in both (comparable: the CPU times of MACHINE_NUMBERS, CURVE_MACHINE, the auto block's timed columns): exit 1 naming the block that differs; it prints the blocks it does not compare
 (commands/report.py NOT_CHECKED) and why, and those blocks say themselves which of their numbers depend on the
 machine. `--quick` also skips the container's H = 0.01. `--quick` and `--from` never rewrite the documents: they
 write the documents with their blocks to a folder (--out, default out/report); only a full run rewrites them in
@@ -65,6 +68,7 @@ place.
 from __future__ import annotations
 
 import json
+import math
 import os
 import platform
 import re
@@ -133,10 +137,40 @@ def parse_blocks(text: str, where: str = "") -> dict[str, str]:
     return blocks
 
 
+# curve_speed: the run's date, CPUs and load (the parenthesis after the command) and the curve's times
+CURVE_MACHINE = re.compile(r"(?<=^`vibrofmu bench --curve` \()[^)]*(?=\): a fold curve)|(?<= in \(ω, Δ\) in )[0-9.]+ "
+                           r"s wall clock, [0-9.]+ s CPU \([0-9]+ ms CPU per point\)", re.M)
+# auto: the columns --check compares in each of the block's tables (by the table's first header cell); a cell "a, b"
+# of the costs table is auto's cost a beside the measured b, of which a alone is compared
+AUTO_COMPARED = {"pairs (seed)": (0, 1, 2, 3, 4), "auto chose": (0, 1, 2), "candidate": (0, 1)}
+DATE = re.compile(r"\d{4}-\d\d-\d\d \d\d:\d\d UTC")
+
+
 def comparable(name: str, body: str) -> str:
-    """body as `report --check` compares it: stripped, its machine-dependent numbers (MACHINE_NUMBERS) masked."""
-    pattern = MACHINE_NUMBERS.get(name)
+    """body as `report --check` compares it: stripped, its machine-dependent numbers masked (MACHINE_NUMBERS, the
+    curve_speed block's CURVE_MACHINE; of the auto block's tables the AUTO_COMPARED columns only, its date masked)."""
+    if name == "auto":
+        return _auto_comparable(body)
+    pattern = MACHINE_NUMBERS.get(name) or (CURVE_MACHINE if name == "curve_speed" else None)
     return (pattern.sub("…", body) if pattern else body).rstrip()
+
+
+def _auto_comparable(body: str) -> str:
+    lines, columns = [], None
+    for line in body.rstrip().splitlines():
+        if not line.startswith("|"):
+            columns = None
+            lines.append(DATE.sub("…", line))
+            continue
+        cells = [cell.strip() for cell in line.strip().strip("|").split("|")]
+        if columns is None:  # a table's header
+            columns = AUTO_COMPARED.get(cells[0], tuple(range(len(cells))))
+            costs = cells[0] == "candidate"
+        kept = [cells[i] if i < len(cells) else "" for i in columns]
+        if costs:  # auto's cost, not the measured one beside it
+            kept[1] = kept[1].split(",")[0]
+        lines.append("| " + " | ".join(kept) + " | …")
+    return "\n".join(lines)
 
 
 def replace_blocks(text: str, bodies: dict[str, str]) -> str:
@@ -430,14 +464,22 @@ def calibration_block(sources: list[Path]) -> str | None:
                       "--only calibration --from DIR`):", "", "```", *commands, "```"])
 
 
-AUTO_MACHINE = ("Depend on the machine (so `vibrofmu report --check` does not compare this block): the oracle (the "
-                "candidate measured cheapest among those that meet the tolerance), so every column that compares "
-                "with it, and every measured cost. Auto's choices and its own costs (vibromodel.auto's table), met "
-                "and refused do not.")
+AUTO_MACHINE = ("Depend on the machine: the oracle (the candidate measured cheapest among those that meet the "
+                "tolerance), so every column that compares with it, every measured cost, and the date; and auto's "
+                "set-up as modelled for each pair follows which candidates that pair built and whether the analytic "
+                "rung's fit was cached. `vibrofmu report --check` masks those. The pairs, met, refused, compared, "
+                "auto's choices and how many of each met, and auto's own loop costs (vibromodel.auto's table) do not "
+                "depend on the machine: `vibrofmu report --check` derives them again (the same pairs, auto's choice "
+                "and the chosen candidate's run: seconds) and compares them.")
+
+
+AUTO_REPLAY = "auto_replay.json"  # error_calibration.auto_replay's output: what `report --check` runs for this block
 
 
 def auto_block(sources: list[Path]) -> str | None:
-    """The auto-against-the-oracle table from the first auto.json in the folders."""
+    """The auto-against-the-oracle table from the first auto.json in the folders; else, from the first AUTO_REPLAY
+    (`report --check`'s), the same block with only what the replay derives (its costs and dates "…", which --check
+    masks in the documents too: comparable)."""
     from vibrofmu.analyses.error_calibration import auto_table
 
     for folder in sources:
@@ -445,11 +487,27 @@ def auto_block(sources: list[Path]) -> str | None:
         if file.is_file():
             result = json.loads(file.read_text())
             when = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime(file.stat().st_mtime))
-            return "\n".join(auto_table(result) + [
-                "", f"Measured {when} (costs: thread CPU time on a shared machine). Regenerate: `python -m "
-                f"vibrofmu.analyses.error_calibration auto {result['n']} {result['seed']} > DIR/auto.json`, then "
-                "`vibrofmu report --only auto --from DIR`.", "", AUTO_MACHINE])
+            return _auto_body(auto_table(result), result, when)
+    for folder in sources:
+        file = folder / AUTO_REPLAY
+        if file.is_file():
+            from vibromodel.auto import candidates, describe
+            from vibromodel.plant import Settings
+
+            result = json.loads(file.read_text())
+            result["summary"] = {key: math.nan if value is None else value  # the cost shares: JSON's null
+                                 for key, value in result["summary"].items()}
+            costs = {describe(candidate): (cost, math.nan, math.nan, math.nan)
+                     for cost, candidate in candidates(Settings())}  # auto's own; the measured ones are timings
+            return _auto_body(auto_table(result, costs), result, "…")
     return None
+
+
+def _auto_body(table: list[str], result: dict, when: str) -> str:
+    return "\n".join(table + [
+        "", f"Measured {when} (costs: thread CPU time on a shared machine). Regenerate: `python -m "
+        f"vibrofmu.analyses.error_calibration auto {result['n']} {result['seed']} > DIR/auto.json`, then "
+        "`vibrofmu report --only auto --from DIR`.", "", AUTO_MACHINE])
 
 
 def auto_costs_block(sources: list[Path]) -> str | None:
@@ -574,8 +632,10 @@ def curve_speed_block(sources: list[Path]) -> str | None:
                        f"det(M − I) = 0 by {c['fold_system']['checked_by']}: |P(z) − z| ≤ "
                        f"{c['fold_system']['max_residual']:.1e}, |det(M − I)| ≤ {c['fold_system']['max_det']:.1e} "
                        f"over its {c['fold_system']['points']} points." if "fold_system" in c else "")
-                    + " Depend on the machine (so `vibrofmu report --check` does not compare this block): the times. "
-                    + ("The points and the residuals do not." if "fold_system" in c else "The points do not."))
+                    + " Depend on the machine: the date, the CPUs, the load and the times (`vibrofmu report --check` "
+                    "masks them). " + ("The points and the residuals do not" if "fold_system" in c else
+                                       "The points do not")
+                    + " (`vibrofmu report --check` runs `vibrofmu bench --curve` again and compares them).")
     return None
 
 

@@ -125,6 +125,61 @@ def test_the_cpu_time_is_the_only_number_check_leaves_out_of_the_study_blocks():
         assert masked.replace("…", pattern.findall(body)[0]) == body.rstrip()
 
 
+def test_check_masks_the_curve_speed_blocks_machine_and_times_only():
+    """report.comparable masks the curve_speed block's run record (date, CPUs, load) and its times, each once, and
+    nothing else: the points and the residuals are compared."""
+    body = report.parse_blocks((ROOT / "docs" / "continuation.md").read_text())["curve_speed"].rstrip()
+    masked = report.comparable("curve_speed", body)
+    found = report.CURVE_MACHINE.findall(body)
+    assert len(found) == 2 and masked.count("…") == 2
+    assert re.search(r"\d{4}-\d\d-\d\d \d\d:\d\d UTC, \d+ CPUs, load average", found[0])
+    assert re.fullmatch(r"[0-9.]+ s wall clock, [0-9.]+ s CPU \(\d+ ms CPU per point\)", found[1])
+    assert masked.replace("…", found[0], 1).replace("…", found[1], 1) == body
+    assert re.search(r"a fold curve of \d+ points in .*\|P\(z\) − z\| ≤ \S+, \|det\(M − I\)\| ≤ \S+ over its \d+ points",
+                     masked)
+
+
+def test_check_compares_the_auto_blocks_counts_and_choices_not_its_costs():
+    """report.comparable on docs/rungs.md's auto block: a change of any cell of its tables, one at a time, changes
+    the compared text exactly when the cell is one --check derives again (report.AUTO_COMPARED: the counts, met,
+    refused, compared, auto's choices and auto's own loop cost; not the oracle's columns, the measured costs or
+    auto's modelled set-up); a change of the date does not."""
+    body = report.parse_blocks((ROOT / "docs" / "rungs.md").read_text())["auto"].rstrip()
+    base = report.comparable("auto", body)
+    lines, columns, cells_seen = body.splitlines(), None, 0
+    for i, line in enumerate(lines):
+        if not line.startswith("|"):
+            columns = None
+            continue
+        cells = line.strip().strip("|").split("|")
+        if columns is None:  # the header
+            columns = report.AUTO_COMPARED[cells[0].strip()]
+            costs = cells[0].strip() == "candidate"
+            continue
+        if set(line) <= set("|-"):
+            continue
+        for j, cell in enumerate(cells):
+            parts = cell.split(",") if costs and j >= 1 else [cell]
+            for k in range(len(parts)):
+                doctored = [*parts[:k], " 9.87654", *parts[k + 1:]]
+                changed = cells[:j] + [",".join(doctored)] + cells[j + 1:]
+                text = "\n".join([*lines[:i], "|" + "|".join(changed) + "|", *lines[i + 1:]])
+                compared = j in columns and not (costs and (j == 2 or k == 1))
+                assert (report.comparable("auto", text) != base) == compared, (line, j, k)
+                cells_seen += 1
+    assert cells_seen >= 2 * 7 + 8 * 6 + 11 * 5  # the documented campaign's tables: every cell tried
+    when = re.search(r"Measured (\S+ \S+ UTC)", body)[1]
+    assert report.comparable("auto", body.replace(when, "2031-01-01 00:00 UTC")) == base
+
+
+def test_the_replayed_auto_campaign_is_the_documented_one():
+    """--check replays the campaign (pairs, seed) the auto block reports."""
+    from vibrofmu.analyses.error_calibration import DOCUMENTED_AUTO
+
+    block = report.parse_blocks((ROOT / "docs" / "rungs.md").read_text())["auto"]
+    assert re.findall(r"error_calibration auto (\d+) (\d+) ", block) == [tuple(map(str, DOCUMENTED_AUTO))]
+
+
 def test_the_report_runs_the_documented_cascade():
     """The cascade --check and a full report run (report.CASCADE_ARGV) is the command the block names."""
     block = report.parse_blocks((ROOT / "docs" / "continuation.md").read_text())["cascade"]
@@ -143,7 +198,8 @@ def test_the_replayed_campaigns_are_the_documented_ones():
 # checked by the slow test below: the container (~26 s of FMU runs, three H down to 0.01), the SSP orderings
 # (a minute of runs: three orderings at three H) and the oafm block (a full `vibrofmu oafm`: ~50 s of CPU)
 SLOW_CHECKS = ("container", "ssp_orderings", "oafm", "calibration_replay",  # (+ the replay: ten seconds, and the
-               "cascade", "cusp_order")  # cascade and the cusp study: ~25 s of wall clock on a loaded machine)
+               "cascade", "cusp_order",  # cascade and the cusp study: ~25 s of wall clock on a loaded machine,
+               "curve_speed", "auto")  # `bench --curve`: 17 s of CPU, the auto replay: 8 s)
 
 
 def test_report_check_matches_a_fresh_run(plant_fmu, controller_fmu, closed_loop_fmu, capsys, monkeypatch):
@@ -164,8 +220,8 @@ def test_report_check_of_every_deterministic_block(plant_fmu, controller_fmu, cl
     container's table and the oafm and stability studies' blocks too."""
     assert main(["report", "--check", "--fmu-dir", str(plant_fmu.parent), "--root", str(ROOT)]) == 0, \
         capsys.readouterr().err
-    assert ("accuracy, calibration_replay, cascade, container, cusp_order, oafm, ranges, ssp, ssp_orderings, stability "
-            "match" in capsys.readouterr().out)
+    assert ("accuracy, auto, calibration_replay, cascade, container, curve_speed, cusp_order, oafm, ranges, ssp, "
+            "ssp_orderings, stability match" in capsys.readouterr().out)
 
 
 @pytest.mark.slow
@@ -179,3 +235,16 @@ def test_report_check_recomputes_the_cascade_and_the_cusp_study(capsys, monkeypa
     monkeypatch.setattr(command, "FROM_CHECKED", ("cascade", "cusp_order"))
     assert main(["report", "--check", "--root", str(ROOT)]) == 0, capsys.readouterr().err
     assert "blocks cascade, cusp_order match a fresh run" in capsys.readouterr().out
+
+
+@pytest.mark.slow
+def test_report_check_recomputes_the_curve_and_the_auto_choices(capsys, monkeypatch):
+    """`report --check`'s own `vibrofmu bench --curve` and replay of the documented auto campaign give the published
+    curve_speed and auto blocks, every number but the timings (no FMU; measured 17 s of CPU for the curve with its
+    check of every point, 8 s for the replay of 500 pairs)."""
+    import vibrofmu.commands.report as command
+
+    monkeypatch.setattr(report, "DETERMINISTIC", ())
+    monkeypatch.setattr(command, "FROM_CHECKED", ("curve_speed", "auto"))
+    assert main(["report", "--check", "--root", str(ROOT)]) == 0, capsys.readouterr().err
+    assert "blocks auto, curve_speed match a fresh run" in capsys.readouterr().out

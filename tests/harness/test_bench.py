@@ -6,6 +6,7 @@ import math
 import struct
 import sys
 import types
+from pathlib import Path
 
 import matplotlib.image
 import numpy as np
@@ -23,14 +24,30 @@ STAND_IN_ROWS = [{"name": "stand-in extreme row"}]
 
 
 @pytest.fixture(scope="module")
-def quick(plant_fmu, tmp_path_factory):
+def quick(plant_fmu, closed_loop_fmu, native_plant_fmu, plant_fmi3, tmp_path_factory):
     """(bench.json, stdout, out dir) of `vibrofmu bench --quick`, with a stand-in vibrofmu.analyses.extremes (the real
-    module has its own tests; this keeps the run short and checks the rows are passed through)."""
+    module has its own tests; this keeps the run short and checks the rows are passed through). The FMUs the bench
+    builds for itself from these sources (the closed loop for the ladder; the native plant as FMI 2.0 and 3.0 for the
+    FMI versions record) are the session's, built from the same sources by the same builders (conftest.py): three
+    builds fewer (each a compile of the whole model, a third of this run's CPU). The session's native FMU may hold a
+    win64 DLL and a reference result besides (the bench leaves them out to build faster): the linux64 binary the
+    bench times is the same."""
+    from vibrofmu.fmus import build as fmu_build
+    from vibrofmu.fmus import native
+
     out = tmp_path_factory.mktemp("bench")
     extremes = types.ModuleType("vibrofmu.analyses.extremes")
     extremes.extreme_rows = lambda quick, fmu: [{**row, "quick": quick, "fmu": str(fmu)} for row in STAND_IN_ROWS]
+    built = {2: native_plant_fmu, 3: plant_fmi3}
+
+    def session_native(pythonfmu, out_dir, win64=None, reference=True, fmi_version=2):
+        assert Path(pythonfmu).resolve() == Path(plant_fmu).resolve()  # the bench's own plant: the session's native FMUs are built from it
+        return built[fmi_version]
+
     stdout, stderr = io.StringIO(), io.StringIO()
     with pytest.MonkeyPatch.context() as mp, contextlib.redirect_stdout(stdout), contextlib.redirect_stderr(stderr):
+        mp.setattr(fmu_build, "build_closed_loop", lambda folder: closed_loop_fmu)
+        mp.setattr(native, "build_native", session_native)
         mp.setitem(sys.modules, "vibrofmu.analyses.extremes", extremes)
         # the cli imports it as `from vibrofmu.analyses import extremes`: the package attribute, once imported
         mp.setattr(vibrofmu.analyses, "extremes", extremes, raising=False)
@@ -324,3 +341,28 @@ def test_auto_against_the_oracle_is_recorded_and_printed(quick):
             assert row["cost_ratio_run"] == pytest.approx(mine["run"] / max(best, 1e-9))
             assert row["met"] == mine["met"]
     assert "fidelity auto against the oracle" in stdout and "doStep loop" in stdout
+
+
+def test_the_auto_replay_derives_the_campaigns_choices_and_counts(quick, monkeypatch):
+    """error_calibration.auto_replay (what `report --check` runs for the auto block) on the quick campaign's pairs
+    (the same n and seed): the same choices, met, refusals and compared counts, without building every candidate.
+    Then with auto refusing every pair (choose patched), so that the replay builds and runs every candidate as the
+    campaign did: a refusal is right (met) exactly when none of the campaign's candidates met the tolerance."""
+    from vibrofmu.analyses import error_calibration
+    from vibromodel import auto
+    from vibromodel.parameters import ParameterError
+
+    campaign = quick[0]["auto"]
+    replay = error_calibration.auto_replay(bench.AUTO_PAIRS_QUICK, bench.AUTO_SEED)
+    assert [(r["outcome"], r.get("chosen"), r.get("met")) for r in replay["rows"]] == \
+        [(r["outcome"], r.get("chosen"), r.get("met")) for r in campaign["rows"]]
+    for key in ("pairs", "met_share", "refused", "compared_run", "compared_total"):
+        assert replay["summary"][key] == campaign["summary"][key], key
+
+    def refuse(scene, settings, tolerance, *args, **kwargs):
+        raise ParameterError("tolerance", tolerance, "refused here")
+
+    monkeypatch.setattr(auto, "choose", refuse)
+    refused = error_calibration.auto_replay(bench.AUTO_PAIRS_QUICK, bench.AUTO_SEED)
+    assert [(r["outcome"], r["met"]) for r in refused["rows"]] == \
+        [("refused", not any(c.get("met") for c in r["candidates"])) for r in campaign["rows"]]

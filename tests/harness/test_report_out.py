@@ -17,7 +17,8 @@ from vibrofmu.cli import main
 
 BLOCK = "<!-- report:ranges -->\ngenerated ranges table\n<!-- /report:ranges -->"
 PUBLISHED = (("oafm", "model.md"), ("stability", "numerics.md"), ("cascade", "continuation.md"),
-             ("cusp_order", "continuation.md"))  # the summary blocks --check compares, and where they are
+             ("cusp_order", "continuation.md"), ("curve_speed", "continuation.md"),
+             ("auto", "rungs.md"))  # the summary blocks --check compares, and where they are
 
 
 def digests(folder: Path) -> dict:
@@ -83,12 +84,13 @@ def test_check_names_the_blocks_it_does_not_compare(stand_ins, monkeypatch, caps
     monkeypatch.setattr(command, "run_studies", lambda *args: studies.append(args[-1]) or [])
     assert main(["report", "--check", "--root", str(root), "--fmu-dir", str(fmus)]) == 0
     out = capsys.readouterr().out
-    assert "blocks cascade, cusp_order, oafm, ranges, stability match a fresh run" in out
+    assert "blocks auto, cascade, curve_speed, cusp_order, oafm, ranges, stability match a fresh run" in out
     assert "not compared: machine (" in out and "speed (timings and instruction counts" in out
     assert "peers (timings of other ODE solvers" in out
-    assert "cascade (" not in out and "cusp_order (" not in out  # compared: not in the list of those that are not
-    # without --from: fresh full runs of the four, never the bench
-    assert studies == [("oafm", "stability", "cascade", "cusp_order")]
+    for name in ("cascade", "cusp_order", "curve_speed", "auto"):  # compared: not in the list of those that are not
+        assert f"{name} (" not in out
+    # without --from: fresh full runs of the studies, the curve's bench and the auto replay, never the full bench
+    assert studies == [("oafm", "stability", "cascade", "cusp_order", "curve_speed", "auto")]
     assert digests(root) == before
 
 
@@ -108,7 +110,7 @@ def test_check_compares_the_oafm_and_stability_blocks(stand_ins, monkeypatch, ca
         if code:
             assert "docs/model.md: oafm" in captured.err and captured.err.startswith("error:")
         else:
-            assert "blocks cascade, cusp_order, oafm, stability match a fresh run" in captured.out
+            assert "blocks auto, cascade, curve_speed, cusp_order, oafm, stability match a fresh run" in captured.out
 
 
 def test_check_refuses_quick(stand_ins, capsys):
@@ -118,24 +120,30 @@ def test_check_refuses_quick(stand_ins, capsys):
     assert err.startswith("error: --quick") and len(err.splitlines()) == 1
 
 
-STORED = Path(__file__).resolve().parents[1] / "data" / "report_studies"  # outputs of the two documented studies
-FILES = {"cascade": "summary.json", "cusp_order": "cusp_order.json"}
+STORED = Path(__file__).resolve().parents[1] / "data" / "report_studies"  # outputs of the documented studies
+FILES = {"cascade": "summary.json", "cusp_order": "cusp_order.json", "curve_speed": "bench.json",
+         "auto": "auto_replay.json"}  # what --check's run of each study writes (auto: error_calibration.auto_replay)
+# auto: the documents' block comes from a campaign (error_calibration.auto_campaign 6 7, auto.json; docs/rungs.md's
+# is 500 7), which --check's run does not repeat: it replays the same pairs (auto_replay 6 7, the stored output)
+CAMPAIGN = STORED / "auto_campaign"
 
 
 @pytest.fixture
 def studied(tmp_path, monkeypatch):
-    """A copy of the documents whose cascade and cusp_order blocks are made from the stored study outputs; --check
-    compares those two blocks only, the studies' runs replaced by copies of the stored outputs (`runs`: the studies
-    --check asked for). Returns (root, fmus, {block: its study's folder}, runs)."""
+    """A copy of the documents whose cascade, cusp_order, curve_speed and auto blocks are made from the stored study
+    outputs (auto's from the stored campaign); --check compares those blocks only, the studies' runs replaced by
+    copies of the stored outputs (`runs`: the studies --check asked for). Returns (root, fmus, {block: its study's
+    folder}, runs)."""
     import vibrofmu.commands.report as command
     import vibrofmu.report as report
 
     root, fmus = stand_in_checkout(tmp_path)
     shutil.copytree(STORED, tmp_path / "studies")
     folders = {name: tmp_path / "studies" / name for name in FILES}
-    doc = root / "docs" / "continuation.md"
-    doc.write_text(report.replace_blocks(doc.read_text(), {name: report.summary_block(name, [folder])
-                                                           for name, folder in folders.items()}))
+    for doc in (root / "docs" / "continuation.md", root / "docs" / "rungs.md"):
+        doc.write_text(report.replace_blocks(doc.read_text(), {
+            name: report.summary_block(name, [CAMPAIGN if name == "auto" else folder])
+            for name, folder in folders.items()}))
     monkeypatch.setattr(report, "DETERMINISTIC", ())
     monkeypatch.setattr(command, "FROM_CHECKED", tuple(FILES))
     runs = []
@@ -157,6 +165,20 @@ def _shift(path, factor=1.0, offset=0.0):
 # last digit the block prints of that number (10 decimals for a doubling point, 6 for a multiplier, 4 for a ratio,
 # 10 significant digits for a cusp's Delta, 12 decimals for its omega, 3 decimals for an order), so it shows
 CHANGES = [("cascade", lambda data: None, False),
+           ("curve_speed", _shift(("curve", "cpu_seconds"), 40.0, 7.0), False),  # timings, the machine and its load
+           ("curve_speed", _shift(("curve", "seconds"), 40.0, 7.0), False),
+           ("curve_speed", _shift(("curve", "cpu_seconds_per_point"), 40.0), False),
+           ("curve_speed", _shift(("curve", "load_average_at_start", 0), offset=9.0), False),
+           ("curve_speed", _shift(("curve", "cpu_count"), offset=6), False),
+           ("curve_speed", _shift(("curve", "points"), offset=1), True),
+           # |P(z) - z| and |det(M - I)| print 2 significant digits: a 10 % change shows
+           ("curve_speed", _shift(("curve", "fold_system", "max_residual"), factor=1.1), True),
+           ("curve_speed", _shift(("curve", "fold_system", "max_det"), factor=1.1), True),
+           ("curve_speed", _shift(("curve", "fold_system", "points"), offset=-1), True),
+           ("auto", _shift(("rows", 2, "met"), factor=0), True),  # a pair auto's choice no longer meets
+           ("auto", lambda data: data["rows"][1].update(chosen="fidelity 3"), True),
+           ("auto", _shift(("summary", "refused"), offset=1), True),
+           ("auto", _shift(("summary", "compared_run"), offset=-1), True),
            ("cascade", _shift(("cpu_seconds",), 40.0, 7.0), False),  # the CPU time: depends on the machine
            ("cascade", _shift(("cascade", "doublings", 2, "value"), offset=2e-10), True),
            ("cascade", _shift(("cascade", "doublings", 4, "multipliers", 0, 0), offset=2e-6), True),
@@ -170,7 +192,9 @@ CHANGES = [("cascade", lambda data: None, False),
 
 
 @pytest.mark.parametrize("study, change, seen", CHANGES, ids=[
-    "cascade-as-stored", "cascade-cpu-time", "doubling-point", "multiplier", "ratio", "points", "cusp-cpu-time",
+    "cascade-as-stored", "curve-cpu-time", "curve-wall-clock", "curve-per-point", "curve-load", "curve-cpus",
+    "curve-points", "curve-residual", "curve-det", "curve-checked-points", "auto-met", "auto-choice", "auto-refused",
+    "auto-compared", "cascade-cpu-time", "doubling-point", "multiplier", "ratio", "points", "cusp-cpu-time",
     "exact-cusp-Delta", "slow-flow-omega", "order", "local-order"])
 def test_check_compares_the_cascade_and_cusp_numbers_not_their_cpu_times(studied, capsys, study, change, seen):
     root, fmus, folders, runs = studied
@@ -180,15 +204,16 @@ def test_check_compares_the_cascade_and_cusp_numbers_not_their_cpu_times(studied
     file.write_text(json.dumps(data))
     code = main(["report", "--check", "--root", str(root), "--fmu-dir", str(fmus)])
     captured = capsys.readouterr()
-    assert runs == [("cascade", "cusp_order")]  # both studies run again (stand-ins here), never read from the docs
+    assert runs == [tuple(FILES)]  # every study run again (stand-ins here), never read from the docs
     errors = [line for line in captured.err.splitlines() if line.startswith("error:")]
     if seen:  # one error line naming the changed block, and only it
         assert code == 1 and len(errors) == 1 and errors[0].startswith("error: generated numbers differ")
-        other = next(name for name in FILES if name != study)
-        assert f"docs/continuation.md: {study}" in errors[0] and other not in errors[0]
+        doc = "rungs.md" if study == "auto" else "continuation.md"
+        assert f"docs/{doc}: {study}" in errors[0]
+        assert not any(f": {other}" in errors[0] for other in FILES if other != study)
     else:
         assert code == 0 and not errors, captured.err
-        assert "blocks cascade, cusp_order match a fresh run" in captured.out
+        assert f"blocks {', '.join(sorted(FILES))} match a fresh run" in captured.out
 
 
 def test_check_runs_only_the_studies_the_from_folders_lack(studied, capsys):
@@ -197,7 +222,7 @@ def test_check_runs_only_the_studies_the_from_folders_lack(studied, capsys):
     root, fmus, folders, runs = studied
     argv = ["report", "--check", "--from", str(folders["cascade"]), "--root", str(root), "--fmu-dir", str(fmus)]
     assert main(argv) == 0
-    assert runs == [("cusp_order",)]
+    assert runs == [("cusp_order", "curve_speed", "auto")]
     file = folders["cascade"] / FILES["cascade"]
     data = json.loads(file.read_text())
     data["cascade"]["doublings"][0]["value"] += 1e-8

@@ -327,6 +327,67 @@ def auto_campaign(n: int = 500, seed: int = 0, h: float = 0.1, progress=None) ->
     return {"n": n, "seed": seed, "rows": rows, "summary": auto_summary(rows)}
 
 
+def auto_replay(n: int = 500, seed: int = 0, h: float = 0.1) -> dict:
+    """What of auto_campaign(n, seed, h) does not depend on the machine, derived again without its timings (for
+    `vibrofmu report --check`: ~10 s of CPU for 500 pairs where the campaign takes ~1 s a pair, building and timing
+    every candidate). The same pairs (the same draws of the same generator), the same reference, auto's choice
+    (vibromodel.auto.choose, as the campaign calls it) and the chosen plant's run (the campaign's _timed_run), so its
+    error and "met". The other candidates are built and run only where the campaign's counts need them: where auto
+    refused or its choice missed the tolerance, whether some candidate met it (a refusal is then wrong, and a miss
+    still has an oracle to be compared with). Rows as auto_campaign's (outcome, chosen, met, error) plus `oracle`
+    (some candidate met the tolerance), no costs; the summary's counts as auto_summary's (compared: the pairs with
+    both a choice and an oracle), its cost shares and medians nan."""
+    from vibromodel.auto import candidates, choose, describe
+
+    library, rows = campaign_kernel(), []
+    rng = np.random.default_rng(seed)
+
+    def met_by(candidate, scene, stop, exact, tolerance) -> bool:
+        try:
+            plant = make_plant(scene, candidate, 0.0, stop, library=library)
+        except (ParameterError, IntegrationError):
+            return False
+        x, _ = _timed_run(plant, lambda: make_plant(scene, candidate, 0.0, stop, library=library), stop, h)
+        m = min(len(x), len(exact))
+        return len(x) == len(exact) and (float(np.max(np.abs(x[:m] - exact[:m]))) if m else math.inf) <= tolerance
+
+    while len(rows) < n:
+        scene, stop, info = random_scene(rng)
+        tolerance = float(10 ** rng.uniform(-10, -1))
+        try:
+            exact, _ = run_steps(make_plant(scene, Settings(rtol=1e-12), 0.0, stop, library=library), stop, h)
+        except (ParameterError, IntegrationError) as error:
+            rows.append({**info, "tolerance": tolerance, "outcome": "reference refused", "message": str(error)[:200]})
+            continue
+        row = {**info, "tolerance": tolerance, "stop": stop}
+        try:
+            plant, chosen, _ = choose(scene, Settings(), tolerance,
+                                      lambda s, scene=scene, stop=stop: make_plant(scene, s, 0.0, stop, library=library),
+                                      span=stop)
+        except ParameterError:
+            chosen = None
+        if chosen is not None:
+            x, _ = _timed_run(plant, lambda: make_plant(scene, chosen, 0.0, stop, library=library), stop, h)
+            m = min(len(x), len(exact))
+            error = float(np.max(np.abs(x[:m] - exact[:m]))) if m else math.inf
+            met = len(x) == len(exact) and error <= tolerance
+            row.update(outcome="chosen", chosen=describe(chosen), met=met, error=error)
+        oracle = chosen is not None and row["met"] or any(
+            met_by(candidate, scene, stop, exact, tolerance) for _, candidate in candidates(Settings())
+            if chosen is None or _candidate_key(candidate) != _candidate_key(chosen))
+        if chosen is None:
+            row.update(outcome="refused", chosen=None, met=not oracle)
+        rows.append({**row, "oracle": oracle})
+    pairs = [r for r in rows if "met" in r]
+    compared = sum(r["outcome"] == "chosen" and r["oracle"] for r in pairs)
+    summary = {"pairs": len(pairs), "met_share": sum(r["met"] for r in pairs) / len(pairs) if pairs else math.nan,
+               "refused": sum(r["outcome"] == "refused" for r in pairs)}
+    for cost in ("run", "total"):
+        summary.update({f"compared_{cost}": compared, f"within_2x_{cost}_share": math.nan,
+                        f"cost_ratio_{cost}_median": math.nan})
+    return {"n": n, "seed": seed, "rows": rows, "summary": summary, "replay": True}
+
+
 def pair_costs(scene: Scene, stop: float, tolerance: float, rounds: int = 5, h: float = 0.1) -> dict:
     """One (scene, tolerance) pair measured as the auto campaign measures its pairs, each cost the least of `rounds`
     interleaved rounds (a millisecond's set-up on a shared machine is noisy): every candidate's set-up (make_plant with
@@ -547,6 +608,7 @@ TABLE_ORDER = ("exact", "rk4", "polynomial", "polynomial-paper", "averaged", "an
 # (rung, seed) of the campaigns docs/rungs.md's calibration block reports (tests/docs check the block's commands)
 DOCUMENTED_CAMPAIGNS = (("exact", 7), ("rk4", 7), ("polynomial", 7), ("polynomial-paper", 7), ("averaged", 7),
                         ("analytic", 7), ("analytic", 8))
+DOCUMENTED_AUTO = (500, 7)  # (pairs, seed) of the auto campaign docs/rungs.md's auto block reports
 REPLAYED_SCENES = 3  # per campaign: ~10 s of CPU in all (fidelity 4's fits the most)
 
 
@@ -576,8 +638,9 @@ def calibration_table(results: list[dict]) -> list[str]:
     return lines
 
 
-def auto_table(result: dict) -> list[str]:
-    """Markdown rows of an auto campaign (auto_campaign's output): the shares, then what auto and the oracle chose."""
+def auto_table(result: dict, costs: dict | None = None) -> list[str]:
+    """Markdown rows of an auto campaign (auto_campaign's output): the shares, then what auto and the oracle chose,
+    then auto's costs beside the measured ones (costs: measured_costs(result) unless given)."""
     s = result["summary"]
     lines = ["| pairs (seed) | met | refused | cost: | compared | ≤ 2× the oracle's | median / the oracle's |",
              "|---|---|---|---|---|---|---|"]
@@ -598,7 +661,7 @@ def auto_table(result: dict) -> list[str]:
               "loop |", "|---|---|---|---|---|---|"]
     lines += [f"| {name} | {n} | {met} | {same} | {within} | {loop} |"
               for name, (n, met, same, within, loop) in sorted(chosen.items(), key=lambda kv: -kv[1][0])]
-    costs = measured_costs(result)
+    costs = measured_costs(result) if costs is None else costs
     if costs:
         lines += ["", "The costs auto ranks by (vibromodel.auto) beside this campaign's medians over its pairs (the "
                   "doStep loop per output relative to the exact model's at rtol 10⁻⁸; the set-up in outputs of "

@@ -18,9 +18,9 @@ def options(p):
                                                         "order 3; bench --quick (default: off: the full runs)")
     p.add_argument("--check", action="store_true",
                    help="re-compute every block that does not depend on the machine (accuracy, ssp, ssp_orderings, "
-                        "container, ranges, calibration_replay, and oafm, stability, cascade and cusp_order from the "
-                        "--from summaries or else fresh full runs; their CPU times are not compared) and compare with "
-                        "the documents; write nothing (default: off)")
+                        "container, ranges, calibration_replay, and oafm, stability, cascade, cusp_order, curve_speed "
+                        "and auto from the --from summaries or else fresh runs: their timings are not compared) and "
+                        "compare with the documents; write nothing (default: off)")
     p.add_argument("--out", default=None, metavar="DIR",
                    help="write the documents with the regenerated blocks to DIR (README.md, docs/*.md) instead of "
                         f"rewriting them; --quick and --from always do (default: {QUICK_OUT} with --quick or --from, "
@@ -41,8 +41,6 @@ NOT_CHECKED = {"machine": "where and when the numbers were taken", "speed": "tim
                "calibration": "the rungs' error estimates against their measured errors: an hour of campaigns "
                "(docs/rungs.md names them; then `vibrofmu report --from DIR --only calibration`); the first scenes "
                "of each are compared (calibration_replay)",
-               "curve_speed": "a fold curve's time: it depends on the machine and its load",
-               "auto": "fidelity auto against the oracle: the oracle and the costs are timings on a shared machine",
                "fuzz": "a fuzzing campaign's executions, rates and coverage: they depend on the machine, its load "
                "and the campaign's length (`python3 tests/fuzz/run.py --seconds S --out DIR`, then `vibrofmu report "
                "--from DIR --only fuzz`)",
@@ -54,25 +52,30 @@ NOT_CHECKED = {"machine": "where and when the numbers were taken", "speed": "tim
                "--from DIR --only auto_setup`)"}
 # compared by --check too: from the --from summaries, else from fresh full runs of `vibrofmu oafm` and `stability`
 # (about a minute of CPU on 2 cores), the documented cascade's `vibrofmu continuation` (measured 7 s CPU with its
-# plots) and the cusp study (5 s CPU), their CPU times masked (report.MACHINE_NUMBERS); the bench is not run: the
-# speed block is not compared
-FROM_CHECKED = ("oafm", "stability", "cascade", "cusp_order")
+# plots), the cusp study (5 s CPU), `vibrofmu bench --curve` (17 s CPU, mostly its check of every point by SciPy)
+# and the replay of the documented auto campaign (error_calibration.auto_replay: 10 s CPU), their timings masked
+# (report.comparable); the bench is not run: the speed block is not compared
+FROM_CHECKED = ("oafm", "stability", "cascade", "cusp_order", "curve_speed", "auto")
 STUDIES = ("oafm", "stability", "bench", "cascade", "cusp_order")  # what a full run runs (without --from)
+# what --check runs besides (a full run leaves these blocks as they are: the curve's timings come from a `bench
+# --curve` given with --from, and the replay derives only part of the auto block, its campaign takes an hour)
+CHECK_STUDIES = ("curve_speed", "auto")
 
 
 # The studies each generated block reads: a block is rewritten only when every one of them completed (the speed block
 # gathers the three summaries; from two of them it would silently lose the bench's lines).
 BLOCK_STUDIES = {"oafm": {"oafm"}, "stability": {"stability"}, "speed": {"oafm", "stability", "bench"},
-                 "auto_setup": {"bench"}, "cascade": {"cascade"}, "cusp_order": {"cusp_order"}}
+                 "auto_setup": {"bench"}, "cascade": {"cascade"}, "cusp_order": {"cusp_order"},
+                 "curve_speed": {"curve_speed"}, "auto": {"auto"}}
 NEEDS_FMUS = ("accuracy", "ssp", "ssp_orderings", "container")  # the blocks that run the FMUs themselves
 STUDIES_WITH_FMUS = ("oafm", "stability", "bench")  # the studies that run the plant FMU (not the continuations)
 
 
 def run_studies(fmu_dir: Path, work_dir: Path, quick: bool, failed: set | None = None,
                 which=STUDIES) -> list[Path]:
-    """Run the studies `which` of STUDIES (quick: fewer orders, quick bench; the cascade and the cusp study take
-    seconds and run in full) into work_dir; the folders of those that completed (a failure is printed, added to
-    `failed` and skipped)."""
+    """Run the studies `which` of STUDIES and CHECK_STUDIES (quick: fewer orders, quick bench; the cascade, the cusp
+    study, the curve and the auto replay take seconds and run in full) into work_dir; the folders of those that
+    completed (a failure is printed, added to `failed` and skipped)."""
     from vibrofmu.commands import continuation
     from vibrofmu.report import CASCADE_ARGV
 
@@ -81,17 +84,19 @@ def run_studies(fmu_dir: Path, work_dir: Path, quick: bool, failed: set | None =
             "stability": (stability.COMMAND, ["--fmu", plant]),
             "bench": (bench.COMMAND, ["--fmu", plant] + (["--quick"] if quick else [])),
             "cascade": (continuation.COMMAND, list(CASCADE_ARGV)),
-            "cusp_order": (cusp_study, [])}
+            "cusp_order": (cusp_study, []),
+            "curve_speed": (bench.COMMAND, ["--curve"]),
+            "auto": (auto_replay_study, [])}
     folders = []
     for name, (command, argv) in runs.items():
         if name not in which:
             continue
         folder = work_dir / name
-        said = ("python3 -m vibrofmu.analyses.cusp_order" if command is cusp_study else
+        said = (IN_PROCESS[command] if command in IN_PROCESS else
                 " ".join(["vibrofmu", command.name, *(argv[2:] if name in STUDIES_WITH_FMUS else argv)]))
         print(f"report: running {said} ...", file=sys.stderr, flush=True)
         try:
-            code = command(folder) if command is cusp_study else invoke(command, argv + ["--out", str(folder)])
+            code = command(folder) if command in IN_PROCESS else invoke(command, argv + ["--out", str(folder)])
         except Exception as error:  # a failing study must not lose the other blocks: say which and go on
             # (Ctrl-C is no Exception: it stops the report before any document is rewritten)
             code = f"{type(error).__name__}: {error}"
@@ -111,6 +116,23 @@ def cusp_study(folder: Path) -> int:
     from vibrofmu.analyses import cusp_order
 
     return cusp_order.main([str(folder)])
+
+
+def auto_replay_study(folder: Path) -> int:
+    """error_calibration.auto_replay of the documented auto campaign (DOCUMENTED_AUTO), in this process, into
+    folder/report.AUTO_REPLAY (0)."""
+    from vibrofmu.analyses.error_calibration import DOCUMENTED_AUTO, auto_replay
+    from vibrofmu.output import export
+    from vibrofmu.report import AUTO_REPLAY
+
+    folder.mkdir(parents=True, exist_ok=True)
+    export.write_json(folder / AUTO_REPLAY, auto_replay(*DOCUMENTED_AUTO))
+    return 0
+
+
+IN_PROCESS = {cusp_study: "python3 -m vibrofmu.analyses.cusp_order",  # the studies run as functions, and how the
+              auto_replay_study: "the replay of the documented `python -m vibrofmu.analyses.error_calibration auto` "
+                                 "campaign (auto's choices and their runs)"}  # report names them
 
 
 def run(args) -> int:
@@ -168,11 +190,13 @@ def run(args) -> int:
     # the studies to run: without --from those of the blocks asked for (a full run: all of STUDIES); with --check
     # and --from, those of the compared blocks whose summaries no --from folder holds
     wanted = set().union(*(BLOCK_STUDIES.get(name, set()) for name in names))
+    if not args.check:
+        wanted -= set(CHECK_STUDIES)
     if args.check and sources:
         wanted = {name for name in FROM_CHECKED if summary_block(name, sources) is None}
     elif sources:
         wanted = set()
-    studies = tuple(study for study in STUDIES if study in wanted)
+    studies = tuple(study for study in STUDIES + CHECK_STUDIES if study in wanted)
     fmu_dir = Path(args.fmu_dir or paths.build_dir())
     if any(name in NEEDS_FMUS for name in names) or any(study in STUDIES_WITH_FMUS for study in studies):
         fmu_dir = built_all(fmu_dir)  # the blocks from summaries alone (--from) and the continuations run no FMU
