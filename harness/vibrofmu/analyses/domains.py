@@ -13,8 +13,12 @@
   the fastest drive, counted against 100 rtol max|x|, with the drive's step ceiling (max_step = 0) and without it
   (max_step = 1000), and with the ceiling but the solver at the rtol asked ("as_asked": the tolerance factor of
   models.tolerance_factor switched off).
+- turn_campaign: the drive's step ceiling at several turns (max_step = turn / the fastest drive): random contact-loss
+  scenes, the same with fast drives, and grazing runs, every run at every turn against an independent reference (the
+  evidence of models.DRIVE_STEP_TURN).
 
-Command line: python -m vibrofmu.analyses.domains grid | extremes FMU | graze [n] [seed]  (prints JSON).
+Command line: python -m vibrofmu.analyses.domains grid | extremes FMU | graze [n] [seed] | turns [n] [seed]
+[--summary]  (prints JSON).
 """
 from __future__ import annotations
 
