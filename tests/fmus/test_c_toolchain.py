@@ -14,7 +14,7 @@ import pytest
 
 from vibrofmu import paths
 from vibrofmu.fmus import fmi_calls, native, toolchain
-from vibrofmu.speed import instructions, ladder, native_timing, peers
+from vibrofmu.speed import instructions, ladder, native_timing, peer_instructions, peers
 
 FMU_SRC = paths.FMU_SRC
 STRICT = ("-fsyntax-only", "-Werror")
@@ -37,6 +37,8 @@ def units():
              for path in (paths.C_HOST_DIR / "fmi2_host.c", paths.C_HOST_DIR / "instance_cycles.c",
                           ladder.TIMING_HOST_SOURCE, instructions.FLOOR_DRIVER_SOURCE,
                           native_timing.FMI_VERSIONS_HOST_SOURCE)]
+    # numbalsoda's solvers on a C right-hand side, for the peers' instruction counts (speed/peer_instructions.py)
+    hosts.append((peer_instructions.DRIVER_SOURCE.name, toolchain.HOST, [], peer_instructions.DRIVER_SOURCE, ()))
     # the CVODE peer's driver (bench --peers), on the core's model and the system's SUNDIALS headers (.ci/run)
     cvode = [(peers.CVODE_SOURCE.name, toolchain.HOST, [f"-I{FMU_SRC / 'core'}"], peers.CVODE_SOURCE, ()),
              # the Model Exchange host on CVODE (tests/fmus/test_controller_model_exchange.py)
