@@ -1,5 +1,5 @@
 """fmusim (the Reference-FMUs' simulator) on the native FMI 2.0 FMUs: Model Exchange under fmusim's CVode against
-the co-simulation (fmusim's and FMPy's) and against FMPy's CVode, within the bounds the Model Exchange tests derive
+the co-simulation (fmusim's and FMPy's) and against FMPy's CVode (the controller in FMI 2.0 and 3.0), within the bounds the Model Exchange tests derive
 (tests/fmus/test_controller_model_exchange.py: (steps + 1) 30 rtol (max|theta^_i| + 1) + the co-simulation's
 rounding for the controller's estimates; _loop_bound for the closed loop), with fmusim's own number of right-hand
 sides (from its FMI call log) as the bound's step count.
@@ -10,7 +10,8 @@ FMUSIM: an fmusim binary (its options --interface-type, --solver cvode, --tolera
 --output-interval, --start-value, --output-variable, --output-file, --log-fmi-calls, --fmi-log-file); BUILD_DIR: a
 `vibrofmu build --out-dir` folder (built into a temporary folder when left out). fmusim is not packaged for Debian
 or PyPI, so this is a script run by hand, not a test. Prints one line per comparison; exit status 1 when a
-difference exceeds its bound.
+difference exceeds its bound or the controller's FMI 3.0 Model Exchange under fmusim does not give its FMI 2.0 bits (the
+same C calls under the same solver).
 """
 import csv
 import subprocess
@@ -53,7 +54,7 @@ def run_fmusim(fmusim, fmu, interface, work, stop, outputs, rtol=None, start_val
     last = {int(k): i for i, k in enumerate(grid) if on_grid[i]}  # the last row of each grid time
     keep = [last[k] for k in sorted(last)]
     with open(log) as f:
-        rhs = sum(1 for line in f if line.startswith("fmi2GetDerivatives("))
+        rhs = sum(1 for line in f if line.startswith(("fmi2GetDerivatives(", "fmi3GetContinuousStateDerivatives(")))
     return {name: data[keep, header.index(name)] for name in header}, rhs
 
 
@@ -63,7 +64,7 @@ def line(what, error, bound):
     return ok
 
 
-def controller(fmusim, fmu, work):
+def controller(fmusim, fmu, fmu3, work):
     ok = True
     outputs = [*mex.ESTIMATES, "U", "e1", "e2"]
     fcs, _ = run_fmusim(fmusim, fmu, "cs", work, mex.STOP, outputs, start_values=mex.INPUTS)
@@ -83,6 +84,11 @@ def controller(fmusim, fmu, work):
             error, bound, name = max(worst, key=lambda w: w[0] / w[1])
             ok &= line(f"{what}: {scaled:6.1f} rtol (max+1); tightest {name}", error, bound)
         print(f"  fmusim ME - FMPy ME, estimates: {scaled_gap(fme, pme, rtol):.1f} rtol (max+1)")
+        fme3, rhs3 = run_fmusim(fmusim, fmu3, "me", work, mex.STOP, outputs, rtol, mex.INPUTS)
+        same = rhs3 == rhs and all(fme3[n].tobytes() == fme[n].tobytes() for n in fme)
+        print(f"  fmusim ME, FMI 3.0 against FMI 2.0: {rhs3} right-hand sides, "
+              f"{'the same bits' if same else f'{scaled_gap(fme3, fme, rtol):.1f} rtol (max+1) apart'}")
+        ok &= same
     return ok
 
 
@@ -109,17 +115,28 @@ def closed_loop(fmusim, fmu, work):
     return ok
 
 
+def usage_error(message):
+    """A user mistake: one line and exit status 2 (the project's CLI rule)."""
+    print(f"error: {message}", file=sys.stderr)
+    sys.exit(2)
+
+
 def main(argv):
     if len(argv) not in (2, 3):
-        sys.exit("usage: python benchmarks/fmusim_compare.py FMUSIM [BUILD_DIR]")
+        usage_error("usage: python benchmarks/fmusim_compare.py FMUSIM [BUILD_DIR]")
     fmusim = Path(argv[1])
+    if not fmusim.is_file():
+        usage_error(f"no fmusim binary at {fmusim}")
     with tempfile.TemporaryDirectory() as tmp:
         work = Path(tmp)
         build = Path(argv[2]) if len(argv) == 3 else work / "build"
+        if len(argv) == 3 and not (build / "native").is_dir():
+            usage_error(f"{build} is not a `vibrofmu build --out-dir` folder (no native/ in it)")
         if len(argv) == 2:
             subprocess.run(["vibrofmu", "build", "--no-win64", "--out-dir", str(build)], check=True)
         native = build / "native"
-        ok = controller(fmusim, native / "AdaptiveLyapunovController.fmu", work)
+        ok = controller(fmusim, native / "AdaptiveLyapunovController.fmu",
+                        native / "fmi3" / "AdaptiveLyapunovController.fmu", work)
         ok &= closed_loop(fmusim, native / "HertzEAClosedLoop.fmu", work)
     return 0 if ok else 1
 
