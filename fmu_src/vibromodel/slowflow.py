@@ -262,35 +262,19 @@ class SlowFlowSolution:
 
     def _reconstruct_arrays(self, t, A, B, dA, dB, ddA, ddB):
         """_reconstruct on arrays (numpy's sin and cos)."""
-        w = self.omega
-        c, sn = np.cos(w * t), np.sin(w * t)
-        p, q = A * c + B * sn, A * sn - B * c
-        dp, dq = dA * c + dB * sn - w * q, dA * sn - dB * c + w * p
-        ddp = ddA * c + ddB * sn - 2 * w * (dA * sn - dB * c) - w * w * p
-        ddq = ddA * sn - ddB * c + 2 * w * (dA * c + dB * sn) - w * w * q
-        h, m = self.harmonic, self.mean_shift
-        x = self.x_e + p + h * (p * p - q * q) - m * (A * A + B * B)
-        v = dp + 2 * h * (p * dp - q * dq) - 2 * m * (A * dA + B * dB)
-        a = ddp + 2 * h * (dp * dp + p * ddp - dq * dq - q * ddq) - 2 * m * (dA * dA + A * ddA + dB * dB + B * ddB)
-        if self.ac:
-            P, Q, W = self.psi_sin, self.psi_cos, self.Omega
-            s1, c1 = np.sin(W * t), np.cos(W * t)
-            s2, c2 = 2.0 * s1 * c1, c1 * c1 - s1 * s1
-            x = x + P * s1 + Q * c2
-            v = v + W * (P * c1 - 2.0 * Q * s2)
-            a = a - W * W * (P * s1 + 4.0 * Q * c2)
-        return x, v, a
+        return self._reconstruct(t, A, B, dA, dB, ddA, ddB, np.cos, np.sin)
 
-    def _reconstruct(self, t, A, B, dA, dB, ddA, ddB):
+    def _reconstruct(self, t, A, B, dA, dB, ddA, ddB, cos=math.cos, sin=math.sin):
         """x = x_e + p + y2 + psi and its exact first and second derivatives, from A, B and theirs.
 
         p = A cos(w t) + B sin(w t) = r cos(theta) (first order); q = A sin - B cos = r sin(theta).
         y2 = k2/(6 k1) r^2 cos(2 theta) - k2/(2 k1) r^2: the second-order harmonics of the quadratic term
         (y'' + k1 y + k2 y^2, Nayfeh & Mook §4.1), the reconstruction that belongs to the Lindstedt
         backbone, which is second order in k2. psi: the fast AC response, Eq. 46.
+        cos, sin: math's for a float t (the per-output path), numpy's for arrays (_reconstruct_arrays).
         """
         w = self.omega
-        c, sn = math.cos(w * t), math.sin(w * t)
+        c, sn = cos(w * t), sin(w * t)
         p, q = A * c + B * sn, A * sn - B * c
         dp, dq = dA * c + dB * sn - w * q, dA * sn - dB * c + w * p
         ddp = ddA * c + ddB * sn - 2 * w * (dA * sn - dB * c) - w * w * p
@@ -301,7 +285,7 @@ class SlowFlowSolution:
         a = ddp + 2 * h * (dp * dp + p * ddp - dq * dq - q * ddq) - 2 * m * (dA * dA + A * ddA + dB * dB + B * ddB)
         if self.ac:  # psi of Eq. 46 and its derivatives, inlined: this is the per-output hot path
             P, Q, W = self.psi_sin, self.psi_cos, self.Omega
-            s1, c1 = math.sin(W * t), math.cos(W * t)
+            s1, c1 = sin(W * t), cos(W * t)
             s2, c2 = 2.0 * s1 * c1, c1 * c1 - s1 * s1
             x += P * s1 + Q * c2
             v += W * (P * c1 - 2.0 * Q * s2)

@@ -236,6 +236,22 @@ def _timed_run(plant, rebuild, stop: float, h: float) -> tuple[np.ndarray, float
 COST_REPEATS = 3  # auto's choice and each exact candidate's build timed this often, the least taken (both alike)
 
 
+def _reference_pairs(n: int, rng, library, h: float, rows: list):
+    """The campaigns' draws while rows holds fewer than n pairs: (scene, stop, info, tolerance, the reference's x at
+    every communication point, where the reference stopped), the reference DOP853 at rtol 1e-12; a pair whose
+    reference is refused is a row of its own (outcome "reference refused"). auto_campaign and auto_replay draw the
+    same pairs from the same generator through it."""
+    while len(rows) < n:
+        scene, stop, info = random_scene(rng)
+        tolerance = float(10 ** rng.uniform(-10, -1))
+        try:
+            exact, exact_stop = run_steps(make_plant(scene, Settings(rtol=1e-12), 0.0, stop, library=library), stop, h)
+        except (ParameterError, IntegrationError) as error:
+            rows.append({**info, "tolerance": tolerance, "outcome": "reference refused", "message": str(error)[:200]})
+            continue
+        yield scene, stop, info, tolerance, exact, exact_stop
+
+
 def auto_campaign(n: int = 500, seed: int = 0, h: float = 0.1, progress=None) -> dict:
     """n random (scene, tolerance) pairs (random_scene; tolerance log-uniform in [1e-10, 1e-1]): fidelity auto's
     chooser (vibromodel.auto.choose) against the oracle, the candidate that really met the tolerance at the least
@@ -253,14 +269,7 @@ def auto_campaign(n: int = 500, seed: int = 0, h: float = 0.1, progress=None) ->
     library, rows = campaign_kernel(), []
     rng = np.random.default_rng(seed)
     started = time.perf_counter()
-    while len(rows) < n:
-        scene, stop, info = random_scene(rng)
-        tolerance = float(10 ** rng.uniform(-10, -1))
-        try:
-            exact, exact_stop = run_steps(make_plant(scene, Settings(rtol=1e-12), 0.0, stop, library=library), stop, h)
-        except (ParameterError, IntegrationError) as error:
-            rows.append({**info, "tolerance": tolerance, "outcome": "reference refused", "message": str(error)[:200]})
-            continue
+    for scene, stop, info, tolerance, exact, exact_stop in _reference_pairs(n, rng, library, h, rows):
         built, times = {}, {}
 
         def build(settings, scene=scene, stop=stop, built=built, times=times):
@@ -351,14 +360,7 @@ def auto_replay(n: int = 500, seed: int = 0, h: float = 0.1) -> dict:
         m = min(len(x), len(exact))
         return len(x) == len(exact) and (float(np.max(np.abs(x[:m] - exact[:m]))) if m else math.inf) <= tolerance
 
-    while len(rows) < n:
-        scene, stop, info = random_scene(rng)
-        tolerance = float(10 ** rng.uniform(-10, -1))
-        try:
-            exact, _ = run_steps(make_plant(scene, Settings(rtol=1e-12), 0.0, stop, library=library), stop, h)
-        except (ParameterError, IntegrationError) as error:
-            rows.append({**info, "tolerance": tolerance, "outcome": "reference refused", "message": str(error)[:200]})
-            continue
+    for scene, stop, info, tolerance, exact, _ in _reference_pairs(n, rng, library, h, rows):
         row = {**info, "tolerance": tolerance, "stop": stop}
         try:
             plant, chosen, _ = choose(scene, Settings(), tolerance,
