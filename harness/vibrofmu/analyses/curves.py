@@ -49,11 +49,10 @@ from scipy.optimize import brentq
 from vibromodel.parameters import Scene
 
 from vibrofmu.analyses import shooting as sh
-from vibrofmu.analyses.continuation import budget_reason
+from vibrofmu.analyses.continuation import CONTACT_EDGE, budget_reason
 
 KINDS = ("fold", "period-doubling", "grazing")  # what a curve follows
 SIGN = {"fold": -1.0, "period-doubling": 1.0}  # A = M + SIGN I: the sign of the multiplier that sits at 1
-CONTACT_EDGE = -1.5  # continuation.CONTACT_EDGE: 1 + 2x/3 = 0
 # forward-difference step of M, relative to max(1, |y|): the period map's error ~ rtol 1e-11 |M| over the step
 # 1e-6 gives dM/dy to ~1e-5, and the truncation ~ 1e-6 |M''|: the chord Newton converges with ratio ~1e-5
 FD_STEP = 1e-6
@@ -290,9 +289,9 @@ def grazing_event_on_curve(system: Augmented, u0: np.ndarray, t0: np.ndarray, h:
     raise ValueError(f"no {event} bracketed along the grazing curve")
 
 
-def locate_cusp(system: Augmented, u0: np.ndarray, t0: np.ndarray, h: float) -> CurvePoint:
-    """Brent on the arclength in (0, h) for the zero of g_z w (module doc)."""
-    return locate(system, u0, t0, h, lambda pt: pt.quadratic, "cusp")[1]
+def locate_cusp(system: Augmented, u0: np.ndarray, t0: np.ndarray, h: float) -> tuple[float, CurvePoint]:
+    """Brent on the arclength in (0, h) for the zero of g_z w (module doc): locate's (arclength, point)."""
+    return locate(system, u0, t0, h, lambda pt: pt.quadratic, "cusp")
 
 
 def _x_min_test(pt: CurvePoint) -> float:
@@ -351,7 +350,7 @@ def follow(system: Augmented, start: CurvePoint, direction: float, p2_bounds: tu
         found = []
         if system.kind == "fold" and last.quadratic * point.quadratic < 0.0:
             try:
-                hh, located = locate(system, u, t, h, lambda pt: pt.quadratic, "cusp")
+                hh, located = locate_cusp(system, u, t, h)
                 if parameters_turn(last, located, point):
                     found.append((hh, located))
             except (sh.ShootingError, ValueError):
