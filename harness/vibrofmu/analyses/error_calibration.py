@@ -236,6 +236,14 @@ def _timed_run(plant, rebuild, stop: float, h: float) -> tuple[np.ndarray, float
 COST_REPEATS = 3  # auto's choice and each exact candidate's build timed this often, the least taken (both alike)
 
 
+def _run_error(x: np.ndarray, exact: np.ndarray, tolerance: float) -> tuple[float, bool]:
+    """(max|x - x_ref| over the outputs both runs have, whether the run met `tolerance`: within it, and as many
+    outputs as the reference, i.e. stopped where it stopped -- pull-in). The auto campaign's rule (its replay's and pair_costs' too)."""
+    m = min(len(x), len(exact))
+    error = float(np.max(np.abs(x[:m] - exact[:m]))) if m else math.inf
+    return error, len(x) == len(exact) and error <= tolerance
+
+
 def _reference_pairs(n: int, rng, library, h: float, rows: list):
     """The campaigns' draws while rows holds fewer than n pairs: (scene, stop, info, tolerance, the reference's x at
     every communication point, where the reference stopped), the reference DOP853 at rtol 1e-12; a pair whose
@@ -311,11 +319,9 @@ def auto_campaign(n: int = 500, seed: int = 0, h: float = 0.1, progress=None) ->
                 continue
             x, run_cost = _timed_run(plant, lambda c=candidate: make_plant(scene, c, 0.0, stop, library=library),
                                      stop, h)
-            m = min(len(x), len(exact))
-            error = float(np.max(np.abs(x[:m] - exact[:m]))) if m else math.inf
+            error, met = _run_error(x, exact, tolerance)
             table.append({**row, "run": run_cost, "total": build_cost + run_cost, "error": error,
-                          "estimate": plant.error_estimate["estimate"],
-                          "met": len(x) == len(exact) and error <= tolerance, "fitted": _fitted(plant)})
+                          "estimate": plant.error_estimate["estimate"], "met": met, "fitted": _fitted(plant)})
         met = [c for c in table if c.get("met")]
         mine = next((c for c in table if c["key"] == choice), None)
         row = {**info, "tolerance": tolerance, "stop": stop, "exact_stopped": exact_stop is not None,
@@ -357,8 +363,7 @@ def auto_replay(n: int = 500, seed: int = 0, h: float = 0.1) -> dict:
         except (ParameterError, IntegrationError):
             return False
         x, _ = _timed_run(plant, lambda: make_plant(scene, candidate, 0.0, stop, library=library), stop, h)
-        m = min(len(x), len(exact))
-        return len(x) == len(exact) and (float(np.max(np.abs(x[:m] - exact[:m]))) if m else math.inf) <= tolerance
+        return _run_error(x, exact, tolerance)[1]
 
     for scene, stop, info, tolerance, exact, _ in _reference_pairs(n, rng, library, h, rows):
         row = {**info, "tolerance": tolerance, "stop": stop}
@@ -370,9 +375,7 @@ def auto_replay(n: int = 500, seed: int = 0, h: float = 0.1) -> dict:
             chosen = None
         if chosen is not None:
             x, _ = _timed_run(plant, lambda: make_plant(scene, chosen, 0.0, stop, library=library), stop, h)
-            m = min(len(x), len(exact))
-            error = float(np.max(np.abs(x[:m] - exact[:m]))) if m else math.inf
-            met = len(x) == len(exact) and error <= tolerance
+            error, met = _run_error(x, exact, tolerance)
             row.update(outcome="chosen", chosen=describe(chosen), met=met, error=error)
         oracle = chosen is not None and row["met"] or any(
             met_by(candidate, scene, stop, exact, tolerance) for _, candidate in candidates(Settings())
@@ -414,11 +417,9 @@ def pair_costs(scene: Scene, stop: float, tolerance: float, rounds: int = 5, h: 
                 continue
             build = time.thread_time() - started
             x, run = _timed_run(plant, lambda c=candidate: make_plant(scene, c, 0.0, stop, library=library), stop, h)
-            m = min(len(x), len(exact))
-            error = float(np.max(np.abs(x[:m] - exact[:m]))) if m else math.inf
+            error, met = _run_error(x, exact, tolerance)
             row = table.setdefault(name, {"candidate": name, "build": math.inf, "run": math.inf, "error": error,
-                                          "estimate": plant.error_estimate["estimate"],
-                                          "met": len(x) == len(exact) and error <= tolerance})
+                                          "estimate": plant.error_estimate["estimate"], "met": met})
             row["build"], row["run"] = min(row["build"], build), min(row["run"], run)
         started = time.thread_time()
         try:
