@@ -382,7 +382,7 @@ def test_branch_plot_marks_how_a_branch_ends(reason, mark, other, tmp_path, monk
                          double=False)
     result.stop_reason = reason
     figures = []
-    monkeypatch.setattr(output, "save_plot", lambda fig, path: figures.append(fig))
+    monkeypatch.setattr(output, "save_plot", lambda fig, path, **options: figures.append(fig))
     output.plot_branch(tmp_path / "branch.png", result, "ends")
     labels = {text.get_text() for legend in figures[0].legends for text in legend.get_texts()}
     assert mark in labels and other not in labels

@@ -120,8 +120,7 @@ def plot_branch(path: Path, result: cont.Branch, title: str) -> None:
         ax.grid(True, alpha=0.3)
     fig.suptitle(wrapped(title, fig.get_figwidth(), 11), fontsize=11)
     legend_below(fig, [axes[0]], columns=2)
-    fig.savefig(path.with_suffix(".pdf"))  # vector, beside the PNG (save_plot closes the figure)
-    save_plot(fig, path)
+    save_plot(fig, path, vector=True)
 
 
 # ----- the two-parameter chart in (omega, Delta) -------------------------------------------------------------
@@ -341,8 +340,7 @@ def plot_chart(path: Path, data: dict, curves: two.Curves | None = None) -> None
                          f"doubling beside the slow flow's folds ($\\mu$ = {s['mu']:g}, $R$ = {s['R']:g})",
                          fig.get_figwidth(), 11), fontsize=11)
     legend_below(fig, [ax], columns=3)
-    fig.savefig(path.with_suffix(".pdf"))  # vector, beside the PNG (save_plot closes the figure)
-    save_plot(fig, path)
+    save_plot(fig, path, vector=True)
 
 
 def agreement_table(data: dict) -> list[str]:
@@ -400,8 +398,7 @@ def plot_curves(path: Path, curves: two.Curves, scene: Scene, title: str) -> Non
     ax.grid(True, alpha=0.3)
     fig.suptitle(wrapped(title, fig.get_figwidth(), 11), fontsize=11)
     legend_below(fig, [ax], columns=2)
-    fig.savefig(path.with_suffix(".pdf"))  # vector, beside the PNG (save_plot closes the figure)
-    save_plot(fig, path)
+    save_plot(fig, path, vector=True)
 
 
 def draw_curves(ax, curves: two.Curves, seen: set, label: str = "{kind} curve") -> None:

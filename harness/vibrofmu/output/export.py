@@ -92,13 +92,17 @@ def write_parquet(table, path: Path) -> None:
         pq.write_table(table, tmp, write_page_checksum=True)
 
 
-def save_figure(fig, path: Path, **options) -> None:
-    """fig.savefig to `path` atomically (the format from path's suffix), then closed."""
+def save_figure(fig, path: Path, close: bool = True, **options) -> None:
+    """fig.savefig to `path` atomically (the format from path's suffix), then closed (unless close is False and
+    the write succeeded: another format follows)."""
     path = Path(path)
     try:
         with atomic(path) as tmp:
             fig.savefig(tmp, format=path.suffix.lstrip(".") or None, **options)
-    finally:
+    except BaseException:
+        plt.close(fig)
+        raise
+    if close:
         plt.close(fig)
 
 
@@ -134,7 +138,11 @@ def legend_below(fig, axes, columns: int = 4) -> None:
                    frameon=False)
 
 
-def save_plot(fig, path: Path) -> None:
+def save_plot(fig, path: Path, vector: bool = False) -> None:
+    """fig as a PNG at `path` (DPI) and, with `vector`, as a PDF beside it (path with .pdf), each written
+    atomically (save_figure); then closed."""
+    if vector:
+        save_figure(fig, Path(path).with_suffix(".pdf"), close=False)
     save_figure(fig, path, dpi=DPI)
 
 
