@@ -173,16 +173,18 @@ def valgrind_missing() -> str | None:
     return None
 
 
-def callgrind_counts(cmd: list[str], env: dict, runs: int) -> tuple[list[int], subprocess.CompletedProcess]:
-    """Instructions executed inside timing_host.c's timing_do_step and timing_get_real (doStep + getReal and all
-    they call), one count per run of the host, under valgrind --tool=callgrind: collection is on only inside those
-    two functions, and a profile is dumped after each run (timing_run_done)."""
+def callgrind_counts(cmd: list[str], env: dict, runs: int, collect=("timing_do_step", "timing_get_real"),
+                     dump_after: str = "timing_run_done") -> tuple[list[int], subprocess.CompletedProcess]:
+    """Instructions executed inside the functions `collect` and all they call, one count per run, under valgrind
+    --tool=callgrind: collection is on only inside those functions, and a profile is dumped after each run (the
+    function dump_after). By default timing_host.c's timing_do_step and timing_get_real (doStep + getReal), dumped
+    at timing_run_done."""
     with tempfile.TemporaryDirectory(prefix="vibrofmu-callgrind-") as tmp:
         out = Path(tmp) / "callgrind.out"
         proc = child.run(["valgrind", "--tool=callgrind", "--collect-atstart=no",
-                               "--toggle-collect=timing_do_step", "--toggle-collect=timing_get_real",
-                               "--dump-after=timing_run_done", f"--callgrind-out-file={out}", *cmd],
-                              capture_output=True, text=True, env=env, timeout=3600)
+                          *(f"--toggle-collect={name}" for name in collect),
+                          f"--dump-after={dump_after}", f"--callgrind-out-file={out}", *cmd],
+                         capture_output=True, text=True, env=env, timeout=3600)
         if proc.returncode != 0:
             raise RuntimeError(f"valgrind failed ({proc.returncode}): {proc.stderr.strip()[-500:]}")
         dumps = sorted(Path(tmp).glob("callgrind.out.*"), key=lambda p: int(p.name.rsplit(".", 1)[1]))

@@ -16,7 +16,7 @@ peer's. Needs valgrind, numbalsoda and a built plant FMU.
 from __future__ import annotations
 
 import argparse
-import re
+import os
 import subprocess
 import sys
 import tempfile
@@ -77,16 +77,10 @@ def numbalsoda_counts(work: Path, rtols) -> dict:
     for name, scene in SCENES.items():
         x_ref = _reference(scene)
         for contender, (library, symbol) in NUMBALSODA.items():
-            with tempfile.TemporaryDirectory(prefix="vibrofmu-callgrind-") as tmp:
-                out = Path(tmp) / "callgrind.out"
-                cmd = [str(driver), str(folder / library), symbol, repr(scene.x_start), repr(scene.v_start),
-                       *map(repr, parameters(scene).tolist()), repr(STOP), repr(INTERVAL), *map(repr, rtols)]
-                proc = subprocess.run(["valgrind", "--tool=callgrind", "--collect-atstart=no", "--toggle-collect=nb_run",
-                                       "--dump-after=nb_done", f"--callgrind-out-file={out}", *cmd],
-                                      capture_output=True, text=True, check=True)
-                dumps = sorted(Path(tmp).glob("callgrind.out.*"), key=lambda p: int(p.name.rsplit(".", 1)[1]))
-                counts = [int(re.search(r"^(?:summary|totals):\s+(\d+)", d.read_text(), re.MULTILINE).group(1))
-                          for d in dumps]
+            cmd = [str(driver), str(folder / library), symbol, repr(scene.x_start), repr(scene.v_start),
+                   *map(repr, parameters(scene).tolist()), repr(STOP), repr(INTERVAL), *map(repr, rtols)]
+            counts, proc = callgrind_counts(cmd, dict(os.environ), len(rtols), collect=("nb_run",),
+                                            dump_after="nb_done")
             runs = [line.split() for line in proc.stdout.splitlines() if line.startswith("run ")]
             for rtol, count, run in zip(rtols, counts, runs):
                 x = np.array([float(v) for v in run[4:]])
