@@ -161,7 +161,8 @@ def run(args) -> int:
     for index, br in enumerate(result.doubled, 1):
         print(f"doubled branch {index}: {len(br.points)} orbits of period {br.problem.periods}T ({br.stop_reason})"
               + "".join(f"; {pt.event} at {pt.p:.8g}" for pt in br.events()))
-    for name, br in [("branch", result)] + [(f"doubled branch {i}", b) for i, b in enumerate(result.doubled, 1)]:
+    named = [("branch", result)] + [(f"doubled branch {i}", b) for i, b in enumerate(result.doubled, 1)]
+    for name, br in named:
         if br.stop_reason.startswith("stopped at"):
             print(f"warning: {name} {br.stop_reason} before {args.param} = {args.stop:g}; raise --points")
         elif br.stop_reason.startswith("pull-in"):
@@ -195,12 +196,10 @@ def run(args) -> int:
         found = []
         scale1 = abs(args.stop - args.start)
         for kind in kinds:
-            if not any(pt.event == kind for br in [result, *result.doubled] for pt in br.points):
+            with_kind = [(name, br) for name, br in named if any(pt.event == kind for pt in br.points)]
+            if not with_kind:
                 print(f"no {kind} on the branches: no {kind} curve")
-                continue
-            for name, br in [("branch", result)] + [(f"doubled branch {i}", b) for i, b in enumerate(result.doubled, 1)]:
-                if not any(pt.event == kind for pt in br.points):
-                    continue
+            for name, br in with_kind:
                 try:  # a doubled branch's curves are of its orbits (period 2T, 4T, ...), stepped on the T range
                     found.append(two.curves_from_branch(br, kind, args.param2, args.to2, args.from2,
                                                         points=args.points, scale1=scale1, progress=say))
