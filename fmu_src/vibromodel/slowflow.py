@@ -256,13 +256,9 @@ class SlowFlowSolution:
                              f"{self.t_end!r}] only")
         a0, a1, a2, a3, b0, b1, b2, b3 = cells[index].T
         g = 1.0 / self.spacing
-        return self._reconstruct_arrays(t, a0 + s * (a1 + s * (a2 + s * a3)), b0 + s * (b1 + s * (b2 + s * b3)),
-                                        g * (a1 + s * (2 * a2 + 3 * s * a3)), g * (b1 + s * (2 * b2 + 3 * s * b3)),
-                                        g * g * (2 * a2 + 6 * s * a3), g * g * (2 * b2 + 6 * s * b3))
-
-    def _reconstruct_arrays(self, t, A, B, dA, dB, ddA, ddB):
-        """_reconstruct on arrays (numpy's sin and cos)."""
-        return self._reconstruct(t, A, B, dA, dB, ddA, ddB, np.cos, np.sin)
+        return self._reconstruct(t, a0 + s * (a1 + s * (a2 + s * a3)), b0 + s * (b1 + s * (b2 + s * b3)),
+                                 g * (a1 + s * (2 * a2 + 3 * s * a3)), g * (b1 + s * (2 * b2 + 3 * s * b3)),
+                                 g * g * (2 * a2 + 6 * s * a3), g * g * (2 * b2 + 6 * s * b3), np.cos, np.sin)
 
     def _reconstruct(self, t, A, B, dA, dB, ddA, ddB, cos=math.cos, sin=math.sin):
         """x = x_e + p + y2 + psi and its exact first and second derivatives, from A, B and theirs.
@@ -271,7 +267,7 @@ class SlowFlowSolution:
         y2 = k2/(6 k1) r^2 cos(2 theta) - k2/(2 k1) r^2: the second-order harmonics of the quadratic term
         (y'' + k1 y + k2 y^2, Nayfeh & Mook §4.1), the reconstruction that belongs to the Lindstedt
         backbone, which is second order in k2. psi: the fast AC response, Eq. 46.
-        cos, sin: math's for a float t (the per-output path), numpy's for arrays (_reconstruct_arrays).
+        cos, sin: math's for a float t (the per-output path, state), numpy's for arrays (states).
         """
         w = self.omega
         c, sn = cos(w * t), sin(w * t)
