@@ -17,9 +17,12 @@ from fmpy.validation import validate_fmu
 from vibrofmu.hosts.run import run_fmu
 
 REPOSITORY = Path(__file__).resolve().parents[2]
-# what a fresh clone does not have: copied trees leave it out
-NOT_IN_A_CLONE = shutil.ignore_patterns(".git", ".venv", ".setuptools-build", "*.egg-info", "__pycache__", ".benchmarks",
-                                        ".pytest_cache")
+# what a fresh clone does not have: copied trees leave it out (any virtual environment, by its usual names, and the
+# tools' caches; symbolic links are copied as links, never followed, so a link to a venv elsewhere costs nothing --
+# one such link once made each CI copy 1.3 GB and filled the disk)
+NOT_IN_A_CLONE = shutil.ignore_patterns(".git", ".venv*", "venv", ".setuptools-build", "*.egg-info", "__pycache__",
+                                        ".benchmarks", ".pytest_cache", ".ruff_cache", ".import_linter_cache", "out",
+                                        "ci-python-*.log")
 
 
 def build_wheel(tmp_path: Path) -> subprocess.CompletedProcess:
@@ -27,7 +30,7 @@ def build_wheel(tmp_path: Path) -> subprocess.CompletedProcess:
     source tree (setup.py's build_base), so two wheel builds at once -- pytest-xdist workers, CI's Python
     versions side by side -- must not share one tree."""
     source = tmp_path / "source"
-    shutil.copytree(REPOSITORY, source, ignore=lambda folder, names: NOT_IN_A_CLONE(folder, names) | (
+    shutil.copytree(REPOSITORY, source, symlinks=True, ignore=lambda folder, names: NOT_IN_A_CLONE(folder, names) | (
         {"build"} if Path(folder) == REPOSITORY else set()))
     return subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", "-w", str(tmp_path / "dist"),
                            str(source)], capture_output=True, text=True, timeout=600)
