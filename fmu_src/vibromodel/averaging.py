@@ -206,30 +206,35 @@ def equilibrium_problem(scene: Scene) -> str | None:
     backbone divides by k1^(3/2) and omega_e = sqrt(k1)). A strong electrostatic pull (alpha, gamma or the AC
     moments of beta) can leave no such root inside the contact: static pull-in, which the slow flow cannot describe
     (alpha = 3 used to end in TypeError('must be real number, not complex'), naming nothing)."""
+    return _examined(scene)[0]
+
+
+def _examined(scene: Scene) -> tuple[str | None, Averaged | None]:
+    """(equilibrium_problem's answer, the averaged model when there is none): the equilibrium found once."""
     try:
         eq = equilibrium(scene)
         kappa = backbone(eq)
         value = float(P.polyval(eq.x_e, eq.A))
         scale = float(np.sum(np.abs(eq.A) * abs(eq.x_e) ** np.arange(len(eq.A))))
     except (ArithmeticError, ValueError, TypeError) as error:
-        return f"no equilibrium found ({error})"
+        return f"no equilibrium found ({error})", None
     if not (math.isfinite(eq.x_e) and math.isfinite(eq.k[1]) and eq.k[1] > 0.0):
-        return f"stiffness k1 = {eq.k[1]:.4g} at x_e = {eq.x_e:.4g} (needs k1 > 0)"
+        return f"stiffness k1 = {eq.k[1]:.4g} at x_e = {eq.x_e:.4g} (needs k1 > 0)", None
     if not abs(value) <= 1e-9 * scale:  # Newton did not converge: no root near -A0/A1
-        return f"Newton's method found no root of the averaged force (residual {value:.3g} at x = {eq.x_e:.4g})"
+        return f"Newton's method found no root of the averaged force (residual {value:.3g} at x = {eq.x_e:.4g})", None
     if not all(isinstance(k, float) and math.isfinite(k) for k in (kappa.kappa2, kappa.kappa4)):
-        return "the backbone's coefficients are not finite"
+        return "the backbone's coefficients are not finite", None
     if not (eq.x_e > -1.5 and abs(eq.x_e) < 1.5 * scene.R):
-        return f"x_e = {eq.x_e:.4g} lies outside the contact (x > -3/2) or beyond an electrode (|x| < 3R/2)"
-    return None
+        return f"x_e = {eq.x_e:.4g} lies outside the contact (x > -3/2) or beyond an electrode (|x| < 3R/2)", None
+    return None, Averaged(scene, eq, kappa)  # averaged(scene): the Lindstedt backbone of this equilibrium
 
 
 def checked_averaged(scene: Scene) -> Averaged:
     """averaged(scene), or ParameterError when it has no stable equilibrium (equilibrium_problem), naming the
     actuation parameter (alpha, gamma or beta) whose removal alone gives the scene one (alpha if none does)."""
-    problem = equilibrium_problem(scene)
+    problem, model = _examined(scene)
     if problem is None:
-        return averaged(scene)
+        return model
     name = next((name for name in ("alpha", "gamma", "beta") if getattr(scene, name) != 0.0
                  and equilibrium_problem(replace(scene, **{name: 0.0})) is None), "alpha")
     raise ParameterError(name, getattr(scene, name), f"fidelity 3 averages about a stable static equilibrium of the "

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import error_estimates, settings as plant
+from . import error_estimates, settings as plant, slowflow_kernel
 # core/plant.h's return codes, core/dop853.h's array sizes and the structures: generated from the headers
 # (core_layouts.py by harness/vibrofmu/fmus/layouts.py); Dop853State and Rk4State are dop853.h's Dop853, rk4.h's Rk4
 from .core_layouts import (DOP_MAX_EVENTS, DOP_STAGES, VK_BAD_INPUT, VK_BAD_STEP, VK_BAD_TIME, VK_FAILED,
@@ -170,6 +170,7 @@ def load_library(directories) -> tuple[ctypes.CDLL | None, str]:
     if problem is not None:
         return None, f"{path} does not match vibromodel.compiled: {problem}"
     error_estimates.use_kernel(library)  # fidelities 1 and 2's estimate in C (core/estimate.c), the same bits
+    slowflow_kernel.use_kernel(library)  # fidelity 3's table in C (core/slowflow_table.c)
     return library, f"compiled kernel {path}"
 
 

@@ -1,7 +1,8 @@
 """Fidelities 3 and 4 on the compiled kernel: the per-output evaluation in C (fmu_src/core/slowflow_eval.c,
 oafm_eval.c, openloop_plant.c), the set-up in Python.
 
-Set-up stays where it is: plant.Plant builds the slow-flow table (slowflow.py) or the OAFM fit (analytic.py).
+Set-up stays where it is: plant.Plant builds the slow-flow table (slowflow.py, itself in C where the kernel is
+loaded: core/slowflow_table.c) or the OAFM fit (analytic.py).
 CompiledOpenLoopPlant wraps that Plant, hands its table or closed-form sums to C once, and from then on
 doStep is one C call (the FMU's fast path calls vk_open_loop_do_step directly, without Python). What C does not do
 itself -- a refused step, a time beyond the slow flow's table, a non-finite output -- it leaves unchanged and
@@ -66,7 +67,7 @@ def declare(library) -> str | None:
 
 def slowflow_table(solution) -> tuple[SfTable, np.ndarray]:
     """The SfTable of a slowflow.SlowFlowSolution and the array its cells pointer points into (keep it)."""
-    cells = np.ascontiguousarray(np.array(solution.cells, dtype=float).reshape(-1, 8))
+    cells = np.ascontiguousarray(solution.cell_array())
     ac = bool(solution.ac)
     table = SfTable(t0=solution.t0, spacing=solution.spacing, omega=solution.omega, x_e=solution.x_e,
                     harmonic=solution.harmonic, mean_shift=solution.mean_shift,

@@ -64,7 +64,7 @@ def averaged_terms(model, solution, span: float) -> dict:
     (propagated_residual's equation with a1 = k1), max|R| and the amplitude |x_e| + max r of the slow flow."""
     s = model.scene
     mu, k1 = s.mu, model.eq.k[1]
-    cells = np.asarray(solution.cells)
+    cells = solution.cell_array()
     horizon = max(1, min(len(cells), math.ceil(span / solution.spacing))) if len(cells) else 0
     r_max = float(np.max(np.hypot(cells[:horizon, 0], cells[:horizon, 4]))) if horizon else 0.0
     span = min(span, solution.t_end - solution.t0)
@@ -522,7 +522,8 @@ def polynomial_estimate(scene, settings, model, solution, span: float, kernel: b
 def averaged_plant_estimate(scene, settings, model, solution, span: float) -> dict:
     """Fidelity 3: averaged_estimate of the plant's slow-flow solution."""
     from .averaging import averaged as averaged_model  # fidelity 3's module (loaded by it)
-    value, terms = averaged_estimate(averaged_model(scene), solution, span)
+    model = getattr(solution, "averaged", None) or averaged_model(scene)  # the solution's own, else made anew
+    value, terms = averaged_estimate(model, solution, span)
     return _result(value, terms["amplitude"], terms)
 
 

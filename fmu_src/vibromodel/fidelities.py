@@ -115,8 +115,10 @@ def _averaged_solution(scene, settings, t0, stop_time, cache_dirs):
     refusal, warnings = validity_estimates(model)  # the averaging's own domain, before any integration
     if refusal is not None:
         raise refusal
+    # a window of the table at a time (slowflow.WINDOW); tabulated on the compiled kernel where the settings ask for it
+    # (settings.Kernel.COMPILED = 0, its first value) and one is loaded (slowflow_kernel)
     solution = SlowFlowSolution(model, t0, scene.x_start, scene.v_start, settings.rtol, settings.max_step or math.inf,
-                                stop_time, bounded=True)  # a window of the table at a time (slowflow.WINDOW)
+                                stop_time, bounded=True, kernel=settings.kernel == 0)
     notes = [f"averaged slow flow (docs/model.md, Averaging and slow flow, {model.backbone.kind} backbone): x_e = {model.eq.x_e:.6g}, omega_e = "
              f"{model.omega_e:.8g}, table spacing {solution.spacing:.3g}"]
     solution.warnings = warnings + solution.amplitude_warnings

@@ -23,7 +23,7 @@ from .solvers import solver_entry
 # What a snapshot leaves out: built from the scene and settings by the constructor.
 PLANT_REBUILT = ("scene", "settings", "model", "integrator", "solution", "warnings")
 INTEGRATOR_REBUILT = ("accel", "events", "rates", "phased")
-SLOW_FLOW_REBUILT = ("flow",)  # fidelity 3: its table and integration end are plain data
+SLOW_FLOW_REBUILT = ("flow", "kernel", "_array", "averaged")  # fidelity 3: its table and integration end are plain data
 
 
 class Plant:
@@ -106,6 +106,7 @@ class Plant:
             restore_attributes(self.integrator, snapshot["integrator"], INTEGRATOR_REBUILT)
         if self._slow_flow():
             restore_attributes(self.solution, snapshot["slow_flow"], SLOW_FLOW_REBUILT)
+            vars(self.solution).pop("_array", None)  # the fresh table's array, not the restored table's
 
     def _slow_flow(self) -> bool:
         return entry(self.settings.fidelity).solution_in_snapshot

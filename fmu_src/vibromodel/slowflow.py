@@ -1,10 +1,13 @@
 """Fidelity 3: the averaged slow flow integrated in time, and x reconstructed from it (docs/model.md, Averaging and slow flow).
 
 x ~ x_e + A(t) cos(omega t) + B(t) sin(omega t) + y2 + psi(t), with (A, B) from the slow flow, y2 the
-second-order harmonics of the quadratic stiffness and psi the fast AC response (Eq. 46). The slow flow is integrated with large steps (DOP853, SciPy) and tabulated as
+second-order harmonics of the quadratic stiffness and psi the fast AC response (Eq. 46). The slow flow is integrated with large steps (DOP853) and tabulated as
 cubic Hermite pieces on a uniform grid whose spacing is refined until the table matches the
 integrator's dense output to the tolerance; one output then costs one table lookup and a few
 trigonometric terms. v and a are the exact time derivatives of the reconstructed x.
+The integration and the table are made in C (core/slowflow_table.c, through slowflow_kernel) when the plant asks
+for the compiled kernel and one is loaded, ~10x faster than with SciPy's solve_ivp and numpy, which does it
+otherwise (the same rule and tolerance, not the same bits: tests/model/test_slowflow_kernel.py).
 
 scipy is imported inside the functions that use it: at module level its import would be most of the
 plant FMU's first instantiation, which needs none of this module.
@@ -16,6 +19,7 @@ import time
 
 import numpy as np
 
+from . import slowflow_kernel
 from .averaging import Averaged
 from .parameters import PULL_IN_GAP, ParameterError
 
@@ -53,8 +57,11 @@ class SlowFlowSolution:
     """(x, x', x'') of the averaged model from the initial state (x0, v0) at t0."""
 
     def __init__(self, model: Averaged, t0: float, x0: float, v0: float, rtol: float,
-                 max_step: float = math.inf, t_end: float | None = None, bounded: bool = False):
+                 max_step: float = math.inf, t_end: float | None = None, bounded: bool = False,
+                 kernel: bool = False):
         self.stop = math.inf if t_end is None else t_end  # the experiment's end: check_domain looks no further
+        # kernel: integrate and tabulate on the compiled kernel where one is loaded (slowflow_kernel)
+        self.kernel = kernel and slowflow_kernel.kernel_loaded()
         if bounded and t_end is not None:
             t_end = min(t_end, t0 + WINDOW)  # the rest as the run advances
         self.bounded, self.first = bounded, 0  # first: cells dropped from the front (bounded only)
@@ -65,6 +72,7 @@ class SlowFlowSolution:
             raise ParameterError("max_step", max_step, f"the averaged slow flow over {over} would need "
                                  f"more than {MAX_STEPS} steps of it; raise it or use 0 (automatic)")
         s = model.scene
+        self.averaged = model  # the averaged model (its estimate's)
         self.x_start, self.Delta = x0, s.Delta  # named by check_domain
         self.flow = model.flow()
         self.omega, self.x_e = s.omega, model.eq.x_e
@@ -119,7 +127,7 @@ class SlowFlowSolution:
         with fmi2OK, where fidelity 0 stops at pull-in at tau = 17.08."""
         if self.stop < math.inf:  # none after the stop time
             cells = cells[:max(0, math.ceil((self.stop - first_time) / self.spacing))]
-        if not cells:
+        if not len(cells):
             return
         AB = np.asarray(cells)[:, [0, 4]]
         r = np.hypot(AB[:, 0], AB[:, 1])
@@ -180,6 +188,8 @@ class SlowFlowSolution:
         span = max(t - self.t_end, CHUNK)
         if self.cells:  # later chunks keep the grid of the first, so that lookups stay uniform
             span = math.ceil(span / self.spacing) * self.spacing
+        if self.kernel and self._extend_on_kernel(t, span):
+            return
         from scipy.integrate import solve_ivp  # lazily, see the module docstring
 
         started = time.perf_counter()
@@ -200,6 +210,43 @@ class SlowFlowSolution:
         self.check_domain(cells, self.t_end)
         self.cells.extend(cells)
         self._start(self.t_end + span, tuple(solution.y[:, -1]))
+
+    def cell_array(self) -> np.ndarray:
+        """The table's kept cells as an (n, 8) array (a row per cell: a0..a3, b0..b3), without copying the list of
+        cells when the kernel's array of the same table is at hand (the first table, until a doStep extends it)."""
+        held = self.__dict__.get("_array")  # (first, cells, t_end, the array): the table it was made of
+        if held is not None and held[:3] == (self.first, len(self.cells), self.t_end):
+            return held[3]
+        return np.asarray(self.cells, dtype=float).reshape(-1, 8)
+
+    def _extend_on_kernel(self, t: float, span: float) -> bool:
+        """extend() on the compiled kernel (slowflow_kernel: the integration and the table in C, the refinement of
+        the first table's grid included); False, nothing done, when its grid would exceed the cells it is given room
+        for (then SciPy's path refines, as without the kernel)."""
+        started = time.perf_counter()
+        n = 0 if not self.cells else round(span / self.spacing)
+        room = n if self.cells else max(MAX_TABLE_CELLS, math.ceil(span)) * 2 ** 6
+        result = slowflow_kernel.tabulate(self.flow, self.t_end, self.Z_end, span, self.rtol, self.atol,
+                                          self.max_step, self.spacing if self.cells else 0.0, n, MAX_REFINEMENTS, room)
+        self.integration_seconds += time.perf_counter() - started
+        if result is None:
+            return False
+        spacing, table, Z_end, tolerance, _ = result
+        cells = list(map(tuple, table.tolist()))
+        first_table = not self.cells
+        if self.cells:
+            if self.bounded:  # drop the cells before the one holding t (a run only moves forward)
+                drop = max(0, min(int((t - self.t0) / self.spacing) - self.first, len(self.cells)))
+                del self.cells[:drop]
+                self.first += drop
+        else:
+            self.spacing, self.tolerance = spacing, tolerance
+        self.check_domain(table, self.t_end)
+        self.cells.extend(cells)
+        self._start(self.t_end + span, Z_end)
+        if first_table:  # its array, for the estimate and the compiled evaluator (cell_array)
+            self._array = (self.first, len(self.cells), self.t_end, table)
+        return True
 
     def _refined_cells(self, dense, t_start, span):
         """Grid spacing span/n (n doubled from span/1) at which the Hermite table matches the dense output
@@ -245,7 +292,7 @@ class SlowFlowSolution:
     def states(self, t: np.ndarray, cells: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """state() at an array of times inside the table (from its first kept cell to t_end), as arrays: the
         error estimate's samples of the whole run at once. cells: np.asarray(self.cells) when already at hand."""
-        cells = np.asarray(self.cells) if cells is None else cells
+        cells = self.cell_array() if cells is None else cells
         t = np.asarray(t, dtype=float)
         u = (t - self.t0) / self.spacing
         i = np.minimum(np.trunc(u), self.first + len(cells) - 1)

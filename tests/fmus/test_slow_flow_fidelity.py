@@ -15,8 +15,10 @@ from vibrofmu.analyses.stability import fidelity3_check
 EPS = np.finfo(float).eps
 
 
-def solution(scene=Scene(), t0=0.0, rtol=1e-8, t_end=400.0):
-    return slowflow.SlowFlowSolution(averaged(scene), t0, scene.x_start, scene.v_start, rtol, t_end=t_end)
+def solution(scene=Scene(), t0=0.0, rtol=1e-8, t_end=400.0, kernel=False):
+    """kernel: tabulated on the compiled kernel where one is loaded (slowflow_kernel), else with SciPy."""
+    return slowflow.SlowFlowSolution(averaged(scene), t0, scene.x_start, scene.v_start, rtol, t_end=t_end,
+                                     kernel=kernel)
 
 
 @pytest.mark.parametrize("t0", [0.0, 3.7])
@@ -85,7 +87,7 @@ def test_error_after_the_transient_is_within_one_percent_of_the_amplitude():
 def test_plant_at_fidelity_3_evaluates_the_solution_and_notes_the_validity():
     scene = Scene()
     plant = Plant(scene, Settings(fidelity=3), 0.0, 50.0)
-    sol = solution(scene, t_end=50.0)
+    sol = solution(scene, t_end=50.0, kernel=plant.solution.kernel)  # the table the plant made, made alike
     for k in range(1, 11):
         assert plant.do_step((k - 1) * 0.5, 0.5, 0.0).x == sol.state(k * 0.5)[0]
     assert any("Omega = 2 is near 2 omega" in note for note in plant.notes)
