@@ -43,9 +43,9 @@ static int loop_rhs(void *context, double t, const double *y, double *f)
     const double *shared = reference_at(l, t, ref, &cos_delta);
     if (vk_controller_control_rates(&l->controller, t, y[0], y[1], ref, y + 2, &U, f + 2, time, shared))
         return FAULT_MATH_DOMAIN;  /* math.cos/sin of an infinity */
-    /* the model's drive terms have the same time functions as the control regressor (the same products of the
-       same frequencies and t): evaluated once */
-    VmDrive drive = {time[0], time[1], time[2]};
+    /* the model's drive terms have the regressor's cos(omega t) and sin(Omega t) (the same products of the same
+       frequencies and t): evaluated once; its cos 2 Omega t from sin Omega t, as the model computes it */
+    VmDrive drive = {time[0], time[1], vm_cos_double_angle(time[1])};
     f[0] = y[1];
     f[1] = vm_accel_driven(&l->model, t, &drive, y[0], y[1], U, &fault);
     return fault;
@@ -73,7 +73,7 @@ int vk_loop_outputs_at(const VlLoop *l, double t, const double *y, double *out)
     const double *shared = reference_at(l, t, ref, &cos_delta);
     if (vk_controller_control_rates(c, t, y[0], y[1], ref, y + 2, &U, rates, time, shared)) return FAULT_MATH_DOMAIN;
     vk_controller_errors(c, y[0], y[1], ref, &e1, &e2);
-    VmDrive drive = {time[0], time[1], time[2]};  /* as in loop_rhs */
+    VmDrive drive = {time[0], time[1], vm_cos_double_angle(time[1])};  /* as in loop_rhs */
     double a = vm_accel_driven(&l->model, t, &drive, y[0], y[1], U, &fault);
     if (fault) return fault;
     out[0] = y[0];

@@ -31,9 +31,10 @@ static double sin_Omega_t(const VkModel *m, double t, const VmDrive *drive, int 
     return drive ? drive->sin_Omega_t : py_sin(m->Omega * t, fault);
 }
 
-static double cos_2Omega_t(const VkModel *m, double t, const VmDrive *drive, int *fault)
+/* cos 2 Omega t: given, or from s = sin Omega t (vm_cos_double_angle) */
+static double cos_2Omega_t(double s, const VmDrive *drive)
 {
-    return drive ? drive->cos_2Omega_t : py_cos(2.0 * m->Omega * t, fault);
+    return drive ? drive->cos_2Omega_t : vm_cos_double_angle(s);
 }
 
 static double cos_omega_t(const VkModel *m, double t, const VmDrive *drive, int *fault)
@@ -46,7 +47,7 @@ int vm_drive_at(const VkModel *m, double t, VmDrive *drive)
     int fault = FAULT_NONE;
     drive->cos_omega_t = m->load_forcing ? cos_omega_t(m, t, NULL, &fault) : 0.0;
     drive->sin_Omega_t = m->ac ? sin_Omega_t(m, t, NULL, &fault) : 0.0;
-    drive->cos_2Omega_t = m->ac ? cos_2Omega_t(m, t, NULL, &fault) : 0.0;
+    drive->cos_2Omega_t = m->ac ? vm_cos_double_angle(drive->sin_Omega_t) : 0.0;
     return fault == FAULT_NONE;
 }
 
@@ -60,7 +61,7 @@ static inline __attribute__((always_inline)) double electrostatic(const VkModel 
     if (*fault) return 0.0;
     if (m->ac) {
         double s = sin_Omega_t(m, t, drive, fault);
-        double c = cos_2Omega_t(m, t, drive, fault);
+        double c = cos_2Omega_t(s, drive);
         force += (m->beta * s + m->gamma * (1.0 - c)) * f3;
     }
     return force;
@@ -101,7 +102,7 @@ static inline __attribute__((always_inline)) double polynomial_accel(const VkMod
     if (m->ac) {
         double G3 = g3[0] + x * (g3[1] + x * (g3[2] + x * (g3[3] + x * (g3[4] + x * g3[5]))));
         double s = sin_Omega_t(m, t, drive, fault);
-        double c2 = cos_2Omega_t(m, t, drive, fault);
+        double c2 = cos_2Omega_t(s, drive);
         acc += (m->beta * s - m->gamma * c2) * G3;
     }
     return acc;
@@ -157,7 +158,7 @@ int vm_forces(const VkModel *m, double t, double x, double *f_contact, double *f
     }
     /* PolynomialModel.forces: G1(x), alpha G2(x) + drive G3(x) of the series (5) */
     double s = py_sin(m->Omega * t, &fault);
-    double c = py_cos(2.0 * m->Omega * t, &fault);
+    double c = vm_cos_double_angle(s);
     double drive = m->beta * s + m->gamma * (1.0 - c);
     *f_contact = horner(m->g1, x);
     *f_electrostatic = m->alpha * horner(m->g2, x) + drive * horner(m->g3, x);

@@ -32,15 +32,28 @@ def in_contact(x: float, v: float, a: float) -> bool:
     return indentation > 0.0 or (indentation == 0.0 and (v > 0.0 or (v == 0.0 and a > 0.0)))
 
 
+def cos_double_angle(s: float) -> float:
+    """cos 2 theta from s = sin theta: 1 - 2 s^2, how the model computes cos 2 Omega t (one sine per time for both AC
+    terms; core twin: model.h vm_cos_double_angle). Against libm's cos(2 theta) at the same angle theta, with s within
+    2u of sin theta (u = 2^-53; glibc's sin is within an ulp): s*s rounds with relative error u, so 2 s^2 carries
+    at most 2 (2*2u + u) = 10u absolute, and the subtraction from 1 rounds by at most u: within 11u ~ 1.2e-15 of
+    cos 2 theta, a few ulps of an O(1) value, where libm's own cos is within an ulp."""
+    return 1.0 - 2.0 * (s * s)
+
+
 def electrostatic(t: float, x: float, alpha: float, beta: float, gamma: float, Omega: float, R: float,
                   drive: tuple[float, float] | None = None) -> float:
     """Right-hand electrostatic terms of Eq. 3: alpha*F2(x) + (beta sin Omega t + gamma(1 - cos 2 Omega t)) F3(x).
-    drive: (sin Omega t, cos 2 Omega t) given (default: computed here)."""
+    drive: (sin Omega t, cos 2 Omega t) given (default: computed here, cos 2 Omega t by cos_double_angle)."""
     u = 2.0 * x / (3.0 * R)
     f3 = 1.0 / ((1.0 - u) * (1.0 - u))
     force = alpha * (f3 - 1.0 / ((1.0 + u) * (1.0 + u)))
     if beta or gamma:
-        s, c = (math.sin(Omega * t), math.cos(2.0 * Omega * t)) if drive is None else drive
+        if drive is None:
+            s = math.sin(Omega * t)
+            c = cos_double_angle(s)
+        else:
+            s, c = drive
         force += (beta * s + gamma * (1.0 - c)) * f3
     return force
 
@@ -114,7 +127,8 @@ def electrostatic_gradient(x: float, alpha: float, drive: float, R: float) -> fl
 def electrostatic_stiffness(t: float, x: float, alpha: float, beta: float, gamma: float, Omega: float,
                             R: float) -> float:
     """d/dx of electrostatic(t, x, ...): the drive beta sin Omega t + gamma(1 - cos 2 Omega t) at time t."""
-    drive = beta * math.sin(Omega * t) + gamma * (1.0 - math.cos(2.0 * Omega * t))
+    s = math.sin(Omega * t)
+    drive = beta * s + gamma * (1.0 - cos_double_angle(s))
     return electrostatic_gradient(x, alpha, drive, R)
 
 

@@ -255,7 +255,7 @@ class PolynomialModel:
         g30, g31, g32, g33, g34, g35 = g3
         load_forcing = Delta != 0.0
         ac = beta != 0.0 or gamma != 0.0
-        sin, cos = math.sin, math.cos
+        sin, cos, cos_double_angle = math.sin, math.cos, forces.cos_double_angle
 
         def accel(t, x, v, U):
             acc = U - mu * v - (a0 + x * (a1 + x * (a2 + x * (a3 + x * (a4 + x * a5)))))
@@ -263,7 +263,8 @@ class PolynomialModel:
                 acc += Delta * cos(omega * t)
             if ac:
                 G3 = g30 + x * (g31 + x * (g32 + x * (g33 + x * (g34 + x * g35))))
-                acc += (beta * sin(Omega * t) - gamma * cos(2.0 * Omega * t)) * G3
+                s = sin(Omega * t)
+                acc += (beta * s - gamma * cos_double_angle(s)) * G3
             return acc
 
         def accel_phased(t, phases, x, v, U):  # accel with the drive's phasors given (drive_frequencies)
@@ -286,7 +287,8 @@ class PolynomialModel:
     def forces(self, t: float, x: float) -> tuple[float, float]:
         """(G1(x), alpha G2(x) + (beta sin + gamma(1 - cos 2 Omega t)) G3(x)): the series of Eq. 5."""
         s = self.scene
-        drive = s.beta * math.sin(s.Omega * t) + s.gamma * (1.0 - math.cos(2.0 * s.Omega * t))
+        sine = math.sin(s.Omega * t)
+        drive = s.beta * sine + s.gamma * (1.0 - forces.cos_double_angle(sine))
         return forces.horner(self.g1, x), s.alpha * forces.horner(self.g2, x) + drive * forces.horner(self.g3, x)
 
 

@@ -568,7 +568,7 @@ static double horner_slope(const double *c, double x)
 static void force_slopes(const VkModel *m, double t, double x, double *contact, double *electrostatic, double *accel)
 {
     int fault = 0;
-    const double s = m->ac ? py_sin(m->Omega * t, &fault) : 0.0, c2 = m->ac ? py_cos(2.0 * m->Omega * t, &fault) : 1.0;
+    const double s = m->ac ? py_sin(m->Omega * t, &fault) : 0.0, c2 = m->ac ? vm_cos_double_angle(s) : 1.0;
     if (m->polynomial) { /* Eq. 7: F_contact G1, F_electrostatic alpha G2 + (beta s + gamma (1 - c2)) G3 */
         const double g3 = horner_slope(m->g3, x);
         *contact = horner_slope(m->g1, x);
