@@ -262,12 +262,12 @@ def scene_broken(scene: Scene, fidelity: int) -> bool:
     return not (1.0 - u > PULL_IN_GAP and 1.0 + u > PULL_IN_GAP)
 
 
-def fill_one(plants: np.ndarray, scene: Scene, settings: Settings, start_time: float,
-              stop_time: float) -> tuple[float, list[str], list[str]]:
+def fill_one(scene: Scene, settings: Settings, start_time: float,
+             stop_time: float) -> tuple[VkPlant, float, list[str], list[str]]:
     """fill_plants for one scene of the exact model (c_model EXACT) in Python floats, the same operations on the
-    same values (tests/harness/test_api.py compares the bytes): (its step ceiling, warnings, notes)."""
-    plants.view(np.uint8)[:] = _template(settings, start_time)
-    plant = VkPlant.from_buffer(plants)
+    same values (tests/harness/test_api.py compares the bytes): (its kernel structure, a new ctypes VkPlant; its
+    step ceiling, warnings, notes)."""
+    plant = VkPlant.from_buffer_copy(_template(settings, start_time))
     model = plant.model
     for name in MODEL_PARAMETERS:
         setattr(model, name, getattr(scene, name))
@@ -287,7 +287,7 @@ def fill_one(plants: np.ndarray, scene: Scene, settings: Settings, start_time: f
     notes = solver_tolerance(scene, settings, start_time, stop_time)[1] if factor < 1.0 else []
     solver = solver_entry(settings.solver)
     warnings = rk4_drive_warnings(scene, solver.step(settings.max_step)) if solver.drive_gains is not None else []
-    return (plant.dop.max_step if plant.solver == 0 else plant.rk4.max_step), warnings, notes
+    return plant, (plant.dop.max_step if plant.solver == 0 else plant.rk4.max_step), warnings, notes
 
 
 @functools.lru_cache(maxsize=64)
@@ -397,21 +397,22 @@ def simulate(scene: Scene | None = None, stop_time: float = 200.0, interval: flo
             or scene_broken(scene, int(checked.fidelity)) or not set(outputs) <= set(OUTPUTS)):
         # simulate_many's columns (and its errors, in its order)
         return simulate_many([scene], stop_time, interval, settings, start_time, outputs).run(0)
-    # one scene of the exact model: simulate_many's steps in Python floats (its numpy costs more for one scene)
-    plants = np.zeros(1, dtype=PLANT_DTYPE)
-    ceiling, warnings, notes = fill_one(plants, scene, checked, start_time, stop_time)
-    _check_interval(np.array([ceiling]), interval, 0, False)
+    # one scene of the exact model: simulate_many's steps in Python floats and ctypes scalars (its numpy arrays and
+    # their ctypes pointers cost more than the run itself for a short scene)
+    plant, ceiling, warnings, notes = fill_one(scene, checked, start_time, stop_time)
+    if interval / ceiling > MAX_STEPS_PER_DOSTEP:
+        _check_interval(np.array([ceiling]), interval, 0, False)
     every = not set(outputs) <= set(STATE)
-    out = np.full((len(OUTPUTS) if every else len(STATE), n + 1), np.nan)
-    n_done, codes = np.zeros(1, dtype=np.int64), np.zeros(1, dtype=np.int64)
-    x0, v0 = np.array([scene.x_start]), np.array([scene.v_start])
-    default_library().vk_run_batch(plants.ctypes.data, 1, start_time, x0.ctypes.data_as(_double_p),
-                                   v0.ctypes.data_as(_double_p), interval, n, out.ctypes.data_as(_double_p), n + 1,
-                                   n_done.ctypes.data_as(_int_p), codes.ctypes.data_as(_int_p), int(every))
-    done, stopped, error = int(n_done[0]), "", None
+    out = np.empty((len(OUTPUTS) if every else len(STATE), n + 1))  # only the points reached are returned
+    n_done, code = ctypes.c_int64(), ctypes.c_int64()
+    default_library().vk_run_batch(ctypes.addressof(plant), 1, start_time, ctypes.byref(ctypes.c_double(scene.x_start)),
+                                   ctypes.byref(ctypes.c_double(scene.v_start)), interval, n,
+                                   (ctypes.c_double * out.size).from_buffer(out), n + 1, ctypes.byref(n_done),
+                                   ctypes.byref(code), int(every))
+    done, stopped, error = n_done.value, "", None
     if done < n + 1:
         k = max(done - 1, 0)
-        stopped, error = _stop(VkPlant.from_buffer(plants), int(codes[0]), start_time + k * interval, interval)
+        stopped, error = _stop(plant, code.value, start_time + k * interval, interval)
     values = {name: out[j, :done] if j < len(out) else None for j, name in enumerate(OUTPUTS)}
     if values["in_contact"] is not None:
         values["in_contact"] = values["in_contact"] != 0.0

@@ -226,11 +226,11 @@ def test_one_scene_is_filled_as_simulate_many_fills_it(settings):
                        Scene(Omega=40.0), Scene(mu=0.0)]
     for scene in scenes:
         for start, stop in ((0.0, 10.0), (0.0, 1e4), (5.0, math.nan)):
-            one, many = np.zeros(1, dtype=api.PLANT_DTYPE), np.zeros(1, dtype=api.PLANT_DTYPE)
-            ceiling, warnings, notes = api.fill_one(one, scene, checked, start, stop)
+            many = np.zeros(1, dtype=api.PLANT_DTYPE)
+            one, ceiling, warnings, notes = api.fill_one(scene, checked, start, stop)
             ceilings, many_warnings, many_notes = api.fill_plants(many, api.scene_columns([scene]), checked, start,
                                                                   stop)
-            assert one.tobytes() == many.tobytes(), (scene, start, stop)
+            assert bytes(one) == many.tobytes(), (scene, start, stop)
             assert (ceiling, warnings, notes) == (ceilings[0], many_warnings[0], many_notes[0])
             assert not api.scene_broken(scene, int(checked.fidelity))
 
