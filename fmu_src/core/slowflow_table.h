@@ -28,4 +28,20 @@ int vk_slowflow_tabulate(const double *flow, double t_start, const double *z0, d
                          double max_step, double spacing, int64_t n, int64_t max_refinements, int64_t capacity,
                          double *cells, double *out, char *message);
 
+/* Fidelity 3's error estimate's samples (vibromodel.error_estimates.averaged_terms): x~, x~', x~'' of the table at
+   n >= 2 times t0 + span i/(n - 1) (numpy.linspace's: i span/(n - 1), the last span itself), the residual
+   R = accel(x~, x~') - x~'' of Eq. 3 (error_estimates.exact_accel: scene[] below) and e of e'' + mu e' + k1 e = R
+   advanced exactly from sample to sample with R piecewise linear (error_estimates.linear_response: z_k+1 =
+   step z_k + R_k phi1 + (R_k+1 - R_k) phi2, e = Im(z)/p; filter[] below).  The cosines and sines of omega t and
+   Omega t advance by rotation, recomputed every SR_RESYNC samples (their drift, a few ulps per sample, stays below
+   1e-13 of the amplitude; the estimate is published to 3 digits).  out[SR_PROPAGATED] = max|e|, out[SR_RESIDUAL]
+   = max|R|.  Returns 0, or 1 when a time lies outside the table (nothing written). */
+enum { SR_MU, SR_DELTA, SR_OMEGA, SR_ALPHA, SR_BETA, SR_GAMMA, SR_R, SR_BIG_OMEGA, SR_SCENE };  /* scene[] */
+enum { SR_STEP, SR_PHI1 = 2, SR_PHI2 = 4, SR_P = 6, SR_FILTER };  /* filter[]: complex as (re, im) */
+enum { SR_PROPAGATED, SR_RESIDUAL, SR_OUTPUTS };  /* out[] */
+#define SR_RESYNC 16
+
+int vk_slowflow_residual(const void *table, const double *scene, double t0, double span, int64_t n,
+                         const double *filter, double *out);
+
 #endif

@@ -87,15 +87,28 @@ def shifted(A, x_e: float) -> tuple[float, ...]:
     return tuple(float(sum(comb(n, j) * A[n] * x_e ** (n - j) for n in range(j, len(A)))) for j in range(len(A)))
 
 
+EPS = float(np.finfo(float).eps)
+
+
+def _horner(x: float, c) -> float:
+    """numpy.polynomial's polyval(x, c) for a float x, operation for operation (c ascending): its bits, without
+    numpy's per-call cost (fidelity 3's set-up)."""
+    value = c[-1] + x * 0
+    for coefficient in reversed(c[:-1]):
+        value = coefficient + value * x
+    return value
+
+
 def equilibrium(scene: Scene) -> Equilibrium:
     """Root x_e of sum A_k x^k near -Gamma/A_1, by Newton's method (docs/model.md, Averaging and slow flow)."""
     A = averaged_coefficients(scene)
+    dA = [j * A[j] for j in range(1, len(A))]  # numpy.polynomial's polyder(A), term for term
     x = -A[0] / A[1]
     for _ in range(50):
-        value, slope = P.polyval(x, A), P.polyval(x, P.polyder(A))
-        step = value / slope
+        value, slope = _horner(x, A), _horner(x, dA)
+        step = value / slope if slope else float(np.float64(value) / slope)  # numpy's inf or nan at a zero slope
         x -= step
-        if abs(step) <= 4 * np.finfo(float).eps * max(1.0, abs(x)):
+        if abs(step) <= 4 * EPS * max(1.0, abs(x)):
             break
     x = float(x)
     k = shifted(A, x)

@@ -21,10 +21,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from . import slowflow_kernel
 from .compiled import PlantFastPath, fill_model
 # oafm_eval.h's and openloop_plant.h's constants and structures, generated from the headers (core_layouts.py)
 from .core_layouts import (OE_BASES, OE_ITEMS, OE_POWERS, OE_RESYNC, OE_STEP_SLACK, OL_BEYOND, OL_REFUSED, OeCache,
-                           OePiece, OeSolution, OlPlant, SfTable)
+                           OePiece, OeSolution, OlPlant)
 from .fidelities import Evaluator, entry
 from .forces import coefficients
 from .oafm_bases import eq11_operator
@@ -65,17 +66,7 @@ def declare(library) -> str | None:
 
 # ---------------------------------------------------------------- fidelity 3: the table
 
-def slowflow_table(solution) -> tuple[SfTable, np.ndarray]:
-    """The SfTable of a slowflow.SlowFlowSolution and the array its cells pointer points into (keep it)."""
-    cells = np.ascontiguousarray(solution.cell_array())
-    ac = bool(solution.ac)
-    table = SfTable(t0=solution.t0, spacing=solution.spacing, omega=solution.omega, x_e=solution.x_e,
-                    harmonic=solution.harmonic, mean_shift=solution.mean_shift,
-                    Omega=solution.Omega if ac else 0.0, psi_sin=solution.psi_sin if ac else 0.0,
-                    psi_cos=solution.psi_cos if ac else 0.0, ac=int(ac), first=getattr(solution, "first", 0),
-                    n_cells=len(cells),
-                    t_end=solution.t_end, cells=cells.ctypes.data_as(_dp))
-    return table, cells
+slowflow_table = slowflow_kernel.slowflow_table  # the SfTable of a slowflow.SlowFlowSolution (and its cells)
 
 
 # ---------------------------------------------------------------- fidelity 4: rates as combinations of bases

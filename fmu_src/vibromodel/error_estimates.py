@@ -71,12 +71,16 @@ def averaged_terms(model, solution, span: float) -> dict:
     p = math.sqrt(k1 - 0.25 * mu * mu)  # ValueError (no estimate) for an overdamped k1 <= mu^2/4
     fastest = max(2.0 * solution.omega, 2.0 * s.Omega if solution.ac else 0.0, p)  # x~'s second harmonics, psi's
     n = int(min(RESIDUAL_SAMPLES, max(2, math.ceil(span * fastest / RESIDUAL_STEP_TURN) + 1)))
-    tau = solution.t0 + np.linspace(0.0, span, n)
-    x, v, a = solution.states(tau, cells)
-    residual = exact_accel(s, tau, x, v) - a
-    propagated = float(np.max(np.abs(linear_response(residual, span / (n - 1), mu, k1))))
-    return {"propagated": propagated, "residual": float(np.max(np.abs(residual))),
-            "amplitude": abs(model.eq.x_e) + r_max}
+    on_kernel = solution.residual_terms(s, span, n, mu, k1) if getattr(solution, "kernel", False) else None
+    if on_kernel is not None:  # the same samples in C (core/slowflow_table.c: vk_slowflow_residual)
+        propagated, largest = on_kernel
+    else:
+        tau = solution.t0 + np.linspace(0.0, span, n)
+        x, v, a = solution.states(tau, cells)
+        residual = exact_accel(s, tau, x, v) - a
+        propagated = float(np.max(np.abs(linear_response(residual, span / (n - 1), mu, k1))))
+        largest = float(np.max(np.abs(residual)))
+    return {"propagated": propagated, "residual": largest, "amplitude": abs(model.eq.x_e) + r_max}
 
 
 def averaged_estimate(model, solution, span: float) -> tuple[float, dict]:

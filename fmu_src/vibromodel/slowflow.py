@@ -219,15 +219,26 @@ class SlowFlowSolution:
             return held[3]
         return np.asarray(self.cells, dtype=float).reshape(-1, 8)
 
+    def residual_terms(self, scene, span: float, n: int, mu: float, k1: float) -> tuple[float, float] | None:
+        """fidelity 3's estimate's (max|e|, max|R|) from n samples over the table's first `span` on the kernel
+        (slowflow_kernel.residual_terms); None where it cannot (error_estimates.averaged_terms then uses numpy)."""
+        return slowflow_kernel.residual_terms(self, scene, span, n, mu, k1)
+
     def _extend_on_kernel(self, t: float, span: float) -> bool:
         """extend() on the compiled kernel (slowflow_kernel: the integration and the table in C, the refinement of
         the first table's grid included); False, nothing done, when its grid would exceed the cells it is given room
         for (then SciPy's path refines, as without the kernel)."""
         started = time.perf_counter()
         n = 0 if not self.cells else round(span / self.spacing)
-        room = n if self.cells else max(MAX_TABLE_CELLS, math.ceil(span)) * 2 ** 6
-        result = slowflow_kernel.tabulate(self.flow, self.t_end, self.Z_end, span, self.rtol, self.atol,
-                                          self.max_step, self.spacing if self.cells else 0.0, n, MAX_REFINEMENTS, room)
+        # room for the grid: a first table's refinement rarely passes 16 cells per tau (the paper scene's: 2); a
+        # finer one is asked again with room for 64 times the cells it reached (and left to SciPy beyond that)
+        result = None
+        for room in ((n,) if self.cells else (16 * math.ceil(span), 64 * 16 * math.ceil(span))):
+            result = slowflow_kernel.tabulate(self.flow, self.t_end, self.Z_end, span, self.rtol, self.atol,
+                                              self.max_step, self.spacing if self.cells else 0.0, n, MAX_REFINEMENTS,
+                                              room)
+            if result is not None:
+                break
         self.integration_seconds += time.perf_counter() - started
         if result is None:
             return False

@@ -109,5 +109,44 @@ def test_the_front_ends_layout_is_the_headers():
     assert (slowflow_kernel.SF_FLOW, slowflow_kernel.ST_OUTPUTS) == (position("SF_FLOW"), position("ST_OUTPUTS"))
     assert re.search(r"#define DOP_MESSAGE (\d+)", (CORE / "dop853.h").read_text()).group(1) == \
         str(slowflow_kernel.MESSAGE)
+    assert (slowflow_kernel.SR_SCENE, slowflow_kernel.SR_FILTER, slowflow_kernel.SR_OUTPUTS) == \
+        (position("SR_SCENE"), 7, position("SR_OUTPUTS"))
+    assert re.search(r"SR_P = 6, SR_FILTER \}", header)  # filter[]: three complex numbers and p
+    assert re.search(r"#define SR_RESYNC 16\b", header)  # the rotations between resyncs, as the test above counts
     codes = re.search(r"enum \{ ST_OK = (\d), ST_CAPACITY = (\d), ST_FAILED = (\d) \}", header).groups()
     assert tuple(map(int, codes)) == (slowflow_kernel.ST_OK, slowflow_kernel.ST_CAPACITY, slowflow_kernel.ST_FAILED)
+
+
+@pytest.mark.parametrize("name", list(SCENES))
+def test_the_estimates_samples_on_the_kernel_match_numpys(name):
+    """error_estimates.averaged_terms's residual and its propagation, in C (vk_slowflow_residual) and with numpy.
+
+    Each sample's x~'' and accel are sums of terms of size <= S (below) evaluated at cosines and sines that differ
+    from numpy's by the rotation's drift, <= SR_RESYNC rotations of <= 4 ulps each, and by the two libraries'
+    rounding (<= 1 ulp): so |dR| <= 2 (4 SR_RESYNC + 1) eps S per sample, x~'' counted twice (its omega^2 and
+    Omega^2 terms). The propagation sums the samples' differences with the gain of the recurrence, at most
+    (|phi1| + |phi2|) / (p (1 - |step|)) (a geometric series of the step's modulus)."""
+    from vibromodel import error_estimates
+
+    scene = SCENES[name]
+    c_table, _ = tables(scene)
+    model = c_table.averaged
+    on_kernel = error_estimates.averaged_terms(model, c_table, 200.0)
+    c_table.kernel = False  # the same table, sampled with numpy
+    with_numpy = error_estimates.averaged_terms(model, c_table, 200.0)
+    eps, resync = np.finfo(float).eps, 16  # core/slowflow_table.h's SR_RESYNC
+    r = float(np.max(np.hypot(c_table.cell_array()[:, 0], c_table.cell_array()[:, 4])))
+    w2 = max(scene.omega, scene.Omega) ** 2
+    size = 1.0 + abs(scene.Delta) + 4.0 * (abs(scene.alpha) + abs(scene.beta) + 2 * abs(scene.gamma)) + w2 * r + \
+        w2 * (abs(scene.beta) + abs(scene.gamma)) / scene.Omega ** 2
+    per_sample = 2 * (4 * resync + 1) * eps * size
+    mu, k1 = scene.mu, model.eq.k[1]
+    p = math.sqrt(k1 - 0.25 * mu * mu)
+    n = int(min(error_estimates.RESIDUAL_SAMPLES, max(2, math.ceil(200.0 * max(2 * scene.omega, 2 * scene.Omega, p)
+                                                                   / error_estimates.RESIDUAL_STEP_TURN) + 1)))
+    lam, dt = complex(-0.5 * mu, p), 200.0 / (n - 1)
+    step = np.exp(lam * dt)
+    gain = (abs((step - 1.0) / lam) + abs((step - 1.0 - lam * dt) / (lam * lam * dt))) / (p * (1.0 - abs(step)))
+    assert abs(on_kernel["residual"] - with_numpy["residual"]) <= per_sample
+    assert abs(on_kernel["propagated"] - with_numpy["propagated"]) <= per_sample * gain
+    assert on_kernel["amplitude"] == with_numpy["amplitude"]
