@@ -48,13 +48,16 @@ EXACT_RUN_COST = {1e-4: 0.69, 1e-5: 0.7, 1e-6: 0.71, 1e-7: 0.84, 1e-8: 1.0, 1e-9
 EXACT_RTOLS = tuple(EXACT_RUN_COST)
 # The averaged and analytic rungs' set-up in the same unit: medians over the paper scene and 24 random scenes
 # (`python -m vibrofmu.analyses.error_calibration costs 24 0`, thread CPU on the compiled kernel, least of 3; its
-# per-scene values spread ~3x about the median). The slow flow: 8,750 fixed (its model, the slow state's start, the
-# first table's grid refinement, the estimate's fixed part) and 21 per unit of tau of table and estimate (set-up at
-# stop 1000 minus at 200, per tau: median 21.3; the doSteps' extensions beyond WINDOW, lookups included, 21.2); the
-# paper scene 17,400 and 19.6 (measured at a load average of 10 on 2 cores). The OAFM fit per unit of its fit span:
-# 1,900 fitted (median 1,984; the paper scene 3,600), 320 read from the cache (median 325; the paper scene 450).
-SETUP_COST = {Fidelity.EXACT: 250.0, Fidelity.AVERAGED: 8750.0, Fidelity.ANALYTIC: 0.0}
-TABLE_COST = 21.0
+# per-scene values spread ~3x about the median). The slow flow, integrated and tabulated on the compiled kernel
+# (core/slowflow_table.c, its estimate's samples too): 980 fixed (its model, the slow state's start, the first
+# table's grid refinement, the estimate's fixed part; median 977, 10-90 % 643-1,920; the paper scene 1,906) and 3.7
+# per unit of tau of table and estimate (set-up at stop 1000 minus at 200, per tau: median 3.65, the paper scene 3.4;
+# the doSteps' extensions beyond WINDOW, their lookups included, 9.9, of which the lookups at LADDER_COST are ~7.6),
+# measured at a load average of 6-8 on 2 cores. With SciPy's integration and numpy's table they were 8,750 and 21.
+# The OAFM fit per unit of its fit span: 1,900 fitted (median 1,984; the paper scene 3,600), 320 read from the cache
+# (median 325; the paper scene 450).
+SETUP_COST = {Fidelity.EXACT: 250.0, Fidelity.AVERAGED: 980.0, Fidelity.ANALYTIC: 0.0}
+TABLE_COST = 3.7
 FIT_COST = {"fitted": 1900.0, "cached": 320.0}
 OUTPUT_INTERVAL = 0.1  # the outputs a run is costed by (FMI 2 tells no communication step at initialisation)
 

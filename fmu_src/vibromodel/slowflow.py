@@ -213,7 +213,7 @@ class SlowFlowSolution:
 
     def cell_array(self) -> np.ndarray:
         """The table's kept cells as an (n, 8) array (a row per cell: a0..a3, b0..b3), without copying the list of
-        cells when the kernel's array of the same table is at hand (the first table, until a doStep extends it)."""
+        cells when the kernel's array of the same table is at hand (kept by _extend_on_kernel)."""
         held = self.__dict__.get("_array")  # (first, cells, t_end, the array): the table it was made of
         if held is not None and held[:3] == (self.first, len(self.cells), self.t_end):
             return held[3]
@@ -244,7 +244,7 @@ class SlowFlowSolution:
             return False
         spacing, table, Z_end, tolerance, _ = result
         cells = list(map(tuple, table.tolist()))
-        first_table = not self.cells
+        kept, drop = (self.cell_array() if self.cells else None), 0  # the array of the table before this chunk
         if self.cells:
             if self.bounded:  # drop the cells before the one holding t (a run only moves forward)
                 drop = max(0, min(int((t - self.t0) / self.spacing) - self.first, len(self.cells)))
@@ -255,8 +255,10 @@ class SlowFlowSolution:
         self.check_domain(table, self.t_end)
         self.cells.extend(cells)
         self._start(self.t_end + span, Z_end)
-        if first_table:  # its array, for the estimate and the compiled evaluator (cell_array)
-            self._array = (self.first, len(self.cells), self.t_end, table)
+        # the table's array, for the estimate and the compiled evaluator (cell_array): kept up to date here, so that
+        # an extension costs its own chunk, not a copy of the whole list of cells
+        array = table if kept is None else np.concatenate((kept[drop:], table))
+        self._array = (self.first, len(self.cells), self.t_end, array)
         return True
 
     def _refined_cells(self, dense, t_start, span):

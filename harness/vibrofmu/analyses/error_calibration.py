@@ -551,7 +551,7 @@ def costs_table(result: dict) -> list[str]:
     for key in COST_KEYS:
         if key in result["medians"]:
             paper = result["paper"].get(key)
-            lines.append(f"| {labels[key]} | {mine[key]:,.0f} | {result['medians'][key]:,.1f} ({counted[key]}) | "
+            lines.append(f"| {labels[key]} | {mine[key]:,.4g} | {result['medians'][key]:,.1f} ({counted[key]}) | "
                          f"{'refused' if paper is None else f'{paper:,.1f}'} |")
     return lines
 
