@@ -49,15 +49,17 @@ EXACT_RTOLS = tuple(EXACT_RUN_COST)
 # The averaged and analytic rungs' set-up in the same unit: medians over the paper scene and 24 random scenes
 # (`python -m vibrofmu.analyses.error_calibration costs 24 0`, thread CPU on the compiled kernel, least of 3; its
 # per-scene values spread ~3x about the median). The slow flow, integrated and tabulated on the compiled kernel
-# (core/slowflow_table.c, its estimate's samples too): 980 fixed (its model, the slow state's start, the first
-# table's grid refinement, the estimate's fixed part; median 977, 10-90 % 643-1,920; the paper scene 1,906) and 3.7
-# per unit of tau of table and estimate (set-up at stop 1000 minus at 200, per tau: median 3.65, the paper scene 3.4;
-# the doSteps' extensions beyond WINDOW, their lookups included, 9.9, of which the lookups at LADDER_COST are ~7.6),
-# measured at a load average of 6-8 on 2 cores. With SciPy's integration and numpy's table they were 8,750 and 21.
+# (core/slowflow_table.c, its estimate's samples too): 970 fixed (its model, the slow state's start, the first
+# table's grid refinement, the estimate's fixed part; medians of two runs 977 and 965, 10-90 % 643-1,920; the paper
+# scene 1,850-1,910) and 4.0 per unit of tau of table and estimate (set-up at stop 1000 minus at 200, per tau: medians
+# 3.65 and 4.40, the paper scene 3.4-5.1; the doSteps' extensions beyond WINDOW, their lookups included, 9.9-10.1, of
+# which the lookups at LADDER_COST are ~7.6), measured at a load average of 6-8 on 2 cores. Per tau at interval 0.1
+# the averaged rung (4.0 + 2.84) and the exact model at rtol 1e-4 (6.9) then cost about the same: its fixed set-up
+# is paid back only over ~10^4 tau. With SciPy's integration and numpy's table they were 8,750 and 21.
 # The OAFM fit per unit of its fit span: 1,900 fitted (median 1,984; the paper scene 3,600), 320 read from the cache
 # (median 325; the paper scene 450).
-SETUP_COST = {Fidelity.EXACT: 250.0, Fidelity.AVERAGED: 980.0, Fidelity.ANALYTIC: 0.0}
-TABLE_COST = 3.7
+SETUP_COST = {Fidelity.EXACT: 250.0, Fidelity.AVERAGED: 970.0, Fidelity.ANALYTIC: 0.0}
+TABLE_COST = 4.0
 FIT_COST = {"fitted": 1900.0, "cached": 320.0}
 OUTPUT_INTERVAL = 0.1  # the outputs a run is costed by (FMI 2 tells no communication step at initialisation)
 

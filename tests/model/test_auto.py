@@ -1,5 +1,7 @@
 """Fidelity auto (vibromodel.auto): the cheapest rung whose error estimate (vibromodel.error_estimates) meets a
 tolerance on max|x - x_exact|, against the exact model run by the compiled kernel."""
+import math
+
 import numpy as np
 import pytest
 
@@ -42,9 +44,10 @@ def test_the_paper_scene_gets_a_rung_whose_measured_error_meets_the_tolerance(to
     over its fit span, 235) costs more than the exact model's whole run, and so do the averaged rung's set-up and table
     (auto.SETUP_COST, TABLE_COST; compiled, core/slowflow_table.c), though its estimate (7.5e-4) meets it (measured:
     `python -m vibrofmu.analyses.error_calibration pair 200 1e-3 9`). 1e-10 gets the exact model at a tight rtol.
-    Over [0, 3000] 1e-2 gets the averaged rung: per output its lookup and table (LADDER_COST + TABLE_COST at interval
-    0.1) are priced below the exact model's at rtol 1e-4, and its fixed set-up is paid off beyond ~2,000 tau. The
-    measured error against DOP853 at rtol 1e-12 must meet the tolerance too."""
+    Over [0, 3000] 1e-2 gets the exact model too: per output the averaged rung's lookup and table (LADDER_COST +
+    TABLE_COST at interval 0.1) cost about what the exact model's at rtol 1e-4 does, and its fixed set-up is not paid
+    back (measured: `python -m vibrofmu.analyses.error_calibration pair 3000 1e-2 3`); should its constants price it
+    cheaper, it is chosen there. The measured error against DOP853 at rtol 1e-12 must meet the tolerance too."""
     plant, settings, log = chosen(Scene(), tolerance, library, stop)
     averaged_cheaper = run_cost(Fidelity.AVERAGED, LADDER_COST[Fidelity.AVERAGED], stop) < \
         run_cost(Fidelity.EXACT, EXACT_RUN_COST[1e-4], stop)
@@ -181,11 +184,11 @@ def test_the_cost_model_ranks_the_paper_scene_s_rungs_as_their_counted_work_does
     one CHUNK (the last doStep's end may round past the table's end and ask one more: over [0, 1000] it does). The
     analytic rung's fit span is analytic.covering's, what the plant fits (refused beyond its automatic 600). Priced
     at auto's unit costs, the counted work ranks the candidates as auto's model does. Per output the averaged rung's
-    table and lookup (TABLE_COST per tau, 0.37 per output at interval 0.1, beside its lookup 0.28) cost less than the
-    exact model at any rtol (0.69 ... 2.21), and its fixed set-up (SETUP_COST) is paid off beyond the span where the
-    two meet (between 1000 and 3000 here): the exact model at its loosest rtol is the cheapest at 200 and 1000, the
-    averaged rung at 3000. The analytic rung's fit (FIT_COST: >= 320 per tau of a fit span >= 200) costs more than a
-    run of 60,000 outputs at rtol 1e-4."""
+    table and lookup (TABLE_COST per tau, 0.4 per output at interval 0.1, beside its lookup 0.28) cost about what the
+    exact model does at rtol 1e-4 (0.69), so its fixed set-up (SETUP_COST) is paid off only beyond the span where the
+    two meet, if they do: beyond the paper scene's runs here, on which the exact model at its loosest rtol is the
+    cheapest. The analytic rung's fit (FIT_COST: >= 320 per tau of a fit span >= 200) costs more than a run of
+    60,000 outputs at rtol 1e-4."""
     from vibromodel.analytic import OafmSettings, covering
     from vibromodel.auto import (EXACT_RUN_COST, FIT_COST, OUTPUT_INTERVAL, SETUP_COST, TABLE_COST, run_cost)
     from vibromodel.slowflow import CHUNK
@@ -211,12 +214,10 @@ def test_the_cost_model_ranks_the_paper_scene_s_rungs_as_their_counted_work_does
     for rtol, cost in EXACT_RUN_COST.items():
         counted[rtol] = modelled[rtol] = run_cost(Fidelity.EXACT, cost, stop)
     assert sorted(counted, key=counted.get) == sorted(modelled, key=modelled.get)
-    per_tau = {"averaged": TABLE_COST + LADDER_COST[Fidelity.AVERAGED] / OUTPUT_INTERVAL,
-               "exact": EXACT_RUN_COST[1e-4] / OUTPUT_INTERVAL}
-    assert per_tau["averaged"] < per_tau["exact"] <= min(EXACT_RUN_COST.values()) / OUTPUT_INTERVAL
-    meet = (SETUP_COST[Fidelity.AVERAGED] - SETUP_COST[Fidelity.EXACT]) / (per_tau["exact"] - per_tau["averaged"])
-    assert 1000.0 < meet < 3000.0
-    assert min(counted, key=counted.get) == ("fidelity 3" if stop > meet else 1e-4)
+    saving = (EXACT_RUN_COST[1e-4] - LADDER_COST[Fidelity.AVERAGED]) / OUTPUT_INTERVAL - TABLE_COST  # per tau
+    meet = (SETUP_COST[Fidelity.AVERAGED] - SETUP_COST[Fidelity.EXACT]) / saving if saving > 0.0 else math.inf
+    assert meet > 3000.0  # the averaged rung's set-up is not paid back over these runs
+    assert min(counted, key=counted.get) == 1e-4
 
 
 def test_the_auto_costs_block_prints_auto_s_constants_beside_the_measured_medians(tmp_path):
