@@ -81,7 +81,8 @@ class SlowFlowSolution:
             self.Omega, self.psi_sin, self.psi_cos = s.Omega, -s.beta / s.Omega**2, s.gamma / (4 * s.Omega**2)
         self.rtol, self.atol, self.max_step = rtol, 1e-2 * rtol, max_step
         self.t0, self.cells, self.spacing = t0, [], 1.0
-        self.integration_seconds = 0.0  # time spent integrating the slow flow itself (not tabulating)
+        self.integration_seconds = 0.0  # time spent integrating the slow flow (with SciPy: not tabulating; on the
+        # kernel the one call integrates and tabulates)
         _, k1, k2 = model.eq.k[:3]
         self.harmonic, self.mean_shift = k2 / (6 * k1), k2 / (2 * k1)
         self.R, self.r_edge = s.R, model.r_max  # the domain (check_domain)
