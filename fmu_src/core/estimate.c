@@ -61,16 +61,13 @@ static int py_complex_abs(double re, double im, double *value)
     return !isfinite(*value);
 }
 
-/* x ** w for a float w (float_pow): 1 where Python raises (a negative x to a non-integer power, 0 to a negative
-   one, an overflow from finite operands) */
+/* x ** w for a float w (float_pow): pyfloat.c's vk_python_pow; 1 where Python raises or hands back a complex (a
+   negative x to a non-integer power, 0 to a negative one, an overflow from finite operands) */
 static int py_pow(double x, double w, double *value)
 {
-    if (w == 0.0) { *value = 1.0; return 0; }
-    if (isnan(x)) { *value = x; return 0; }
-    if (x == 0.0 && w < 0.0) return 1;
-    if (x < 0.0 && w != floor(w)) return 1;
-    *value = pow(x, w);
-    return isinf(*value) && isfinite(x) && isfinite(w);
+    int fault = FAULT_NONE;
+    *value = vk_python_pow(x, w, &fault);
+    return fault != FAULT_NONE;
 }
 
 static double hypot2(double a, double b)
@@ -324,4 +321,11 @@ int vk_polynomial_estimate(const double *in, const double *constants, int compen
     if (response_parts(in, &r)) return 1;
     if (solver_terms(in, constants, &r, compensated, out)) return 1;
     return truncation_terms(in, constants, &r, compensated, out);
+}
+
+int vk_solver_estimate(const double *in, const double *constants, int compensated, double *out)
+{
+    Parts r;
+    if (response_parts(in, &r)) return 1;
+    return solver_terms(in, constants, &r, compensated, out);
 }

@@ -29,5 +29,8 @@ enum {
 /* 0, or 1 where the Python function raises (the caller runs it then); compensated: Python's sum() adds floats
    with Neumaier's compensation (CPython 3.12 on), else one by one. */
 int vk_polynomial_estimate(const double *in, const double *constants, int compensated, double *out);
+/* The exact model's estimate (error_estimates.solver_terms): out[PO_SOLVER .. PO_SIZE] alone (in[]'s polynomial
+   coefficients are not read); 0, or 1 where the Python function raises. */
+int vk_solver_estimate(const double *in, const double *constants, int compensated, double *out);
 
 #endif

@@ -8,19 +8,27 @@
 #include <stdio.h>
 #include <stdlib.h>
 
-/* iv ** iw as Python's float ** gives it, for the exponents used here (-1/8, 1/9) of error ratios iv >= 0 or NaN:
- * C's pow (the libm call CPython's float_pow makes for them), a NaN base returned as it is, and the faults where
- * Python raises: 0 ** negative (ZeroDivisionError) and an infinite result from a finite base (OverflowError;
- * found from the value, not from errno). */
+/* iv ** iw as Python's float ** gives it (float_pow), for the exponents of DOP853's step control (-1/8, 1/9, the PI
+ * controller's) of error ratios iv >= 0 or NaN, and the error estimate's (core/estimate.c): C's pow (the libm call
+ * CPython's float_pow makes), with Python's rules where C's differ: x ** 0 is 1 even for a NaN x; a NaN base is
+ * returned as it is; and the faults where Python raises: 0 ** negative (ZeroDivisionError) and an infinite result
+ * from finite operands (OverflowError; found from the value, not from errno); a negative base to a non-integer
+ * power, a complex number in Python, is FAULT_COMPLEX (the caller hands the case back to Python). The step
+ * control's calls (iw != 0, iv >= 0 or NaN) meet none of the added rules: their bits are the former ones. */
 double vk_python_pow(double iv, double iw, int *fault)
 {
+    if (iw == 0.0) return 1.0;
     if (isnan(iv)) return iv;
-    if (iv == 0.0 && iw < 0.0) {
+    if (iv == 0.0 && iw < 0.0 && isfinite(iw)) { /* 0 ** -inf is inf */
         *fault = FAULT_ZERO_DIVISION;
         return 0.0;
     }
+    if (iv < 0.0 && isfinite(iv) && isfinite(iw) && iw != floor(iw)) { /* a NaN iw gives NaN */
+        *fault = FAULT_COMPLEX;
+        return NAN;
+    }
     const double ix = pow(iv, iw);
-    if (isinf(ix) && isfinite(iv)) *fault = FAULT_OVERFLOW;
+    if (isinf(ix) && isfinite(iv) && isfinite(iw)) *fault = FAULT_OVERFLOW;
     return ix;
 }
 
@@ -120,6 +128,9 @@ void py_fault_text(int fault, char *buf, unsigned long size)
         break;
     case FAULT_MATH_DOMAIN:
         snprintf(buf, size, "ValueError: math domain error");
+        break;
+    case FAULT_COMPLEX:
+        snprintf(buf, size, "complex result: a negative number to a fractional power");
         break;
     default:  /* FAULT_OVERFLOW */
         snprintf(buf, size, "OverflowError: result out of range");

@@ -8,7 +8,7 @@
 #define VIBRO_PYFLOAT_H
 
 /* What a Python operation raised (nothing: FAULT_NONE). */
-enum { FAULT_NONE = 0, FAULT_ZERO_DIVISION, FAULT_MATH_DOMAIN, FAULT_OVERFLOW };
+enum { FAULT_NONE = 0, FAULT_ZERO_DIVISION, FAULT_MATH_DOMAIN, FAULT_OVERFLOW, FAULT_COMPLEX };
 
 #define VK_PYTHON_HYPOT_MAX 32
 
@@ -47,7 +47,8 @@ static inline double py_square(double q, int *fault)
     if (isinf(square) && !isinf(q)) *fault = FAULT_OVERFLOW;
     return square;
 }
-/* iv ** iw for iw = -1/8, 1/9 and iv >= 0 or NaN (Python's float **): FAULT_ZERO_DIVISION, FAULT_OVERFLOW */
+/* iv ** iw (Python's float **): FAULT_ZERO_DIVISION, FAULT_OVERFLOW, FAULT_COMPLEX (a negative iv to a non-integer
+   iw: Python's result is complex); x ** 0 is 1 (pyfloat.c) */
 double vk_python_pow(double iv, double iw, int *fault);
 /* math.hypot(*values[0..n-1]), bit for bit: a port of CPython's vector_norm, kept because neither libm's
    hypot nor sqrt of the summed squares gives math.hypot's bits (tests/core/test_pyfloat.py), and DOP853's initial

@@ -21,7 +21,7 @@ none meets: refused, naming the tolerance.
 
 The native FMU (no Python: no averaged or analytic rung) walks the same list, generated into its rules.h
 (harness/vibrofmu/fmus/native.py: auto_rows), passing over the levels it cannot run; its estimates of the exact
-model are this module's to the digit (native/plant_setup.c), so it chooses what `choose(..., native=True)` does.
+model are this module's to the digit (core/estimate.c), so it chooses what `choose(..., native=True)` does.
 """
 from __future__ import annotations
 

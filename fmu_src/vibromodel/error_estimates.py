@@ -209,8 +209,8 @@ def _memory(mu: float, span: float) -> float:
 
 
 def response_parts(scene, span: float) -> dict:
-    """The linear response of Eq. 11 over a run of `span`, in parts of one frequency each (native twin:
-    native/plant_setup.c response_parts):
+    """The linear response of Eq. 11 over a run of `span`, in parts of one frequency each (C twin, for the kernel
+    and the native FMU: core/estimate.c response_parts):
     - forced: (|phasor|, s) of Delta cos(omega t), beta sin(Omega t) and -gamma cos(2 Omega t) (the electrostatic
       drive's linear forcing), each through H(s) = 1/(a1 - s^2 + i mu_eff s) with mu_eff = 2/memory: at resonance
       the response grows as t/(2 s) for the run's memory min(span, 2/mu), not to the steady 1/(mu s);
@@ -451,15 +451,33 @@ def exact_estimate(scene, settings, model, solution, span: float) -> dict:
     return _result(terms["solver"], terms["amplitude"], terms)
 
 
-# The compiled kernel's twin of polynomial_estimate (core/estimate.c): compiled.load_library registers the kernel it
-# loads (use_kernel), and the estimate then runs in C, with the same bits (tests/model/test_error_estimate_theory.py
-# compares them over random scenes); without a kernel, or where the Python code would raise, it runs in Python.
+# The compiled kernel's twin of polynomial_estimate and solver_terms (core/estimate.c, also the native FMU's estimate):
+# compiled.load_library registers the kernel it loads (use_kernel), and fidelities 1 and 2's estimate then runs in C,
+# with the same bits (tests/model/test_error_estimate_theory.py compares them over random scenes); without a kernel,
+# or where the Python code would raise, it runs in Python.
 _KERNEL = None
 # core/estimate.h's layouts: in[] (PE_INPUTS doubles), constants[] (PC_CONSTANTS), out[] (PO_OUTPUTS)
 _PE_INPUTS, _PC_CONSTANTS, _PO_OUTPUTS, _PC_MAX_COSINES = 29, 25, 10, 16
 _SOLVER_KEYS = {False: ("solver", "accumulated", "local", "step", "amplitude"),
                 True: ("solver", "accumulated", None, None, "amplitude")}
 _TRUNCATION_KEYS = ("truncation", "mean", "stiffness", "harmonics", "amplitude")
+
+
+def kernel_constants() -> list[float]:
+    """core/estimate.h's constants[] (PC_CONSTANTS doubles): this module's constants and the cycle's cosines, as the
+    kernel (use_kernel) and the native FMU (its generated rules.h, RULE_ESTIMATE_CONSTANTS) hand them to the C."""
+    return [DOP853_ESTIMATOR, DOP853_LOCAL, CALIBRATION["adaptive"], CALIBRATION["local"], CALIBRATION["fixed"],
+            CALIBRATION["truncation"], MIN_RTOL, TRUNCATION_TIMES, len(TRUNCATION_COSINES), *TRUNCATION_COSINES,
+            *[0.0] * (_PC_MAX_COSINES - len(TRUNCATION_COSINES))]
+
+
+# Python's sum() of floats is compensated (Neumaier) from 3.12 on, and core/estimate.c adds alike when asked. The
+# native FMU has no Python to follow: it adds compensated (NATIVE_COMPENSATED, its rules.h), the sum of the Python
+# this project is developed and tested on, and the more accurate one (the sums here add at most 16 terms of one
+# sign or mixed signs, where an uncompensated sum can lose the last bits). Both FMUs publish the estimate to 3
+# digits (round_estimate), so a Python before 3.12 differs from the native FMU only where the sums' last bits move
+# the third digit.
+NATIVE_COMPENSATED = True
 
 
 def use_kernel(library, compensated: bool | None = None) -> None:
@@ -476,10 +494,7 @@ def use_kernel(library, compensated: bool | None = None) -> None:
     function = library.vk_polynomial_estimate
     function.restype = ctypes.c_int
     function.argtypes = [doubles, ctypes.c_double * _PC_CONSTANTS, ctypes.c_int, ctypes.c_double * _PO_OUTPUTS]
-    constants = (ctypes.c_double * _PC_CONSTANTS)(
-        DOP853_ESTIMATOR, DOP853_LOCAL, CALIBRATION["adaptive"], CALIBRATION["local"], CALIBRATION["fixed"],
-        CALIBRATION["truncation"], MIN_RTOL, TRUNCATION_TIMES, len(TRUNCATION_COSINES), *TRUNCATION_COSINES,
-        *[0.0] * (_PC_MAX_COSINES - len(TRUNCATION_COSINES)))
+    constants = (ctypes.c_double * _PC_CONSTANTS)(*kernel_constants())
     # Python's sum() of floats is compensated (Neumaier) from 3.12 on; the C adds alike
     compensated = sys.version_info >= (3, 12) if compensated is None else compensated
     _KERNEL = (function, doubles, constants, int(compensated), ctypes.c_double * _PO_OUTPUTS)
@@ -541,8 +556,8 @@ DEFAULT_SPAN = 1000.0  # the run estimated without a stop time (fidelity 3's set
 
 
 def round_estimate(value: float) -> float:
-    """An estimate to 3 significant digits (more would be noise), as both plant FMUs publish it (the native one's C
-    computes the same terms in another order: native/plant_setup.c native_error_estimate)."""
+    """An estimate to 3 significant digits (more would be noise), as both plant FMUs publish it (the native one by
+    core/estimate.c, the kernel path's C: native/plant_setup.c native_error_estimate)."""
     return float(f"{value:.3g}")
 
 

@@ -1,5 +1,6 @@
 """core/pyfloat.c's vk_python_pow: Python's float ** for the kernel's exponents (-1/8, 1/9) of error ratios >= 0 or
-NaN, the same bits and, where Python raises, the matching fault (found from the value, without errno); its
+NaN, and for the error estimate's (core/estimate.c: 0.125, 4, 5, 8, 9, of any sign of base), the same bits and,
+where Python raises or gives a complex number, the matching fault (found from the value, without errno); its
 vk_python_hypot: math.hypot, the same bits, which neither C's hypot nor a plain norm gives."""
 import ctypes
 import ctypes.util
@@ -11,7 +12,7 @@ import pytest
 
 from vibrofmu.fmus import kernel
 
-FAULTS = {0: None, 1: ZeroDivisionError, 2: ValueError, 3: OverflowError}  # pyfloat.h's FAULT_* order
+FAULTS = {0: None, 1: ZeroDivisionError, 2: ValueError, 3: OverflowError, 4: complex}  # pyfloat.h's FAULT_* order
 
 
 @pytest.fixture(scope="module")
@@ -24,9 +25,10 @@ def vk_python_pow():
 
 def python_pow(iv, iw):
     try:
-        return iv ** iw, None
+        value = iv ** iw
     except ArithmeticError as error:
         return None, type(error)
+    return (None, complex) if isinstance(value, complex) else (value, None)
 
 
 @pytest.mark.parametrize("iw", [-1.0 / 8.0, 1.0 / 9.0])
@@ -40,6 +42,21 @@ def test_py_pow_is_pythons_float_pow(vk_python_pow, iv, iw):
     if raised is None:
         # bit identity is free: both are the one libm pow call on the same arguments (NaN: the base itself)
         assert struct.pack("<d", value) == struct.pack("<d", expected)
+
+
+@pytest.mark.parametrize("iw", [0.0, 0.125, 4.0, 5.0, 8.0, 9.0, -1.0, 0.5, math.inf, -math.inf, math.nan])
+@pytest.mark.parametrize("iv", [0.0, -0.0, 1e-300, 0.7, 1.0, -1.0, -2.5, 1e40, -1e40, 1e300, math.inf, -math.inf,
+                                math.nan])
+def test_py_pow_keeps_pythons_rules_for_the_estimates_exponents(vk_python_pow, iv, iw):
+    """The rules core/estimate.c needs beyond the step control's (estimate.c called its own copy before): x ** 0 is
+    1 even for a NaN x, a negative base to a non-integer power is Python's complex result (FAULT_COMPLEX: the
+    estimate hands the scene back to Python), an infinite exponent is no overflow; the same bits elsewhere."""
+    fault = ctypes.c_int(0)
+    value = vk_python_pow(iv, iw, ctypes.byref(fault))
+    expected, raised = python_pow(iv, iw)
+    assert FAULTS[fault.value] is raised, (iv, iw, value)
+    if raised is None:
+        assert struct.pack("<d", value) == struct.pack("<d", expected) or (math.isnan(value) and math.isnan(expected))
 
 
 def test_the_hypot_port_is_math_hypot_where_cs_hypot_and_a_plain_norm_are_not():

@@ -53,7 +53,8 @@ def test_slow_ac_grid_of_fidelity_3_and_the_worst_cells_of_fidelity_4(plant_fmu)
                                     {"rtol": 1e-4}, {"mu": 0.002}])
 def test_both_plant_fmus_publish_the_same_error_estimate_that_bounds_the_error(values, plant_fmu, native_plant_fmu):
     """error_estimate (calculated output, set at initialisation): the native FMU computes the integrated rungs' terms
-    in C (native/plant_setup.c), the pythonfmu FMU in Python; both round to 3 significant digits, so they agree
+    in C (core/estimate.c, called by native/plant_setup.c), the pythonfmu FMU in Python or by the same C on its
+    kernel (adding as Python's sum() does, the native FMU compensated as 3.12's); both round to 3 significant digits, so they agree
     exactly. Against the exact model at rtol 1e-12 the estimate bounds the measured error of x."""
     run = dict(stop_time=20.0, output_interval=0.1, output=["x", "error_estimate"])
     python = simulate_fmu(str(plant_fmu), start_values=values, **run)

@@ -64,16 +64,18 @@ def solver_files() -> tuple[Path, ...]:
         path for path in files if path.suffix == ".c" or path.is_file())
 
 
+# the plant's set-up with the error estimate it computes by the core's estimate.c (the Python kernel path's)
+PLANT_SETUP = (NATIVE_SRC / "plant_setup.c", NATIVE_SRC / "plant_setup.h", CORE / "estimate.c", CORE / "estimate.h")
 # what each model needs beyond its folder's native_model.c and config.h
 MODEL_FILES = {
     "HertzEAOscillator": tuple(CORE / name for name in ("plant.c", "plant.h", "model.c", "model.h", "fidelity.h"))
-    + solver_files() + (NATIVE_SRC / "plant_setup.c", NATIVE_SRC / "plant_setup.h"),
+    + solver_files() + PLANT_SETUP,
     "AdaptiveLyapunovController": (CORE / "controller.c", CORE / "controller.h",
                                    NATIVE_SRC / "controller_setup.c", NATIVE_SRC / "controller_setup.h"),
     "HertzEAClosedLoop": tuple(CORE / name for name in (
         "closedloop.c", "closedloop.h", "controller.c", "controller.h", "oafm_eval.c", "oafm_eval.h", "plant.c",
-        "plant.h", "model.c", "model.h", "fidelity.h")) + solver_files() + tuple(NATIVE_SRC / name for name in (
-            "plant_setup.c", "plant_setup.h", "controller_setup.c", "controller_setup.h")),
+        "plant.h", "model.c", "model.h", "fidelity.h")) + solver_files() + PLANT_SETUP + tuple(
+            NATIVE_SRC / name for name in ("controller_setup.c", "controller_setup.h")),
 }
 # Model Exchange (fmu_src/native/fmi2_me.c, me_model.h): each model whose config.h defines ME_N_STATES, with its
 # continuous states and each one's derivative variable, in the order of the C hooks' arrays, and the number of its
@@ -196,11 +198,10 @@ def rules_header() -> str:
         "ATOL_PER_RTOL": integrate.ATOL_PER_RTOL, "RK4_DEFAULT_STEP": plant.RK4_DEFAULT_STEP,
         "RK4_DRIVE_THETA": integrate.RK4_DRIVE_THETA, "RK4_DRIVE_ERROR": integrate.RK4_DRIVE_ERROR,
         "ERROR_MEMORY_REFERENCE": models.ERROR_MEMORY_REFERENCE, "TOLERANCE_FACTOR_FLOOR": models.TOLERANCE_FACTOR_FLOOR,
-        "DOP853_ESTIMATOR": error_estimates.DOP853_ESTIMATOR, "DOP853_LOCAL": error_estimates.DOP853_LOCAL,
-        **{f"CALIBRATION_{kind.upper()}": error_estimates.CALIBRATION[kind]
-           for kind in ("adaptive", "local", "fixed", "truncation")},
+        "CALIBRATION_TRUNCATION": error_estimates.CALIBRATION["truncation"],
+        "DEFAULT_SPAN": error_estimates.DEFAULT_SPAN,
     }
-    counts = {"TRUNCATION_ANGLES": error_estimates.TRUNCATION_ANGLES, "TRUNCATION_TIMES": error_estimates.TRUNCATION_TIMES}
+    counts = {"ESTIMATE_COMPENSATED": int(error_estimates.NATIVE_COMPENSATED)}
     texts = {
         "STEP_SIZE": _reason(plant.check_step, 0.0, 0.0, 0.0, 0.0, math.inf),
         "INPUT": _reason(plant.check_step, 0.0, 0.0, 1.0, math.nan, math.inf),
@@ -222,6 +223,8 @@ def rules_header() -> str:
     lines += [f"#define RULE_{name} {_c_double(value)}" for name, value in constants.items()]
     lines += [f"#define RULE_{name} {int(value)}" for name, value in counts.items()]
     lines += [f"#define RULE_{name} {_c_string(text)}" for name, text in texts.items()]
+    lines += ["/* core/estimate.h's constants[] (error_estimates.kernel_constants), an initialiser */",
+              "#define RULE_ESTIMATE_CONSTANTS {" + ", ".join(map(_c_double, error_estimates.kernel_constants())) + "}"]
     lines += [f"#define RULE_TEXT_{name} {_c_string(printf_format(template))}" for name, template in TEXTS.items()]
     lines += ["", "/* vibromodel.parameters.Rule: a finite number (whole for `integer`) in [low, high] (ends open where",
               " * not inclusive), or exactly `automatic`; only when parameter `when` has one of `when_values`. */",
