@@ -607,7 +607,7 @@ static double step_factor(double error)
     return SAFETY * vk_python_pow(error, ERROR_EXPONENT, &fault);
 }
 
-/* integrate._pi_factor: SAFETY error**-PI_ALPHA max(err_old, PI_ERROR_FLOOR)**PI_BETA (1 for the memory term when
+/* integrate.pi_factor: SAFETY error**-PI_ALPHA max(err_old, PI_ERROR_FLOOR)**PI_BETA (1 for the memory term when
    err_old <= 0: none), error positive and finite, err_old finite (a restored state's doubles are finite: state
    checks), so pow cannot fault */
 static double pi_factor(double error, double err_old)

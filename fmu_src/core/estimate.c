@@ -76,6 +76,15 @@ static double hypot2(double a, double b)
     return vk_python_hypot(values, 2);
 }
 
+/* error_estimates.local_growth: |sum_j series[j] (i theta)^j| */
+static double local_growth(const double *k, double theta)
+{
+    const double *c = k + PC_SERIES, t2 = theta * theta;
+    const double real = c[0] - t2 * (c[2] - t2 * (c[4] - t2 * c[6]));
+    const double imaginary = theta * (c[1] - t2 * (c[3] - t2 * (c[5] - t2 * c[7])));
+    return hypot2(real, imaginary);
+}
+
 typedef struct {
     double x_s, a1, p, mu, mu_eff, memory, free;
     int n_forced;
@@ -163,9 +172,18 @@ static int solver_terms(const double *in, const double *k, const Parts *r, int c
         return 0;
     }
     const double scale_x = 0.01 + size;
-    double velocities[4] = {0};
+    double velocities[4] = {0}, shares[4] = {0}, estimators[4] = {0};
     for (int i = 0; i < n; i++) velocities[i] = amplitudes[i] * frequencies[i];
     const double scale_v = 0.01 + py_sum(velocities, n, compensated);
+    for (int i = 0; i < n; i++) { /* AdaptiveEstimator: the free part the test equation's, a forced one by its share */
+        if (i == 0) {
+            shares[i] = 1.0;
+        } else { /* stiffness_share */
+            const double stiffness = py_max(r->a1, 0.0), s2 = frequencies[i] * frequencies[i];
+            shares[i] = s2 <= stiffness ? 1.0 : stiffness / s2;
+        }
+        estimators[i] = k[PC_FORCED_ESTIMATOR] + (k[PC_ESTIMATOR] - k[PC_FORCED_ESTIMATOR]) * shares[i];
+    }
     const double factor = in[PE_FACTOR];
     const double rtol = factor == 1.0 ? in[PE_RTOL] : py_max(k[PC_MIN_RTOL], in[PE_RTOL] * factor);
     double h = in[PE_CEILING];
@@ -173,19 +191,20 @@ static int solver_terms(const double *in, const double *k, const Parts *r, int c
         const double a = amplitudes[i], s = frequencies[i];
         if (!(a > 0.0 && s > 0.0)) continue;
         if (scale_x == 0.0 || scale_v == 0.0) return 1;
-        const double weight = a * hypot2(1.0 / scale_x, s / scale_v) / sqrt(2.0);
-        const double scaled = k[PC_ESTIMATOR] * weight;
+        const double weight = estimators[i] * a * hypot2(1.0 / scale_x, s / scale_v) / sqrt(2.0);
         double root;
-        if (scaled == 0.0 || py_pow(rtol / scaled, 0.125, &root)) return 1;
+        if (weight == 0.0 || py_pow(k[PC_TARGET] * rtol / weight, 0.125, &root)) return 1;
         h = py_min(h, root / s);
     }
     double accumulated = 0.0, local = 0.0;
     for (int i = 0; i < n; i++) {
-        const double a = amplitudes[i], s = frequencies[i];
+        const double a = amplitudes[i], s = frequencies[i], theta = s * h;
         double p9, p8;
-        if (py_pow(s * h, 9.0, &p9) || py_pow(s * h, 8.0, &p8) || h == 0.0) return 1;
-        accumulated += a * py_min(2.0, k[PC_LOCAL] * p9 / h * remember[i]);
-        local += a * k[PC_ESTIMATOR] * p8;
+        if (py_pow(theta, 9.0, &p9) || py_pow(theta, 8.0, &p8) || h == 0.0) return 1;
+        const double constant = k[PC_FORCED_LOCAL] + (k[PC_LOCAL] * local_growth(k, theta) - k[PC_FORCED_LOCAL])
+                                * shares[i];
+        accumulated += a * py_min(2.0, constant * p9 / h * remember[i]);
+        local = py_max(local, a * estimators[i] * p8);
     }
     out[PO_SOLVER] = k[PC_ADAPTIVE] * accumulated + k[PC_LOCAL_FACTOR] * local;
     out[PO_ACCUMULATED] = accumulated;

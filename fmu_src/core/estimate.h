@@ -17,7 +17,8 @@ enum {
 /* constants[]: error_estimates' constants and its cosines of the cycle's samples */
 enum {
     PC_ESTIMATOR, PC_LOCAL, PC_ADAPTIVE, PC_LOCAL_FACTOR, PC_FIXED, PC_TRUNCATION, PC_MIN_RTOL, PC_TIMES,
-    PC_N_COSINES, PC_COSINES, PC_MAX_COSINES = 16, PC_CONSTANTS = PC_COSINES + PC_MAX_COSINES
+    PC_N_COSINES, PC_FORCED_ESTIMATOR, PC_FORCED_LOCAL, PC_TARGET, PC_SERIES, PC_N_SERIES = 8,
+    PC_COSINES = PC_SERIES + PC_N_SERIES, PC_MAX_COSINES = 16, PC_CONSTANTS = PC_COSINES + PC_MAX_COSINES
 };
 /* out[]: solver_terms' solver, accumulated, local (adaptive), step (adaptive), amplitude; truncation_terms'
    truncation, mean, stiffness, harmonics, amplitude */

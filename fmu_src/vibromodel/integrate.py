@@ -358,7 +358,7 @@ class Dop853(Integrator):
                     f"step size collapsed to {h:.3g} at tau = {t:.10g}, x = {x:.10g} (stiff or singular)", t, x, v)
             x_new, v_new, stages, error = self._trial(t, x, v, h)
             if error < 1.0:
-                factor = MAX_FACTOR if error == 0.0 else min(MAX_FACTOR, _pi_factor(error, self.err_old))
+                factor = MAX_FACTOR if error == 0.0 else min(MAX_FACTOR, pi_factor(error, self.err_old))
                 self.h = h * (min(1.0, factor) if rejected else factor)
                 self.err_old = error
                 break
@@ -617,7 +617,7 @@ class Dop853(Integrator):
         return dense
 
 
-def _pi_factor(error, err_old):
+def pi_factor(error, err_old):
     """The PI controller's step factor after an accepted step of error norm `error` (> 0, finite) that followed one
     of error norm err_old (comment at PI_BETA; core/dop853.c pi_factor); err_old <= 0: none (the first step, or one
     after an error of 0), whose memory term is 1."""
