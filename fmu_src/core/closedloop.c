@@ -169,8 +169,11 @@ static inline __attribute__((always_inline)) int do_step_with(VlLoop *l, const V
     DopReport r;
     if (l->error) return (int)l->error;
     if (!(isfinite(h) && h > 0.0)) return VL_BAD_STEP;
-    if (vk_too_many_steps(h, ops->max_step(slots_of(l)), VL_MAX_STEPS_PER_DOSTEP)) return VL_TOO_MANY_STEPS;
-    if (!(isfinite(t) && fabs(t - l->t) <= l->time_tolerance * py_max(1.0, fabs(t)))) return VL_BAD_TIME;
+    const double ceiling = ops->max_step(slots_of(l));
+    if (vk_too_many_steps(h, ceiling, VL_MAX_STEPS_PER_DOSTEP)) return VL_TOO_MANY_STEPS;
+    /* the solver covers l->t .. t + h, not h: bounded as h is (vibromodel.closedloop.ClosedLoop.check_step) */
+    if (!(isfinite(t) && fabs(t - l->t) <= l->time_tolerance * py_max(1.0, fabs(t))) ||
+        vk_too_many_steps((t + h) - l->t, ceiling, VL_MAX_STEPS_PER_DOSTEP)) return VL_BAD_TIME;
     int code = ops->advance(slots_of(l), &LOOP_RHS, l, t + h, &r);
     if (code) return solver_error(l, code, &r);
     l->t = t + h;

@@ -100,7 +100,9 @@ class ClosedLoop:
         refusal = too_many_steps(h, self.integrator.max_step, self.settings.kernel)  # the plant's guard, same words
         if refusal is not None:
             raise ParameterError("communicationStepSize", h, refusal)
-        if not (math.isfinite(t) and abs(t - self.t) <= TIME_TOLERANCE * max(1.0, abs(t))):
+        # the span the solver covers is self.t .. t + h: bounded as h is (settings.check_step)
+        if not (math.isfinite(t) and abs(t - self.t) <= TIME_TOLERANCE * max(1.0, abs(t))
+                and too_many_steps((t + h) - self.t, self.integrator.max_step, self.settings.kernel) is None):
             raise ParameterError("currentCommunicationPoint", t, f"the closed loop is at tau = {self.t!r}")
 
     def snapshot(self) -> dict:

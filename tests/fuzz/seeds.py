@@ -27,6 +27,14 @@ CALLS = {
     "fmi3_cs_events": [1, 0x12, *SETUP, 1, 25, 16, 3, *STEP3 * 5, 2, 25, 16, 3, *STEP3, *ALL3],
     "fmi3_cs_state": [1, 0, *SETUP, 1, *STEP3, 18, 0, *STEP3, 21, 0, 0, 1, 19, 1, *STEP3, *ALL3],
     "fmi3_me_run": [1, 1, *SETUP, 1, 25, 16, 28, 30, 0, 2, 32, 0, 1, 33, 0, 1, 34, 0, 1, 29, 0, 0, 2, *ALL3],
+    # a campaign's timeout (round 10): a doStep of h = 3.7e-6 from a host time within 1e-9 relative of the plant's at
+    # tau = 3e296 but not equal to it (an ulp there is 4e280): RK4 was asked for more than 1e280 steps of 0.01 to
+    # catch up (the catch-up plant_t .. t + h is now bounded as h is: settings.check_step, plant.c's check_step_with)
+    "fmi2_cs_far_catch_up": bytes.fromhex(
+        "fab8b80112b8b8b81bae00327d7d7d7d7d7d7d7d7d7d7d7d7d7d7d7d7d7d7d7d7d7d7d000052000c0c0c1c0c0c0c0c4c"
+        "310c160c0100012902053a7d7d7d7d7d7d7d7d7d7d7d7d00047d012902053a7d7d7d7d7d7d7d7d7dffffff61030303ff"
+        "fcfcfc7d7d7d7d7d7d7d7d7d7d7d7d7d7d7d7d7d7d7d7d7d7d7d7d7d7d7d7d7d7d7d7d7d7d7d7d7d7d7d7d7d7d7d7d7d"
+        "7d7d7d7d7d7d7d7d7d7d7d7d7d7d7d7d7d7d7d7d7d7d7d7d7d7d7d7d7d7d7d7d7d7d7d7d7d7d03037d03030303037d7d"),
 }
 # state: how (bit 0 FMI 3, bit 1 ME), steps, number of patches - 1, then patches (kind, offset u16, argument)
 NAN_K, INF_K = 18, 19  # fuzz_input.h INTERESTING[]: NAN, INFINITY
