@@ -171,9 +171,7 @@ static inline __attribute__((always_inline)) int do_step_with(VlLoop *l, const V
     if (!(isfinite(h) && h > 0.0)) return VL_BAD_STEP;
     const double ceiling = ops->max_step(slots_of(l));
     if (vk_too_many_steps(h, ceiling, VL_MAX_STEPS_PER_DOSTEP)) return VL_TOO_MANY_STEPS;
-    /* the solver covers l->t .. t + h, not h: bounded as h is (vibromodel.closedloop.ClosedLoop.check_step) */
-    if (!(isfinite(t) && fabs(t - l->t) <= l->time_tolerance * py_max(1.0, fabs(t))) ||
-        vk_too_many_steps((t + h) - l->t, ceiling, VL_MAX_STEPS_PER_DOSTEP)) return VL_BAD_TIME;
+    if (vk_time_refused(t, h, l->t, l->time_tolerance, ceiling, VL_MAX_STEPS_PER_DOSTEP)) return VL_BAD_TIME;
     int code = ops->advance(slots_of(l), &LOOP_RHS, l, t + h, &r);
     if (code) return solver_error(l, code, &r);
     l->t = t + h;

@@ -294,9 +294,7 @@ static inline __attribute__((always_inline)) int check_step_with(VkPlant *p, con
     if (!(isfinite(h) && h > 0.0)) return VK_BAD_STEP;
     if (!isfinite(p->U_input)) return VK_BAD_INPUT;
     if (vk_too_many_steps(h, ceiling, p->max_steps_per_dostep)) return VK_TOO_MANY_STEPS;
-    /* the solver covers plant_t .. t + h, not h: bounded as h is (vibromodel.settings.check_step) */
-    if (!(isfinite(t) && fabs(t - p->plant_t) <= p->time_tolerance * py_max(1.0, fabs(t))) ||
-        vk_too_many_steps((t + h) - p->plant_t, ceiling, p->max_steps_per_dostep)) return VK_BAD_TIME;
+    if (vk_time_refused(t, h, p->plant_t, p->time_tolerance, ceiling, p->max_steps_per_dostep)) return VK_BAD_TIME;
     return VK_OK;
 }
 

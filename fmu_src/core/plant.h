@@ -11,6 +11,7 @@
 #ifndef VIBRO_PLANT_H
 #define VIBRO_PLANT_H
 
+#include <math.h>
 #include <stddef.h>
 #include <stdint.h>
 
@@ -42,6 +43,15 @@ enum { VK_DOP853 = 0, VK_RK4 = 1 };  /* plant.Solver */
 static inline int vk_too_many_steps(double h, double ceiling, double budget)
 {
     return h / ceiling * (1.0 - 1e-12) > budget;
+}
+
+/* VK_BAD_TIME (and VL_BAD_TIME): a host's communication point t not within `tolerance` relative of the time `at`
+   the solver is at, or so far from it that the span the solver covers, at .. t + h, needs more than `budget` steps
+   of `ceiling` (vibromodel.settings.check_step, the same expression) */
+static inline int vk_time_refused(double t, double h, double at, double tolerance, double ceiling, double budget)
+{
+    return !(isfinite(t) && fabs(t - at) <= tolerance * (fabs(t) > 1.0 ? fabs(t) : 1.0)) ||
+           vk_too_many_steps((t + h) - at, ceiling, budget);
 }
 
 typedef struct {

@@ -472,8 +472,7 @@ static int step_checks(VkPlant *p, double t, double h)
     if (!isfinite(p->U_input)) return VK_BAD_INPUT;
     const double ceiling = vk_step_ceiling(p);
     if (vk_too_many_steps(h, ceiling, p->max_steps_per_dostep)) return VK_TOO_MANY_STEPS;
-    if (!(isfinite(t) && fabs(t - p->plant_t) <= p->time_tolerance * fmax(1.0, fabs(t))) ||
-        vk_too_many_steps((t + h) - p->plant_t, ceiling, p->max_steps_per_dostep)) return VK_BAD_TIME;
+    if (vk_time_refused(t, h, p->plant_t, p->time_tolerance, ceiling, p->max_steps_per_dostep)) return VK_BAD_TIME;
     return VK_OK;
 }
 
