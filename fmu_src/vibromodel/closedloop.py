@@ -19,8 +19,8 @@ from .control import ERRATA_INITIAL_ESTIMATES, Controller, Gains, Law, validate_
 from .fidelities import closed_loop_refusal, entry, integrated
 from .models import drive_step_ceiling
 from .parameters import ParameterError, Scene, validate
-from .plant import INTEGRATOR_REBUILT, TIME_TOLERANCE, Settings, checked_settings
-from .settings import step_budget, too_many_steps
+from .plant import INTEGRATOR_REBUILT, Settings, checked_settings
+from .settings import step_budget, time_refused, too_many_steps
 from .snapshot import plain_attributes, restore_attributes
 from .solvers import solver_entry
 from .tracking import ReferenceSettings, make_reference
@@ -100,9 +100,7 @@ class ClosedLoop:
         refusal = too_many_steps(h, self.integrator.max_step, self.settings.kernel)  # the plant's guard, same words
         if refusal is not None:
             raise ParameterError("communicationStepSize", h, refusal)
-        # the span the solver covers is self.t .. t + h: bounded as h is (settings.check_step)
-        if not (math.isfinite(t) and abs(t - self.t) <= TIME_TOLERANCE * max(1.0, abs(t))
-                and too_many_steps((t + h) - self.t, self.integrator.max_step, self.settings.kernel) is None):
+        if time_refused(self.t, t, h, self.integrator.max_step, self.settings.kernel):
             raise ParameterError("currentCommunicationPoint", t, f"the closed loop is at tau = {self.t!r}")
 
     def snapshot(self) -> dict:

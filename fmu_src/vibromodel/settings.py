@@ -139,6 +139,18 @@ def too_many_steps(h: float, ceiling: float, kernel: int = Kernel.COMPILED) -> s
             "smaller communication steps, raise max_step or use kernel = 0")
 
 
+def time_refused(at: float, t: float, h: float, ceiling: float, kernel: int = Kernel.COMPILED) -> bool:
+    """Whether a doStep from the communication point t over h is refused for its time, the stepper being at `at`
+    (plant.h's vk_time_refused; the plant's and the closed loop's check, each with its own words).
+
+    t may differ from `at` by TIME_TOLERANCE relative, and the solver covers at .. t + h, not h: at a large |t| that
+    difference alone can be many steps (at t = 3e296, where an ulp is 4e280, a fuzzed host's t beside the plant's
+    asked RK4 for more than 1e280 steps of 0.01 within a doStep of 3.7e-6: a hang), so the span's steps are bounded
+    as h's are."""
+    return not (math.isfinite(t) and abs(t - at) <= TIME_TOLERANCE * max(1.0, abs(t))
+                and too_many_steps((t + h) - at, ceiling, kernel) is None)
+
+
 def check_step(plant_t: float, t: float, h: float, U: float, ceiling: float, open_loop: int | None = None,
                kernel: int = Kernel.COMPILED) -> None:
     """Plant.do_step's checks of a step from the communication point t (the plant is at plant_t) over h with
@@ -151,12 +163,7 @@ def check_step(plant_t: float, t: float, h: float, U: float, ceiling: float, ope
     refusal = too_many_steps(h, ceiling, kernel)
     if refusal is not None:
         raise ParameterError("communicationStepSize", h, refusal)
-    # t may differ from plant_t by TIME_TOLERANCE relative, and the solver covers plant_t .. t + h, not h: at a large
-    # |t| that difference alone can be many steps (at t = 3e296, where an ulp is 4e280, a fuzzed host's t beside
-    # plant_t asked RK4 for more than 1e280 steps of 0.01 within a doStep of 3.7e-6: a hang), so the span's steps are
-    # bounded as h's are
-    if not (math.isfinite(t) and abs(t - plant_t) <= TIME_TOLERANCE * max(1.0, abs(t))
-            and too_many_steps((t + h) - plant_t, ceiling, kernel) is None):
+    if time_refused(plant_t, t, h, ceiling, kernel):
         raise ParameterError("currentCommunicationPoint", t, f"the plant is at tau = {plant_t!r}")
     if open_loop is not None and U != 0.0:
         raise ParameterError("U", U, f"fidelity {open_loop} ({Fidelity(open_loop).name.lower()}) is open loop: "
