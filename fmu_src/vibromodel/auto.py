@@ -15,7 +15,9 @@ exact model at each rtol (a closed form of the scene: no plant is built), takes 
 as the fallback, and builds an averaged or analytic rung only when its modelled cost (set-up, table and outputs at
 the interval OUTPUT_INTERVAL over the run's span) is below the fallback's whole run: then a rung built and rejected
 costs about the fallback's own cost at most. Their estimate needs their set-up (the slow-flow solution, the OAFM
-residual): the plant built to estimate is the plant the run uses. Only the chosen exact candidate is built. A rung
+residual): the plant built to estimate is the plant the run uses. The averaged rung is first asked a pre-check from
+its averaged model alone (averaged_floor: a floor of its estimate, the slow flow's frequency error; ~0.1 ms where
+its set-up takes ~1-3 ms): a floor above the tolerance passes it over unbuilt, as does its domain's refusal. Only the chosen exact candidate is built. A rung
 that refuses the scene (a ParameterError; the analytic rung's fit span is asked before it is built) is passed over;
 none meets: refused, naming the tolerance.
 
@@ -122,6 +124,21 @@ def exact_estimate(scene, rtol: float, span: float, estimator=None) -> float:
         return math.nan
 
 
+def averaged_floor(scene, t0: float, span: float) -> float:
+    """The averaged rung's pre-check, from its averaged model alone (no slow flow integrated, no table: ~0.1 ms
+    where its set-up takes ~1-3 ms): error_estimates.averaged_floor, a floor below its estimate; ParameterError
+    where its build would refuse the scene before any integration (no stable equilibrium, the averaging's domain:
+    fidelities' averaged solution, in the same order)."""
+    from .averaging import checked_averaged, validity_estimates  # fidelity 3's modules: loaded only where it is asked
+    from .error_estimates import averaged_floor as floor
+
+    model = checked_averaged(scene)
+    refusal, _ = validity_estimates(model)
+    if refusal is not None:
+        raise refusal
+    return floor(model, t0, span)
+
+
 def describe(settings) -> str:
     """"fidelity 0 at rtol 1e-10" or "fidelity 3"."""
     if entry(settings.fidelity).integrated:
@@ -135,13 +152,16 @@ def check_tolerance(tolerance: float) -> None:
 
 
 def choose(scene, settings, tolerance: float, build, native: bool = False, span: float | None = None,
-           t0: float = 0.0, cache_dirs: tuple = ()):
+           t0: float = 0.0, cache_dirs: tuple = (), passed_over: list | None = None):
     """(the plant of the cheapest candidate whose estimate meets `tolerance`, its settings, the log lines of the
     choice). build(settings) -> plant (make_plant with the run's arguments); span: the run's length (None: the
     estimates' DEFAULT_SPAN); t0, cache_dirs: the run's start and the OAFM caches build reads (fit_plan). ParameterError
     naming `tolerance` when none meets it. native: as the native FMU chooses (the levels it cannot run passed over,
     without building them). The exact model's estimates are asked lazily, loosest rtol first, and the first that
-    meets the tolerance is the fallback the cheap rungs must beat."""
+    meets the tolerance is the fallback the cheap rungs must beat. The averaged rung, where its cost would have it
+    built, is first asked its pre-check (averaged_floor): passed over unbuilt where its estimate's floor exceeds the
+    tolerance or its domain refuses the scene. passed_over: a list that receives the candidates passed over, each
+    (message name, its values) as the log line words them (the auto campaign counts the pre-check's by it)."""
     from .error_estimates import DEFAULT_SPAN, AdaptiveEstimator, response_parts
 
     check_tolerance(tolerance)
@@ -159,7 +179,7 @@ def choose(scene, settings, tolerance: float, build, native: bool = False, span:
 
     fallback = next(((cost, rtol) for cost, rtol in EXACT_ROWS if estimate_at(rtol) <= tolerance), None)
     fallback_cost = run_cost(Fidelity.EXACT, fallback[0], span) if fallback is not None else math.inf
-    tried = []  # (message, its values): formatted only for the log line
+    tried = [] if passed_over is None else passed_over  # (message, its values): formatted only for the log line
     for cost, level, rtol in CHOICE_ROWS:
         fidelity = int(level.level)
         if native and level.native_refusal is not None:
@@ -187,6 +207,15 @@ def choose(scene, settings, tolerance: float, build, native: bool = False, span:
                                                                          {"level": 0, "rtol": fallback[1]})}))
                 continue
             candidate = replace(settings, fidelity=fidelity)
+            if level.level == Fidelity.AVERAGED:  # its pre-check: passed over unbuilt where it cannot meet the tolerance
+                try:
+                    floor = averaged_floor(scene, t0, span)
+                except ParameterError as refusal:  # the averaging's own domain, as its build would refuse it
+                    tried.append(("AUTO_REFUSED", {"level": fidelity, "parameter": refusal.name}))
+                    continue
+                if floor > tolerance:
+                    tried.append(("AUTO_FLOOR", {"rung": rung, "floor": floor}))
+                    continue
         try:
             plant = build(candidate)
         except ParameterError as refusal:

@@ -95,6 +95,64 @@ def averaged_estimate(model, solution, span: float) -> tuple[float, dict]:
     return CALIBRATION["averaged"] * terms["propagated"], terms
 
 
+# Fidelity 3's pre-check (averaged_floor; fidelity auto asks it before building the rung, auto.choose): the share of
+# its leading term that the estimate is taken to exceed. Measured over 3,000 scenes of the auto campaign's generator
+# (vibrofmu.analyses.error_calibration.random_scene, seed 1): estimate / (CALIBRATION["averaged"] x the term) was
+# 0.58-5 (1st percentile 0.85, median 1.03): the term is most of the estimate; the least (0.58) where the other
+# parts of the residual (the amplitude's own frequency shift at r ~ 0.5, the AC drive's products) partly cancel it
+# at its peak. A tenth keeps a factor >= 5 below every scene measured (tests/model/test_auto.py checks 2,000 others).
+AVERAGED_FLOOR_SHARE = 0.1
+
+
+def averaged_floor(model, t0: float, span: float) -> float:
+    """A floor of fidelity 3's estimate (averaged_estimate) over a run of `span` from t0, from its averaged model
+    alone (averaging.Averaged: no slow-flow solution, no table): AVERAGED_FLOOR_SHARE of its leading term, so that
+    the estimate is above it (checked over random scenes: tests/model/test_auto.py); inf where the estimate cannot
+    be made (k1 <= mu^2/4: averaged_terms' ValueError, a nan estimate). Fidelity auto passes the rung over unbuilt
+    when the floor exceeds the tolerance.
+
+    The leading term is the slow flow's frequency error. Linear in (A, B), the slow flow's free part (the start's
+    slow state minus the drive's steady point) turns as e^((-mu/2 + i nu) t) with nu = (omega^2 - k1)/(2 omega), so
+    in x it is a free vibration at Omega_f = omega - nu = (omega^2 + k1)/(2 omega), decaying at mu/2. The linear
+    operator the estimate propagates through, L = d^2 + mu d + k1 (averaged_terms), turns its free vibration at
+    p = sqrt(k1 - mu^2/4); so that part leaves the residual R = (p^2 - Omega_f^2) y_f, and the error e it drives
+    (L e = -R, e(0) = e'(0) = 0) is the difference of the two free vibrations from the same start, exactly:
+    |e| = 2 r_f e^(-mu t/2) |sin(d t/2)| at the peaks of its fast factor, d = |Omega_f - p| >= (omega - omega_e)^2/
+    (2 omega) (it turns wrong even at resonance once mu is not small: p < omega_e). Its largest value over the first
+    lobe, at t* = (2/d) atan(d/mu), clipped to the run, is the term (the backbone's shift kappa(r) turns both alike to
+    this order: the residual's first harmonic of the nonlinear force cancels it). The run is taken at most
+    slowflow.CHUNK long: the estimate covers the set-up's table, at least that long (a bounded table may hold less
+    than the run). The start's slow state is van der Pol's first-order one (slowflow's start iteration begins
+    there; its second-order terms, ~k2 r/(6 k1) of r, are within the share)."""
+    from .slowflow import CHUNK
+
+    s = model.scene
+    mu, k1, w = s.mu, model.eq.k[1], s.omega
+    if not k1 > 0.25 * mu * mu:
+        return math.inf
+    p = math.sqrt(k1 - 0.25 * mu * mu)
+    nu, drive = (w * w - k1) / (2.0 * w), s.Delta / (2.0 * w)
+    psi = dpsi = 0.0
+    if s.beta != 0.0 or s.gamma != 0.0:  # psi = P sin(Omega t) + Q cos(2 Omega t), Eq. 46 (slowflow)
+        P, Q, W = -s.beta / s.Omega ** 2, s.gamma / (4.0 * s.Omega ** 2), s.Omega
+        psi = P * math.sin(W * t0) + Q * math.cos(2.0 * W * t0)
+        dpsi = W * (P * math.cos(W * t0) - 2.0 * Q * math.sin(2.0 * W * t0))
+    y, u = s.x_start - model.eq.x_e - psi, (s.v_start - dpsi) / w  # y = A cos + B sin, y'/w = -A sin + B cos
+    c, sn = math.cos(w * t0), math.sin(w * t0)
+    A, B = y * c - u * sn, y * sn + u * c
+    rate = nu * nu + 0.25 * mu * mu  # the steady point: A' = B' = 0 of the linear slow flow
+    if not rate > 0.0:
+        return 0.0  # undamped at resonance: no steady point (no floor claimed)
+    r_free = math.hypot(A + nu * drive / rate, B - 0.5 * mu * drive / rate)
+    d = abs(w - nu - p)
+    horizon = min(span, CHUNK)
+    if not (d > 0.0 and horizon > 0.0 and r_free > 0.0):
+        return 0.0
+    t = min(2.0 / d * math.atan2(d, mu), horizon)
+    term = 2.0 * r_free * math.exp(-0.5 * mu * t) * abs(math.sin(0.5 * d * t))
+    return AVERAGED_FLOOR_SHARE * CALIBRATION["averaged"] * term
+
+
 # The residual's samples for fidelity 4's propagation: a step turns the fastest term of x~ (or the free vibration) by
 # at most RESIDUAL_STEP_TURN radians (the piecewise-linear R then errs by ~1 % of its size); at most RESIDUAL_SAMPLES
 # samples (a run of 2000 at frequency 4: 16,000).

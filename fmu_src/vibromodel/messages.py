@@ -25,6 +25,8 @@ TEXTS = {
     "AUTO_REFUSED": "fidelity {level:g}: refused ({parameter})",
     # Python only (the native FMU has no rung with a set-up to weigh): a cheap rung not built
     "AUTO_SETUP": "{rung}: its set-up and run cost more than {fallback}'s run",
+    # Python only: the averaged rung passed over unbuilt, its estimate's floor (auto.averaged_floor) above the tolerance
+    "AUTO_FLOOR": "{rung}: its estimate is at least {floor:.3g} (its pre-check)",
     "AUTO_EXACT_RUNG": "fidelity {level:g} at rtol {rtol:g}",
     "AUTO_RUNG": "fidelity {level:g}",
 }

@@ -356,7 +356,8 @@ def test_the_auto_replay_derives_the_campaigns_choices_and_counts(quick, monkeyp
     replay = error_calibration.auto_replay(bench.AUTO_PAIRS_QUICK, bench.AUTO_SEED)
     assert [(r["outcome"], r.get("chosen"), r.get("met")) for r in replay["rows"]] == \
         [(r["outcome"], r.get("chosen"), r.get("met")) for r in campaign["rows"]]
-    for key in ("pairs", "met_share", "refused", "compared_run", "compared_total"):
+    for key in ("pairs", "met_share", "refused", "compared_run", "compared_total", "precheck_skipped",
+                "precheck_confirmed"):
         assert replay["summary"][key] == campaign["summary"][key], key
 
     def refuse(scene, settings, tolerance, *args, **kwargs):

@@ -295,9 +295,10 @@ def auto_campaign(n: int = 500, seed: int = 0, h: float = 0.1, progress=None) ->
 
         choice_costs = []
         for _ in range(COST_REPEATS):  # the least of a few: a shared machine's noise, as for every candidate's build
+            passed_over = []  # the candidates auto passed over (the pre-check's among them): the same every repeat
             choosing = time.thread_time()
             try:
-                _, chosen, _ = choose(scene, Settings(), tolerance, build, span=stop)
+                _, chosen, _ = choose(scene, Settings(), tolerance, build, span=stop, passed_over=passed_over)
                 choice = _candidate_key(chosen)
             except ParameterError:
                 choice = None  # auto refused: no candidate's estimate meets the tolerance
@@ -325,7 +326,9 @@ def auto_campaign(n: int = 500, seed: int = 0, h: float = 0.1, progress=None) ->
         met = [c for c in table if c.get("met")]
         mine = next((c for c in table if c["key"] == choice), None)
         row = {**info, "tolerance": tolerance, "stop": stop, "exact_stopped": exact_stop is not None,
-               "scene": scene.as_dict(), "candidates": table, "chosen": mine["candidate"] if mine else None}
+               "scene": scene.as_dict(), "candidates": table, "chosen": mine["candidate"] if mine else None,
+               **_precheck(passed_over, next(c for c in table if c["key"] == (int(Fidelity.AVERAGED), None)),
+                           tolerance)}
         if mine is not None:
             row.update(outcome="chosen", met=bool(mine.get("met")), error=mine.get("error"))
         else:
@@ -340,6 +343,25 @@ def auto_campaign(n: int = 500, seed: int = 0, h: float = 0.1, progress=None) ->
         if progress and len(rows) % 10 == 0:
             progress(f"auto: {len(rows)}/{n} pairs, {time.perf_counter() - started:.0f} s")
     return {"n": n, "seed": seed, "rows": rows, "summary": auto_summary(rows)}
+
+
+def _precheck(passed_over: list, averaged: dict | None, tolerance: float) -> dict:
+    """A pair's record of the averaged rung's pre-check (vibromodel.auto.averaged_floor): whether auto passed the
+    rung over unbuilt by it (precheck_skipped), and then whether its full estimate, built, rejected it too
+    (precheck_confirmed: refused, or an estimate not within the tolerance; the pre-check must never skip a rung
+    whose estimate meets it). averaged: the averaged candidate's row ("estimate" or "refused"), None unbuilt."""
+    skipped = any(name == "AUTO_FLOOR" for name, _ in passed_over)
+    if not skipped:
+        return {"precheck_skipped": False}
+    estimate = averaged.get("estimate", math.nan) if averaged and "refused" not in averaged else math.nan
+    return {"precheck_skipped": True, "precheck_confirmed": not (math.isfinite(estimate) and estimate <= tolerance),
+            "averaged_estimate": estimate}
+
+
+def _precheck_counts(pairs: list[dict]) -> dict:
+    """The pairs whose averaged rung auto's pre-check passed over, and of them those its full estimate rejects."""
+    skipped = [r for r in pairs if r.get("precheck_skipped")]
+    return {"precheck_skipped": len(skipped), "precheck_confirmed": sum(r["precheck_confirmed"] for r in skipped)}
 
 
 def auto_replay(n: int = 500, seed: int = 0, h: float = 0.1) -> dict:
@@ -366,13 +388,21 @@ def auto_replay(n: int = 500, seed: int = 0, h: float = 0.1) -> dict:
         return _run_error(x, exact, tolerance)[1]
 
     for scene, stop, info, tolerance, exact, _ in _reference_pairs(n, rng, library, h, rows):
-        row = {**info, "tolerance": tolerance, "stop": stop}
+        row, passed_over = {**info, "tolerance": tolerance, "stop": stop}, []
         try:
             plant, chosen, _ = choose(scene, Settings(), tolerance,
                                       lambda s, scene=scene, stop=stop: make_plant(scene, s, 0.0, stop, library=library),
-                                      span=stop)
+                                      span=stop, passed_over=passed_over)
         except ParameterError:
             chosen = None
+        averaged = None  # the averaged rung built, as the campaign builds every candidate: only where its pre-check
+        if any(name == "AUTO_FLOOR" for name, _ in passed_over):  # passed it over (the count it reports)
+            try:
+                averaged = {"estimate": make_plant(scene, Settings(fidelity=int(Fidelity.AVERAGED)), 0.0, stop,
+                                                   library=library).error_estimate["estimate"]}
+            except (ParameterError, IntegrationError) as error:
+                averaged = {"refused": str(error)[:200]}
+        row.update(_precheck(passed_over, averaged, tolerance))
         if chosen is not None:
             x, _ = _timed_run(plant, lambda: make_plant(scene, chosen, 0.0, stop, library=library), stop, h)
             error, met = _run_error(x, exact, tolerance)
@@ -386,7 +416,7 @@ def auto_replay(n: int = 500, seed: int = 0, h: float = 0.1) -> dict:
     pairs = [r for r in rows if "met" in r]
     compared = sum(r["outcome"] == "chosen" and r["oracle"] for r in pairs)
     summary = {"pairs": len(pairs), "met_share": sum(r["met"] for r in pairs) / len(pairs) if pairs else math.nan,
-               "refused": sum(r["outcome"] == "refused" for r in pairs)}
+               "refused": sum(r["outcome"] == "refused" for r in pairs), **_precheck_counts(pairs)}
     for cost in ("run", "total"):
         summary.update({f"compared_{cost}": compared, f"within_2x_{cost}_share": math.nan,
                         f"cost_ratio_{cost}_median": math.nan})
@@ -580,7 +610,7 @@ def auto_summary(rows: list[dict]) -> dict:
         return hits / total if total else math.nan
 
     result = {"pairs": len(pairs), "met_share": share(sum(r["met"] for r in pairs), len(pairs)),
-              "refused": sum(r["outcome"] == "refused" for r in pairs)}
+              "refused": sum(r["outcome"] == "refused" for r in pairs), **_precheck_counts(pairs)}
     for cost in ("run", "total"):
         ratios = [r[f"cost_ratio_{cost}"] for r in pairs if f"cost_ratio_{cost}" in r]
         result[f"compared_{cost}"] = len(ratios)
@@ -651,6 +681,10 @@ def auto_table(result: dict, costs: dict | None = None) -> list[str]:
         lines.append(f"| {s['pairs']:,} ({result['seed']}) | {_percent(s['met_share'])} | {s['refused']} | {label} | "
                      f"{s[f'compared_{cost}']} | {_percent(s[f'within_2x_{cost}_share'])} | "
                      f"{s[f'cost_ratio_{cost}_median']:.2f} |")
+    if "precheck_skipped" in s:  # campaigns before the averaged rung's pre-check have not these counts
+        lines += ["", f"The averaged rung's pre-check (its estimate's floor above the tolerance) passed it over "
+                  f"unbuilt in {s['precheck_skipped']} of the pairs; built, its estimate rejected "
+                  f"{s['precheck_confirmed']} of them."]
     chosen: dict = {}
     for r in result["rows"]:
         if "met" in r:
