@@ -137,6 +137,17 @@ EXPORT fmi2Status fmi2GetEventIndicators(fmi2Component c, fmi2Real z[], size_t n
     if (!sized(I, "fmi2GetEventIndicators", "ni", z, ni, ME_N_INDICATORS)) return native_settle(I);
     double g[ME_MAX_INDICATORS];
     model_me_indicators(S, g);
+    for (size_t i = 0; i < ni; i++)
+        if (!isfinite(g[i])) { /* a state set beyond the model's numerical range (x = 1.8e308: the contact indicator
+                                  1 + 2x/3 overflows; found by tests/fuzz): refused as fmi2GetDerivatives refuses it */
+            char gt[64], xt[64];
+            native_repr(g[i], gt, sizeof gt);
+            native_repr(S->model.me.x[0], xt, sizeof xt);
+            native_error(I, "fmi2GetEventIndicators: event indicator %zu = %s at x = %s: the state is beyond the "
+                         "model's numerical range", i, gt, xt);
+            for (size_t k = 0; k < ni; k++) z[k] = 0.0;
+            return native_settle(I);
+        }
     for (size_t i = 0; i < ni; i++) z[i] = g[i];
     return native_settle(I);
 }

@@ -4,6 +4,9 @@
   - Model Exchange started at rest on the contact surface (x = -3/2, v = 0: the contact indicator starts at 0, so
     no sign change tells the host) has in_contact = 1 from its first event on, as the co-simulation after its first
     step (the plant then moves into the contact: x rises);
+  - event indicators at a state set beyond the model's numerical range (x = 1.8e308, finite, so SetContinuousStates
+    takes it: the contact indicator 1 + 2x/3 overflows) are refused with fmi2Error / fmi3Error and a log line naming
+    the indicator, never inf with OK (found by the fuzz campaign in the closed loop; the plant's the same);
   - FMI 3.0 co-simulation with event mode and without early return sets eventHandlingNeeded at every contact change
     (the 28-impact scene of test_native_me_fmi3: 56 changes, each seen on the output grid).
 """
@@ -77,6 +80,56 @@ def test_directional_derivatives_at_an_electrode_are_refused(native_plant_fmu, p
         assert r["status"] == ERROR, r  # NaN / inf with OK before
     assert inside["status"] == OK
     assert math.isfinite(inside["value"]) and inside["value"] != 0.0
+
+
+BEYOND = """
+    import ctypes, json, sys
+    from fmpy import extract, read_model_description
+    from fmpy.fmi2 import FMU2Model
+    from fmpy.fmi3 import FMU3Model
+    fmu, version = {fmu!r}, {version}
+    md = read_model_description(fmu)
+    log = []
+    kwargs = dict(guid=md.guid, unzipDirectory=extract(fmu), modelIdentifier=md.modelExchange.modelIdentifier,
+                  instanceName="e")
+    if version == 2:
+        m = FMU2Model(**kwargs)
+        m.instantiate(loggingOn=True)
+        m.setupExperiment(startTime=0.0)
+        m.enterInitializationMode(); m.exitInitializationMode()
+        m.newDiscreteStates(); m.enterContinuousTimeMode()
+        get = m.dll.fmi2GetEventIndicators
+    else:
+        m = FMU3Model(**kwargs)
+        m.instantiate(loggingOn=True)
+        m.enterInitializationMode(); m.exitInitializationMode()
+        m.updateDiscreteStates(); m.enterContinuousTimeMode()
+        get = m.dll.fmi3GetEventIndicators
+    n, ni = md.numberOfContinuousStates, md.numberOfEventIndicators
+    states = (ctypes.c_double * n)()
+    m.getContinuousStates(states, n)
+    results = []
+    for x in (states[0], sys.float_info.max):  # the start (answered), then the largest finite x
+        states[0] = x
+        m.setContinuousStates(states, n)
+        z = (ctypes.c_double * ni)()
+        status = get(m.component, z, ni)
+        results.append(dict(x=x, status=status, z=list(z)))
+    print(json.dumps(dict(results=results)))
+"""
+
+
+@pytest.mark.parametrize("name, version", [("native_plant_fmu", 2), ("plant_fmi3", 3), ("native_closed_loop_fmu", 2),
+                                           ("closed_loop_fmi3", 3)])
+def test_event_indicators_beyond_the_numerical_range_are_refused(request, name, version):
+    fmu = str(request.getfixturevalue(name))
+    proc = subprocess.run([sys.executable, "-c", textwrap.dedent(BEYOND.format(fmu=fmu, version=version))],
+                          capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, f"the host died (exit {proc.returncode}):\n{proc.stderr[-3000:]}"
+    start, beyond = json.loads(proc.stdout.strip().splitlines()[-1])["results"]
+    assert start["status"] == OK and all(map(math.isfinite, start["z"])), start
+    assert beyond["status"] == ERROR, beyond  # inf with OK before
+    assert "GetEventIndicators: event indicator 0 = inf at x = 1.7976931348623157e+308" in proc.stdout + proc.stderr
 
 
 EDGE = """

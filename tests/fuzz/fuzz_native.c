@@ -337,6 +337,8 @@ static void fmi2_op(F2 *f, In *in)
     case 33: {
         size_t n = in_u8(in) < 224 ? N_STATES : in_u8(in) % MAXN;
         for (size_t i = 0; i < n; i++) real[i] = in_double(in);
+        if (trace)
+            for (size_t i = 0; i < n; i++) fprintf(stderr, "  x[%zu] = %.17g\n", i, real[i]);
         fmi2SetContinuousStates(c, NUL((in_u8(in) & 15) == 0) ? NULL : real, n);
         break;
     }

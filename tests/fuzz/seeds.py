@@ -53,6 +53,11 @@ STATE: dict[str, list[int] | bytes] = {
     # solver dimension (5.9e17) and indexed past its arrays (model_me_indicators now reads no unbuilt model)
     "fmi3_cs_unbuilt": bytes.fromhex("1d0806060606060606060606067a060606060606060606060606f6f600f606060606060606f6f600"
                                      "f68f4b30089cff60706000b47a8f4b30089cff066050656060"),
+    # a campaign's finding (round 11): a closed loop's Model Exchange state restored, then SetContinuousStates with
+    # x = 1.8e308 (finite, so taken) and GetEventIndicators: the contact indicator 1 + 2x/3 overflowed to inf, answered
+    # with OK (fmi2_me.c's fmi2GetEventIndicators now refuses a non-finite indicator, as fmi2GetDerivatives does)
+    "fmi2_me_beyond_range": bytes.fromhex("020208fff821212127114f4f4f4f4f4f4f4f4f4f4f3b4f000000253535353527113131204f4f4f23"
+                                          "4f4f4f4f4f4f4f4f4f4f4f05352711"),
 }
 LAYER = {
     "uri": [0, 200, 3, 5, *b"/tmp"],
