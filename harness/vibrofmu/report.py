@@ -670,60 +670,88 @@ def _count(n: float) -> str:
 FUZZ_GOAL = 10**7  # the executions per target a campaign aims at
 
 
+def _fuzz_campaign(file: Path) -> dict:
+    """One fuzz.json (tests/fuzz/run.py's summary) rendered: its head line, table rows and totals line, and per
+    target its executions and finding; ReportError when the file is not one (unreadable, not JSON, a field missing
+    or of the wrong type)."""
+    try:
+        f = json.loads(file.read_text())["fuzz"]
+        rows, total_cpu = [], 0.0
+        for r in f["targets"]:
+            cpu = float(r["cpu_seconds"])
+            total_cpu += cpu
+            per_cpu = _count(r["executions"] / cpu) if cpu > 0 else "—"
+            cut = " (stopped)" if r.get("stopped") else ""  # cut short by the run's stop (run.py's Stop)
+            rows.append(f"| {r['target']} | {_count(r['executions'])}{cut} | {_count(r['seconds'])} | "
+                        f"{_count(r['exec_per_sec'])} | {_count(cpu)} | {per_cpu} | {_count(r['cov'])} / "
+                        f"{_count(r['ft'])} | {_count(r['corpus'])} | {1 if r['finding'] else 0} |")
+        executions = sum(int(r["executions"]) for r in f["targets"])
+        findings = sum(1 for r in f["targets"] if r["finding"])
+        # the CPU time 10^7 executions would take each target short of them, at its rate in this run
+        short = [FUZZ_GOAL * float(r["cpu_seconds"]) / r["executions"] for r in f["targets"]
+                 if r["executions"] < FUZZ_GOAL and r["executions"] > 0 and r["cpu_seconds"] > 0]
+        start, end = f["load_average_at_start"][0], f["load_average_at_end"][0]
+        if f["seconds"] is not None:
+            limit = (f"each target its share of the {_count(f['seconds'])} s budget, {f['jobs']} at a time"
+                     + (f", or {_count(f['runs_limit'])} executions" if f["runs_limit"] is not None else ""))
+        else:
+            limit = f"{_count(f['runs_limit'])} executions per target, {f['jobs']} at a time"
+        head = (f"`{f['command']}` ({f['started_utc']}, sources at {f['sources'] or 'an unknown commit'}, "
+                f"{f['cpu_count']} CPUs, load average {start:.1f} at its start and {end:.1f} at its end; "
+                f"built in {_count(f['build_seconds'])} s; {limit}; AddressSanitizer and "
+                f"UndefinedBehaviorSanitizer, an input over {f['timeout']} s a finding"
+                + ("; no NULL pointer arguments (--skip-null)" if f["skip_null"] else "")
+                + (f"; stopped early by {f['stopped']}: a target's executions are what it ran, those not started "
+                   "are not listed" if f.get("stopped") else "") + "):")
+        targets = {r["target"]: (int(r["executions"]), bool(r["finding"])) for r in f["targets"]}
+    except (OSError, UnicodeDecodeError, ValueError, KeyError, TypeError, IndexError, AttributeError) as error:
+        what = f"{type(error).__name__}: {error}" if not isinstance(error, KeyError) else f"no field {error}"
+        raise ReportError(f"{file}: not a summary of tests/fuzz/run.py ({what})") from None
+    total = (f"{_count(executions)} executions in {_count(total_cpu)} CPU seconds over {len(rows)} targets, "
+             f"{findings} finding{'s' * (findings != 1)}."
+             + (f" At each target's executions per CPU second here, 10⁷ executions take {_count(min(short))} to "
+                f"{_count(max(short))} CPU seconds a target ({_count(sum(short))} for the {len(short)} targets short "
+                "of them)." if short else " Every target reached 10⁷ executions."))
+    return {"head": head, "rows": rows, "total": total, "targets": targets}
+
+
 def fuzz_block(sources: list[Path]) -> str | None:
-    """The fuzzing campaign from the first fuzz.json (tests/fuzz/run.py's summary) in the folders; ReportError when
-    that file is not one (unreadable, not JSON, a field missing or of the wrong type)."""
-    for folder in sources:
-        file = folder / "fuzz.json"
-        if not file.is_file():
-            continue
-        try:
-            f = json.loads(file.read_text())["fuzz"]
-            rows, total_cpu = [], 0.0
-            for r in f["targets"]:
-                cpu = float(r["cpu_seconds"])
-                total_cpu += cpu
-                per_cpu = _count(r["executions"] / cpu) if cpu > 0 else "—"
-                rows.append(f"| {r['target']} | {_count(r['executions'])} | {_count(r['seconds'])} | "
-                            f"{_count(r['exec_per_sec'])} | {_count(cpu)} | {per_cpu} | {_count(r['cov'])} / "
-                            f"{_count(r['ft'])} | {_count(r['corpus'])} | {1 if r['finding'] else 0} |")
-            executions = sum(int(r["executions"]) for r in f["targets"])
-            findings = sum(1 for r in f["targets"] if r["finding"])
-            # the CPU time 10^7 executions would take each target short of them, at its rate in this run
-            short = [FUZZ_GOAL * float(r["cpu_seconds"]) / r["executions"] for r in f["targets"]
-                     if r["executions"] < FUZZ_GOAL and r["executions"] > 0 and r["cpu_seconds"] > 0]
-            start, end = f["load_average_at_start"][0], f["load_average_at_end"][0]
-            if f["seconds"] is not None:
-                limit = (f"each target its share of the {_count(f['seconds'])} s budget, {f['jobs']} at a time"
-                         + (f", or {_count(f['runs_limit'])} executions" if f["runs_limit"] is not None else ""))
-            else:
-                limit = f"{_count(f['runs_limit'])} executions per target, {f['jobs']} at a time"
-            head = (f"`{f['command']}` ({f['started_utc']}, sources at {f['sources'] or 'an unknown commit'}, "
-                    f"{f['cpu_count']} CPUs, load average {start:.1f} at its start and {end:.1f} at its end; "
-                    f"built in {_count(f['build_seconds'])} s; {limit}; AddressSanitizer and "
-                    f"UndefinedBehaviorSanitizer, an input over {f['timeout']} s a finding"
-                    + ("; no NULL pointer arguments (--skip-null)" if f["skip_null"] else "") + "):")
-        except (OSError, UnicodeDecodeError, ValueError, KeyError, TypeError, IndexError, AttributeError) as error:
-            what = f"{type(error).__name__}: {error}" if not isinstance(error, KeyError) else f"no field {error}"
-            raise ReportError(f"{file}: not a summary of tests/fuzz/run.py ({what})") from None
-        return "\n".join([
-            head, "",
-            "| target | executions | wall s | exec/s | CPU s | exec per CPU s | coverage (edges / features) | corpus "
-            "| findings |", "|---|---:|---:|---:|---:|---:|---:|---:|---:|", *rows, "",
-            f"{_count(executions)} executions in {_count(total_cpu)} CPU seconds over {len(rows)} targets, "
-            f"{findings} finding{'s' * (findings != 1)}."
-            + (f" At each target's executions per CPU second here, 10⁷ executions take {_count(min(short))} to "
-               f"{_count(max(short))} CPU seconds a target ({_count(sum(short))} for the {len(short)} targets short "
-               "of them)." if short else " Every target reached 10⁷ executions."),
-            "- Depend on the machine (so `vibrofmu report --check` does not compare this block) and on the "
-            "campaign's length: every count, rate and coverage number above. A target's executions grow with its share of "
-            "the budget and with the share of a core it gets on a shared machine (CPU seconds, beside the wall "
-            "clock's); its coverage and corpus grow with the executions, and start from the seeds and the committed "
-            "corpus (tests/fuzz/merged). A finding is a bug whatever the machine; 0 findings speaks for these "
-            "executions only, not for the inputs never tried.",
-            "- Regenerate: the command above writes its summary to `<out>/fuzz.json` (`--out`, default "
-            "`build/fuzz`); then `vibrofmu report --from OUT --only fuzz`."])
-    return None
+    """The fuzzing campaign from the fuzz.json files (tests/fuzz/run.py's summaries) in the folders, in their order:
+    one run, or a campaign run in several (targets run side by side as separate runs, each its own summary), each
+    run's table, then per target the most executions one run gave it; ReportError when a file is not one."""
+    runs = [_fuzz_campaign(folder / "fuzz.json") for folder in sources if (folder / "fuzz.json").is_file()]
+    if not runs:
+        return None
+    parts = []
+    for run in runs:
+        parts += [run["head"], "",
+                  "| target | executions | wall s | exec/s | CPU s | exec per CPU s | coverage (edges / features) | "
+                  "corpus | findings |", "|---|---:|---:|---:|---:|---:|---:|---:|---:|", *run["rows"], "",
+                  run["total"]]
+        if len(runs) > 1:
+            parts.append("")
+    if len(runs) > 1:  # a target in several runs: the runs are separate campaigns, so the most one gave it counts
+        best: dict[str, int] = {}
+        for run in runs:
+            for target, (executions, _) in run["targets"].items():
+                best[target] = max(best.get(target, 0), executions)
+        findings = sum(finding for run in runs for _, finding in run["targets"].values())
+        short = sorted(t for t, n in best.items() if n < FUZZ_GOAL)
+        parts.append(f"Together, {len(runs)} runs: {len(best)} targets, {findings} finding{'s' * (findings != 1)}; "
+                     + ("every target reached 10⁷ executions in one run." if not short else
+                        "short of 10⁷ executions in every run: " + ", ".join(f"{t} ({_count(best[t])})"
+                                                                             for t in short) + "."))
+    parts += [
+        "- Depend on the machine (so `vibrofmu report --check` does not compare this block) and on the "
+        "campaign's length: every count, rate and coverage number above. A target's executions grow with its share of "
+        "the budget and with the share of a core it gets on a shared machine (CPU seconds, beside the wall "
+        "clock's); its coverage and corpus grow with the executions, and start from the seeds and the committed "
+        "corpus (tests/fuzz/merged). A finding is a bug whatever the machine; 0 findings speaks for these "
+        "executions only, not for the inputs never tried.",
+        "- Regenerate: the command above writes its summary to `<out>/fuzz.json` (`--out`, default "
+        "`build/fuzz`); then `vibrofmu report --from OUT --only fuzz` (`--from OUT1 --from OUT2` for a campaign "
+        "run in several)."]
+    return "\n".join(parts)
 
 
 # ---------------------------------------------------------------------------------------------- the command

@@ -16,7 +16,9 @@ corpus, minimized: --merge) -- read only, plus a working corpus <out>/corpus/<ta
 of the whole run, shared by the targets (--jobs at a time); --runs N stops each target after N executions (with
 --seconds too, at whichever limit comes first).  Exit 1 on a finding (the input is kept as
 <out>/findings/<target>-crash-...; rerun it with <out>/bin/<target> FILE), 2 when clang or a target cannot be
-built.  The compiler: $FUZZ_CC, else clang-14, else clang (Debian: apt-get install clang-14 libclang-rt-14-dev
+built, 130 (143) when stopped by SIGINT (SIGTERM): the targets running are asked to stop as libFuzzer stops
+gracefully (SIGUSR1: the input at hand finished, its final statistics printed), those not started are not run, and
+the summary holds what ran.  The compiler: $FUZZ_CC, else clang-14, else clang (Debian: apt-get install clang-14 libclang-rt-14-dev
 libfuzzer-14-dev).
 """
 from __future__ import annotations
@@ -29,9 +31,11 @@ import os
 import re
 import shlex
 import shutil
+import signal
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 import xml.etree.ElementTree as ET
 from pathlib import Path
@@ -153,7 +157,40 @@ DONE = re.compile(r"#(\d+)\s+(?:DONE|pulse|NEW|REDUCE|INITED)\s+cov: (\d+) ft: (
 ASAN_OPTIONS = "detect_leaks=1:quarantine_size_mb=64:allocator_release_to_os_interval_ms=-1"
 
 
-def fuzz(out: Path, target: str, seconds: float | None, runs: int | None, timeout: int = 30) -> dict:
+class Stop:
+    """A run stopped early (SIGINT, SIGTERM: Ctrl-C, a scheduler's end of a slot): each target running is sent
+    SIGUSR1, on which libFuzzer finishes the input at hand, prints its final statistics and exits 0, so its
+    executions are kept; a target not yet started is not run.  (A terminal's Ctrl-C reaches the targets too, in the
+    same process group: libFuzzer then exits with its "interrupted" code, 72, after the same statistics; that exit
+    is not a finding once the run is stopping.)  Without it a stopped campaign lost every target's numbers: the
+    summary is written when the last target ends."""
+
+    INTERRUPTED = 72  # libFuzzer's -interrupted_exitcode default
+
+    def __init__(self):
+        self.signal: int | None = None
+        self.lock = threading.Lock()
+        self.running: set[subprocess.Popen] = set()
+
+    def request(self, signum, _frame=None) -> None:
+        self.signal = signum
+        with self.lock:  # held only by the worker threads, briefly: the handler (main thread) never deadlocks on it
+            for proc in self.running:
+                proc.send_signal(signal.SIGUSR1)
+
+    def started(self, proc: subprocess.Popen) -> None:
+        with self.lock:
+            self.running.add(proc)
+            if self.signal is not None:  # stopped between the check before starting and now
+                proc.send_signal(signal.SIGUSR1)
+
+    def ended(self, proc: subprocess.Popen) -> None:
+        with self.lock:
+            self.running.discard(proc)
+
+
+def fuzz(out: Path, target: str, seconds: float | None, runs: int | None, timeout: int = 30,
+         stop: Stop | None = None) -> dict | None:
     corpus = out / "corpus" / target
     corpus.mkdir(parents=True, exist_ok=True)
     findings = out / "findings"
@@ -169,21 +206,31 @@ def fuzz(out: Path, target: str, seconds: float | None, runs: int | None, timeou
     cmd = [str(out / "bin" / target), *limit, f"-timeout={timeout}", "-rss_limit_mb=2048", "-max_len=512",
            "-print_final_stats=1", f"-artifact_prefix={findings}/{target}-", str(corpus),
            *map(str, seeds)]
+    if stop is not None and stop.signal is not None:
+        return None  # the run was stopped before this target started
     start = time.monotonic()
     # the target's own CPU time (user + system, from wait4's resource usage): with --jobs > 1 or on a shared machine
     # the wall-clock seconds tell little about the work done
     with tempfile.TemporaryFile("w+") as log:
         proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=log, text=True,
                                 env={**os.environ, "ASAN_OPTIONS": ASAN_OPTIONS, "UBSAN_OPTIONS": "print_stacktrace=1"})
+        if stop is not None:
+            stop.started(proc)
         _, status, usage = os.wait4(proc.pid, 0)
+        if stop is not None:
+            stop.ended(proc)
         proc.returncode = os.waitstatus_to_exitcode(status)  # reaped here: Popen must not wait for it again
         log.seek(0)
         stderr = log.read()
     elapsed = time.monotonic() - start
     stats = {k: int(v) for k, v in STAT.findall(stderr)}
     cov = DONE.findall(stderr)
+    stopped = stop is not None and stop.signal is not None
+    returncode = proc.returncode
+    if stopped and returncode == Stop.INTERRUPTED and "libFuzzer: run interrupted" in stderr:
+        returncode = 0  # the terminal's SIGINT, not a finding
     result = {"target": target, "seconds": elapsed, "cpu_seconds": usage.ru_utime + usage.ru_stime,
-              "returncode": proc.returncode,
+              "returncode": returncode, "stopped": stopped,
               "runs": stats.get("number_of_executed_units", 0), "exec_per_sec": stats.get("average_exec_per_sec", 0),
               "cov": int(cov[-1][1]) if cov else 0, "ft": int(cov[-1][2]) if cov else 0,
               "corpus": int(cov[-1][3]) if cov else 0, "log": stderr}
@@ -207,10 +254,10 @@ def sources_commit() -> str | None:
 
 
 def write_summary(out: Path, argv: list[str], args, started: tuple[float, tuple[float, float, float], str | None],
-                  built: float, elapsed: float, results: list[dict]) -> Path:
+                  built: float, elapsed: float, results: list[dict], stopped: int | None = None) -> Path:
     """<out>/fuzz.json: the run (its command; started: when, the machine's load then and the sources' commit,
-    taken before the build; the CPUs, the limits) and per target its executions, rates, CPU time, coverage, corpus
-    and whether it found something."""
+    taken before the build; the CPUs, the limits; the signal that stopped it early, if one did) and per target its
+    executions, rates, CPU time, coverage, corpus, whether it found something and whether the stop cut it short."""
     summary = {"fuzz": {
         "command": shlex.join(["python3", "tests/fuzz/run.py", *argv]),
         "started_utc": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime(started[0])),
@@ -218,9 +265,11 @@ def write_summary(out: Path, argv: list[str], args, started: tuple[float, tuple[
         "load_average_at_end": list(os.getloadavg()), "sources": started[2],
         "seconds": args.seconds, "runs_limit": args.runs, "jobs": args.jobs, "timeout": args.timeout,
         "skip_null": args.skip_null, "build_seconds": built, "elapsed_seconds": elapsed,
+        "stopped": signal.Signals(stopped).name if stopped else None,
         "targets": [{"target": r["target"], "executions": r["runs"], "seconds": r["seconds"],
                      "cpu_seconds": r["cpu_seconds"], "exec_per_sec": r["exec_per_sec"], "cov": r["cov"],
-                     "ft": r["ft"], "corpus": r["corpus"], "finding": r["returncode"] != 0} for r in results]}}
+                     "ft": r["ft"], "corpus": r["corpus"], "finding": r["returncode"] != 0,
+                     "stopped": r.get("stopped", False)} for r in results]}}
     path = out / SUMMARY
     tmp = path.with_suffix(".tmp")
     tmp.write_text(json.dumps(summary, indent=1) + "\n")
@@ -310,8 +359,15 @@ def main(argv: list[str] | None = None) -> int:
     # each target's share of the wall-clock budget, --jobs at a time
     seconds = 60.0 if args.seconds is None and args.runs is None else args.seconds
     share = None if seconds is None else seconds * args.jobs / len(wanted)
-    with concurrent.futures.ThreadPoolExecutor(max_workers=args.jobs) as pool:
-        results = list(pool.map(lambda t: fuzz(out, t, share, args.runs, args.timeout), wanted))
+    stop = Stop()
+    handlers = {signum: signal.signal(signum, stop.request) for signum in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        with concurrent.futures.ThreadPoolExecutor(max_workers=args.jobs) as pool:
+            results = [r for r in pool.map(lambda t: fuzz(out, t, share, args.runs, args.timeout, stop), wanted)
+                       if r is not None]
+    finally:
+        for signum, handler in handlers.items():
+            signal.signal(signum, handler)
     failed = 0
     print(f"fuzz: built in {built:.0f} s; {len(wanted)} targets, {args.jobs} at a time")
     print(f"{'target':34s} {'executions':>11s} {'exec/s':>7s} {'CPU s':>7s} {'per CPU s':>9s} {'cov':>5s} {'ft':>6s} "
@@ -319,7 +375,8 @@ def main(argv: list[str] | None = None) -> int:
     for r in results:
         per_cpu = r["runs"] / r["cpu_seconds"] if r["cpu_seconds"] > 0 else 0.0
         print(f"{r['target']:34s} {r['runs']:11d} {r['exec_per_sec']:7d} {r['cpu_seconds']:7.0f} {per_cpu:9.0f} "
-              f"{r['cov']:5d} {r['ft']:6d} {r['corpus']:6d} {r['seconds']:6.0f}{'  FINDING' if r['returncode'] else ''}")
+              f"{r['cov']:5d} {r['ft']:6d} {r['corpus']:6d} {r['seconds']:6.0f}{'  FINDING' if r['returncode'] else ''}"
+              f"{'  stopped' if r['stopped'] else ''}")
         if r["returncode"] != 0:
             failed += 1
             tail = r["log"].splitlines()
@@ -327,10 +384,11 @@ def main(argv: list[str] | None = None) -> int:
                              or "runtime error" in line), max(0, len(tail) - 40))
             print("\n".join(tail[start_at:start_at + 60]), file=sys.stderr)
     elapsed = time.monotonic() - start
-    summary = write_summary(out, argv, args, started, built, elapsed, results)
+    summary = write_summary(out, argv, args, started, built, elapsed, results, stop.signal)
     print(f"fuzz: {failed} finding(s) in {elapsed:.0f} s; summary in {summary} (vibrofmu report --from {out} --only "
-          "fuzz)")
-    return 1 if failed else 0
+          "fuzz)" + (f"; stopped by {signal.Signals(stop.signal).name}: {len(results)} of {len(wanted)} targets ran"
+                     if stop.signal is not None else ""))
+    return 1 if failed else 128 + stop.signal if stop.signal is not None else 0
 
 
 if __name__ == "__main__":

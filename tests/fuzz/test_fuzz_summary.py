@@ -5,7 +5,10 @@ results: nothing is built or fuzzed here."""
 import argparse
 import json
 import os
+import signal
+import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -98,3 +101,68 @@ def test_targets_at_the_goal_need_no_estimate(tmp_path):
     body = report.summary_block("fuzz", [tmp_path])
     assert "20,000,000 executions in 65 CPU seconds over 2 targets, 0 findings. Every target reached 10⁷ executions." \
         in body.splitlines()
+
+
+def test_a_campaign_run_in_several_runs_is_one_block(tmp_path):
+    """Targets run side by side as separate runs (each its own summary, `--from A --from B`): each run's table in the
+    order given, and per target the most executions one run gave it (the runs are separate campaigns: not summed)."""
+    synthetic(tmp_path / "a")
+    path = synthetic(tmp_path / "b", findings=("layer",))
+    data = json.loads(path.read_text())
+    data["fuzz"]["targets"][0]["executions"] = 10**7  # calls_HertzEAOscillator reaches the goal in run b
+    path.write_text(json.dumps(data))
+    body = report.summary_block("fuzz", [tmp_path / "a", tmp_path / "b"])
+    lines = body.splitlines()
+    heads = [i for i, line in enumerate(lines) if line.startswith("`python3 tests/fuzz/run.py")]
+    assert len(heads) == 2 and str(tmp_path / "a") in lines[heads[0]] and str(tmp_path / "b") in lines[heads[1]]
+    assert "| calls_HertzEAOscillator | 10,000,000 | 300 | 411 | 40 | 250,000 | 2,263 / 11,182 | 2,314 | 0 |" in lines
+    # layer: 2,500,000 in both runs (short of 10^7); calls_HertzEAOscillator 10^7 in b (123,456 in a); b's finding
+    assert ("Together, 2 runs: 2 targets, 1 finding; short of 10⁷ executions in every run: layer (2,500,000).") in lines
+    data["fuzz"]["targets"][1]["executions"] = 10**7
+    data["fuzz"]["targets"][1]["finding"] = False
+    path.write_text(json.dumps(data))
+    assert ("Together, 2 runs: 2 targets, 0 findings; every target reached 10⁷ executions in one run."
+            in report.summary_block("fuzz", [tmp_path / "a", tmp_path / "b"]).splitlines())
+    # one run alone: no "Together" line
+    assert "Together" not in report.summary_block("fuzz", [tmp_path / "a"])
+
+
+FAKE_TARGET = """#!/bin/sh
+# a stand-in for a libFuzzer target: runs until SIGUSR1, then prints libFuzzer's final statistics and exits 0, as
+# libFuzzer's graceful exit does
+trap 'echo "stat::number_of_executed_units: 4242" >&2; echo "stat::average_exec_per_sec: 7" >&2; exit 0' USR1
+echo "#4242 DONE cov: 10 ft: 20 corp: 3/1b" >&2
+echo started > "$(dirname "$0")/../started-$(basename "$0")"
+while :; do sleep 0.05; done
+"""
+
+
+@pytest.mark.parametrize("signum, code", [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
+def test_a_stopped_campaign_keeps_what_ran(tmp_path, signum, code):
+    """SIGINT / SIGTERM to run.py: the running target is asked to stop gracefully (SIGUSR1) and its executions are
+    in the summary, the target not yet started is not run, exit 128 + the signal, and the block says so. Fake
+    targets (shell scripts), one at a time: nothing is built or fuzzed."""
+    out = tmp_path / "out"
+    (out / "bin").mkdir(parents=True)
+    for name in ("calls_HertzEAOscillator", "layer"):
+        (out / "bin" / name).write_text(FAKE_TARGET)
+        (out / "bin" / name).chmod(0o755)
+    proc = subprocess.Popen([sys.executable, str(HERE / "run.py"), "--no-build", "--jobs", "1", "--runs", "100",
+                             "--out", str(out), "calls_HertzEAOscillator", "layer"], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 60
+    while not (out / "started-calls_HertzEAOscillator").exists():
+        assert proc.poll() is None and time.monotonic() < deadline, proc.communicate()
+        time.sleep(0.05)
+    proc.send_signal(signum)
+    stdout, stderr = proc.communicate(timeout=60)
+    assert proc.returncode == code, stderr
+    assert f"stopped by {signal.Signals(signum).name}: 1 of 2 targets ran" in stdout
+    assert not (out / "started-layer").exists()  # never started
+    f = json.loads((out / "fuzz.json").read_text())["fuzz"]
+    assert f["stopped"] == signal.Signals(signum).name
+    assert [(r["target"], r["executions"], r["finding"], r["stopped"]) for r in f["targets"]] == [
+        ("calls_HertzEAOscillator", 4242, False, True)]
+    body = report.summary_block("fuzz", [out])
+    assert f"stopped early by {signal.Signals(signum).name}" in body.splitlines()[0]
+    assert "| calls_HertzEAOscillator | 4,242 (stopped) |" in body
