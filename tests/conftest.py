@@ -5,7 +5,9 @@ session's base temporary folder), under a file lock; the others wait for the loc
 OAFM solutions fitted during the tests go to a fresh cache folder of this process, never the user's cache; only
 the kernel's folder in it is shared between the workers (a link to the shared folder).
 """
+import atexit
 import os
+import shutil
 import tempfile
 from pathlib import Path
 
@@ -17,6 +19,9 @@ os.environ["VIBROFMU_CACHE_DIR"] = tempfile.mkdtemp(prefix="vibrofmu-test-cache-
 from vibrofmu.fmus import kernel
 from vibrofmu.fmus.build import build_closed_loop, build_controller, build_plant
 from vibrofmu.hosts.run import run_fmu
+
+# VIBROFMU_CACHE_DIR (above): removed when this process (the run, or an xdist worker) exits: 1,633 of them were left in /tmp by earlier runs
+atexit.register(shutil.rmtree, os.environ["VIBROFMU_CACHE_DIR"], ignore_errors=True)
 
 
 # VIBROFMU_TEST_BUILDS=FOLDER (set by .ci/run for its two pytest runs): the FMUs and the kernel are built into
